@@ -1,0 +1,27 @@
+"""Effect plug-ins: one file per physical or sensor effect.
+
+`BASELINE` is the effect set of the walking-skeleton Drogue model: canopy
+inflation and drag, forebody drag, canopies with their dry mass on rigid
+risers, per-stage drag scale and per-canopy load-cell scale, and the GPS, IMU
+and load-cell measurement models.  Order matters only in that the sensors
+come after the effects that set their gains.
+"""
+
+from .base import Capture, Constraint, Effect, State
+from .canopy_inflation import CanopyInflation
+from .drag_scale import DragScale
+from .forebody_drag import ForebodyDrag
+from .loadcell_scale import LoadCellScale
+from .rigid_riser import RigidRiser
+from .sensors import GpsSensor, ImuSensor, LoadCellSensor
+
+
+def baseline_effects() -> list[Effect]:
+    """A fresh list of the baseline effects, in composition order."""
+    return [CanopyInflation(), ForebodyDrag(), RigidRiser(), DragScale(), LoadCellScale(),
+            GpsSensor(), ImuSensor(), LoadCellSensor()]
+
+
+__all__ = ["Capture", "CanopyInflation", "Constraint", "DragScale", "Effect", "ForebodyDrag",
+           "GpsSensor", "ImuSensor", "LoadCellScale", "LoadCellSensor", "RigidRiser", "State",
+           "baseline_effects"]

@@ -1,0 +1,88 @@
+"""The effect plug-in interface.
+
+An effect is one piece of physics or one sensor model.  It declares its
+parameters, any states and captured quantities it adds, and contributes to the
+model in two passes over a shared symbolic `ModelContext`:
+
+1. `forces`: aerodynamic and body forces on the vehicle (N, 3-vectors in
+   east-north-up), masses, derivatives of its own states, and named
+   quantities others may use (``cds[drogue1]``, ``drag[drogue1]`` ...);
+2. `observations`: sensor predictions and quantities that need the system's
+   specific force, which the model computes between the passes.
+
+Everything is written once in CasADi symbols, so the estimator, the simulator
+and the sensitivities all use the same code.  Adding a physical effect means
+writing one subclass in one file and naming it in the problem.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import casadi as ca
+
+from ..parameters import Parameter
+
+if TYPE_CHECKING:
+    from ..flight_test import FlightTest
+    from ..model import ModelContext
+
+
+@dataclass(frozen=True)
+class State:
+    """A differential state: name, size, SI unit, typical magnitude (for scaling)."""
+
+    name: str
+    size: int
+    unit: str
+    scale: float
+
+
+@dataclass(frozen=True)
+class Capture:
+    """The value of a model quantity at the instant given by a time parameter.
+
+    Example: a stage's start airspeed V_i is ``airspeed`` captured at
+    ``t_start[drogue1,stage2]``.  The estimator makes it a decision variable
+    tied to the trajectory; the simulator records it when the event happens.
+    """
+
+    name: str
+    time_parameter: str
+    quantity: str
+    unit: str
+
+
+@dataclass(frozen=True)
+class Constraint:
+    """A constraint lower <= expr(parameters) <= upper declared by an effect."""
+
+    label: str
+    expr: ca.SX
+    lower: float
+    upper: float
+
+
+class Effect:
+    """Base class: an effect contributes nothing until it overrides a hook."""
+
+    name: str = "effect"
+
+    def parameters(self, test: FlightTest) -> list[Parameter]:
+        return []
+
+    def states(self, test: FlightTest) -> list[State]:
+        return []
+
+    def captures(self, test: FlightTest) -> list[Capture]:
+        return []
+
+    def forces(self, ctx: ModelContext) -> None:
+        """First pass: forces, masses, state derivatives, quantities."""
+
+    def observations(self, ctx: ModelContext) -> None:
+        """Second pass: sensor predictions (after the specific force is known)."""
+
+    def constraints(self, ctx: ModelContext) -> list[Constraint]:
+        return []

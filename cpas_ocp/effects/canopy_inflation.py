@@ -1,0 +1,141 @@
+"""Canopy drag-area growth through the reefing stages (paper Eqs. 5, 6), and canopy drag.
+
+For every canopy and every stage this effect declares the steady drag area
+CdS_i (m^2) and the inflation start time t_i (s); infinite-mass canopies add
+the over-inflation factor Ck, the peak fill constant n_p, the shape exponent
+expopen and the settling time t_k (s); finite-mass canopies add the fill
+constant n and expopen.  The start airspeed V_i of each stage is captured from
+the trajectory at t_i.  Drag areas here are the aerodynamic ones the
+trajectory feels, pressure recovery included (PRF * CdS in the paper's terms).
+
+Quantities written: ``cds[P]`` (m^2), ``drag[P]`` (N, 3-vector, against the
+air-relative velocity) and ``stage_active[P,S]`` (1 while S is the canopy's
+current stage; the first stage also covers the time before inflation).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import casadi as ca
+
+from ..errors import InputError
+from ..inflation import fill_length, finite_mass_cds, infinite_mass_cds
+from ..parameters import Parameter, param_name
+from .base import Capture, Effect
+
+if TYPE_CHECKING:
+    from ..flight_test import FlightTest, Parachute
+    from ..model import ModelContext
+
+# Delay from mortar fire to inflation start used only when no bag-strip or
+# line-stretch observation exists (s).
+MORTAR_TO_INFLATION_S = 0.5
+
+
+@dataclass(frozen=True)
+class CanopyInflation(Effect):
+    """Drag-area growth of every canopy and the drag it produces.
+
+    `start_window` (s): how far each inflation start time may move from its
+    observed event (bag strip or disreef) when estimated.
+    """
+
+    start_window: float = 1.0
+    name: str = "canopy_inflation"
+
+    def parameters(self, test: FlightTest) -> list[Parameter]:
+        out = []
+        for chute in test.parachutes:
+            s_o = math.pi * chute.diameter**2 / 4.0
+            n_stages = len(chute.stages)
+            for k, stage in enumerate(chute.stages):
+                idx = (chute.name, stage)
+                out.append(Parameter(param_name("CdS", *idx), "m^2",
+                                     0.5 * s_o * (k + 1) / n_stages, 1e-3 * s_o, 1.5 * s_o,
+                                     description="steady drag area of the stage",
+                                     scale=0.5 * s_o * (k + 1) / n_stages))
+                if chute.inflation == "infinite_mass":
+                    out += [
+                        Parameter(param_name("Ck", *idx), "1", 1.3, 1.0, 3.0,
+                                  description="over-inflation factor", scale=1.0),
+                        Parameter(param_name("n_p", *idx), "1", 6.0, 0.3, 40.0,
+                                  description="peak fill constant (diameters to peak)", scale=5.0),
+                        Parameter(param_name("expopen", *idx), "1", 2.0, 0.3, 6.0,
+                                  description="opening shape exponent", scale=1.0),
+                        Parameter(param_name("t_k", *idx), "s", 0.3, 0.01, 3.0,
+                                  description="settling time after the peak", scale=0.3),
+                    ]
+                else:
+                    out += [
+                        Parameter(param_name("n", *idx), "1", 8.0, 0.3, 60.0,
+                                  description="fill constant (diameters to full stage)", scale=5.0),
+                        Parameter(param_name("expopen", *idx), "1", 1.0, 0.3, 6.0,
+                                  description="opening shape exponent", scale=1.0),
+                    ]
+                t0 = self._observed_start(test, chute, k)
+                lo = max(test.t_start, t0 - self.start_window)
+                hi = min(test.t_end, t0 + self.start_window)
+                out.append(Parameter(param_name("t_start", *idx), "s", t0, lo, hi,
+                                     description="inflation start time", scale=1.0))
+        return out
+
+    def captures(self, test: FlightTest) -> list[Capture]:
+        return [Capture(param_name("V_start", c.name, s), param_name("t_start", c.name, s),
+                        "airspeed", "m/s")
+                for c in test.parachutes for s in c.stages]
+
+    @staticmethod
+    def _observed_start(test: FlightTest, chute: Parachute, k: int) -> float:
+        """The observed time a stage starts inflating: bag strip / line stretch or disreef."""
+        stage = chute.stages[k]
+        if k == 0:
+            for name in ("bag_strip", "line_stretch"):
+                event = test.event(name, chute.name)
+                if event is not None:
+                    return event.time
+            event = test.event("mortar_fire", chute.name)
+            if event is not None:
+                return event.time + MORTAR_TO_INFLATION_S
+            expected = "a bag_strip, line_stretch or mortar_fire event"
+        else:
+            event = test.event("disreef", chute.name, stage)
+            if event is not None:
+                return event.time
+            expected = f"a disreef event into {stage}"
+        raise InputError(str(test.path / "manifest.json") if test.path else "manifest",
+                         "events", f"{expected} for {chute.name} (it seeds the start time of "
+                         f"{stage})")
+
+    def forces(self, ctx: ModelContext) -> None:
+        t, p = ctx.t, ctx.p
+        for chute in ctx.test.parachutes:
+            cds = ca.SX(0.0)
+            prev = ca.SX(0.0)
+            cds_o = p[param_name("CdS", chute.name, chute.stages[-1])]
+            starts = [p[param_name("t_start", chute.name, s)] for s in chute.stages]
+            for k, stage in enumerate(chute.stages):
+                idx = (chute.name, stage)
+                steady = p[param_name("CdS", *idx)]
+                length = fill_length(chute.fill_length, chute.diameter, prev, steady, cds_o)
+                v_i = ctx.c[param_name("V_start", *idx)]
+                if chute.inflation == "infinite_mass":
+                    curve = infinite_mass_cds(t, starts[k], prev, steady,
+                                              p[param_name("Ck", *idx)],
+                                              p[param_name("n_p", *idx)],
+                                              p[param_name("expopen", *idx)],
+                                              p[param_name("t_k", *idx)], length, v_i)
+                else:
+                    curve = finite_mass_cds(t, starts[k], prev, steady,
+                                            p[param_name("n", *idx)],
+                                            p[param_name("expopen", *idx)], length, v_i)
+                cds = ca.if_else(t >= starts[k], curve, cds)
+                prev = steady
+                after = 1.0 if k == 0 else (t >= starts[k])
+                before = 1.0 if k == len(starts) - 1 else (t < starts[k + 1])
+                ctx.q[param_name("stage_active", *idx)] = after * before
+            ctx.q[param_name("cds", chute.name)] = cds
+            ctx.q[param_name("drag", chute.name)] = (
+                cds * ctx.q["dynamic_pressure"] * ctx.q["drag_direction"])

@@ -1,0 +1,40 @@
+"""Canopies on inextensible risers, with their dry mass (paper Eq. 3).
+
+Each canopy moves with the vehicle: its drag and its dry mass m_p are lumped
+onto the vehicle body.  The riser tension follows from the canopy's own
+equation of motion, m_p a = D + m_p g - T, i.e. T = D - m_p f with f the
+system's specific force; along the drag direction this is the paper's
+F = PRF*CdS*q - W_p*G.  A riser cannot push: tension is clipped at zero.
+
+Quantities written: ``tension[P]`` (N).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import casadi as ca
+
+from ..parameters import param_name
+from .base import Effect
+
+if TYPE_CHECKING:
+    from ..model import ModelContext
+
+
+@dataclass(frozen=True)
+class RigidRiser(Effect):
+    name: str = "rigid_riser"
+
+    def forces(self, ctx: ModelContext) -> None:
+        for chute in ctx.test.parachutes:
+            ctx.forces.append(ctx.q[param_name("drag", chute.name)])
+            ctx.mass = ctx.mass + chute.dry_mass
+
+    def observations(self, ctx: ModelContext) -> None:
+        f = ctx.q["specific_force"]
+        for chute in ctx.test.parachutes:
+            pull = ctx.q[param_name("drag", chute.name)] - chute.dry_mass * f
+            ctx.q[param_name("tension", chute.name)] = ca.fmax(
+                ca.dot(pull, ctx.q["drag_direction"]), 0.0)

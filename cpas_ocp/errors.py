@@ -1,0 +1,33 @@
+"""Errors the product reports to its users.
+
+`InputError` is a user's mistake in a test folder or on the command line: it
+carries the file, the field and what was expected, and the CLI prints it as one
+line and exits with code 2.  `SolverFailure` is an estimation that did not
+converge: it carries Ipopt's status and iteration count, and is never shown as
+a result.
+"""
+
+from __future__ import annotations
+
+
+class InputError(ValueError):
+    """A user's input does not meet the test-folder contract."""
+
+    def __init__(self, file: str, field: str, expectation: str) -> None:
+        self.file = file
+        self.field = field
+        self.expectation = expectation
+        super().__init__(f"{file}: {field}: {expectation}")
+
+
+class SolverFailure(RuntimeError):
+    """Ipopt ended without a converged, feasible solution."""
+
+    def __init__(self, status: str, iterations: int, worst_constraint: str = "") -> None:
+        self.status = status
+        self.iterations = iterations
+        self.worst_constraint = worst_constraint
+        detail = f"; worst constraint {worst_constraint}" if worst_constraint else ""
+        super().__init__(
+            f"solver failed: status {status} after {iterations} iterations{detail}"
+        )

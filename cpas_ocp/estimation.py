@@ -1,0 +1,325 @@
+"""One test phase as one multiple-shooting NLP, solved by Ipopt.
+
+Decision variables (all scaled to order one):
+
+* the state at every node of a uniform grid t_k = t_0 + k h (multiple
+  shooting; the initial state is free and GPS pins it);
+* the free model parameters (inflation parameters, scale factors, inflation
+  start times ...), between their bounds;
+* the captured quantities (each stage's start airspeed V_i), tied to the
+  trajectory by V_i = sum_k B((t_i - t_k)/h) |v_air(x_k)|, the cubic
+  B-spline smoothing of node airspeeds at the free start time t_i (C2 in t_i,
+  error h^2/6 |V''|, below 1e-4 m/s here).
+
+Constraints: continuity x_{k+1} = RK4^M(x_k, t_k, p, c) on every interval,
+the capture relations, and the effects' parameter constraints.
+
+Objective: half the chi-square of all sensor samples in the phase,
+0.5 sum ((y - h(x(t_s), t_s, p, c)) / sigma)^2, where x(t_s) is the node state
+or, for a sample between nodes, one RK4 step from the node before it.
+Weights use the manifest's sigmas; relative noise is evaluated at the
+measured value so the weights do not depend on the parameters.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import casadi as ca
+import numpy as np
+
+from .effects import Effect, baseline_effects
+from .errors import SolverFailure
+from .flight_test import FlightTest
+from .model import Model
+from .reduction import gps_state, initial_guess
+from .simulate import rk4_step
+
+
+@dataclass
+class Settings:
+    """Transcription and solver settings.
+
+    grid_step (s): shooting interval; substeps: RK4 steps per interval;
+    free: parameter names to estimate (default: every estimable parameter
+    except the forebody drag area, which comes from the aero database);
+    fixed: values of parameters held fixed (default: their model default).
+    """
+
+    grid_step: float = 0.01
+    substeps: int = 1
+    max_iter: int = 500
+    tol: float = 1e-8
+    free: list[str] | None = None
+    fixed: dict[str, float] = field(default_factory=dict)
+    guess: dict[str, float] = field(default_factory=dict)
+    verbose: bool = False
+
+
+@dataclass
+class SensorResidual:
+    """One sensor channel: sample times, measurement, model, sigma (SI)."""
+
+    sensor: str
+    channel: str
+    t: np.ndarray
+    measured: np.ndarray
+    model: np.ndarray
+    sigma: np.ndarray
+
+    @property
+    def normalized(self) -> np.ndarray:
+        return (self.measured - self.model) / self.sigma
+
+
+@dataclass
+class SolverStats:
+    status: str
+    success: bool
+    iterations: int
+    wall_s: float
+    objective: float
+    worst_constraint: str = ""
+
+
+@dataclass
+class Fit:
+    """A converged reconstruction of one test phase."""
+
+    test: FlightTest
+    model: Model
+    parameters: dict[str, float]
+    free: list[str]
+    guess: dict[str, float]
+    t: np.ndarray
+    x: np.ndarray
+    captures: dict[str, float]
+    residuals: list[SensorResidual]
+    solver: SolverStats
+    settings: Settings
+
+    @property
+    def chi_square(self) -> float:
+        return float(sum(np.sum(r.normalized**2) for r in self.residuals))
+
+    @property
+    def n_samples(self) -> int:
+        return int(sum(r.t.size for r in self.residuals))
+
+    def quantities(self) -> dict[str, np.ndarray]:
+        """Every scalar model quantity (cds[P], tension[P], dynamic_pressure, ...) on the grid."""
+        pvec = self.model.parameter_vector(self.parameters)
+        cvec = np.array([self.captures[c.name] for c in self.model.captures])
+        fn = self.model.quantities.map(len(self.t))
+        vals = np.asarray(fn(self.x.T, self.t, pvec, cvec))
+        return dict(zip(self.model.quantity_names, vals, strict=True))
+
+
+class Estimator:
+    """Builds the NLP of one test phase once; `solve` may then be called repeatedly."""
+
+    def __init__(self, test: FlightTest, effects: list[Effect] | None = None,
+                 settings: Settings | None = None) -> None:
+        self.test = test
+        self.settings = settings or Settings()
+        self.model = Model(test, effects if effects is not None else baseline_effects())
+        m, s = self.model, self.settings
+        names = m.parameter_names
+        if s.free is None:
+            self.free = [p.name for p in m.parameters if p.estimable and p.name != "CdS_V"]
+        else:
+            unknown = sorted(set(s.free) - set(names))
+            if unknown:
+                raise ValueError(f"cannot estimate unknown parameters {unknown}")
+            self.free = list(s.free)
+        self.guess = initial_guess(test, m)
+        self.guess.update(s.guess)
+        self.values = {**self.guess, **s.fixed}
+
+        h = s.grid_step
+        n = int(np.floor((test.t_end - test.t_start) / h + 1e-9))
+        self.t = test.t_start + h * np.arange(n + 1)
+        self._build(n, h)
+
+    # ------------------------------------------------------------------ transcription
+    def _build(self, n: int, h: float) -> None:
+        m, s = self.model, self.settings
+        nx, ncap = m.nx, len(m.captures)
+        xscale = m.state_scales()
+        self.pscale = np.array([m.parameter(f).scale for f in self.free])
+        X = ca.MX.sym("X", nx, n + 1)
+        P = ca.MX.sym("P", len(self.free))
+        C = ca.MX.sym("C", ncap)
+        cscale = 100.0
+        Xp = ca.repmat(ca.DM(xscale), 1, n + 1) * X
+        Cp = cscale * C
+        free_index = {f: i for i, f in enumerate(self.free)}
+        pfull = ca.vertcat(*[
+            P[free_index[p.name]] * self.pscale[free_index[p.name]] if p.name in free_index
+            else ca.MX(self.values.get(p.name, p.default)) for p in m.parameters])
+        self._pfull = ca.Function("pfull", [P], [pfull])
+
+        step = rk4_step(m)
+        xs = ca.SX.sym("x", nx)
+        ts = ca.SX.sym("t")
+        ps = ca.SX.sym("p", len(m.parameters))
+        cs = ca.SX.sym("c", ncap)
+        xe = xs
+        for j in range(s.substeps):
+            xe = step(xe, ts + j * h / s.substeps, h / s.substeps, ps, cs)
+        interval = ca.Function("interval", [xs, ts, ps, cs], [xe]).expand()
+        xnext = interval.map(n, "serial")(Xp[:, :n], ca.DM(self.t[:n]).T, pfull, Cp)
+        gaps = (Xp[:, 1:] - xnext) / ca.repmat(ca.DM(xscale), 1, n)
+        g = [ca.vec(gaps)]
+        lbg = [np.zeros(nx * n)]
+        ubg = [np.zeros(nx * n)]
+
+        # Captured quantities at free event times: cubic B-spline weights of node values.
+        for i, cap in enumerate(m.captures):
+            prm = m.parameter(cap.time_parameter)
+            lo = self.values.get(prm.name, prm.default) if prm.name not in free_index else prm.lower
+            hi = self.values.get(prm.name, prm.default) if prm.name not in free_index else prm.upper
+            k0 = max(int(np.floor((lo - self.t[0]) / h)) - 2, 0)
+            k1 = min(int(np.ceil((hi - self.t[0]) / h)) + 2, n)
+            ks = np.arange(k0, k1 + 1)
+            qfn = m.capture_function(cap.name).map(len(ks), "serial")
+            node_vals = qfn(Xp[:, ks], ca.DM(self.t[ks]).T, pfull, Cp)
+            t_event = pfull[m.parameter_names.index(prm.name)]
+            w = cubic_bspline((t_event - ca.DM(self.t[ks]).T) / h)
+            g.append((Cp[i] - ca.dot(w, node_vals)) / cscale)
+            lbg.append([0.0])
+            ubg.append([0.0])
+
+        # Parameter constraints declared by effects.
+        p_sx = ca.vertcat(*[m.ctx.p[p.name] for p in m.parameters])
+        for con in m.constraints:
+            fn = ca.Function("con", [p_sx], [con.expr])
+            g.append(fn(pfull))
+            lbg.append([con.lower])
+            ubg.append([con.upper])
+
+        # Objective: 0.5 chi-square over all sensors.
+        residual_blocks = []
+        self._samples = []
+        for sensor in self.test.sensors:
+            if sensor.name not in m.outputs:
+                continue
+            ts_all = sensor.time
+            keep = (ts_all >= self.t[0] - 1e-9) & (ts_all <= self.t[-1] + 1e-9)
+            tsamp = ts_all[keep]
+            k = np.clip(np.floor((tsamp - self.t[0]) / h + 1e-7).astype(int), 0, n - 1)
+            dt = tsamp - self.t[k]
+            on_node = np.abs(dt) < 1e-7
+            k = np.where(on_node, k, k)
+            xsamp = ca.MX(nx, len(tsamp))
+            if on_node.all():
+                xsamp = Xp[:, k]
+            else:
+                part = step.map(len(tsamp), "serial")
+                xsamp = part(Xp[:, k], ca.DM(self.t[k]).T, ca.DM(dt).T, pfull, Cp)
+            y = m.outputs[sensor.name].map(len(tsamp), "serial")(xsamp, ca.DM(tsamp).T, pfull, Cp)
+            channels = m.sensor_channels[sensor.name]
+            meas = np.vstack([sensor.data[c].to_numpy()[keep] for c in channels])
+            sig = np.vstack([sensor.noise_sigma(c, sensor.data[c].to_numpy()[keep])
+                             for c in channels])
+            r = (ca.DM(meas) - y) / ca.DM(sig)
+            residual_blocks.append(ca.vec(r))
+            self._samples.append((sensor.name, channels, tsamp, meas, sig, y))
+
+        self._z = ca.vertcat(ca.vec(X), P, C)
+        residual = ca.vertcat(*residual_blocks)
+        self._g = ca.vertcat(*g)
+        self._blocks = {"gaps": g[0], "captures": ca.vertcat(*g[1:1 + ncap]),
+                        "residual": residual}
+        jac = ca.jacobian(residual, self._z)
+        self._residual_jacobian = ca.Function("residual_jacobian", [self._z], [residual, jac])
+        obj = 0.5 * ca.sumsqr(residual)
+        # Gauss-Newton Hessian of the Lagrangian: J'J of the weighted residuals; the
+        # curvature of the continuity constraints is neglected (small-residual problems).
+        sigma_f = ca.MX.sym("sigma_f")
+        hess = ca.Function("gauss_newton", [self._z, ca.MX.sym("p", 0, 1), sigma_f,
+                                            ca.MX.sym("lam_g", self._g.numel())],
+                           [sigma_f * ca.triu(ca.mtimes(jac.T, jac))],
+                           ["x", "p", "lam_f", "lam_g"], ["hess_gamma_x_x"])
+        self._unpack = ca.Function("unpack", [self._z], [Xp, pfull, Cp])
+        self._outputs = ca.Function("outputs", [self._z], [s_[5] for s_ in self._samples])
+        self._lbg = np.concatenate([np.ravel(a) for a in lbg])
+        self._ubg = np.concatenate([np.ravel(a) for a in ubg])
+        self._obj = obj
+        self._nz = (X.numel(), P.numel(), C.numel())
+        self._xscale = xscale
+        self._cscale = cscale
+        pb = [m.parameter(f) for f in self.free]
+        inf = np.inf
+        self._lbz = np.concatenate([np.full(X.numel(), -inf), [p.lower / sc for p, sc in
+                                    zip(pb, self.pscale, strict=True)], np.full(ncap, 0.01)])
+        self._ubz = np.concatenate([np.full(X.numel(), inf), [p.upper / sc for p, sc in
+                                    zip(pb, self.pscale, strict=True)], np.full(ncap, inf)])
+        opts = {
+            "ipopt.max_iter": s.max_iter, "ipopt.tol": s.tol,
+            "ipopt.print_level": 5 if s.verbose else 0, "print_time": False,
+            "ipopt.sb": "yes", "hess_lag": hess,
+        }
+        nlp = {"x": self._z, "f": self._obj, "g": self._g}
+        self._solver = ca.nlpsol("reconstruction", "ipopt", nlp, opts)
+
+    def initial_point(self) -> np.ndarray:
+        """Shooting nodes from GPS, parameters from the reduction, captures from GPS speed."""
+        m = self.model
+        pos, vel = gps_state(self.test, self.t)
+        x0 = np.zeros((m.nx, len(self.t)))
+        x0[m.state_slice("position")] = pos.T
+        x0[m.state_slice("velocity")] = vel.T
+        p0 = np.array([self.values[f] for f in self.free]) / self.pscale
+        speed = np.linalg.norm(vel, axis=1)
+        c0 = np.array([np.interp(self.values[c.time_parameter], self.t, speed)
+                       for c in m.captures]) / self._cscale
+        return np.concatenate([(x0 / self._xscale[:, None]).ravel(order="F"), p0, c0])
+
+    # ------------------------------------------------------------------ solve
+    def solve(self) -> Fit:
+        """Solve the NLP from the reduction's initial point; raise SolverFailure if it fails."""
+        z0 = self.initial_point()
+        t0 = time.perf_counter()
+        sol = self._solver(x0=z0, lbx=self._lbz, ubx=self._ubz, lbg=self._lbg, ubg=self._ubg)
+        wall = time.perf_counter() - t0
+        st = self._solver.stats()
+        z = np.asarray(sol["x"]).ravel()
+        g = np.asarray(sol["g"]).ravel()
+        viol = np.maximum(self._lbg - g, 0) + np.maximum(g - self._ubg, 0)
+        worst = f"index {int(np.argmax(viol))}, violation {float(np.max(viol)):.3g}" \
+            if viol.size else ""
+        stats = SolverStats(st["return_status"], bool(st["success"]), int(st["iter_count"]),
+                            wall, float(sol["f"]), worst)
+        if not stats.success:
+            raise SolverFailure(stats.status, stats.iterations, worst)
+        return self._fit(z, stats)
+
+    def _fit(self, z: np.ndarray, stats: SolverStats) -> Fit:
+        m = self.model
+        Xp, pfull, Cp = (np.asarray(a) for a in self._unpack(z))
+        params = {p.name: float(v) for p, v in zip(m.parameters, pfull.ravel(), strict=True)}
+        caps = {c.name: float(v) for c, v in zip(m.captures, Cp.ravel(), strict=True)}
+        outs = self._outputs(z)
+        outs = outs if isinstance(outs, tuple | list) else [outs]
+        residuals = []
+        for (sensor, channels, tsamp, meas, sig, _), y in zip(self._samples, outs, strict=True):
+            y = np.asarray(y)
+            for j, ch in enumerate(channels):
+                residuals.append(SensorResidual(sensor, ch, tsamp, meas[j], y[j], sig[j]))
+        return Fit(self.test, m, params, list(self.free), dict(self.guess), self.t, Xp.T, caps,
+                   residuals, stats, self.settings)
+
+
+def cubic_bspline(u: ca.MX) -> ca.MX:
+    """Cubic B-spline kernel (support |u| < 2, C2, a partition of unity on integer nodes)."""
+    a = ca.fabs(u)
+    return ca.if_else(a < 1.0, (4.0 - 6.0 * a**2 + 3.0 * a**3) / 6.0,
+                      ca.if_else(a < 2.0, (2.0 - a) ** 3 / 6.0, 0.0))
+
+
+def reconstruct(test: FlightTest, effects: list[Effect] | None = None,
+                settings: Settings | None = None) -> Fit:
+    """Reconstruct one test phase: build the NLP, solve it, return the Fit."""
+    return Estimator(test, effects, settings).solve()

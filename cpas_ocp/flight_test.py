@@ -1,0 +1,347 @@
+"""A test folder: manifest.json plus one CSV per sensor, validated and in SI.
+
+The manifest is validated against `data_schemas/manifest.schema.json` (which
+references `series.schema.json` for each sensor's columns).  Loading then
+checks what a schema cannot: names that refer to each other, the CSV files
+against their declared columns, finite values, strictly increasing time, and
+events inside the data.  Every violation raises `InputError` naming the file,
+the field and the expectation.  Units are converted to SI here and nowhere
+else.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from functools import cache
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import jsonschema
+import numpy as np
+import pandas as pd
+import referencing
+
+from .atmosphere import Atmosphere, StandardAtmosphere, TableAtmosphere
+from .errors import InputError
+from .units import FACTORS
+
+MANIFEST = "manifest.json"
+FORMAT = "cpas-ocp/test-folder/1"
+
+# Channels of each sensor kind and the dimension of each column.
+SENSOR_COLUMNS: dict[str, dict[str, str]] = {
+    "gps": {"time": "time", "east": "length", "north": "length", "up": "length",
+            "v_east": "velocity", "v_north": "velocity", "v_up": "velocity"},
+    "imu_load_factor": {"time": "time", "load_factor": "load_factor"},
+    "load_cell": {"time": "time", "tension": "force"},
+}
+# Noise groups of each sensor kind: group -> (dimension, channels it covers).
+SIGMA_GROUPS: dict[str, dict[str, tuple[str, tuple[str, ...]]]] = {
+    "gps": {"position": ("length", ("east", "north", "up")),
+            "velocity": ("velocity", ("v_east", "v_north", "v_up"))},
+    "imu_load_factor": {"load_factor": ("load_factor", ("load_factor",))},
+    "load_cell": {"tension": ("force", ("tension",))},
+}
+
+
+@dataclass(frozen=True)
+class Vehicle:
+    """Test vehicle: suspended mass (kg) without canopies, forebody drag area (m^2)."""
+
+    name: str
+    mass: float
+    forebody_cds: float
+
+
+@dataclass(frozen=True)
+class Parachute:
+    """One canopy: nominal diameter D_o (m), dry mass m_p (kg), its stages in order."""
+
+    name: str
+    type: str
+    diameter: float
+    dry_mass: float
+    inflation: str
+    fill_length: str
+    stages: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class Event:
+    """An observed event (video, pyro log) at `time` s with standard deviation `sigma` s."""
+
+    name: str
+    parachute: str
+    stage: str | None
+    time: float
+    sigma: float
+
+
+@dataclass(frozen=True)
+class Sensor:
+    """One sensor's series in SI, with per-channel noise sigma (SI) and relative noise."""
+
+    name: str
+    kind: str
+    parachute: str | None
+    file: str
+    data: pd.DataFrame
+    sigma: dict[str, float]
+    sigma_relative: float = 0.0
+
+    @property
+    def channels(self) -> tuple[str, ...]:
+        return tuple(c for c in SENSOR_COLUMNS[self.kind] if c != "time")
+
+    @property
+    def time(self) -> np.ndarray:
+        return self.data["time"].to_numpy()
+
+    def noise_sigma(self, channel: str, values: np.ndarray) -> np.ndarray:
+        """Per-sample sigma: absolute and relative parts added in quadrature."""
+        return np.sqrt(self.sigma[channel] ** 2 + (self.sigma_relative * np.abs(values)) ** 2)
+
+
+@dataclass
+class FlightTest:
+    """One test phase, everything in SI."""
+
+    name: str
+    path: Path | None
+    vehicle: Vehicle
+    parachutes: tuple[Parachute, ...]
+    events: tuple[Event, ...]
+    sensors: tuple[Sensor, ...]
+    atmosphere: Atmosphere
+    t_start: float
+    t_end: float
+    description: str = ""
+    label: str = ""
+    manifest: dict[str, Any] = field(default_factory=dict, repr=False)
+
+    def parachute(self, name: str) -> Parachute:
+        return next(p for p in self.parachutes if p.name == name)
+
+    def event(self, name: str, parachute: str, stage: str | None = None) -> Event | None:
+        for e in self.events:
+            if e.name == name and e.parachute == parachute and (stage is None or e.stage == stage):
+                return e
+        return None
+
+    def sensors_of(self, kind: str) -> tuple[Sensor, ...]:
+        return tuple(s for s in self.sensors if s.kind == kind)
+
+
+@cache
+def _schema_registry() -> tuple[dict[str, Any], referencing.Registry]:
+    folder = resources.files("cpas_ocp.schemas")
+    schemas = {name: json.loads(folder.joinpath(name).read_text())
+               for name in ("manifest.schema.json", "series.schema.json")}
+    registry = referencing.Registry().with_resources(
+        (s["$id"], referencing.Resource.from_contents(s)) for s in schemas.values()
+    )
+    return schemas["manifest.schema.json"], registry
+
+
+def _json_path(parts: Any) -> str:
+    out = ""
+    for p in parts:
+        out += f"[{p}]" if isinstance(p, int) else (f".{p}" if out else str(p))
+    return out or "(top level)"
+
+
+def validate_manifest(manifest: Any, file: str = MANIFEST) -> None:
+    """Validate a manifest object against the JSON Schema; raise InputError on the first problem."""
+    schema, registry = _schema_registry()
+    validator = jsonschema.Draft202012Validator(schema, registry=registry)
+    error = jsonschema.exceptions.best_match(validator.iter_errors(manifest))
+    if error is not None:
+        # Descend to the most specific cause so the message names the leaf field.
+        while error.context:
+            error = jsonschema.exceptions.best_match(error.context)
+        raise InputError(file, _json_path(error.absolute_path), error.message)
+
+
+def _si(quantity: dict[str, Any], dimension: str) -> float:
+    return float(quantity["value"]) * FACTORS[dimension][quantity["unit"]]
+
+
+def load_test(folder: str | Path) -> FlightTest:
+    """Load and validate a test folder; everything returned is in SI."""
+    folder = Path(folder)
+    path = folder / MANIFEST
+    if not path.is_file():
+        raise InputError(str(path), "(file)", "a test folder must contain manifest.json")
+    try:
+        manifest = json.loads(path.read_text())
+    except json.JSONDecodeError as exc:
+        raise InputError(str(path), f"line {exc.lineno}", f"valid JSON ({exc.msg})") from None
+    return test_from_manifest(manifest, folder)
+
+
+def test_from_manifest(manifest: dict[str, Any], folder: Path,
+                       series: dict[str, pd.DataFrame] | None = None) -> FlightTest:
+    """Build a FlightTest from a manifest object whose CSV files live in `folder`.
+
+    `series` (sensor name -> SI DataFrame) replaces reading the files; the
+    simulator uses it to plan sample times before any data exist.
+    """
+    mfile = str(folder / MANIFEST)
+    validate_manifest(manifest, mfile)
+
+    v = manifest["vehicle"]
+    vehicle = Vehicle(v["name"], _si(v["mass"], "mass"), _si(v["forebody_cds"], "area"))
+
+    parachutes = []
+    for i, p in enumerate(manifest["parachutes"]):
+        if len(set(p["stages"])) != len(p["stages"]):
+            raise InputError(mfile, f"parachutes[{i}].stages", "stage names must be unique")
+        parachutes.append(Parachute(p["name"], p["type"], _si(p["diameter"], "length"),
+                                    _si(p["dry_mass"], "mass"), p["inflation"],
+                                    p.get("fill_length", "diameter"), tuple(p["stages"])))
+    _unique(mfile, "parachutes", [p.name for p in parachutes])
+    by_name = {p.name: p for p in parachutes}
+
+    sensors = [_load_sensor(mfile, folder, i, s, by_name, series)
+               for i, s in enumerate(manifest["sensors"])]
+    _unique(mfile, "sensors", [s.name for s in sensors])
+
+    t_lo = max(s.time[0] for s in sensors)
+    t_hi = min(s.time[-1] for s in sensors)
+    phase = manifest.get("phase", {})
+    t_start = _si(phase["start"], "time") if "start" in phase else t_lo
+    t_end = _si(phase["end"], "time") if "end" in phase else t_hi
+    if not (t_lo <= t_start < t_end <= t_hi):
+        raise InputError(mfile, "phase", f"a window inside the data shared by all sensors "
+                         f"[{t_lo:.3f}, {t_hi:.3f}] s with start < end")
+
+    events = []
+    for i, e in enumerate(manifest["events"]):
+        where = f"events[{i}]"
+        if e["parachute"] not in by_name:
+            raise InputError(mfile, f"{where}.parachute", f"one of {sorted(by_name)}")
+        stage = e.get("stage")
+        if stage is not None and stage not in by_name[e["parachute"]].stages:
+            raise InputError(mfile, f"{where}.stage",
+                             f"one of {list(by_name[e['parachute']].stages)}")
+        if e["name"] == "disreef" and stage is None:
+            raise InputError(mfile, f"{where}.stage", "a disreef event names the stage it opens into")
+        t = _si(e["time"], "time")
+        if not (t_start <= t <= t_end):
+            raise InputError(mfile, f"{where}.time", f"{t:.3f} s lies outside the data "
+                             f"[{t_start:.3f}, {t_end:.3f}] s")
+        events.append(Event(e["name"], e["parachute"], stage, t, _si(e["sigma"], "time")))
+
+    return FlightTest(
+        name=manifest["name"], path=folder, vehicle=vehicle, parachutes=tuple(parachutes),
+        events=tuple(events), sensors=tuple(sensors),
+        atmosphere=_load_atmosphere(mfile, folder, manifest["atmosphere"]),
+        t_start=t_start, t_end=t_end, description=manifest.get("description", ""),
+        label=manifest.get("label", ""), manifest=manifest,
+    )
+
+
+def _unique(file: str, field_name: str, names: list[str]) -> None:
+    dup = sorted({n for n in names if names.count(n) > 1})
+    if dup:
+        raise InputError(file, field_name, f"names must be unique (repeated: {', '.join(dup)})")
+
+
+def _load_sensor(mfile: str, folder: Path, i: int, s: dict[str, Any],
+                 parachutes: dict[str, Parachute],
+                 series: dict[str, pd.DataFrame] | None) -> Sensor:
+    where = f"sensors[{i}]"
+    kind = s["kind"]
+    parachute = s.get("parachute")
+    if kind == "load_cell":
+        if parachute not in parachutes:
+            raise InputError(mfile, f"{where}.parachute",
+                             f"a load cell names its canopy, one of {sorted(parachutes)}")
+    sigma: dict[str, float] = {}
+    for group, (dim, channels) in SIGMA_GROUPS[kind].items():
+        q = s["sigma"].get(group)
+        if q is None:
+            raise InputError(mfile, f"{where}.sigma.{group}", f"noise sigma in {dim} units")
+        if q["unit"] not in FACTORS[dim]:
+            raise InputError(mfile, f"{where}.sigma.{group}.unit",
+                             f"one of {sorted(FACTORS[dim])}, got {q['unit']!r}")
+        for c in channels:
+            sigma[c] = _si(q, dim)
+    if series is not None:
+        data = series[s["name"]]
+    else:
+        data = read_series(folder / s["file"], s["columns"], SENSOR_COLUMNS[kind])
+    return Sensor(s["name"], kind, parachute, s["file"], data, sigma,
+                  float(s.get("sigma_relative", 0.0)))
+
+
+def _read_columns(path: Path, units: dict[str, str], dimensions: dict[str, str],
+                  what: str) -> dict[str, np.ndarray]:
+    """Read the named columns of a CSV file as finite numbers in SI."""
+    file = str(path)
+    if not path.is_file():
+        raise InputError(file, "(file)", f"{what} must exist")
+    try:
+        raw = pd.read_csv(path)
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
+        raise InputError(file, "(csv)", f"a CSV table with a header row ({exc})") from None
+    out = {}
+    for column, dim in dimensions.items():
+        if column not in raw.columns:
+            raise InputError(file, column, f"a column named {column!r} (header has "
+                             f"{', '.join(map(str, raw.columns))})")
+        values = pd.to_numeric(raw[column], errors="coerce").to_numpy(dtype=float)
+        bad = np.flatnonzero(~np.isfinite(values))
+        if bad.size:
+            raise InputError(file, column, f"finite numbers; missing or non-numeric values in "
+                             f"data rows {_runs(bad)} (clean the series before loading)")
+        out[column] = values * FACTORS[dim][units[column]]
+    return out
+
+
+def read_series(path: Path, units: dict[str, str], dimensions: dict[str, str]) -> pd.DataFrame:
+    """Read one sensor's CSV series, check it, and return its columns in SI."""
+    out = _read_columns(path, units, dimensions, "the sensor's series file")
+    t = out["time"]
+    if len(t) < 2:
+        raise InputError(str(path), "time", "at least two samples")
+    steps = np.diff(t)
+    if (steps <= 0).any():
+        k = int(np.flatnonzero(steps <= 0)[0])
+        raise InputError(str(path), "time", f"strictly increasing; row {k + 2} ({t[k + 1]:.6g} s)"
+                         f" does not follow row {k + 1} ({t[k]:.6g} s)")
+    return pd.DataFrame(out)
+
+
+def _runs(rows: np.ndarray) -> str:
+    """Describe sorted row indices (0-based data rows) as 1-based runs, e.g. '12-18, 40'."""
+    parts, start = [], rows[0]
+    for a, b in zip(rows, [*rows[1:], math.inf], strict=True):
+        if b != a + 1:
+            parts.append(f"{start + 1}" if start == a else f"{start + 1}-{a + 1}")
+            start = b
+    return ", ".join(parts[:5]) + (" ..." if len(parts) > 5 else "")
+
+
+def _load_atmosphere(mfile: str, folder: Path, spec: dict[str, Any]) -> Atmosphere:
+    if spec["model"] == "standard":
+        return StandardAtmosphere()
+    dims = {"altitude": "length", "density": "density"}
+    dims.update({k: "velocity" for k in ("wind_east", "wind_north") if k in spec["columns"]})
+    data = read_series_table(folder / spec["file"], spec["columns"], dims)
+    if (data["density"] <= 0).any():
+        raise InputError(str(folder / spec["file"]), "density", "positive values")
+    return TableAtmosphere(data["altitude"], data["density"],
+                           data.get("wind_east"), data.get("wind_north"))
+
+
+def read_series_table(path: Path, units: dict[str, str],
+                      dimensions: dict[str, str]) -> dict[str, np.ndarray]:
+    """Read a profile table (no time column) with strictly increasing altitude, in SI."""
+    out = _read_columns(path, units, dimensions, "the atmosphere table")
+    if (np.diff(out["altitude"]) <= 0).any():
+        raise InputError(str(path), "altitude", "strictly increasing altitude")
+    return out

@@ -1,0 +1,175 @@
+"""Compose effects into the dynamics and the sensor predictions of a test phase.
+
+The core body is the vehicle as a point mass in a flat-earth east-north-up
+frame, 3 translational degrees of freedom, attitude not modelled (drag acts
+against the air-relative velocity).  Its states are position r (m) and
+velocity v (m/s).  Effects add forces and masses (canopies, forebody drag),
+states of their own, and sensor predictions.  Between the two effect passes
+the model forms
+
+    specific force  f = sum(F) / m            (m/s^2, what an accelerometer senses)
+    acceleration    a = f + g,  g = (0, 0, -g0)
+
+with m the total mass carried on the vehicle body (vehicle plus anything an
+effect lumps onto it, e.g. canopies on rigid risers).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import TypeVar
+
+import casadi as ca
+import numpy as np
+
+from .effects.base import Capture, Constraint, Effect, State
+from .flight_test import FlightTest
+from .parameters import Parameter
+from .units import G0
+
+T = TypeVar("T", Parameter, State, Capture)
+
+CORE_STATES = (
+    State("position", 3, "m", 1000.0),
+    State("velocity", 3, "m/s", 100.0),
+)
+
+
+@dataclass
+class ModelContext:
+    """The symbolic workspace effects read from and write into."""
+
+    test: FlightTest
+    t: ca.SX
+    x: dict[str, ca.SX]
+    p: dict[str, ca.SX]
+    c: dict[str, ca.SX]
+    q: dict[str, ca.SX] = field(default_factory=dict)
+    xdot: dict[str, ca.SX] = field(default_factory=dict)
+    forces: list[ca.SX] = field(default_factory=list)
+    mass: ca.SX | float = 0.0
+    y: dict[str, dict[str, ca.SX]] = field(default_factory=dict)
+
+    def scale(self, name: str, factor: ca.SX | float) -> None:
+        """Multiply quantity `name` (1 if not yet set) by `factor`."""
+        self.q[name] = self.q.get(name, 1.0) * factor
+
+
+class Model:
+    """Dynamics x' = f(x, t, p, c) and sensor outputs y = h(x, t, p, c) of one test phase."""
+
+    def __init__(self, test: FlightTest, effects: Sequence[Effect]) -> None:
+        self.test = test
+        self.effects = tuple(effects)
+        self.parameters: list[Parameter] = _unique_by_name(
+            [p for e in self.effects for p in e.parameters(test)], "parameter")
+        self.states: list[State] = _unique_by_name(
+            [*CORE_STATES, *(s for e in self.effects for s in e.states(test))], "state")
+        self.captures: list[Capture] = _unique_by_name(
+            [c for e in self.effects for c in e.captures(test)], "capture")
+        names = {p.name for p in self.parameters}
+        for cap in self.captures:
+            if cap.time_parameter not in names:
+                raise ValueError(f"capture {cap.name} refers to unknown parameter "
+                                 f"{cap.time_parameter}")
+
+        self.nx = sum(s.size for s in self.states)
+        x = ca.SX.sym("x", self.nx)
+        t = ca.SX.sym("t")
+        p = ca.SX.sym("p", len(self.parameters))
+        c = ca.SX.sym("c", len(self.captures))
+        xs, k = {}, 0
+        for s in self.states:
+            xs[s.name] = x[k:k + s.size]
+            k += s.size
+        ctx = ModelContext(
+            test=test, t=t, x=xs,
+            p={prm.name: p[i] for i, prm in enumerate(self.parameters)},
+            c={cap.name: c[i] for i, cap in enumerate(self.captures)},
+        )
+        self._environment(ctx)
+        for e in self.effects:
+            e.forces(ctx)
+        total = ca.SX.zeros(3)
+        for f in ctx.forces:
+            total += f
+        ctx.mass = ctx.mass + test.vehicle.mass
+        ctx.q["mass"] = ctx.mass
+        ctx.q["specific_force"] = total / ctx.mass
+        ctx.q["load_factor"] = ca.norm_2(ctx.q["specific_force"]) / G0
+        ctx.xdot["position"] = xs["velocity"]
+        ctx.xdot["velocity"] = ctx.q["specific_force"] + ca.vertcat(0.0, 0.0, -G0)
+        for e in self.effects:
+            e.observations(ctx)
+        self.ctx = ctx
+        self.constraints: list[Constraint] = [c_ for e in self.effects
+                                              for c_ in e.constraints(ctx)]
+        missing = [s.name for s in self.states if s.name not in ctx.xdot]
+        if missing:
+            raise ValueError(f"no effect defines the derivative of state(s) {missing}")
+
+        args = [x, t, p, c]
+        self.rhs = ca.Function("rhs", args, [ca.vertcat(*(ctx.xdot[s.name] for s in self.states))],
+                               ["x", "t", "p", "c"], ["xdot"])
+        self.sensor_channels = {name: tuple(ch) for name, ch in ctx.y.items()}
+        self.outputs = {
+            name: ca.Function(f"y{i}", args, [ca.vertcat(*ch.values())],
+                              ["x", "t", "p", "c"], ["y"])
+            for i, (name, ch) in enumerate(ctx.y.items())
+        }
+        self.quantity_names = tuple(n for n, v in ctx.q.items()
+                                    if isinstance(v, ca.SX) and v.numel() == 1)
+        self.quantities = ca.Function(
+            "quantities", args, [ca.vertcat(*(ctx.q[n] for n in self.quantity_names))])
+        self._capture_fns = {cap.name: ca.Function(f"capture{i}", args, [ctx.q[cap.quantity]])
+                             for i, cap in enumerate(self.captures)}
+
+    def _environment(self, ctx: ModelContext) -> None:
+        """Air-relative velocity, density and dynamic pressure at the vehicle."""
+        r, v = ctx.x["position"], ctx.x["velocity"]
+        atm = self.test.atmosphere
+        v_air = v - atm.wind(r[2])
+        airspeed = ca.sqrt(ca.sumsqr(v_air) + 1e-6)
+        rho = atm.density(r[2])
+        ctx.q["altitude"] = r[2]
+        ctx.q["airspeed"] = airspeed
+        ctx.q["density"] = rho
+        ctx.q["dynamic_pressure"] = 0.5 * rho * airspeed**2
+        ctx.q["drag_direction"] = -v_air / airspeed
+
+    # --- helpers for the estimator, the simulator and reports ---------------------------
+
+    @property
+    def parameter_names(self) -> list[str]:
+        return [p.name for p in self.parameters]
+
+    def parameter(self, name: str) -> Parameter:
+        return next(p for p in self.parameters if p.name == name)
+
+    def capture_function(self, name: str) -> ca.Function:
+        return self._capture_fns[name]
+
+    def state_scales(self) -> np.ndarray:
+        return np.concatenate([np.full(s.size, s.scale) for s in self.states])
+
+    def state_slice(self, name: str) -> slice:
+        k = 0
+        for s in self.states:
+            if s.name == name:
+                return slice(k, k + s.size)
+            k += s.size
+        raise KeyError(name)
+
+    def parameter_vector(self, values: dict[str, float]) -> np.ndarray:
+        """Full parameter vector from a dict, defaults where a value is absent."""
+        return np.array([values.get(p.name, p.default) for p in self.parameters], dtype=float)
+
+
+def _unique_by_name(items: list[T], what: str) -> list[T]:
+    seen: dict[str, T] = {}
+    for it in items:
+        if it.name in seen and seen[it.name] != it:
+            raise ValueError(f"two effects declare {what} {it.name} differently")
+        seen.setdefault(it.name, it)
+    return list(seen.values())

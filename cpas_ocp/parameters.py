@@ -1,0 +1,46 @@
+"""Named model parameters: what they mean, their unit, bounds and default.
+
+Names follow the issue tracker and the reports: ``CdS[drogue1,stage1]``,
+``t_start[drogue2,stage3]``, ``drag_scale[stage2]``, ``loadcell_scale[drogue1]``.
+Values are SI.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+_NAME = re.compile(r"^(?P<base>[A-Za-z_][A-Za-z0-9_]*)(\[(?P<index>[A-Za-z0-9_,]+)\])?$")
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """A scalar model parameter.
+
+    `default` is the value used when the parameter is not estimated and no
+    better value is known; `lower`/`upper` bound it when it is estimated.
+    `scale` is its typical magnitude, used to scale the NLP.
+    """
+
+    name: str
+    unit: str
+    default: float
+    lower: float
+    upper: float
+    estimable: bool = True
+    description: str = ""
+    scale: float = 1.0
+
+
+def param_name(base: str, *index: str) -> str:
+    """`param_name("CdS", "drogue1", "stage1")` -> ``"CdS[drogue1,stage1]"``."""
+    return f"{base}[{','.join(index)}]" if index else base
+
+
+def split_name(name: str) -> tuple[str, tuple[str, ...]]:
+    """Inverse of `param_name`: ``"CdS[drogue1,stage1]"`` -> ``("CdS", ("drogue1", "stage1"))``."""
+    m = _NAME.match(name)
+    if m is None:
+        raise ValueError(f"not a parameter name: {name!r}")
+    index = m.group("index")
+    return m.group("base"), tuple(index.split(",")) if index else ()

@@ -1,0 +1,41 @@
+"""Ready-made test phases shipped in `problems/` (installed as `cpas_ocp.problems`).
+
+Each problem is one JSON file: a manifest template (vehicle, parachutes,
+sensors and their noise), the simulation set-up (initial state, duration,
+sample rates, how observed events relate to the truth), and the synthetic
+truth, in SI, under exactly the parameter names a reconstruction reports.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from importlib import resources
+from typing import Any
+
+from .errors import InputError
+
+
+@dataclass(frozen=True)
+class Problem:
+    name: str
+    title: str
+    label: str
+    manifest: dict[str, Any]
+    simulation: dict[str, Any]
+    truth: dict[str, float]
+
+
+def problem_names() -> list[str]:
+    folder = resources.files("cpas_ocp.problem_data")
+    return sorted(f.name.removesuffix(".json") for f in folder.iterdir()
+                  if f.name.endswith(".json"))
+
+
+def load_problem(name: str) -> Problem:
+    names = problem_names()
+    if name not in names:
+        raise InputError("problem", "name", f"one of {', '.join(names)}; got {name!r}")
+    raw = json.loads(resources.files("cpas_ocp.problem_data").joinpath(f"{name}.json").read_text())
+    return Problem(raw["name"], raw["title"], raw["label"], raw["manifest"], raw["simulation"],
+                   raw["truth"]["parameters"])

@@ -1,0 +1,146 @@
+"""Offline data reduction (paper Eqs. 2-3) and the initial guess it gives.
+
+Without any simulation, on the IMU's time base:
+
+* dynamic pressure q = rho(h) |v - w|^2 / 2 from GPS position and velocity;
+* IMU drag area, Eq. 2:      PRF*CdS_total = W_T G / q - (CdS)_V;
+* riser drag area, Eq. 3:    PRF*CdS_P = (F_P + W_p,P G) / q;
+* per-stage scale factor: the time mean of the IMU drag area over the
+  stage's steady window divided by that of the summed riser drag areas.  It
+  is the initial guess of ``drag_scale[stage]``, since the trajectory's drag is
+  the load-cell drag times that factor.
+
+From these curves the initial guess of every canopy's inflation parameters
+follows: CdS from the scaled riser drag area in the steady window, Ck from its
+peak, n_p from the time of the peak after the observed start.  The guess never
+uses anything but the test folder.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .atmosphere import density_at, wind_at
+from .flight_test import FlightTest
+from .model import Model
+from .parameters import param_name
+from .units import G0
+
+SETTLE_S = 1.0  # time after a stage start before its drag area counts as steady (s)
+
+
+@dataclass
+class Reduction:
+    """Offline drag areas (m^2) on the time base `t` (s)."""
+
+    t: np.ndarray
+    dynamic_pressure: np.ndarray
+    airspeed: np.ndarray
+    load_factor: np.ndarray
+    cds_imu: np.ndarray
+    cds_riser: dict[str, np.ndarray]
+    stage_scale: dict[str, float]
+    stage_windows: dict[str, tuple[float, float]]
+
+
+def gps_state(test: FlightTest, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """GPS position and velocity (m, m/s) linearly interpolated to times `t`, shape (n, 3)."""
+    gps = test.sensors_of("gps")
+    if not gps:
+        raise ValueError(f"{test.name}: the reduction needs a GPS sensor")
+    d = gps[0].data
+    pos = np.column_stack([np.interp(t, d["time"], d[c]) for c in ("east", "north", "up")])
+    vel = np.column_stack([np.interp(t, d["time"], d[c]) for c in ("v_east", "v_north", "v_up")])
+    return pos, vel
+
+
+def reduce(test: FlightTest, starts: dict[tuple[str, str], float]) -> Reduction:
+    """Offline reduction with stage start times `starts[(canopy, stage)]` (s)."""
+    imu = test.sensors_of("imu_load_factor")
+    cells = test.sensors_of("load_cell")
+    base = imu[0] if imu else (cells[0] if cells else test.sensors[0])
+    t = base.time[(base.time >= test.t_start) & (base.time <= test.t_end)]
+    pos, vel = gps_state(test, t)
+    v_air = vel - wind_at(test.atmosphere, pos[:, 2])
+    airspeed = np.linalg.norm(v_air, axis=1)
+    q = 0.5 * density_at(test.atmosphere, pos[:, 2]) * airspeed**2
+    if imu:
+        G = np.interp(t, imu[0].time, imu[0].data["load_factor"])
+    else:
+        G = np.ones_like(t)
+    w_total = (test.vehicle.mass + sum(p.dry_mass for p in test.parachutes)) * G0
+    cds_imu = w_total * G / q - test.vehicle.forebody_cds
+    cds_riser = {}
+    for cell in cells:
+        chute = test.parachute(cell.parachute)
+        tension = np.interp(t, cell.time, cell.data["tension"])
+        cds_riser[chute.name] = (tension + chute.dry_mass * G0 * G) / q
+
+    windows = _steady_windows(test, starts)
+    scale = {}
+    for stage, (a, b) in windows.items():
+        sel = (t >= a) & (t <= b)
+        riser_sum = sum(cds_riser.values())
+        if imu and cds_riser and sel.sum() > 3:
+            scale[stage] = float(np.mean(cds_imu[sel]) / np.mean(riser_sum[sel]))
+        else:
+            scale[stage] = 1.0
+    return Reduction(t, q, airspeed, G, cds_imu, cds_riser, scale, windows)
+
+
+def _steady_windows(test: FlightTest, starts: dict[tuple[str, str], float]
+                    ) -> dict[str, tuple[float, float]]:
+    """Per stage name: from the last canopy's start + SETTLE_S to the first next start."""
+    stage_names = list(dict.fromkeys(s for c in test.parachutes for s in c.stages))
+    windows = {}
+    for k, stage in enumerate(stage_names):
+        begin = max(t for (c, s), t in starts.items() if s == stage) + SETTLE_S
+        later = [t for (c, s), t in starts.items() if s in stage_names[k + 1:]]
+        end = min(later) if later else test.t_end
+        windows[stage] = (begin, max(end, begin))
+    return windows
+
+
+def initial_guess(test: FlightTest, model: Model) -> dict[str, float]:
+    """Initial values of the model parameters from the test folder alone."""
+    guess = {p.name: p.default for p in model.parameters}
+    starts = {(c.name, s): guess[param_name("t_start", c.name, s)]
+              for c in test.parachutes for s in c.stages}
+    red = reduce(test, starts)
+    for stage, s in red.stage_scale.items():
+        name = param_name("drag_scale", stage)
+        if name in guess:
+            guess[name] = float(np.clip(s, 0.6, 1.8))
+    for chute in test.parachutes:
+        curve = red.cds_riser.get(chute.name)
+        for k, stage in enumerate(chute.stages):
+            scale = red.stage_scale.get(stage, 1.0)
+            if curve is None:
+                continue
+            t0 = starts[(chute.name, stage)]
+            a, b = red.stage_windows[stage]
+            steady = (red.t >= a) & (red.t <= b)
+            cds = scale * float(np.median(curve[steady])) if steady.any() else None
+            if cds is None or cds <= 0:
+                continue
+            guess[param_name("CdS", chute.name, stage)] = cds
+            if chute.inflation != "infinite_mass":
+                continue
+            prev_start = starts[(chute.name, chute.stages[k - 1])] if k else test.t_start
+            next_start = (starts[(chute.name, chute.stages[k + 1])]
+                          if k + 1 < len(chute.stages) else test.t_end)
+            lo = max(t0 - 1.0, prev_start + 0.5 * (t0 - prev_start))
+            hi = min(t0 + 2.0, next_start - 0.5)
+            near = (red.t >= lo) & (red.t <= hi)
+            if not near.any():
+                continue
+            i_peak = int(np.flatnonzero(near)[np.argmax(curve[near])])
+            guess[param_name("Ck", chute.name, stage)] = float(
+                np.clip(scale * curve[i_peak] / cds, 1.02, 2.5))
+            t_fp = max(red.t[i_peak] - t0, 0.2)
+            v_i = float(np.interp(t0, red.t, red.airspeed))
+            guess[param_name("n_p", chute.name, stage)] = float(
+                np.clip(t_fp * v_i / chute.diameter, 1.0, 30.0))
+    return guess

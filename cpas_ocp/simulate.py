@@ -1,0 +1,175 @@
+"""Forward simulation of a test phase and synthetic sensor data.
+
+The simulator integrates the very same CasADi dynamics the estimator uses,
+with classical Runge-Kutta 4 on a fine step (default 1 ms), stepping exactly
+onto every inflation start time so that each stage's start airspeed V_i is
+captured at its event.  Sensor samples are the model outputs at their sample
+times plus Gaussian noise with the manifest's sigmas, drawn from a seeded
+generator.  A test folder is written to a temporary directory and moved into
+place only when complete.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+import pandas as pd
+
+from .effects import Effect, baseline_effects
+from .errors import InputError
+from .flight_test import MANIFEST, SENSOR_COLUMNS, FlightTest, test_from_manifest
+from .model import Model
+from .problems import Problem
+from .units import FACTORS
+
+
+@dataclass
+class Trajectory:
+    """A simulated trajectory: times (s), states (n x nx), captured values by name."""
+
+    t: np.ndarray
+    x: np.ndarray
+    captures: dict[str, float]
+
+
+def rk4_step(model: Model) -> ca.Function:
+    """One RK4 step x(t) -> x(t + h) of the model's dynamics, h symbolic."""
+    x = ca.SX.sym("x", model.nx)
+    t, h = ca.SX.sym("t"), ca.SX.sym("h")
+    p = ca.SX.sym("p", len(model.parameters))
+    c = ca.SX.sym("c", len(model.captures))
+    f = model.rhs
+    k1 = f(x, t, p, c)
+    k2 = f(x + h / 2 * k1, t + h / 2, p, c)
+    k3 = f(x + h / 2 * k2, t + h / 2, p, c)
+    k4 = f(x + h * k3, t + h, p, c)
+    return ca.Function("rk4", [x, t, h, p, c], [x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)],
+                       ["x", "t", "h", "p", "c"], ["xf"])
+
+
+def simulate(model: Model, params: dict[str, float], x0: np.ndarray, t0: float, t1: float,
+             step: float = 1e-3) -> Trajectory:
+    """Integrate from t0 to t1 on a grid of `step`, stopping exactly at capture times."""
+    pvec = model.parameter_vector(params)
+    names = model.parameter_names
+    pending = sorted(((pvec[names.index(cap.time_parameter)], i)
+                      for i, cap in enumerate(model.captures)))
+    cvec = np.zeros(len(model.captures))
+    speed = float(ca.norm_2(x0[model.state_slice("velocity")]))
+    cvec[:] = speed  # placeholder until each event happens; its stage is inactive before
+    step_fn = rk4_step(model)
+    n = round((t1 - t0) / step)
+    times = t0 + step * np.arange(n + 1)
+    xs = np.empty((n + 1, model.nx))
+    x = np.asarray(x0, dtype=float)
+    xs[0] = x
+    for k in range(n):
+        ta, tb = times[k], times[k + 1]
+        while pending and pending[0][0] <= tb:
+            tc, i = pending.pop(0)
+            if tc > ta:
+                x = np.asarray(step_fn(x, ta, tc - ta, pvec, cvec)).ravel()
+                ta = tc
+            cvec[i] = float(model.capture_function(model.captures[i].name)(x, ta, pvec, cvec))
+        x = np.asarray(step_fn(x, ta, tb - ta, pvec, cvec)).ravel()
+        xs[k + 1] = x
+    return Trajectory(times, xs, {cap.name: float(cvec[i]) for i, cap in enumerate(model.captures)})
+
+
+def model_outputs(model: Model, traj: Trajectory, params: dict[str, float], sensor: str,
+                  times: np.ndarray) -> np.ndarray:
+    """Noise-free outputs of `sensor` at `times` (which must lie on the trajectory grid)."""
+    idx = np.rint((times - traj.t[0]) / (traj.t[1] - traj.t[0])).astype(int)
+    if np.any(np.abs(traj.t[idx] - times) > 1e-9):
+        raise ValueError("sample times must lie on the simulation grid")
+    pvec = model.parameter_vector(params)
+    cvec = np.array([traj.captures[c.name] for c in model.captures])
+    fn = model.outputs[sensor].map(len(times))
+    return np.asarray(fn(traj.x[idx].T, times, pvec, cvec)).T
+
+
+def simulate_problem(problem: Problem, out: str | Path, seed: int,
+                     effects: list[Effect] | None = None) -> FlightTest:
+    """Simulate `problem` with sensor noise drawn from `seed`; write a test folder at `out`.
+
+    Writes manifest.json, one CSV per sensor (in the manifest's units) and
+    truth.json (``{"parameters": {name: value}}``, SI).  Nothing is left
+    behind if anything fails.
+    """
+    out = Path(out)
+    if out.exists() and any(out.iterdir()):
+        raise InputError(str(out), "(folder)", "an empty or new folder for the test")
+    rng = np.random.default_rng(seed)
+    sim = problem.simulation
+    truth = dict(problem.truth)
+    manifest = json.loads(json.dumps(problem.manifest))
+    manifest["name"] = f"{problem.name}-seed{seed}"
+    manifest["events"] = _observed_events(sim["events"], truth, rng)
+
+    t0, t1, step = float(sim["t_begin"]), float(sim["t_end"]), float(sim["step"])
+    sample_times = {}
+    for s in manifest["sensors"]:
+        rate = float(sim["rates_hz"][s["name"]])
+        sample_times[s["name"]] = t0 + np.arange(round((t1 - t0) * rate) + 1) / rate
+    planned = {name: pd.DataFrame({"time": t}) for name, t in sample_times.items()}
+    test = test_from_manifest(manifest, out, series=planned)
+    model = Model(test, effects if effects is not None else baseline_effects())
+    unknown = sorted(set(truth) - set(model.parameter_names))
+    if unknown:
+        raise ValueError(f"problem {problem.name}: truth names unknown parameters {unknown}")
+    x0 = np.concatenate([sim["initial_state"][s.name] for s in model.states])
+    traj = simulate(model, truth, x0, t0, t1, step)
+
+    tmp = Path(tempfile.mkdtemp(prefix=".cpas-sim-", dir=out.parent if out.parent.exists()
+                                else None))
+    try:
+        for s in manifest["sensors"]:
+            sensor = next(x for x in test.sensors if x.name == s["name"])
+            t = sample_times[s["name"]]
+            clean = model_outputs(model, traj, truth, s["name"], _on_grid(t, t0, step))
+            cols = {"time": t}
+            for j, ch in enumerate(model.sensor_channels[s["name"]]):
+                sigma = sensor.noise_sigma(ch, clean[:, j])
+                dim = SENSOR_COLUMNS[s["kind"]][ch]
+                cols[ch] = (clean[:, j] + sigma * rng.standard_normal(len(t))) \
+                    / FACTORS[dim][s["columns"][ch]]
+            pd.DataFrame(cols).to_csv(tmp / s["file"], index=False, float_format="%.9g")
+        full_truth = {p.name: float(v) for p, v in
+                      zip(model.parameters, model.parameter_vector(truth), strict=True)}
+        (tmp / MANIFEST).write_text(json.dumps(manifest, indent=2))
+        (tmp / "truth.json").write_text(json.dumps(
+            {"problem": problem.name, "seed": seed, "label": problem.label,
+             "parameters": full_truth, "captures": traj.captures}, indent=2))
+        out.mkdir(parents=True, exist_ok=True)
+        for f in tmp.iterdir():
+            shutil.move(str(f), out / f.name)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    from .flight_test import load_test
+    return load_test(out)
+
+
+def _on_grid(t: np.ndarray, t0: float, step: float) -> np.ndarray:
+    return t0 + step * np.rint((t - t0) / step)
+
+
+def _observed_events(spec: list[dict], truth: dict[str, float],
+                     rng: np.random.Generator) -> list[dict]:
+    """Events as a video or pyro log would report them: truth-based times plus timing noise."""
+    events = []
+    for e in spec:
+        base = truth[e["from_parameter"]] + e["offset"] if "from_parameter" in e else e["time"]
+        t = base + e["sigma"] * rng.standard_normal()
+        ev = {"name": e["name"], "parachute": e["parachute"],
+              "time": {"value": round(float(t), 4), "unit": "s"},
+              "sigma": {"value": e["sigma"], "unit": "s"}}
+        if "stage" in e:
+            ev["stage"] = e["stage"]
+        events.append(ev)
+    return events
