@@ -10,7 +10,8 @@ trajectory feels, pressure recovery included (PRF * CdS in the paper's terms).
 
 Quantities written: ``cds[P]`` (m^2), ``drag[P]`` (N, 3-vector, against the
 air-relative velocity) and ``stage_active[P,S]`` (1 while S is the canopy's
-current stage; the first stage also covers the time before inflation).
+current stage, switching smoothly over +-5 ms at each start; the first stage
+also covers the time before inflation).
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ from typing import TYPE_CHECKING
 import casadi as ca
 
 from ..errors import InputError
-from ..inflation import fill_length, finite_mass_cds, infinite_mass_cds
+from ..inflation import CORNER_S, fill_length, finite_mass_cds, infinite_mass_cds, smoothstep
 from ..parameters import Parameter, param_name
 from .base import Capture, Effect
 
@@ -133,8 +134,11 @@ class CanopyInflation(Effect):
                                             p[param_name("expopen", *idx)], length, v_i)
                 cds = ca.if_else(t >= starts[k], curve, cds)
                 prev = steady
-                after = 1.0 if k == 0 else (t >= starts[k])
-                before = 1.0 if k == len(starts) - 1 else (t < starts[k + 1])
+                # Smooth (C2, +-CORNER_S) so sensor gains that switch with the stage do
+                # not make the estimation problem discontinuous in the start times.
+                after = 1.0 if k == 0 else smoothstep((t - starts[k]) / CORNER_S)
+                before = (1.0 if k == len(starts) - 1
+                          else 1.0 - smoothstep((t - starts[k + 1]) / CORNER_S))
                 ctx.q[param_name("stage_active", *idx)] = after * before
             ctx.q[param_name("cds", chute.name)] = cds
             ctx.q[param_name("drag", chute.name)] = (

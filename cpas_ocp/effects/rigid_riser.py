@@ -4,7 +4,10 @@ Each canopy moves with the vehicle: its drag and its dry mass m_p are lumped
 onto the vehicle body.  The riser tension follows from the canopy's own
 equation of motion, m_p a = D + m_p g - T, i.e. T = D - m_p f with f the
 system's specific force; along the drag direction this is the paper's
-F = PRF*CdS*q - W_p*G.  A riser cannot push: tension is clipped at zero.
+F = PRF*CdS*q - W_p*G.  A riser cannot push: tension is clipped at zero by a
+smooth maximum, (T + sqrt(T^2 + eps^2)) / 2 with eps = 50 N (under 2 N of
+difference once the riser carries more than 600 N), so the estimation problem
+stays differentiable where the canopy starts to pull.
 
 Quantities written: ``tension[P]`` (N).
 """
@@ -23,6 +26,9 @@ if TYPE_CHECKING:
     from ..model import ModelContext
 
 
+SLACK_N = 50.0  # width of the smooth zero clip of riser tension (N)
+
+
 @dataclass(frozen=True)
 class RigidRiser(Effect):
     name: str = "rigid_riser"
@@ -36,5 +42,5 @@ class RigidRiser(Effect):
         f = ctx.q["specific_force"]
         for chute in ctx.test.parachutes:
             pull = ctx.q[param_name("drag", chute.name)] - chute.dry_mass * f
-            ctx.q[param_name("tension", chute.name)] = ca.fmax(
-                ca.dot(pull, ctx.q["drag_direction"]), 0.0)
+            along = ca.dot(pull, ctx.q["drag_direction"])
+            ctx.q[param_name("tension", chute.name)] = 0.5 * (along + ca.sqrt(along**2 + SLACK_N**2))

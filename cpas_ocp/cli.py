@@ -1,0 +1,119 @@
+"""The `cpas-ocp` command line.
+
+    cpas-ocp problems                         list the built-in test phases
+    cpas-ocp simulate NAME --out DIR --seed N write a synthetic test folder (+ truth.json)
+    cpas-ocp reconstruct TEST_DIR --out DIR   reconstruct a test folder, write the report
+    cpas-ocp demo [--out DIR]                 simulate the built-in Drogue test and reconstruct it
+
+Exit codes: 0 success, 2 bad input (one line naming file, field and
+expectation), 3 the solver did not converge (status and iteration count).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from .errors import InputError, SolverFailure
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = _parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.run(args) or 0)
+    except InputError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except SolverFailure as exc:
+        print(f"error: {exc}; no result written", file=sys.stderr)
+        return 3
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="cpas-ocp", description=__doc__.split("\n\n")[0])
+    sub = p.add_subparsers(required=True, metavar="COMMAND")
+
+    s = sub.add_parser("problems", help="list the built-in test phases")
+    s.set_defaults(run=_problems)
+
+    s = sub.add_parser("simulate", help="simulate a built-in problem into a test folder")
+    s.add_argument("name")
+    s.add_argument("--out", required=True, type=Path)
+    s.add_argument("--seed", required=True, type=int)
+    s.set_defaults(run=_simulate)
+
+    s = sub.add_parser("reconstruct", help="reconstruct a test folder")
+    s.add_argument("test_dir", type=Path)
+    s.add_argument("--out", required=True, type=Path)
+    _solver_options(s)
+    s.set_defaults(run=_reconstruct)
+
+    s = sub.add_parser("demo", help="simulate the built-in Drogue test and reconstruct it")
+    s.add_argument("--out", type=Path, default=Path("cpas-demo"))
+    s.add_argument("--seed", type=int, default=1)
+    _solver_options(s)
+    s.set_defaults(run=_demo)
+    return p
+
+
+def _solver_options(s: argparse.ArgumentParser) -> None:
+    s.add_argument("--grid-step", type=float, default=0.01, help="shooting interval [s]")
+    s.add_argument("--verbose", action="store_true", help="show Ipopt's iteration log")
+
+
+def _problems(args: argparse.Namespace) -> int:
+    from .problems import load_problem, problem_names
+    for name in problem_names():
+        prob = load_problem(name)
+        print(f"{name:10s} {prob.title}\n{'':10s} {prob.label}")
+    return 0
+
+
+def _simulate(args: argparse.Namespace) -> int:
+    from .problems import load_problem
+    from .simulate import simulate_problem
+    test = simulate_problem(load_problem(args.name), args.out, args.seed)
+    print(f"wrote test folder {args.out} ({test.name}) with truth.json")
+    return 0
+
+
+def _reconstruct(args: argparse.Namespace) -> int:
+    from .flight_test import load_test
+    test = load_test(args.test_dir)
+    _run_reconstruction(test, args)
+    return 0
+
+
+def _demo(args: argparse.Namespace) -> int:
+    import shutil
+
+    from .problems import load_problem
+    from .simulate import simulate_problem
+    test_dir = args.out / "test"
+    if test_dir.exists():
+        shutil.rmtree(test_dir)
+    print(f"simulating the built-in 'drogue' problem (seed {args.seed}) into {test_dir}")
+    test = simulate_problem(load_problem("drogue"), test_dir, args.seed)
+    args.out = args.out / "report"
+    _run_reconstruction(test, args)
+    return 0
+
+
+def _run_reconstruction(test, args: argparse.Namespace) -> None:
+    from .estimation import Estimator, Settings
+    from .report import fit_summary, parameter_table, write_report
+    settings = Settings(grid_step=args.grid_step, verbose=args.verbose)
+    print(f"building the multiple-shooting NLP of {test.name} "
+          f"({test.t_end - test.t_start:.1f} s at {args.grid_step * 1e3:g} ms) ...", flush=True)
+    est = Estimator(test, settings=settings)
+    print(f"solving: {est.size_text()} ...", flush=True)
+    fit = est.solve(progress=not args.verbose)
+    cov = est.covariance(fit)
+    out = write_report(fit, cov, args.out)
+    print()
+    print(parameter_table(fit, cov))
+    print()
+    print(fit_summary(fit))
+    print(f"\nreport written to {out} (result.json, parameters.csv, report.md, figures)")

@@ -1,0 +1,88 @@
+"""Figures of a fit: model against measurement per sensor, and canopy drag areas."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from .estimation import Fit  # noqa: E402
+from .parameters import param_name  # noqa: E402
+from .reduction import reduce  # noqa: E402
+from .units import FT, LBF  # noqa: E402
+
+# Display units: the engineers' customary ones, per channel.
+DISPLAY = {
+    "east": ("ft", 1 / FT), "north": ("ft", 1 / FT), "up": ("ft", 1 / FT),
+    "v_east": ("ft/s", 1 / FT), "v_north": ("ft/s", 1 / FT), "v_up": ("ft/s", 1 / FT),
+    "load_factor": ("g", 1.0), "tension": ("lbf", 1 / LBF),
+}
+
+
+def plot_sensors(fit: Fit, folder: Path) -> list[Path]:
+    """One figure per sensor: each channel's data and model, normalised residuals beneath."""
+    paths = []
+    for sensor in dict.fromkeys(r.sensor for r in fit.residuals):
+        rows = [r for r in fit.residuals if r.sensor == sensor]
+        fig, axes = plt.subplots(2 * len(rows), 1, figsize=(10, 2.6 * len(rows) + 1.5),
+                                 sharex=True, gridspec_kw={"height_ratios": [3, 1] * len(rows)})
+        for i, r in enumerate(rows):
+            unit, k = DISPLAY.get(r.channel, ("SI", 1.0))
+            ax, axr = axes[2 * i], axes[2 * i + 1]
+            ax.plot(r.t, r.measured * k, ".", ms=1.5, color="0.55", label="measured")
+            ax.plot(r.t, r.model * k, "-", lw=1.0, color="C3", label="model")
+            ax.set_ylabel(f"{r.channel} [{unit}]")
+            ax.legend(loc="best", fontsize=8)
+            axr.plot(r.t, r.normalized, ".", ms=1.5, color="C0")
+            axr.axhline(0, color="k", lw=0.5)
+            axr.set_ylabel("res/σ")
+            lim = max(4.0, float(np.percentile(np.abs(r.normalized), 99.5)))
+            axr.set_ylim(-lim, lim)
+        axes[-1].set_xlabel("time [s]")
+        fig.suptitle(f"{fit.test.name}: {sensor}, model vs measurement")
+        fig.tight_layout()
+        path = folder / f"sensor_{sensor}.png"
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+        paths.append(path)
+    return paths
+
+
+def plot_drag_areas(fit: Fit, folder: Path) -> Path:
+    """Each canopy's reconstructed drag area against its offline (Eq. 3) reduction."""
+    q = fit.quantities()
+    starts = {(c.name, s): fit.parameters[param_name("t_start", c.name, s)]
+              for c in fit.test.parachutes for s in c.stages}
+    red = reduce(fit.test, starts)
+    chutes = fit.test.parachutes
+    fig, axes = plt.subplots(len(chutes), 1, figsize=(10, 3.2 * len(chutes)), sharex=True,
+                             squeeze=False)
+    for ax, chute in zip(axes[:, 0], chutes, strict=True):
+        if chute.name in red.cds_riser:
+            # Load-cell drag area mapped to the trajectory frame: times s_stage / k_canopy.
+            factor = np.zeros_like(red.t)
+            k = fit.parameters.get(param_name("loadcell_scale", chute.name), 1.0)
+            for s in chute.stages:
+                act = np.interp(red.t, fit.t, q[param_name("stage_active", chute.name, s)])
+                factor += act * fit.parameters.get(param_name("drag_scale", s), 1.0) / k
+            ax.plot(red.t, red.cds_riser[chute.name] * factor / FT**2, ".", ms=1.2,
+                    color="0.6", label="riser data, Eq. 3, with fitted scales")
+        ax.plot(fit.t, q[param_name("cds", chute.name)] / FT**2, color="C3", lw=1.2,
+                label="reconstructed CdS(t)")
+        for s in chute.stages:
+            ax.axvline(starts[(chute.name, s)], color="C2", lw=0.6, ls="--")
+        ax.set_ylabel(f"{chute.name} CdS [ft²]")
+        ax.legend(loc="best", fontsize=8)
+    axes[-1, 0].set_xlabel("time [s]  (dashed: reconstructed inflation start times)")
+    fig.suptitle(f"{fit.test.name}: canopy drag areas")
+    fig.tight_layout()
+    path = folder / "drag_areas.png"
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+

@@ -1,0 +1,123 @@
+"""The report folder of a reconstruction: result.json, parameters.csv, figures, and the table."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from .diagnostics import sensor_summary, worst_windows
+from .errors import InputError
+from .estimation import Fit
+from .plots import plot_drag_areas, plot_sensors
+from .uncertainty import Covariance
+from .units import FT
+
+SENSOR_UNITS = {"east": "m", "north": "m", "up": "m", "v_east": "m/s", "v_north": "m/s",
+                "v_up": "m/s", "load_factor": "g", "tension": "N"}
+
+
+def result_dict(fit: Fit, cov: Covariance | None) -> dict[str, Any]:
+    """Everything a reader of result.json needs; SI units, stated per value."""
+    std = cov.std if cov is not None else {}
+    params = {}
+    for name in fit.free:
+        prm = fit.model.parameter(name)
+        entry = {"value": fit.parameters[name], "unit": prm.unit,
+                 "initial": fit.guess.get(name, prm.default)}
+        if name in std:
+            entry["std"] = std[name]
+        if cov is not None and name in cov.at_bound:
+            entry["at_bound"] = True
+        params[name] = entry
+    fixed = {n: {"value": v, "unit": fit.model.parameter(n).unit}
+             for n, v in fit.parameters.items() if n not in fit.free}
+    summary = sensor_summary(fit)
+    residuals = {s: {"rms": e["rms"], "unit": {c: SENSOR_UNITS.get(c, "SI") for c in e["rms"]},
+                     "normalized_rms": e["normalized_rms"], "samples": e["samples"]}
+                 for s, e in summary.items()}
+    n = fit.n_samples
+    worst = [{"sensor": w.sensor, "channel": w.channel, "window_s": [w.t0, w.t1],
+              "normalized_rms": w.normalized_rms} for w in worst_windows(fit)]
+    return {
+        "test": fit.test.name,
+        "label": fit.test.label,
+        "parameters": params,
+        "fixed": fixed,
+        "captures": fit.captures,
+        "solver": {"status": fit.solver.status, "success": fit.solver.success,
+                   "iterations": fit.solver.iterations, "wall_s": fit.solver.wall_s},
+        "residuals": residuals,
+        "fit": {"chi_square": fit.chi_square, "samples": n, "free_parameters": len(fit.free),
+                "chi_square_per_dof": fit.chi_square / max(n - len(fit.free), 1),
+                "covariance": "Gauss-Newton KKT, sensor sigmas as given" if cov else "none"},
+        "worst_windows": worst,
+        "model": {"effects": [e.name for e in fit.model.effects],
+                  "grid_step_s": fit.settings.grid_step,
+                  "fill_length": {c.name: c.fill_length for c in fit.test.parachutes}},
+    }
+
+
+def parameter_table(fit: Fit, cov: Covariance | None) -> str:
+    """A readable terminal table of the estimated parameters."""
+    std = cov.std if cov is not None else {}
+    lines = [f"{'parameter':30s} {'value':>11s} {'± 1σ':>10s}  {'unit':5s} {'initial':>10s}"]
+    for name in fit.free:
+        prm = fit.model.parameter(name)
+        v = fit.parameters[name]
+        s = f"{std[name]:10.4g}" if name in std else f"{'—':>10s}"
+        extra = f"   ({v / FT**2:7.2f} ft²)" if prm.unit == "m^2" else ""
+        flag = "  at bound" if cov is not None and name in cov.at_bound else ""
+        lines.append(f"{name:30s} {v:11.5g} {s}  {prm.unit:5s} "
+                     f"{fit.guess.get(name, prm.default):10.4g}{extra}{flag}")
+    return "\n".join(lines)
+
+
+def fit_summary(fit: Fit) -> str:
+    """Solver outcome, residuals per sensor and where the model fits worst."""
+    n = fit.n_samples
+    out = [f"solver: {fit.solver.status}, {fit.solver.iterations} iterations, "
+           f"{fit.solver.wall_s:.1f} s;  chi²/dof = {fit.chi_square:.1f}/{n - len(fit.free)}"
+           f" = {fit.chi_square / max(n - len(fit.free), 1):.3f}"]
+    for s, e in sensor_summary(fit).items():
+        rms = ", ".join(f"{c} {v:.4g} {SENSOR_UNITS.get(c, '')}" for c, v in e["rms"].items())
+        out.append(f"  {s:16s} normalised RMS {e['normalized_rms']:.3f}   (RMS {rms})")
+    worst = worst_windows(fit, top=1)
+    if worst:
+        w = worst[0]
+        out.append(f"worst fit: {w.sensor}.{w.channel} in {w.t0:.2f}-{w.t1:.2f} s, "
+                   f"normalised RMS {w.normalized_rms:.2f}")
+    return "\n".join(out)
+
+
+def write_report(fit: Fit, cov: Covariance | None, out: str | Path) -> Path:
+    """Write the report folder atomically: all of it or nothing."""
+    out = Path(out)
+    if out.exists() and any(out.iterdir()) and not (out / "result.json").exists():
+        raise InputError(str(out), "(folder)", "a new or empty folder, or an earlier report "
+                         "folder to replace")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=".cpas-report-", dir=out.parent))
+    try:
+        (tmp / "result.json").write_text(json.dumps(result_dict(fit, cov), indent=2))
+        rows = [{"parameter": n, "value": fit.parameters[n],
+                 "std": (cov.std.get(n, np.nan) if cov else np.nan),
+                 "unit": fit.model.parameter(n).unit} for n in fit.free]
+        pd.DataFrame(rows).to_csv(tmp / "parameters.csv", index=False)
+        plot_sensors(fit, tmp)
+        plot_drag_areas(fit, tmp)
+        (tmp / "report.md").write_text(
+            f"# Reconstruction of {fit.test.name}\n\n{fit.test.label}\n\n```\n"
+            f"{parameter_table(fit, cov)}\n\n{fit_summary(fit)}\n```\n\n"
+            + "".join(f"![{p.stem}]({p.name})\n\n" for p in sorted(tmp.glob("*.png"))))
+        if out.exists():
+            shutil.rmtree(out)
+        tmp.rename(out)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return out
