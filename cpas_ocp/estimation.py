@@ -23,6 +23,7 @@ measured value so the weights do not depend on the parameters.
 
 from __future__ import annotations
 
+import sys
 import time
 from dataclasses import dataclass, field
 
@@ -35,6 +36,7 @@ from .flight_test import FlightTest
 from .model import Model
 from .reduction import gps_state, initial_guess
 from .simulate import rk4_step
+from .uncertainty import Covariance, kkt_covariance
 
 
 @dataclass
@@ -98,6 +100,7 @@ class Fit:
     residuals: list[SensorResidual]
     solver: SolverStats
     settings: Settings
+    z: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))
 
     @property
     def chi_square(self) -> float:
@@ -173,7 +176,7 @@ class Estimator:
         self._blocks_value: list[ca.MX] = []
         self._blocks_jac: list[tuple[np.ndarray, np.ndarray, ca.MX]] = []
         self._nrows = 0
-        self._ctx = (X, Xp, pfull, Cp, xscale, cscale, free_index)
+        self._ctx = (X, Xp, pfull, Cp, xscale, cscale)
 
         # Continuity of every shooting interval.
         gap = ca.Function("gap", [xs, xs1, ts, ps, cs], [(xs1 - xe) / xscale])
@@ -284,17 +287,20 @@ class Estimator:
                                     zip(pb, self.pscale, strict=True)], np.full(ncap, inf)])
         # Gauss-Newton converges linearly, so Ipopt's dual infeasibility plateaus near
         # 1e-4 (scaled) long after the estimate has stopped moving; accept a point where
-        # the objective no longer changes (relative 1e-10 over 5 iterations) and the
+        # the objective no longer changes (relative 1e-9, i.e. ~1e-5 in chi-square, over
+        # 5 iterations; a change of 1 in chi-square is the statistical scale) and the
         # constraints hold to 1e-8.  `solve` reports which criterion ended the run.
         opts = {
             "ipopt.max_iter": s.max_iter, "ipopt.tol": s.tol,
-            "ipopt.acceptable_tol": 1e-2, "ipopt.acceptable_iter": 5,
-            "ipopt.acceptable_obj_change_tol": 1e-10,
+            "ipopt.acceptable_tol": 1e-1, "ipopt.acceptable_iter": 5,
+            "ipopt.acceptable_obj_change_tol": 1e-9,
             "ipopt.acceptable_constr_viol_tol": 1e-8,
             "ipopt.print_level": 5 if s.verbose else 0, "print_time": False,
             "ipopt.sb": "yes", "hess_lag": hess, "jac_g": jac_g,
         }
         nlp = {"x": self._z, "f": self._obj, "g": self._g}
+        self._progress = _Progress(self._z.numel(), self._g.numel())  # keep a reference
+        opts["iteration_callback"] = self._progress
         self._solver = ca.nlpsol("reconstruction", "ipopt", nlp, opts)
 
     def _mapped_block(self, fn: ca.Function, nodes: list[np.ndarray], times: np.ndarray,
@@ -310,7 +316,7 @@ class Estimator:
         the mapped graph directly would take one sweep per colour of the whole
         Jacobian, about as many as there are parameters.
         """
-        X, Xp, pfull, Cp, xscale, cscale, free_index = self._ctx
+        X, Xp, pfull, Cp, xscale, cscale = self._ctx
         m = self.model
         nx = m.nx
         n_inst = len(times)
@@ -362,13 +368,27 @@ class Estimator:
         return np.concatenate([(x0 / self._xscale[:, None]).ravel(order="F"), p0, c0])
 
     # ------------------------------------------------------------------ solve
-    def solve(self) -> Fit:
-        """Solve the NLP from the reduction's initial point; raise SolverFailure if it fails."""
+    def size_text(self) -> str:
+        """One line describing the NLP's size."""
+        nX, nP, nC = self._nz
+        return (f"{nX + nP + nC} variables ({nX} shooting states on {len(self.t)} nodes, "
+                f"{nP} parameters, {nC} captured speeds), {self._g.numel()} constraints, "
+                f"{sum(len(s_[2]) * len(s_[1]) for s_ in self._samples)} residuals")
+
+    def solve(self, progress: bool = False) -> Fit:
+        """Solve the NLP from the reduction's initial point; raise SolverFailure if it fails.
+
+        With `progress`, a one-line iteration counter with chi-square is shown on stderr.
+        """
         z0 = self.initial_point()
         t0 = time.perf_counter()
-        sol = self._solver(x0=z0, lbx=self._lbz, ubx=self._ubz, lbg=self._lbg, ubg=self._ubg)
+        solver = self._solver
+        self._progress.reset(progress)
+        sol = solver(x0=z0, lbx=self._lbz, ubx=self._ubz, lbg=self._lbg, ubg=self._ubg)
+        if progress:
+            sys.stderr.write("\n")
         wall = time.perf_counter() - t0
-        st = self._solver.stats()
+        st = solver.stats()
         z = np.asarray(sol["x"]).ravel()
         g = np.asarray(sol["g"]).ravel()
         viol = np.maximum(self._lbg - g, 0) + np.maximum(g - self._ubg, 0)
@@ -379,6 +399,14 @@ class Estimator:
         if not stats.success:
             raise SolverFailure(stats.status, stats.iterations, worst)
         return self._fit(z, stats)
+
+    def covariance(self, fit: Fit, scale_by_residual: bool = False) -> Covariance:
+        """Covariance of the free parameters at `fit` (Gauss-Newton KKT parameter block)."""
+        nX, nP, _ = self._nz
+        idx = np.arange(nX, nX + nP)
+        return kkt_covariance(self._residual_jacobian, self._constraint_jacobian, fit.z,
+                              idx, self.pscale, self._lbz[idx], self._ubz[idx], self.free,
+                              scale_by_residual)
 
     def _fit(self, z: np.ndarray, stats: SolverStats) -> Fit:
         m = self.model
@@ -393,7 +421,45 @@ class Estimator:
             for j, ch in enumerate(channels):
                 residuals.append(SensorResidual(sensor, ch, tsamp, meas[j], y[j], sig[j]))
         return Fit(self.test, m, params, list(self.free), dict(self.guess), self.t, Xp.T, caps,
-                   residuals, stats, self.settings)
+                   residuals, stats, self.settings, z)
+
+
+class _Progress(ca.Callback):
+    """Ipopt iteration callback: one self-overwriting status line on stderr."""
+
+    def __init__(self, nx: int, ng: int) -> None:
+        ca.Callback.__init__(self)
+        self._nx, self._ng, self._k, self.enabled = nx, ng, 0, False
+        self.construct("progress", {})
+
+    def reset(self, enabled: bool) -> None:
+        self._k, self.enabled = 0, enabled
+
+    def get_n_in(self) -> int:
+        return ca.nlpsol_n_out()
+
+    def get_n_out(self) -> int:
+        return 1
+
+    def get_name_in(self, i: int) -> str:
+        return ca.nlpsol_out(i)
+
+    def get_name_out(self, i: int) -> str:
+        return "ret"
+
+    def get_sparsity_in(self, i: int) -> ca.Sparsity:
+        name = ca.nlpsol_out(i)
+        n = {"f": 1, "x": self._nx, "lam_x": self._nx, "g": self._ng, "lam_g": self._ng}.get(
+            name, 0)
+        return ca.Sparsity.dense(n, 1)
+
+    def eval(self, arg: list) -> list:
+        self._k += 1
+        if not self.enabled or not sys.stderr.isatty():
+            return [0]
+        sys.stderr.write(f"\r  iteration {self._k:4d}   chi-square {2 * float(arg[1]):14.6g}")
+        sys.stderr.flush()
+        return [0]
 
 
 def cubic_bspline(u: ca.MX) -> ca.MX:

@@ -228,7 +228,8 @@ def test_from_manifest(manifest: dict[str, Any], folder: Path,
             raise InputError(mfile, f"{where}.stage",
                              f"one of {list(by_name[e['parachute']].stages)}")
         if e["name"] == "disreef" and stage is None:
-            raise InputError(mfile, f"{where}.stage", "a disreef event names the stage it opens into")
+            raise InputError(mfile, f"{where}.stage",
+                             "a disreef event names the stage it opens into")
         t = _si(e["time"], "time")
         if not (t_start <= t <= t_end):
             raise InputError(mfile, f"{where}.time", f"{t:.3f} s lies outside the data "
@@ -256,10 +257,9 @@ def _load_sensor(mfile: str, folder: Path, i: int, s: dict[str, Any],
     where = f"sensors[{i}]"
     kind = s["kind"]
     parachute = s.get("parachute")
-    if kind == "load_cell":
-        if parachute not in parachutes:
-            raise InputError(mfile, f"{where}.parachute",
-                             f"a load cell names its canopy, one of {sorted(parachutes)}")
+    if kind == "load_cell" and parachute not in parachutes:
+        raise InputError(mfile, f"{where}.parachute",
+                         f"a load cell names its canopy, one of {sorted(parachutes)}")
     sigma: dict[str, float] = {}
     for group, (dim, channels) in SIGMA_GROUPS[kind].items():
         q = s["sigma"].get(group)

@@ -7,13 +7,13 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
 
-from .estimation import Fit  # noqa: E402
-from .parameters import param_name  # noqa: E402
-from .reduction import reduce  # noqa: E402
-from .units import FT, LBF  # noqa: E402
+from .estimation import Fit
+from .parameters import param_name
+from .reduction import reduce
+from .units import FT, LBF
 
 # Display units: the engineers' customary ones, per channel.
 DISPLAY = {

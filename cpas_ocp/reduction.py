@@ -66,10 +66,7 @@ def reduce(test: FlightTest, starts: dict[tuple[str, str], float]) -> Reduction:
     v_air = vel - wind_at(test.atmosphere, pos[:, 2])
     airspeed = np.linalg.norm(v_air, axis=1)
     q = 0.5 * density_at(test.atmosphere, pos[:, 2]) * airspeed**2
-    if imu:
-        G = np.interp(t, imu[0].time, imu[0].data["load_factor"])
-    else:
-        G = np.ones_like(t)
+    G = np.interp(t, imu[0].time, imu[0].data["load_factor"]) if imu else np.ones_like(t)
     w_total = (test.vehicle.mass + sum(p.dry_mass for p in test.parachutes)) * G0
     cds_imu = w_total * G / q - test.vehicle.forebody_cds
     cds_riser = {}

@@ -26,7 +26,8 @@ FACTORS: dict[str, dict[str, float]] = {
     "load_factor": {"g": 1.0, "1": 1.0},
     "dimensionless": {"1": 1.0, "": 1.0},
     "stiffness": {"N/m": 1.0, "lbf/ft": LBF / FT},
-    "pressure": {"Pa": 1.0, "psf": LBF / FT**2, "hPa": 100.0, "kPa": 1e3, "psi": LBF / (FT / 12) ** 2},
+    "pressure": {"Pa": 1.0, "psf": LBF / FT**2, "hPa": 100.0, "kPa": 1e3,
+                 "psi": LBF / (FT / 12) ** 2},
 }
 
 SI_UNIT = {dim: next(u for u, f in table.items() if f == 1.0) for dim, table in FACTORS.items()}

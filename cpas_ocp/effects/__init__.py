@@ -22,6 +22,18 @@ def baseline_effects() -> list[Effect]:
             GpsSensor(), ImuSensor(), LoadCellSensor()]
 
 
-__all__ = ["Capture", "CanopyInflation", "Constraint", "DragScale", "Effect", "ForebodyDrag",
-           "GpsSensor", "ImuSensor", "LoadCellScale", "LoadCellSensor", "RigidRiser", "State",
-           "baseline_effects"]
+__all__ = [
+    "CanopyInflation",
+    "Capture",
+    "Constraint",
+    "DragScale",
+    "Effect",
+    "ForebodyDrag",
+    "GpsSensor",
+    "ImuSensor",
+    "LoadCellScale",
+    "LoadCellSensor",
+    "RigidRiser",
+    "State",
+    "baseline_effects",
+]

@@ -43,4 +43,5 @@ class RigidRiser(Effect):
         for chute in ctx.test.parachutes:
             pull = ctx.q[param_name("drag", chute.name)] - chute.dry_mass * f
             along = ca.dot(pull, ctx.q["drag_direction"])
-            ctx.q[param_name("tension", chute.name)] = 0.5 * (along + ca.sqrt(along**2 + SLACK_N**2))
+            ctx.q[param_name("tension", chute.name)] = 0.5 * (
+                along + ca.sqrt(along**2 + SLACK_N**2))

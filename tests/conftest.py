@@ -1,0 +1,72 @@
+"""Shared fixtures: simulated Drogue test folders and their reconstructions (built once)."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+
+from cpas_ocp.estimation import Estimator, Fit
+from cpas_ocp.flight_test import load_test
+from cpas_ocp.problems import load_problem
+from cpas_ocp.simulate import simulate_problem
+from cpas_ocp.uncertainty import Covariance
+
+START_GUESS_OFFSET_S = 0.3
+
+
+@pytest.fixture(scope="session")
+def drogue_folder(tmp_path_factory: pytest.TempPathFactory):
+    """A factory: the simulated `drogue` test folder for a seed (simulated once per seed)."""
+    cache: dict[int, Path] = {}
+
+    def make(seed: int) -> Path:
+        if seed not in cache:
+            folder = tmp_path_factory.mktemp(f"drogue{seed}") / "test"
+            simulate_problem(load_problem("drogue"), folder, seed)
+            cache[seed] = folder
+        return cache[seed]
+
+    return make
+
+
+def offset_events(folder: Path, dest: Path, offset: float) -> Path:
+    """Copy a test folder with every inflation-start event moved `offset` s off the truth.
+
+    Signs alternate so that some guesses are early and some late.  Only the
+    observed events change; the estimator takes its start-time guesses from them.
+    """
+    shutil.copytree(folder, dest)
+    manifest = json.loads((dest / "manifest.json").read_text())
+    truth = json.loads((dest / "truth.json").read_text())["parameters"]
+    (dest / "truth.json").unlink()  # the estimator's folder carries no truth
+    k = 0
+    for event in manifest["events"]:
+        if event["name"] in ("bag_strip", "disreef"):
+            stage = event.get("stage", "stage1")
+            t_true = truth[f"t_start[{event['parachute']},{stage}]"]
+            event["time"]["value"] = t_true + offset * (-1) ** k
+            k += 1
+    (dest / "manifest.json").write_text(json.dumps(manifest, indent=2))
+    return dest
+
+
+@pytest.fixture(scope="session")
+def drogue_fit(drogue_folder, tmp_path_factory: pytest.TempPathFactory):
+    """A factory: (fit, covariance, truth) of the seed's test with start guesses 0.3 s off."""
+    cache: dict[int, tuple[Fit, Covariance, dict[str, float]]] = {}
+
+    def make(seed: int) -> tuple[Fit, Covariance, dict[str, float]]:
+        if seed not in cache:
+            folder = drogue_folder(seed)
+            truth = json.loads((folder / "truth.json").read_text())["parameters"]
+            shifted = offset_events(folder, tmp_path_factory.mktemp(f"shifted{seed}") / "test",
+                                    START_GUESS_OFFSET_S)
+            est = Estimator(load_test(shifted))
+            fit = est.solve()
+            cache[seed] = (fit, est.covariance(fit), truth)
+        return cache[seed]
+
+    return make

@@ -1,0 +1,74 @@
+"""The drag-area growth laws of paper Eqs. 5 and 6, and the n <-> n_p conversion."""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from cpas_ocp.inflation import (
+    CORNER_S,
+    fill_constant_from_peak,
+    fill_length,
+    finite_mass_cds,
+    infinite_mass_cds,
+    peak_fill_constant,
+)
+
+T0, PREV, CDS, CK, NP, E, TK, D, V = 1.0, 7.0, 12.0, 1.3, 5.0, 1.7, 0.25, 7.0, 100.0
+
+
+def curve(t: float) -> float:
+    return float(infinite_mass_cds(t, T0, PREV, CDS, CK, NP, E, TK, D, V))
+
+
+def test_rises_from_previous_stage_to_peak_at_t_fp() -> None:
+    t_fp = NP * D / V
+    assert curve(T0 + 1e-6) == pytest.approx(PREV, rel=1e-6)
+    # outside the +-5 ms rounding the curve is exactly Eq. 5 ...
+    tau = (t_fp - 2 * CORNER_S) / t_fp
+    x = (CK * CDS - PREV) / (CDS - PREV)
+    assert curve(T0 + tau * t_fp) == pytest.approx(PREV + (CDS - PREV) * x * tau**E, rel=1e-12)
+    # ... and the peak is Ck * CdS_i to within the rounding.
+    assert curve(T0 + t_fp) == pytest.approx(CK * CDS, rel=5e-3)
+
+
+def test_decays_per_eq6_and_settles_after_t_k() -> None:
+    t_fp = NP * D / V
+    t = T0 + t_fp + 0.1
+    assert curve(t) == pytest.approx(CK * CDS * CK ** (-0.1 / TK), rel=1e-12)
+    assert curve(T0 + t_fp + TK + 2 * CORNER_S) == pytest.approx(CDS, rel=1e-12)
+    assert curve(T0 + 5.0) == pytest.approx(CDS, rel=1e-12)
+
+
+def test_fill_constant_round_trip_and_meaning() -> None:
+    n = float(fill_constant_from_peak(NP, PREV, CDS, CK, E))
+    assert float(peak_fill_constant(n, PREV, CDS, CK, E)) == pytest.approx(NP, rel=1e-12)
+    # Eq. 5 with the standard fill constant reaches Ck CdS_i at t_fp = n_p D / V.
+    t_f = n * D / V
+    t_fp = NP * D / V
+    assert PREV + (CDS - PREV) * (t_fp / t_f) ** E == pytest.approx(CK * CDS, rel=1e-12)
+
+
+def test_finite_mass_reaches_steady_value_at_t_f() -> None:
+    n = 8.0
+    t_f = n * D / V
+    f = [float(finite_mass_cds(T0 + s * t_f, T0, PREV, CDS, n, 1.0, D, V)) for s in
+         (0.5, 1.0, 2.0)]
+    assert f == pytest.approx([0.5 * (PREV + CDS), CDS, CDS], rel=1e-12)
+
+
+def test_growth_scaled_fill_length() -> None:
+    length = float(fill_length("growth_scaled", D, PREV, CDS, 20.0))
+    assert length == pytest.approx(D * np.sqrt((CDS - PREV) / 20.0))
+    with pytest.raises(ValueError):
+        fill_length("bogus", D, PREV, CDS, 20.0)  # type: ignore[arg-type]
+
+
+def test_curve_is_twice_differentiable_in_start_time() -> None:
+    t0 = ca.SX.sym("t0")
+    t_peak = T0 + NP * D / V
+    expr = infinite_mass_cds(t_peak, t0, PREV, CDS, CK, NP, E, TK, D, V)
+    d2 = ca.Function("d2", [t0], [ca.hessian(expr, t0)[0]])
+    values = [float(d2(T0 + s)) for s in np.linspace(-CORNER_S, CORNER_S, 41)]
+    assert np.all(np.isfinite(values))
