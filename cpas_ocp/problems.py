@@ -1,4 +1,4 @@
-"""Ready-made test phases shipped in `problems/` (installed as `cpas_ocp.problems`).
+"""Ready-made test phases shipped in `problems/` (installed as `cpas_ocp.problem_data`).
 
 Each problem is one JSON file: a manifest template (vehicle, parachutes,
 sensors and their noise), the simulation set-up (initial state, duration,

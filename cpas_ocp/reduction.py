@@ -106,10 +106,11 @@ def initial_guess(test: FlightTest, model: Model) -> dict[str, float]:
     starts = {(c.name, s): guess[param_name("t_start", c.name, s)]
               for c in test.parachutes for s in c.stages}
     red = reduce(test, starts)
+    bounds = {p.name: (p.lower, p.upper) for p in model.parameters}
     for stage, s in red.stage_scale.items():
         name = param_name("drag_scale", stage)
         if name in guess:
-            guess[name] = float(np.clip(s, 0.6, 1.8))
+            guess[name] = float(np.clip(s, *bounds[name]))
     for chute in test.parachutes:
         curve = red.cds_riser.get(chute.name)
         for k, stage in enumerate(chute.stages):
