@@ -161,7 +161,6 @@ class Estimator:
         pfull = ca.vertcat(*[
             P[free_index[p.name]] * self.pscale[free_index[p.name]] if p.name in free_index
             else ca.MX(self.values.get(p.name, p.default)) for p in m.parameters])
-        self._pfull = ca.Function("pfull", [P], [pfull])
 
         step = rk4_step(m)
         xs = ca.SX.sym("x", nx)
@@ -173,9 +172,6 @@ class Estimator:
         xe = xs
         for j in range(s.substeps):
             xe = step(xe, ts + j * h / s.substeps, h / s.substeps, ps, cs)
-        self._blocks_value: list[ca.MX] = []
-        self._blocks_jac: list[tuple[np.ndarray, np.ndarray, ca.MX]] = []
-        self._nrows = 0
         self._ctx = (X, Xp, pfull, Cp, xscale, cscale)
 
         # Continuity of every shooting interval.
@@ -256,7 +252,6 @@ class Estimator:
         residual = ca.vertcat(*residual_blocks)
         jac = ca.vertcat(*residual_jacs)
         self._g = ca.vertcat(*g)
-        self._res_blocks = residual_blocks
         self._residual_jacobian = ca.Function("residual_jacobian", [self._z], [residual, jac])
         self._constraint_jacobian = ca.Function("constraint_jacobian", [self._z],
                                                 [ca.vertcat(*g_jac)])

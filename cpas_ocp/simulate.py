@@ -23,7 +23,7 @@ import pandas as pd
 
 from .effects import Effect, baseline_effects
 from .errors import InputError
-from .flight_test import MANIFEST, SENSOR_COLUMNS, FlightTest, test_from_manifest
+from .flight_test import MANIFEST, SENSOR_COLUMNS, FlightTest, load_test, test_from_manifest
 from .model import Model
 from .problems import Problem
 from .units import FACTORS
@@ -151,7 +151,6 @@ def simulate_problem(problem: Problem, out: str | Path, seed: int,
             shutil.move(str(f), out / f.name)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
-    from .flight_test import load_test
     return load_test(out)
 
 
