@@ -14,8 +14,12 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from .errors import InputError, SolverFailure
+
+if TYPE_CHECKING:
+    from .flight_test import FlightTest
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -101,7 +105,7 @@ def _demo(args: argparse.Namespace) -> int:
     return 0
 
 
-def _run_reconstruction(test, args: argparse.Namespace) -> None:
+def _run_reconstruction(test: FlightTest, args: argparse.Namespace) -> None:
     from .estimation import Estimator, Settings
     from .report import fit_summary, parameter_table, write_report
     settings = Settings(grid_step=args.grid_step, verbose=args.verbose)

@@ -110,6 +110,11 @@ class Fit:
     def n_samples(self) -> int:
         return int(sum(r.t.size for r in self.residuals))
 
+    @property
+    def dof(self) -> int:
+        """Degrees of freedom of the fit: residuals minus free parameters (at least 1)."""
+        return max(self.n_samples - len(self.free), 1)
+
     def quantities(self) -> dict[str, np.ndarray]:
         """Every scalar model quantity (cds[P], tension[P], dynamic_pressure, ...) on the grid."""
         pvec = self.model.parameter_vector(self.parameters)
@@ -239,14 +244,11 @@ class Estimator:
             else:
                 y_at = m.outputs[sensor.name](xs, ts, ps, cs)
                 extra, sym_extra = [], []
-            pred = ca.Function("pred", [xs, ts, *sym_extra, ps, cs], [y_at])
             res = ca.Function("res", [xs, ts, *sym_extra, ym, sg, ps, cs], [(ym - y_at) / sg])
             r_value, r_jac = self._mapped_block(res, [k], tsamp, [*extra, meas, sig])
             residual_blocks.append(r_value)
             residual_jacs.append(r_jac)
-            y = pred.map(len(tsamp), "serial")(
-                Xp[:, k], ca.DM(tsamp - dt).T, *[ca.DM(e).T for e in extra], pfull, Cp)
-            self._samples.append((sensor.name, channels, tsamp, meas, sig, y))
+            self._samples.append((sensor.name, channels, tsamp, meas, sig))
 
         self._z = z_all
         residual = ca.vertcat(*residual_blocks)
@@ -267,7 +269,7 @@ class Estimator:
                            [sigma_f * ca.triu(ca.mtimes(jac.T, jac))],
                            ["x", "p", "lam_f", "lam_g"], ["hess_gamma_x_x"])
         self._unpack = ca.Function("unpack", [self._z], [Xp, pfull, Cp])
-        self._outputs = ca.Function("outputs", [self._z], [s_[5] for s_ in self._samples])
+        self._residuals = ca.Function("residuals", [self._z], residual_blocks)
         self._lbg = np.concatenate([np.ravel(a) for a in lbg])
         self._ubg = np.concatenate([np.ravel(a) for a in ubg])
         self._obj = obj
@@ -319,13 +321,12 @@ class Estimator:
         xs_args, p_arg, c_arg = args[:len(nodes)], args[-2], args[-1]
         out = fn(*args)
         free_cols = [m.parameter_names.index(f) for f in self.free]
-        rows_of = out.numel()
-        jblocks = [ca.jacobian(out, a) * ca.repmat(ca.DM(xscale).T, rows_of, 1) for a in xs_args]
-        jp = ca.jacobian(out, p_arg)[:, free_cols] * ca.repmat(ca.DM(self.pscale).T, rows_of, 1)
+        mrows = out.numel()
+        jblocks = [ca.jacobian(out, a) * ca.repmat(ca.DM(xscale).T, mrows, 1) for a in xs_args]
+        jp = ca.jacobian(out, p_arg)[:, free_cols] * ca.repmat(ca.DM(self.pscale).T, mrows, 1)
         jc = ca.jacobian(out, c_arg) * cscale
         n_states = len(nodes)
         local = ca.Function("local_jac", args, [ca.vec(ca.horzcat(*jblocks, jp, jc))])
-        mrows = out.numel()
         nfree = len(self.free)
         ncap = len(m.captures)
         call = [*(Xp[:, k] for k in nodes), ca.DM(times).T,
@@ -377,13 +378,11 @@ class Estimator:
         """
         z0 = self.initial_point()
         t0 = time.perf_counter()
-        solver = self._solver
         self._progress.reset(progress)
-        sol = solver(x0=z0, lbx=self._lbz, ubx=self._ubz, lbg=self._lbg, ubg=self._ubg)
-        if progress:
-            sys.stderr.write("\n")
+        sol = self._solver(x0=z0, lbx=self._lbz, ubx=self._ubz, lbg=self._lbg, ubg=self._ubg)
+        self._progress.finish()
         wall = time.perf_counter() - t0
-        st = solver.stats()
+        st = self._solver.stats()
         z = np.asarray(sol["x"]).ravel()
         g = np.asarray(sol["g"]).ravel()
         viol = np.maximum(self._lbg - g, 0) + np.maximum(g - self._ubg, 0)
@@ -408,11 +407,13 @@ class Estimator:
         Xp, pfull, Cp = (np.asarray(a) for a in self._unpack(z))
         params = {p.name: float(v) for p, v in zip(m.parameters, pfull.ravel(), strict=True)}
         caps = {c.name: float(v) for c, v in zip(m.captures, Cp.ravel(), strict=True)}
-        outs = self._outputs(z)
-        outs = outs if isinstance(outs, tuple | list) else [outs]
+        blocks = self._residuals(z)
+        blocks = blocks if isinstance(blocks, tuple | list) else [blocks]
         residuals = []
-        for (sensor, channels, tsamp, meas, sig, _), y in zip(self._samples, outs, strict=True):
-            y = np.asarray(y)
+        for (sensor, channels, tsamp, meas, sig), r in zip(self._samples, blocks, strict=True):
+            # Residual blocks are instance-major: (meas - model) / sigma per sample.
+            r = np.asarray(r).reshape(len(tsamp), len(channels)).T
+            y = meas - r * sig
             for j, ch in enumerate(channels):
                 residuals.append(SensorResidual(sensor, ch, tsamp, meas[j], y[j], sig[j]))
         return Fit(self.test, m, params, list(self.free), dict(self.guess), self.t, Xp.T, caps,
@@ -428,7 +429,11 @@ class _Progress(ca.Callback):
         self.construct("progress", {})
 
     def reset(self, enabled: bool) -> None:
-        self._k, self.enabled = 0, enabled
+        self._k, self.enabled = 0, enabled and sys.stderr.isatty()
+
+    def finish(self) -> None:
+        if self.enabled and self._k:
+            sys.stderr.write("\n")
 
     def get_n_in(self) -> int:
         return ca.nlpsol_n_out()
@@ -450,7 +455,7 @@ class _Progress(ca.Callback):
 
     def eval(self, arg: list) -> list:
         self._k += 1
-        if not self.enabled or not sys.stderr.isatty():
+        if not self.enabled:
             return [0]
         sys.stderr.write(f"\r  iteration {self._k:4d}   chi-square {2 * float(arg[1]):14.6g}")
         sys.stderr.flush()

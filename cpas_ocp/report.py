@@ -54,7 +54,7 @@ def result_dict(fit: Fit, cov: Covariance | None) -> dict[str, Any]:
                    "iterations": fit.solver.iterations, "wall_s": fit.solver.wall_s},
         "residuals": residuals,
         "fit": {"chi_square": fit.chi_square, "samples": n, "free_parameters": len(fit.free),
-                "chi_square_per_dof": fit.chi_square / max(n - len(fit.free), 1),
+                "chi_square_per_dof": fit.chi_square / fit.dof,
                 "covariance": "Gauss-Newton KKT, sensor sigmas as given" if cov else "none"},
         "worst_windows": worst,
         "model": {"effects": [e.name for e in fit.model.effects],
@@ -80,10 +80,9 @@ def parameter_table(fit: Fit, cov: Covariance | None) -> str:
 
 def fit_summary(fit: Fit) -> str:
     """Solver outcome, residuals per sensor and where the model fits worst."""
-    n = fit.n_samples
     out = [f"solver: {fit.solver.status}, {fit.solver.iterations} iterations, "
-           f"{fit.solver.wall_s:.1f} s;  chi²/dof = {fit.chi_square:.1f}/{n - len(fit.free)}"
-           f" = {fit.chi_square / max(n - len(fit.free), 1):.3f}"]
+           f"{fit.solver.wall_s:.1f} s;  chi²/dof = {fit.chi_square:.1f}/{fit.dof}"
+           f" = {fit.chi_square / fit.dof:.3f}"]
     for s, e in sensor_summary(fit).items():
         rms = ", ".join(f"{c} {v:.4g} {SENSOR_UNITS.get(c, '')}" for c, v in e["rms"].items())
         out.append(f"  {s:16s} normalised RMS {e['normalized_rms']:.3f}   (RMS {rms})")

@@ -38,8 +38,7 @@ def test_converges_from_the_reduction(drogue_fit, seed: int) -> None:
     # The guesses really were far off: the test would be empty otherwise.
     assert min(guess_err) == pytest.approx(START_GUESS_OFFSET_S, abs=1e-6)
     # chi-square per degree of freedom near 1: the model explains the data to the noise.
-    dof = fit.n_samples - len(fit.free)
-    assert abs(fit.chi_square / dof - 1.0) < 5 * np.sqrt(2.0 / dof)
+    assert abs(fit.chi_square / fit.dof - 1.0) < 5 * np.sqrt(2.0 / fit.dof)
 
 
 @pytest.mark.parametrize("seed", [1, pytest.param(2, marks=START_TIME_DEFECT)])
