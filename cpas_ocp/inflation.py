@@ -58,6 +58,11 @@ def fill_length(form: FillLength, diameter: Expr, cds_prev: Expr, cds: Expr,
     raise ValueError(f"unknown fill-length form {form!r}; expected one of {FILL_LENGTHS}")
 
 
+def fill_time(fill_constant: Expr, length: Expr, v_start: Expr) -> Expr:
+    """Time (s) for a fill constant over a fill length at the start airspeed: n L / V_i."""
+    return fill_constant * length / v_start
+
+
 def peak_ratio(cds_prev: Expr, cds: Expr, ck: Expr) -> Expr:
     """x = (Ck CdS_i - CdS_{i-1}) / (CdS_i - CdS_{i-1}), the Eq. 5 level reached at the peak."""
     return (ck * cds - cds_prev) / ca.fmax(cds - cds_prev, _TINY)
@@ -89,7 +94,7 @@ def infinite_mass_cds(t: Expr, t_start: Expr, cds_prev: Expr, cds: Expr, ck: Exp
     t_k to CdS_i, then holds; corners rounded over +-CORNER_S.  The caller
     selects this branch for t >= t_start.
     """
-    t_fp = n_p * length / v_start
+    t_fp = fill_time(n_p, length, v_start)
     tau = ca.fmax((t - t_start) / t_fp, _TINY)
     x = peak_ratio(cds_prev, cds, ck)
     after_peak = t - t_start - t_fp
@@ -106,6 +111,6 @@ def infinite_mass_cds(t: Expr, t_start: Expr, cds_prev: Expr, cds: Expr, ck: Exp
 def finite_mass_cds(t: Expr, t_start: Expr, cds_prev: Expr, cds: Expr, n: Expr,
                     expopen: Expr, length: Expr, v_start: Expr) -> Expr:
     """Drag area (m^2) of a finite-mass stage (Eq. 5), for t >= t_start."""
-    t_f = n * length / v_start
+    t_f = fill_time(n, length, v_start)
     tau = ca.fmax((t - t_start) / t_f, _TINY)
     return ca.if_else(tau < 1.0, cds_prev + (cds - cds_prev) * tau**expopen, cds)

@@ -63,12 +63,9 @@ def plot_drag_areas(fit: Fit, folder: Path) -> Path:
                              squeeze=False)
     for ax, chute in zip(axes[:, 0], chutes, strict=True):
         if chute.name in red.cds_riser:
-            # Load-cell drag area mapped to the trajectory frame: times s_stage / k_canopy.
-            factor = np.zeros_like(red.t)
-            k = fit.parameters.get(param_name("loadcell_scale", chute.name), 1.0)
-            for s in chute.stages:
-                act = np.interp(red.t, fit.t, q[param_name("stage_active", chute.name, s)])
-                factor += act * fit.parameters.get(param_name("drag_scale", s), 1.0) / k
+            # Load-cell drag area mapped to the trajectory frame: divided by the fitted gain.
+            gain = q.get(param_name("loadcell_gain", chute.name))
+            factor = 1.0 if gain is None else 1.0 / np.interp(red.t, fit.t, gain)
             ax.plot(red.t, red.cds_riser[chute.name] * factor / FT**2, ".", ms=1.2,
                     color="0.6", label="riser data, Eq. 3, with fitted scales")
         ax.plot(fit.t, q[param_name("cds", chute.name)] / FT**2, color="C3", lw=1.2,

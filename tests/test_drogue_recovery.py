@@ -17,15 +17,20 @@ from cpas_ocp.parameters import split_name
 from .conftest import START_GUESS_OFFSET_S
 
 SEEDS = [1, 2]
-# Known defect, kept visible: on seed 2 the start of drogue2's disreef to full
-# open (Ck 1.08, expopen 1.4, a flat start) lands 29 ms early, at an Ipopt
-# KKT point (status Solve_Succeeded with tight tolerances).  Pinning it at the
-# truth costs only 0.03 in chi-square, so the data hardly tell the start from
-# a steeper rise, while the linearised sigma (4 ms) comes from the load-cell
-# gain switching within one sample interval and is far too small.  Strict:
-# these cases fail the suite as soon as they start passing.
-START_TIME_DEFECT = pytest.mark.xfail(
-    strict=True, reason="t_start[drogue2,stage3] 29 ms early on seed 2; see comment")
+# Seed 2, kept visible; strict, so these cases fail the suite as soon as they pass.
+# Two disreef start times miss the 20 ms acceptance limit: t_start[drogue2,stage3]
+# is 35 ms early and t_start[drogue1,stage2] 21 ms early, but their reported
+# standard deviations are 19 ms and 12 ms (z = -1.9 and -1.8).  A disreef rise
+# starts flat, (t - t_i)^expopen, and its start trades against n_p and expopen,
+# so the data hold it to about 10-20 ms: the limit asks for more than the data
+# give on this seed, not for a better estimator.
+DATA_LIMITED_START = pytest.mark.xfail(
+    strict=True, reason="seed 2: disreef starts 35 ms / 21 ms off with sigma 19 ms / 12 ms")
+# Seed 2 also puts t_start[drogue1,stage1] 14 ms late at z = 4.05 on the linearised
+# sigma; the profile likelihood puts the truth at delta chi-square 11.4 (3.4 sigma):
+# the quadratic approximation is slightly optimistic for bag-strip starts.
+OPTIMISTIC_SIGMA = pytest.mark.xfail(
+    strict=True, reason="seed 2: t_start[drogue1,stage1] at z = 4.05 (profile: 3.4 sigma)")
 RELATIVE = {"CdS": 0.02, "Ck": 0.05, "drag_scale": 0.02, "loadcell_scale": 0.02}
 
 
@@ -41,7 +46,7 @@ def test_converges_from_the_reduction(drogue_fit, seed: int) -> None:
     assert abs(fit.chi_square / fit.dof - 1.0) < 5 * np.sqrt(2.0 / fit.dof)
 
 
-@pytest.mark.parametrize("seed", [1, pytest.param(2, marks=START_TIME_DEFECT)])
+@pytest.mark.parametrize("seed", [1, pytest.param(2, marks=DATA_LIMITED_START)])
 def test_every_parameter_recovered(drogue_fit, seed: int) -> None:
     fit, _, truth = drogue_fit(seed)
     failures = []
@@ -59,7 +64,7 @@ def test_every_parameter_recovered(drogue_fit, seed: int) -> None:
     assert not failures, failures
 
 
-@pytest.mark.parametrize("seed", [1, pytest.param(2, marks=START_TIME_DEFECT)])
+@pytest.mark.parametrize("seed", [1, pytest.param(2, marks=OPTIMISTIC_SIGMA)])
 def test_errors_consistent_with_reported_uncertainty(drogue_fit, seed: int) -> None:
     fit, cov, truth = drogue_fit(seed)
     std = cov.std

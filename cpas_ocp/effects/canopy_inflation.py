@@ -9,9 +9,13 @@ the trajectory at t_i.  Drag areas here are the aerodynamic ones the
 trajectory feels, pressure recovery included (PRF * CdS in the paper's terms).
 
 Quantities written: ``cds[P]`` (m^2), ``drag[P]`` (N, 3-vector, against the
-air-relative velocity) and ``stage_active[P,S]`` (1 while S is the canopy's
-current stage, switching smoothly over +-5 ms at each start; the first stage
-also covers the time before inflation).
+air-relative velocity) and ``stage_weight[P,S]`` (the weight of stage S in
+the canopy's sensor gains: 1 through the stage, handed to the next stage
+along a C2 smoothstep that spans the next stage's rise, from its start t_i to
+its peak or full fill; the first stage also covers the time before
+inflation).  Handing over through the rise rather than at t_i keeps every
+prediction smooth in t_i: a gain that jumped at t_i would let a few samples
+around the jump set the start time to a precision the data do not hold.
 """
 
 from __future__ import annotations
@@ -23,7 +27,13 @@ from typing import TYPE_CHECKING
 import casadi as ca
 
 from ..errors import InputError
-from ..inflation import CORNER_S, fill_length, finite_mass_cds, infinite_mass_cds, smoothstep
+from ..inflation import (
+    fill_length,
+    fill_time,
+    finite_mass_cds,
+    infinite_mass_cds,
+    smoothstep,
+)
 from ..parameters import Parameter, param_name
 from .base import Capture, Effect
 
@@ -117,29 +127,33 @@ class CanopyInflation(Effect):
             prev = ca.SX(0.0)
             cds_o = p[param_name("CdS", chute.name, chute.stages[-1])]
             starts = [p[param_name("t_start", chute.name, s)] for s in chute.stages]
+            # Weight with which each stage's sensor gains apply: 1 before the next
+            # stage starts, handing over smoothly through the next stage's rise.
+            arrivals: list[ca.SX] = []
             for k, stage in enumerate(chute.stages):
                 idx = (chute.name, stage)
                 steady = p[param_name("CdS", *idx)]
                 length = fill_length(chute.fill_length, chute.diameter, prev, steady, cds_o)
                 v_i = ctx.c[param_name("V_start", *idx)]
                 if chute.inflation == "infinite_mass":
+                    n_p = p[param_name("n_p", *idx)]
                     curve = infinite_mass_cds(t, starts[k], prev, steady,
-                                              p[param_name("Ck", *idx)],
-                                              p[param_name("n_p", *idx)],
+                                              p[param_name("Ck", *idx)], n_p,
                                               p[param_name("expopen", *idx)],
                                               p[param_name("t_k", *idx)], length, v_i)
+                    rise = fill_time(n_p, length, v_i)
                 else:
-                    curve = finite_mass_cds(t, starts[k], prev, steady,
-                                            p[param_name("n", *idx)],
+                    n_f = p[param_name("n", *idx)]
+                    curve = finite_mass_cds(t, starts[k], prev, steady, n_f,
                                             p[param_name("expopen", *idx)], length, v_i)
+                    rise = fill_time(n_f, length, v_i)
                 cds = ca.if_else(t >= starts[k], curve, cds)
                 prev = steady
-                # Smooth (C2, +-CORNER_S) so sensor gains that switch with the stage do
-                # not make the estimation problem discontinuous in the start times.
-                after = 1.0 if k == 0 else smoothstep((t - starts[k]) / CORNER_S)
-                before = (1.0 if k == len(starts) - 1
-                          else 1.0 - smoothstep((t - starts[k + 1]) / CORNER_S))
-                ctx.q[param_name("stage_active", *idx)] = after * before
+                arrivals.append(1.0 if k == 0 else
+                                smoothstep(2.0 * (t - starts[k]) / rise - 1.0))
+            for k, stage in enumerate(chute.stages):
+                leaving = 0.0 if k == len(chute.stages) - 1 else arrivals[k + 1]
+                ctx.q[param_name("stage_weight", chute.name, stage)] = arrivals[k] * (1.0 - leaving)
             ctx.q[param_name("cds", chute.name)] = cds
             ctx.q[param_name("drag", chute.name)] = (
                 cds * ctx.q["dynamic_pressure"] * ctx.q["drag_direction"])

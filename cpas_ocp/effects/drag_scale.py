@@ -44,6 +44,6 @@ class DragScale(Effect):
 
     def observations(self, ctx: ModelContext) -> None:
         for chute in self._measured(ctx.test):
-            inverse = sum(ctx.q[param_name("stage_active", chute.name, s)]
+            inverse = sum(ctx.q[param_name("stage_weight", chute.name, s)]
                           / ctx.p[param_name("drag_scale", s)] for s in chute.stages)
             ctx.scale(param_name("loadcell_gain", chute.name), inverse)
