@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import casadi as ca
@@ -36,7 +37,13 @@ from .flight_test import FlightTest
 from .model import Model
 from .reduction import gps_state, initial_guess
 from .simulate import rk4_step
-from .uncertainty import Covariance, kkt_covariance
+from .uncertainty import (
+    Covariance,
+    Linearization,
+    gauss_newton_decrement,
+    kkt_covariance,
+    linearize,
+)
 
 
 @dataclass
@@ -44,6 +51,9 @@ class Settings:
     """Transcription and solver settings.
 
     grid_step (s): shooting interval; substeps: RK4 steps per interval;
+    chi2_step_tol: stop once the Gauss-Newton step would lower chi-square by
+    less than this (0.01: every parameter within 0.1 sigma of the optimum the
+    fit is heading for; None: only Ipopt's own tests end the run);
     free: parameter names to estimate (default: every estimable parameter
     except the forebody drag area, which comes from the aero database);
     fixed: values of parameters held fixed (default: their model default).
@@ -53,6 +63,7 @@ class Settings:
     substeps: int = 1
     max_iter: int = 500
     tol: float = 1e-6
+    chi2_step_tol: float | None = 0.01
     free: list[str] | None = None
     fixed: dict[str, float] = field(default_factory=dict)
     guess: dict[str, float] = field(default_factory=dict)
@@ -75,6 +86,10 @@ class SensorResidual:
         return (self.measured - self.model) / self.sigma
 
 
+# Status of a run ended by the statistical test (`Settings.chi2_step_tol`).
+STATISTICALLY_CONVERGED = "Solved_Gauss_Newton_Step_Below_Tolerance"
+
+
 @dataclass
 class SolverStats:
     status: str
@@ -83,6 +98,7 @@ class SolverStats:
     wall_s: float
     objective: float
     worst_constraint: str = ""
+    chi2_decrement: float | None = None
 
 
 @dataclass
@@ -255,8 +271,8 @@ class Estimator:
         jac = ca.vertcat(*residual_jacs)
         self._g = ca.vertcat(*g)
         self._residual_jacobian = ca.Function("residual_jacobian", [self._z], [residual, jac])
-        self._constraint_jacobian = ca.Function("constraint_jacobian", [self._z],
-                                                [ca.vertcat(*g_jac)])
+        self._constraints = ca.Function("constraints", [self._z],
+                                        [self._g, ca.vertcat(*g_jac)])
         obj = 0.5 * ca.sumsqr(residual)
         empty = ca.MX.sym("p", 0, 1)
         jac_g = ca.Function("jac_g", [self._z, empty], [self._g, ca.vertcat(*g_jac)],
@@ -296,8 +312,9 @@ class Estimator:
             "ipopt.sb": "yes", "hess_lag": hess, "jac_g": jac_g,
         }
         nlp = {"x": self._z, "f": self._obj, "g": self._g}
-        self._progress = _Progress(self._z.numel(), self._g.numel())  # keep a reference
-        opts["iteration_callback"] = self._progress
+        self._monitor = _Monitor(self._z.numel(), self._g.numel(), self._converged,
+                                 s.chi2_step_tol)  # the solver keeps only a reference
+        opts["iteration_callback"] = self._monitor
         self._solver = ca.nlpsol("reconstruction", "ipopt", nlp, opts)
 
     def _mapped_block(self, fn: ca.Function, nodes: list[np.ndarray], times: np.ndarray,
@@ -378,9 +395,9 @@ class Estimator:
         """
         z0 = self.initial_point()
         t0 = time.perf_counter()
-        self._progress.reset(progress)
+        self._monitor.reset(progress)
         sol = self._solver(x0=z0, lbx=self._lbz, ubx=self._ubz, lbg=self._lbg, ubg=self._ubg)
-        self._progress.finish()
+        self._monitor.finish()
         wall = time.perf_counter() - t0
         st = self._solver.stats()
         z = np.asarray(sol["x"]).ravel()
@@ -388,19 +405,36 @@ class Estimator:
         viol = np.maximum(self._lbg - g, 0) + np.maximum(g - self._ubg, 0)
         worst = f"index {int(np.argmax(viol))}, violation {float(np.max(viol)):.3g}" \
             if viol.size else ""
-        stats = SolverStats(st["return_status"], bool(st["success"]), int(st["iter_count"]),
-                            wall, float(sol["f"]), worst)
+        status, success = st["return_status"], bool(st["success"])
+        if status == "User_Requested_Stop" and self._monitor.stopped:
+            status, success = STATISTICALLY_CONVERGED, True
+        stats = SolverStats(status, success, int(st["iter_count"]), wall, float(sol["f"]), worst,
+                            self._monitor.decrement)
         if not stats.success:
             raise SolverFailure(stats.status, stats.iterations, worst)
         return self._fit(z, stats)
 
+    def _converged(self, z: np.ndarray, g: np.ndarray) -> float | None:
+        """Gauss-Newton chi-square decrement at an Ipopt iterate (None if not feasible)."""
+        viol = np.maximum(self._lbg - g, 0) + np.maximum(g - self._ubg, 0)
+        if viol.size and float(np.max(viol)) > 1e-8:
+            return None
+        return gauss_newton_decrement(self._linearize(z))
+
     def covariance(self, fit: Fit, scale_by_residual: bool = False) -> Covariance:
         """Covariance of the free parameters at `fit` (Gauss-Newton KKT parameter block)."""
+        return kkt_covariance(self._linearize(fit.z), self._param_index, self.pscale,
+                              self.free, scale_by_residual)
+
+    @property
+    def _param_index(self) -> np.ndarray:
         nX, nP, _ = self._nz
-        idx = np.arange(nX, nX + nP)
-        return kkt_covariance(self._residual_jacobian, self._constraint_jacobian, fit.z,
-                              idx, self.pscale, self._lbz[idx], self._ubz[idx], self.free,
-                              scale_by_residual)
+        return np.arange(nX, nX + nP)
+
+    def _linearize(self, z: np.ndarray) -> Linearization:
+        idx = self._param_index
+        return linearize(self._residual_jacobian, self._constraints, z, self._lbg, self._ubg,
+                         idx, self._lbz[idx], self._ubz[idx])
 
     def _fit(self, z: np.ndarray, stats: SolverStats) -> Fit:
         m = self.model
@@ -420,19 +454,33 @@ class Estimator:
                    residuals, stats, self.settings, z)
 
 
-class _Progress(ca.Callback):
-    """Ipopt iteration callback: one self-overwriting status line on stderr."""
+class _Monitor(ca.Callback):
+    """Ipopt iteration callback: progress line on stderr, and the statistical stopping test.
 
-    def __init__(self, nx: int, ng: int) -> None:
+    Gauss-Newton converges linearly, so Ipopt's optimality tests keep it
+    polishing chi-square in its fifth decimal long after the estimate has
+    stopped moving on the scale of its own uncertainty.  Whenever an
+    iteration lowers chi-square by less than `tol`, the monitor asks
+    `decrement(z, g)` for the chi-square decrease the full Gauss-Newton step
+    predicts (at most every third iteration: each test costs a KKT
+    factorisation) and stops the run once it is below `tol`.
+    """
+
+    def __init__(self, nx: int, ng: int,
+                 decrement: Callable[[np.ndarray, np.ndarray], float | None],
+                 tol: float | None) -> None:
         ca.Callback.__init__(self)
-        self._nx, self._ng, self._k, self.enabled = nx, ng, 0, False
-        self.construct("progress", {})
+        self._nx, self._ng, self._decrement_at, self._tol = nx, ng, decrement, tol
+        self.reset(False)
+        self.construct("monitor", {})
 
-    def reset(self, enabled: bool) -> None:
-        self._k, self.enabled = 0, enabled and sys.stderr.isatty()
+    def reset(self, progress: bool) -> None:
+        self._k, self._last_test, self._chi2 = 0, -10, np.inf
+        self.stopped, self.decrement = False, None
+        self.progress = progress and sys.stderr.isatty()
 
     def finish(self) -> None:
-        if self.enabled and self._k:
+        if self.progress and self._k:
             sys.stderr.write("\n")
 
     def get_n_in(self) -> int:
@@ -455,11 +503,19 @@ class _Progress(ca.Callback):
 
     def eval(self, arg: list) -> list:
         self._k += 1
-        if not self.enabled:
+        chi2 = 2.0 * float(arg[1])
+        if self.progress:
+            sys.stderr.write(f"\r  iteration {self._k:4d}   chi-square {chi2:14.6g}")
+            sys.stderr.flush()
+        improved, self._chi2 = self._chi2 - chi2, chi2
+        if self._tol is None or improved >= self._tol or self._k - self._last_test < 3:
             return [0]
-        sys.stderr.write(f"\r  iteration {self._k:4d}   chi-square {2 * float(arg[1]):14.6g}")
-        sys.stderr.flush()
-        return [0]
+        self._last_test = self._k
+        d = self._decrement_at(np.asarray(arg[0]).ravel(), np.asarray(arg[2]).ravel())
+        if d is not None:
+            self.decrement = d
+            self.stopped = d < self._tol
+        return [1 if self.stopped else 0]
 
 
 def cubic_bspline(u: ca.MX) -> ca.MX:

@@ -12,6 +12,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from cpas_ocp.estimation import STATISTICALLY_CONVERGED, Estimator, Settings
+from cpas_ocp.flight_test import load_test
 from cpas_ocp.parameters import split_name
 
 from .conftest import START_GUESS_OFFSET_S
@@ -73,3 +75,19 @@ def test_errors_consistent_with_reported_uncertainty(drogue_fit, seed: int) -> N
     assert all(s > 0 for s in std.values())
     worst = max(z, key=lambda n: abs(z[n]))
     assert abs(z[worst]) < 4.0, f"{worst}: {z[worst]:.2f} sigma"
+
+
+def test_statistical_stop_agrees_with_full_convergence(drogue_fit) -> None:
+    """Stopping on the Gauss-Newton decrement (< 0.01 in chi-square) leaves every parameter
+    within 0.1 sigma of the optimum in the linearisation; allow 0.2 sigma for curvature."""
+    fit, cov, _ = drogue_fit(1)
+    assert fit.solver.status == STATISTICALLY_CONVERGED
+    assert fit.solver.chi2_decrement is not None and fit.solver.chi2_decrement < 0.01
+    full = Estimator(load_test(fit.test.path), settings=Settings(chi2_step_tol=None)).solve()
+    assert full.solver.status != STATISTICALLY_CONVERGED
+    assert full.solver.iterations > fit.solver.iterations
+    std = cov.std
+    shift = {n: abs(fit.parameters[n] - full.parameters[n]) / std[n] for n in fit.free}
+    worst = max(shift, key=shift.get)
+    assert shift[worst] < 0.2, f"{worst}: {shift[worst]:.3f} sigma"
+    assert fit.chi_square - full.chi_square < 0.01
