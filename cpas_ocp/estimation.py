@@ -312,7 +312,7 @@ class Estimator:
             "ipopt.sb": "yes", "hess_lag": hess, "jac_g": jac_g,
         }
         nlp = {"x": self._z, "f": self._obj, "g": self._g}
-        self._monitor = _Monitor(self._z.numel(), self._g.numel(), self._converged,
+        self._monitor = _Monitor(self._z.numel(), self._g.numel(), self._decrement,
                                  s.chi2_step_tol)  # the solver keeps only a reference
         opts["iteration_callback"] = self._monitor
         self._solver = ca.nlpsol("reconstruction", "ipopt", nlp, opts)
@@ -414,7 +414,7 @@ class Estimator:
             raise SolverFailure(stats.status, stats.iterations, worst)
         return self._fit(z, stats)
 
-    def _converged(self, z: np.ndarray, g: np.ndarray) -> float | None:
+    def _decrement(self, z: np.ndarray, g: np.ndarray) -> float | None:
         """Gauss-Newton chi-square decrement at an Ipopt iterate (None if not feasible)."""
         viol = np.maximum(self._lbg - g, 0) + np.maximum(g - self._ubg, 0)
         if viol.size and float(np.max(viol)) > 1e-8:
