@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+from scipy.stats import norm
 
 from .diagnostics import sensor_summary, worst_windows
 from .errors import InputError
@@ -17,6 +18,31 @@ from .estimation import Fit
 from .plots import plot_drag_areas, plot_sensors
 from .uncertainty import Covariance
 from .units import FT
+
+Z95 = float(norm.ppf(0.975))  # two-sided 95 % quantile of the standard normal
+STRONG_CORRELATION = 0.9  # |rho| from which a parameter pair is listed
+
+
+def information_criteria(fit: Fit) -> dict[str, float]:
+    """AIC and BIC of a fit with known sensor sigmas: chi^2 + 2k and chi^2 + k ln N.
+
+    Both drop the constant sum of log sigma, so only differences between fits
+    of the same data mean anything.
+    """
+    k, n = len(fit.free), fit.n_samples
+    return {"aic": fit.chi_square + 2.0 * k, "bic": fit.chi_square + k * float(np.log(n))}
+
+
+def strong_correlations(cov: Covariance,
+                        threshold: float = STRONG_CORRELATION) -> list[tuple[str, str, float]]:
+    """Parameter pairs whose correlation is at least `threshold` in size, strongest first."""
+    rho = cov.correlation()
+    i, j = np.triu_indices(len(cov.names), k=1)
+    keep = np.abs(rho[i, j]) >= threshold
+    pairs = [(cov.names[a], cov.names[b], float(rho[a, b])) for a, b in zip(i[keep], j[keep],
+                                                                             strict=True)]
+    return sorted(pairs, key=lambda p: -abs(p[2]))
+
 
 SENSOR_UNITS = {"east": "m", "north": "m", "up": "m", "v_east": "m/s", "v_north": "m/s",
                 "v_up": "m/s", "load_factor": "g", "tension": "N"}
@@ -32,6 +58,8 @@ def result_dict(fit: Fit, cov: Covariance | None) -> dict[str, Any]:
                  "initial": fit.guess.get(name, prm.default)}
         if name in std:
             entry["std"] = std[name]
+            entry["ci95"] = [fit.parameters[name] - Z95 * std[name],
+                             fit.parameters[name] + Z95 * std[name]]
         if cov is not None and name in cov.at_bound:
             entry["at_bound"] = True
         params[name] = entry
@@ -55,9 +83,11 @@ def result_dict(fit: Fit, cov: Covariance | None) -> dict[str, Any]:
                    "chi2_decrement": fit.solver.chi2_decrement},
         "residuals": residuals,
         "fit": {"chi_square": fit.chi_square, "samples": n, "free_parameters": len(fit.free),
-                "chi_square_per_dof": fit.chi_square / fit.dof,
+                "chi_square_per_dof": fit.chi_square / fit.dof, **information_criteria(fit),
                 "covariance": "Gauss-Newton KKT, sensor sigmas as given" if cov else "none"},
         "worst_windows": worst,
+        "strong_correlations": [] if cov is None else [
+            {"a": a, "b": b, "rho": r} for a, b, r in strong_correlations(cov)],
         "model": {"effects": [e.name for e in fit.model.effects],
                   "grid_step_s": fit.settings.grid_step,
                   "fill_length": {c.name: c.fill_length for c in fit.test.parachutes}},
@@ -76,14 +106,20 @@ def parameter_table(fit: Fit, cov: Covariance | None) -> str:
         flag = "  at bound" if cov is not None and name in cov.at_bound else ""
         lines.append(f"{name:30s} {v:11.5g} {s}  {prm.unit:5s} "
                      f"{fit.guess.get(name, prm.default):10.4g}{extra}{flag}")
+    if cov is not None:
+        pairs = strong_correlations(cov)
+        lines.append(f"correlations |ρ| ≥ {STRONG_CORRELATION}: "
+                     + ("none" if not pairs else f"{len(pairs)}, strongest "
+                        + "; ".join(f"{a} ~ {b} {r:+.3f}" for a, b, r in pairs[:3])))
     return "\n".join(lines)
 
 
 def fit_summary(fit: Fit) -> str:
     """Solver outcome, residuals per sensor and where the model fits worst."""
+    ic = information_criteria(fit)
     out = [f"solver: {fit.solver.status}, {fit.solver.iterations} iterations, "
            f"{fit.solver.wall_s:.1f} s;  chi²/dof = {fit.chi_square:.1f}/{fit.dof}"
-           f" = {fit.chi_square / fit.dof:.3f}"]
+           f" = {fit.chi_square / fit.dof:.3f};  AIC {ic['aic']:.1f}, BIC {ic['bic']:.1f}"]
     for s, e in sensor_summary(fit).items():
         rms = ", ".join(f"{c} {v:.4g} {SENSOR_UNITS.get(c, '')}" for c, v in e["rms"].items())
         out.append(f"  {s:16s} normalised RMS {e['normalized_rms']:.3f}   (RMS {rms})")

@@ -1,0 +1,47 @@
+"""The report folder of a reconstruction: result.json contents, figures, and the fit report."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from cpas_ocp.report import STRONG_CORRELATION, parameter_table, write_report
+
+
+def test_report_folder_carries_values_uncertainties_and_fit_statistics(drogue_fit,
+                                                                      tmp_path) -> None:
+    fit, cov, _ = drogue_fit(1)
+    out = write_report(fit, cov, tmp_path / "report")
+    result = json.loads((out / "result.json").read_text())
+    assert {p.name for p in out.glob("*.png")} >= {"drag_areas.png"}
+    assert len(list(out.glob("*.png"))) >= 2  # sensors and drag areas
+
+    std = cov.std
+    for name in fit.free:
+        entry = result["parameters"][name]
+        assert entry["value"] == pytest.approx(fit.parameters[name])
+        assert entry["std"] == pytest.approx(std[name])
+        lo, hi = entry["ci95"]
+        assert (hi - lo) == pytest.approx(2 * 1.959964 * std[name], rel=1e-6)
+        assert lo < entry["value"] < hi
+    solver = result["solver"]
+    assert solver["success"] and solver["iterations"] > 0 and solver["wall_s"] > 0
+    assert {"rms", "normalized_rms"} <= set(next(iter(result["residuals"].values())))
+
+    k, n = len(fit.free), fit.n_samples
+    assert result["fit"]["aic"] == pytest.approx(fit.chi_square + 2 * k)
+    assert result["fit"]["bic"] == pytest.approx(fit.chi_square + k * math.log(n))
+
+    rho = cov.correlation()
+    index = {name: i for i, name in enumerate(cov.names)}
+    listed = {(c["a"], c["b"]) for c in result["strong_correlations"]}
+    upper = np.triu(np.abs(rho) >= STRONG_CORRELATION, k=1)
+    assert len(listed) == int(upper.sum())
+    for c in result["strong_correlations"]:
+        assert c["rho"] == pytest.approx(rho[index[c["a"]], index[c["b"]]])
+    sizes = [abs(c["rho"]) for c in result["strong_correlations"]]
+    assert sizes == sorted(sizes, reverse=True)
+    assert "correlations |ρ|" in parameter_table(fit, cov)
