@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
+from .compiled import compile_functions
 from .effects import Effect, baseline_effects
 from .errors import SolverFailure
 from .flight_test import FlightTest
@@ -54,6 +55,8 @@ class Settings:
     chi2_step_tol: stop once the Gauss-Newton step would lower chi-square by
     less than this (0.01: every parameter within 0.1 sigma of the optimum the
     fit is heading for; None: only Ipopt's own tests end the run);
+    compile: evaluate the per-interval and per-sample functions as native
+    code (`cpas_ocp.compiled`; falls back to CasADi's VM without a compiler);
     free: parameter names to estimate (default: every estimable parameter
     except the forebody drag area, which comes from the aero database);
     fixed: values of parameters held fixed (default: their model default).
@@ -64,6 +67,7 @@ class Settings:
     max_iter: int = 500
     tol: float = 1e-6
     chi2_step_tol: float | None = 0.01
+    compile: bool = True
     free: list[str] | None = None
     fixed: dict[str, float] = field(default_factory=dict)
     guess: dict[str, float] = field(default_factory=dict)
@@ -195,10 +199,53 @@ class Estimator:
             xe = step(xe, ts + j * h / s.substeps, h / s.substeps, ps, cs)
         self._ctx = (X, Xp, pfull, Cp, xscale, cscale)
 
-        # Continuity of every shooting interval.
-        gap = ca.Function("gap", [xs, xs1, ts, ps, cs], [(xs1 - xe) / xscale])
+        # Per-instance functions, each mapped over its instances with its Jacobian:
+        # the continuity gap of every shooting interval, and the weighted residuals of
+        # every sample of every sensor (sensors sampled between nodes are predicted one
+        # partial RK4 step after the node before the sample).
         ks = np.arange(n)
-        gap_value, gap_jac = self._mapped_block(gap, [ks, ks + 1], self.t[:n], [])
+        blocks = [_Block(ca.Function("gap", [xs, xs1, ts, ps, cs], [(xs1 - xe) / xscale]),
+                         [ks, ks + 1], self.t[:n], [])]
+        self._samples = []
+        for sensor in self.test.sensors:
+            if sensor.name not in m.outputs:
+                continue
+            ts_all = sensor.time
+            keep = (ts_all >= self.t[0] - 1e-9) & (ts_all <= self.t[-1] + 1e-9)
+            tsamp = ts_all[keep]
+            k = np.clip(np.floor((tsamp - self.t[0]) / h + 1e-7).astype(int), 0, n - 1)
+            dt = tsamp - self.t[k]
+            dt[np.abs(dt) < 1e-7] = 0.0
+            channels = m.sensor_channels[sensor.name]
+            meas = np.vstack([sensor.data[c].to_numpy()[keep] for c in channels])
+            sig = np.vstack([sensor.noise_sigma(c, sensor.data[c].to_numpy()[keep])
+                             for c in channels])
+            nch = len(channels)
+            ym = ca.SX.sym("ym", nch)
+            sg = ca.SX.sym("sg", nch)
+            if np.any(dt > 0):
+                x_at = step(xs, ts, dts, ps, cs)
+                y_at = m.outputs[sensor.name](x_at, ts + dts, ps, cs)
+                extra = [dt]
+                sym_extra = [dts]
+            else:
+                y_at = m.outputs[sensor.name](xs, ts, ps, cs)
+                extra, sym_extra = [], []
+            blocks.append(_Block(ca.Function(f"residual_{len(self._samples)}",
+                                             [xs, ts, *sym_extra, ym, sg, ps, cs],
+                                             [(ym - y_at) / sg]),
+                                 [k], tsamp, [*extra, meas, sig]))
+            self._samples.append((sensor.name, channels, tsamp, meas, sig))
+        # The Jacobians dominate the cost and are compiled; the values stay in CasADi's
+        # VM so that CasADi can still differentiate the NLP functions it builds.
+        jacobians = [self._local_jacobian(b.fn, len(b.nodes)) for b in blocks]
+        if s.compile:
+            jacobians = compile_functions(jacobians)
+        mapped = [self._mapped_block(b.fn, jac_fn, b.nodes, b.times, b.data)
+                  for b, jac_fn in zip(blocks, jacobians, strict=True)]
+        gap_value, gap_jac = mapped[0]
+        residual_blocks = [v for v, _ in mapped[1:]]
+        residual_jacs = [j for _, j in mapped[1:]]
         g = [gap_value]
         g_jac = [gap_jac]
         lbg = [np.zeros(nx * n)]
@@ -232,40 +279,6 @@ class Estimator:
             lbg.append([con.lower])
             ubg.append([con.upper])
 
-        # Objective: 0.5 chi-square over all sensors; sensors sampled between nodes are
-        # predicted one partial RK4 step after the node before the sample.
-        residual_blocks, residual_jacs = [], []
-        self._samples = []
-        for sensor in self.test.sensors:
-            if sensor.name not in m.outputs:
-                continue
-            ts_all = sensor.time
-            keep = (ts_all >= self.t[0] - 1e-9) & (ts_all <= self.t[-1] + 1e-9)
-            tsamp = ts_all[keep]
-            k = np.clip(np.floor((tsamp - self.t[0]) / h + 1e-7).astype(int), 0, n - 1)
-            dt = tsamp - self.t[k]
-            dt[np.abs(dt) < 1e-7] = 0.0
-            channels = m.sensor_channels[sensor.name]
-            meas = np.vstack([sensor.data[c].to_numpy()[keep] for c in channels])
-            sig = np.vstack([sensor.noise_sigma(c, sensor.data[c].to_numpy()[keep])
-                             for c in channels])
-            nch = len(channels)
-            ym = ca.SX.sym("ym", nch)
-            sg = ca.SX.sym("sg", nch)
-            if np.any(dt > 0):
-                x_at = step(xs, ts, dts, ps, cs)
-                y_at = m.outputs[sensor.name](x_at, ts + dts, ps, cs)
-                extra = [dt]
-                sym_extra = [dts]
-            else:
-                y_at = m.outputs[sensor.name](xs, ts, ps, cs)
-                extra, sym_extra = [], []
-            res = ca.Function("res", [xs, ts, *sym_extra, ym, sg, ps, cs], [(ym - y_at) / sg])
-            r_value, r_jac = self._mapped_block(res, [k], tsamp, [*extra, meas, sig])
-            residual_blocks.append(r_value)
-            residual_jacs.append(r_jac)
-            self._samples.append((sensor.name, channels, tsamp, meas, sig))
-
         self._z = z_all
         residual = ca.vertcat(*residual_blocks)
         jac = ca.vertcat(*residual_jacs)
@@ -277,6 +290,11 @@ class Estimator:
         empty = ca.MX.sym("p", 0, 1)
         jac_g = ca.Function("jac_g", [self._z, empty], [self._g, ca.vertcat(*g_jac)],
                             ["x", "p"], ["g", "jac_g_x"])
+        # Objective gradient J'r from the (compiled) residual Jacobian blocks, dense as
+        # Ipopt's interface copies it.
+        gradient = ca.densify(ca.mtimes(jac.T, residual))
+        grad_f = ca.Function("grad_f", [self._z, empty], [obj, gradient], ["x", "p"],
+                             ["f", "grad_f_x"])
         # Gauss-Newton Hessian of the Lagrangian: J'J of the weighted residuals; the
         # curvature of the continuity constraints is neglected (small-residual problems).
         sigma_f = ca.MX.sym("sigma_f")
@@ -309,7 +327,7 @@ class Estimator:
             "ipopt.acceptable_obj_change_tol": 1e-9,
             "ipopt.acceptable_constr_viol_tol": 1e-8,
             "ipopt.print_level": 5 if s.verbose else 0, "print_time": False,
-            "ipopt.sb": "yes", "hess_lag": hess, "jac_g": jac_g,
+            "ipopt.sb": "yes", "hess_lag": hess, "jac_g": jac_g, "grad_f": grad_f,
         }
         nlp = {"x": self._z, "f": self._obj, "g": self._g}
         self._monitor = _Monitor(self._z.numel(), self._g.numel(), self._decrement,
@@ -317,33 +335,44 @@ class Estimator:
         opts["iteration_callback"] = self._monitor
         self._solver = ca.nlpsol("reconstruction", "ipopt", nlp, opts)
 
-    def _mapped_block(self, fn: ca.Function, nodes: list[np.ndarray], times: np.ndarray,
-                      data: list[np.ndarray]) -> tuple[ca.MX, ca.MX]:
-        """Value and Jacobian (w.r.t. the scaled decision vector) of `fn` mapped over instances.
+    def _local_jacobian(self, fn: ca.Function, n_states: int) -> ca.Function:
+        """Jacobian of one instance of `fn` w.r.t. its scaled states, free parameters, captures.
 
-        `fn(x_a, x_b, ..., t, *data, p, c)` takes one state per entry of `nodes`
-        (node indices per instance), a time, per-instance data columns, and the
-        full parameter and capture vectors; it returns a vector of m values.  Its
-        Jacobian is formed once at SX level for a single instance (CasADi picks
-        forward or reverse mode for that small function), mapped over all
-        instances, and scattered into the global sparse Jacobian; differentiating
-        the mapped graph directly would take one sweep per colour of the whole
-        Jacobian, about as many as there are parameters.
+        Same inputs as `fn`; the output is the column-major m x (nx*n_states +
+        free parameters + captures) block, formed at SX level (CasADi picks
+        forward or reverse mode for this small function).
         """
-        X, Xp, pfull, Cp, xscale, cscale = self._ctx
+        _, _, _, _, xscale, cscale = self._ctx
         m = self.model
-        nx = m.nx
-        n_inst = len(times)
         args = fn.sx_in()
-        xs_args, p_arg, c_arg = args[:len(nodes)], args[-2], args[-1]
+        xs_args, p_arg, c_arg = args[:n_states], args[-2], args[-1]
         out = fn(*args)
         free_cols = [m.parameter_names.index(f) for f in self.free]
         mrows = out.numel()
         jblocks = [ca.jacobian(out, a) * ca.repmat(ca.DM(xscale).T, mrows, 1) for a in xs_args]
         jp = ca.jacobian(out, p_arg)[:, free_cols] * ca.repmat(ca.DM(self.pscale).T, mrows, 1)
         jc = ca.jacobian(out, c_arg) * cscale
+        return ca.Function(f"{fn.name()}_jac", args, [ca.vec(ca.horzcat(*jblocks, jp, jc))])
+
+    def _mapped_block(self, fn: ca.Function, local: ca.Function, nodes: list[np.ndarray],
+                      times: np.ndarray, data: list[np.ndarray]) -> tuple[ca.MX, ca.MX]:
+        """Value and Jacobian (w.r.t. the scaled decision vector) of `fn` mapped over instances.
+
+        `fn(x_a, x_b, ..., t, *data, p, c)` takes one state per entry of `nodes`
+        (node indices per instance), a time, per-instance data columns, and the
+        full parameter and capture vectors; it returns a vector of m values.
+        `local` is its single-instance Jacobian (`_local_jacobian`); both are
+        mapped over all instances, and the Jacobian values are scattered into
+        the global sparse Jacobian.  Differentiating the mapped graph directly
+        would take one sweep per colour of the whole Jacobian, about as many as
+        there are parameters.
+        """
+        X, Xp, pfull, Cp, _, _ = self._ctx
+        m = self.model
+        nx = m.nx
+        n_inst = len(times)
         n_states = len(nodes)
-        local = ca.Function("local_jac", args, [ca.vec(ca.horzcat(*jblocks, jp, jc))])
+        mrows = fn.numel_out(0)
         nfree = len(self.free)
         ncap = len(m.captures)
         call = [*(Xp[:, k] for k in nodes), ca.DM(times).T,
@@ -516,6 +545,16 @@ class _Monitor(ca.Callback):
             self.decrement = d
             self.stopped = d < self._tol
         return [1 if self.stopped else 0]
+
+
+@dataclass
+class _Block:
+    """A per-instance function, its instances' node indices, times and data columns."""
+
+    fn: ca.Function
+    nodes: list[np.ndarray]
+    times: np.ndarray
+    data: list[np.ndarray]
 
 
 def cubic_bspline(u: ca.MX) -> ca.MX:
