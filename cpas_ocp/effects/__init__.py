@@ -4,9 +4,11 @@
 inflation and drag, forebody drag, canopies with their dry mass on rigid
 risers, per-stage drag scale and per-canopy load-cell scale, and the GPS, IMU
 and load-cell measurement models.  Order matters only in that the sensors
-come after the effects that set their gains.
+come after the effects that set their gains.  Further effects (`AddedMass`)
+are added to the list where a problem needs them.
 """
 
+from .added_mass import AddedMass
 from .base import Capture, Constraint, Effect, State
 from .canopy_inflation import CanopyInflation
 from .drag_scale import DragScale
@@ -23,6 +25,7 @@ def baseline_effects() -> list[Effect]:
 
 
 __all__ = [
+    "AddedMass",
     "CanopyInflation",
     "Capture",
     "Constraint",
