@@ -108,13 +108,18 @@ def _demo(args: argparse.Namespace) -> int:
 def _run_reconstruction(test: FlightTest, args: argparse.Namespace) -> None:
     from .estimation import Estimator, Settings
     from .report import fit_summary, parameter_table, write_report
+    from .uncertainty import SingularKKT
     settings = Settings(grid_step=args.grid_step, verbose=args.verbose)
     print(f"building the multiple-shooting NLP of {test.name} "
           f"({test.t_end - test.t_start:.1f} s at {args.grid_step * 1e3:g} ms) ...", flush=True)
     est = Estimator(test, settings=settings)
     print(f"solving: {est.size_text()} ...", flush=True)
     fit = est.solve(progress=not args.verbose)
-    cov = est.covariance(fit)
+    try:
+        cov = est.covariance(fit)
+    except SingularKKT as exc:
+        print(f"warning: no uncertainties: {exc}", file=sys.stderr)
+        cov = None
     out = write_report(fit, cov, args.out)
     print()
     print(parameter_table(fit, cov))

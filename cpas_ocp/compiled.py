@@ -1,4 +1,4 @@
-"""Native code for the estimator's per-instance functions, compiled once per model and cached.
+"""Native code for the estimator's per-instance Jacobians, compiled once per model and cached.
 
 CasADi evaluates SX functions in its virtual machine.  The same function
 emitted as C and compiled by the system C compiler at -O1 runs about four

@@ -41,6 +41,7 @@ from .simulate import rk4_step
 from .uncertainty import (
     Covariance,
     Linearization,
+    SingularKKT,
     gauss_newton_decrement,
     kkt_covariance,
     linearize,
@@ -55,7 +56,7 @@ class Settings:
     chi2_step_tol: stop once the Gauss-Newton step would lower chi-square by
     less than this (0.01: every parameter within 0.1 sigma of the optimum the
     fit is heading for; None: only Ipopt's own tests end the run);
-    compile: evaluate the per-interval and per-sample functions as native
+    compile: evaluate the per-interval and per-sample Jacobians as native
     code (`cpas_ocp.compiled`; falls back to CasADi's VM without a compiler);
     free: parameter names to estimate (default: every estimable parameter
     except the forebody drag area, which comes from the aero database);
@@ -440,21 +441,26 @@ class Estimator:
         if status == "User_Requested_Stop" and self._monitor.stopped:
             status, success = STATISTICALLY_CONVERGED, True
         stats = SolverStats(status, success, int(st["iter_count"]), wall, float(sol["f"]), worst,
-                            self._monitor.decrement)
+                            self._monitor.decrement if self._monitor.stopped else None)
         if not stats.success:
             raise SolverFailure(stats.status, stats.iterations, worst)
         return self._fit(z, stats)
 
-    def _decrement(self, z: np.ndarray, g: np.ndarray) -> float | None:
+    def _decrement(self, z: np.ndarray) -> float | None:
         """Gauss-Newton chi-square decrement at an Ipopt iterate (None if not feasible).
 
-        Feasible means every scaled constraint within STOP_CONSTRAINT_TOL: the
-        shooting gaps are then below 1 mm and 0.1 mm/s.
+        Feasible means every scaled constraint within STOP_CONSTRAINT_TOL (the
+        shooting gaps then below 1 mm and 0.1 mm/s), evaluated here rather than
+        taken from Ipopt, whose reported values may be scaled.  None as well
+        when the KKT system is singular there.
         """
-        viol = np.maximum(self._lbg - g, 0) + np.maximum(g - self._ubg, 0)
-        if viol.size and float(np.max(viol)) > STOP_CONSTRAINT_TOL:
+        lin = self._linearize(z)
+        if lin.c.size and float(np.max(np.abs(lin.c))) > STOP_CONSTRAINT_TOL:
             return None
-        return gauss_newton_decrement(self._linearize(z))
+        try:
+            return gauss_newton_decrement(lin)
+        except SingularKKT:
+            return None
 
     def covariance(self, fit: Fit, scale_by_residual: bool = False) -> Covariance:
         """Covariance of the free parameters at `fit` (Gauss-Newton KKT parameter block)."""
@@ -496,14 +502,14 @@ class _Monitor(ca.Callback):
     polishing chi-square in its fifth decimal long after the estimate has
     stopped moving on the scale of its own uncertainty.  Whenever an
     iteration lowers chi-square by less than `tol`, the monitor asks
-    `decrement(z, g)` for the chi-square decrease the full Gauss-Newton step
+    `decrement(z)` for the chi-square decrease the full Gauss-Newton step
     predicts and stops the run once it is below `tol`.  Each test costs a KKT
     factorisation (about two iterations' time), so tests are at least 3
     iterations apart, and 6 then 12 while the decrement stays above 10 tol.
     """
 
     def __init__(self, nx: int, ng: int,
-                 decrement: Callable[[np.ndarray, np.ndarray], float | None],
+                 decrement: Callable[[np.ndarray], float | None],
                  tol: float | None) -> None:
         ca.Callback.__init__(self)
         self._nx, self._ng, self._decrement_at, self._tol = nx, ng, decrement, tol
@@ -547,7 +553,7 @@ class _Monitor(ca.Callback):
         if self._tol is None or improved >= self._tol or self._k - self._last_test < self._gap:
             return [0]
         self._last_test = self._k
-        d = self._decrement_at(np.asarray(arg[0]).ravel(), np.asarray(arg[2]).ravel())
+        d = self._decrement_at(np.asarray(arg[0]).ravel())
         if d is not None:
             self.decrement = d
             self.stopped = d < self._tol

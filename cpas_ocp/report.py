@@ -26,8 +26,9 @@ STRONG_CORRELATION = 0.9  # |rho| from which a parameter pair is listed
 def information_criteria(fit: Fit) -> dict[str, float]:
     """AIC and BIC of a fit with known sensor sigmas: chi^2 + 2k and chi^2 + k ln N.
 
-    Both drop the constant sum of log sigma, so only differences between fits
-    of the same data mean anything.
+    k counts the free parameters (those held on a bound included), not the
+    shooting states; both drop the constant sum of log sigma, so only
+    differences between fits of the same data mean anything.
     """
     k, n = len(fit.free), fit.n_samples
     return {"aic": fit.chi_square + 2.0 * k, "bic": fit.chi_square + k * float(np.log(n))}
@@ -56,12 +57,12 @@ def result_dict(fit: Fit, cov: Covariance | None) -> dict[str, Any]:
         prm = fit.model.parameter(name)
         entry = {"value": fit.parameters[name], "unit": prm.unit,
                  "initial": fit.guess.get(name, prm.default)}
-        if name in std:
+        if cov is not None and name in cov.at_bound:
+            entry["at_bound"] = True
+        elif name in std:
             entry["std"] = std[name]
             entry["ci95"] = [fit.parameters[name] - Z95 * std[name],
                              fit.parameters[name] + Z95 * std[name]]
-        if cov is not None and name in cov.at_bound:
-            entry["at_bound"] = True
         params[name] = entry
     fixed = {n: {"value": v, "unit": fit.model.parameter(n).unit}
              for n, v in fit.parameters.items() if n not in fit.free}

@@ -117,15 +117,21 @@ def gauss_newton_decrement(lin: Linearization) -> float:
     rhs = np.concatenate([-(lin.J.T @ lin.r), -lin.c])
     dz = solve_kkt(lin.J, lin.A, rhs[:, None])[:lin.z.size, 0]
     after = lin.r + lin.J @ dz
-    return float(lin.r @ lin.r - after @ after)
+    return max(float(lin.r @ lin.r - after @ after), 0.0)
+
+
+class SingularKKT(ValueError):
+    """The Gauss-Newton KKT system is singular: some parameter combination is undetermined."""
 
 
 def solve_kkt(J: sp.csc_matrix, A: sp.csc_matrix, rhs: np.ndarray) -> np.ndarray:
-    """Solve [[J'J, A'], [A, 0]] x = rhs with MUMPS (symmetric indefinite, sparse).
+    """Solve [[J'J, A'], [A, 0]] x = rhs by MUMPS (sparse LU), checking the solution.
 
     MUMPS orders the saddle-point system for its arrow structure (states
-    banded in time, parameters dense); a general sparse LU fills it in about
-    ten times more and takes ten times longer.
+    banded in time, parameters dense); SuperLU's default ordering fills it in
+    about ten times more and takes ten times longer.  CasADi's MUMPS wrapper
+    does not report a singular matrix, so the relative residual of the
+    solution is checked here: above 1e-6 raises `SingularKKT`.
     """
     K = sp.bmat([[(J.T @ J), A.T], [A, None]]).tocsc()
     K.sort_indices()
@@ -134,7 +140,13 @@ def solve_kkt(J: sp.csc_matrix, A: sp.csc_matrix, rhs: np.ndarray) -> np.ndarray
     solver = ca.Linsol("kkt", "mumps", sparsity)
     solver.sfact(Kdm)
     solver.nfact(Kdm)
-    return np.asarray(solver.solve(Kdm, ca.DM(rhs)))
+    x = np.asarray(solver.solve(Kdm, ca.DM(rhs)))
+    error = np.linalg.norm(K @ x - rhs) / max(np.linalg.norm(rhs), 1e-300)
+    if not np.isfinite(error) or error > 1e-6:
+        raise SingularKKT(f"the Gauss-Newton KKT system is singular (relative residual "
+                          f"{error:.1e}): some parameter combination is not determined by "
+                          f"the data")
+    return x
 
 
 def _csc(m: ca.DM) -> sp.csc_matrix:

@@ -29,6 +29,14 @@ def test_compiled_and_interpreted_estimators_agree(drogue_folder, tmp_path,
         for x, y in zip(a, b, strict=True):
             assert x.sparsity() == y.sparsity()
             assert float(ca.mmax(ca.fabs(x - y))) <= 1e-12 * max(float(ca.mmax(ca.fabs(x))), 1.0)
+    # The Jacobian itself, against central differences of the residuals.
+    v = np.random.default_rng(8).standard_normal(z.size)
+    eps = 1e-6
+    r_plus = np.asarray(native._residual_jacobian(z + eps * v)[0]).ravel()
+    r_minus = np.asarray(native._residual_jacobian(z - eps * v)[0]).ravel()
+    jv = np.asarray(ca.mtimes(native._residual_jacobian(z)[1], ca.DM(v))).ravel()
+    np.testing.assert_allclose((r_plus - r_minus) / (2 * eps), jv, rtol=1e-4,
+                               atol=1e-6 * np.max(np.abs(jv)))
     # The objective gradient handed to Ipopt is dense J'r.
     grad = native._solver.get_function("nlp_grad_f")(z, [])[1]
     r, J = native._residual_jacobian(z)

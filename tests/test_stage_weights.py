@@ -43,6 +43,21 @@ def test_weights_partition_unity_and_hand_over_through_the_rise(model_and_truth)
     np.testing.assert_allclose(w, [0.0, 0.0, 0.5, 1.0, 1.0], atol=1e-12)
 
 
+def test_weights_partition_unity_when_a_stage_starts_during_the_previous_rise(
+        model_and_truth) -> None:
+    model, truth = model_and_truth
+    chute = model.test.parachutes[0]
+    early = dict(truth)
+    t2 = truth[param_name("t_start", chute.name, chute.stages[1])]
+    rise2 = truth[param_name("n_p", chute.name, chute.stages[1])] * chute.diameter / SPEED
+    early[param_name("t_start", chute.name, chute.stages[2])] = t2 + 0.3 * rise2
+    t = np.linspace(t2 - 0.1, t2 + 2 * rise2, 2001)
+    q = _quantities(model, early, t)
+    weights = np.array([q[param_name("stage_weight", chute.name, s)] for s in chute.stages])
+    np.testing.assert_allclose(weights.sum(axis=0), 1.0, atol=1e-12)
+    assert np.all(weights >= -1e-12)
+
+
 def test_loadcell_gain_moves_from_one_stage_scale_to_the_next(model_and_truth) -> None:
     model, truth = model_and_truth
     chute = model.test.parachutes[1]

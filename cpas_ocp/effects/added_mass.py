@@ -16,8 +16,9 @@ gathered from rest relative to the air, so the canopy (paper Eq. 1) obeys
 
     (m_p + m_A) a = D + m_p g - d(m_A)/dt v_air + (riser force),
 
-and the riser carries the extra d(m_A)/dt v_air + m_A a: the opening load
-rises while the canopy grows and falls while it decelerates.  With rigid
+and the pull the riser transmits gains -(d(m_A)/dt v_air + m_A a): the
+opening load rises while the canopy grows (v_air points against the pull)
+and falls while the canopy decelerates.  With rigid
 risers the whole system gains m_A in inertia, the force -d(m_A)/dt v_air,
 and no weight for m_A.
 

@@ -151,9 +151,15 @@ class CanopyInflation(Effect):
                 prev = steady
                 arrivals.append(1.0 if k == 0 else
                                 smoothstep(2.0 * (t - starts[k]) / rise - 1.0))
+            # reached[k]: how far the canopy has come into stage k (a product, so that
+            # the weights below sum to one even when a stage starts before the rise
+            # of the previous one has ended).
+            reached = [arrivals[0]]
+            for a in arrivals[1:]:
+                reached.append(reached[-1] * a)
+            reached.append(0.0)
             for k, stage in enumerate(chute.stages):
-                leaving = 0.0 if k == len(chute.stages) - 1 else arrivals[k + 1]
-                ctx.q[param_name("stage_weight", chute.name, stage)] = arrivals[k] * (1.0 - leaving)
+                ctx.q[param_name("stage_weight", chute.name, stage)] = reached[k] - reached[k + 1]
             ctx.q[param_name("cds", chute.name)] = cds
             ctx.q[param_name("drag", chute.name)] = (
                 cds * ctx.q["dynamic_pressure"] * ctx.q["drag_direction"])

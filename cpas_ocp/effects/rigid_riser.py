@@ -4,8 +4,8 @@ Each canopy moves with the vehicle: its drag and its dry mass m_p are lumped
 onto the vehicle body.  The riser tension follows from the canopy's own
 equation of motion, m_p a = D + m_p g - T, i.e. T = D - m_p f with f the
 system's specific force; along the drag direction this is the paper's
-F = PRF*CdS*q - W_p*G.  With the `added_mass` effect the riser also carries
-d(m_A)/dt v_air + m_A a (paper Eq. 1).  A riser cannot push: tension is clipped at zero by a
+F = PRF*CdS*q - W_p*G.  With the `added_mass` effect the pull gains
+-(d(m_A)/dt v_air + m_A a) (paper Eq. 1).  A riser cannot push: tension is clipped at zero by a
 smooth maximum, (T + sqrt(T^2 + eps^2)) / 2 with eps = 50 N (under 2 N of
 difference once the riser carries more than 600 N), so the estimation problem
 stays differentiable where the canopy starts to pull.
@@ -46,7 +46,7 @@ class RigidRiser(Effect):
         for chute in ctx.test.parachutes:
             pull = ctx.q[param_name("drag", chute.name)] - chute.dry_mass * f
             # Air mass the canopy carries (added_mass effect): the riser also gathers
-            # it, d(m_A)/dt v_air, and decelerates it, m_A a.
+            # it (d(m_A)/dt v_air) and decelerates it (m_A a).
             m_a = ctx.q.get(param_name("added_mass", chute.name))
             if m_a is not None:
                 pull = pull - ctx.q[param_name("added_momentum_rate", chute.name)] - m_a * a
