@@ -78,8 +78,10 @@ def _compile(functions: list[ca.Function], cc: str) -> list[ca.Function]:
             jobs.append((subprocess.Popen([cc, *FLAGS, "-o", str(partial), str(src), "-lm"],
                                           stdout=subprocess.DEVNULL, stderr=subprocess.PIPE),
                          partial, lib))
-        for proc, partial, lib in jobs:
-            _, err = proc.communicate()
+        # Wait for every job before judging any, so none is still writing into the
+        # temporary folder when a failure removes it.
+        errors = [proc.communicate()[1] for proc, _, _ in jobs]
+        for (proc, partial, lib), err in zip(jobs, errors, strict=True):
             if proc.returncode != 0:
                 raise RuntimeError(f"compiling {lib.name} failed: {err.decode()[-500:]}")
             os.replace(partial, lib)  # atomic: a library in the cache is always complete

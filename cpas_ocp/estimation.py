@@ -287,11 +287,11 @@ class Estimator:
         jac = ca.vertcat(*residual_jacs)
         self._g = ca.vertcat(*g)
         self._residual_jacobian = ca.Function("residual_jacobian", [self._z], [residual, jac])
-        self._constraints = ca.Function("constraints", [self._z],
-                                        [self._g, ca.vertcat(*g_jac)])
+        constraint_jac = ca.vertcat(*g_jac)
+        self._constraints = ca.Function("constraints", [self._z], [self._g, constraint_jac])
         obj = 0.5 * ca.sumsqr(residual)
         empty = ca.MX.sym("p", 0, 1)
-        jac_g = ca.Function("jac_g", [self._z, empty], [self._g, ca.vertcat(*g_jac)],
+        jac_g = ca.Function("jac_g", [self._z, empty], [self._g, constraint_jac],
                             ["x", "p"], ["g", "jac_g_x"])
         # Objective gradient J'r from the (compiled) residual Jacobian blocks, dense as
         # Ipopt's interface copies it.
