@@ -2,6 +2,7 @@
 
     cpas-ocp problems                         list the built-in test phases
     cpas-ocp simulate NAME --out DIR --seed N write a synthetic test folder (+ truth.json)
+    cpas-ocp reduce TEST_DIR --out DIR        offline reduction (Eqs. 2-3) and initial guess
     cpas-ocp reconstruct TEST_DIR --out DIR   reconstruct a test folder, write the report
     cpas-ocp demo [--out DIR]                 simulate the built-in Drogue test and reconstruct it
 
@@ -48,6 +49,11 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--seed", required=True, type=int)
     s.set_defaults(run=_simulate)
 
+    s = sub.add_parser("reduce", help="offline drag-area reduction and the initial guess")
+    s.add_argument("test_dir", type=Path)
+    s.add_argument("--out", required=True, type=Path)
+    s.set_defaults(run=_reduce)
+
     s = sub.add_parser("reconstruct", help="reconstruct a test folder")
     s.add_argument("test_dir", type=Path)
     s.add_argument("--out", required=True, type=Path)
@@ -80,6 +86,16 @@ def _simulate(args: argparse.Namespace) -> int:
     from .simulate import simulate_problem
     test = simulate_problem(load_problem(args.name), args.out, args.seed)
     print(f"wrote test folder {args.out} ({test.name}) with truth.json")
+    return 0
+
+
+def _reduce(args: argparse.Namespace) -> int:
+    from .flight_test import load_test
+    from .reduction_report import guess_table, write_reduction
+    test = load_test(args.test_dir)
+    out, model, guess = write_reduction(test, args.out)
+    print(guess_table(model, guess))
+    print(f"\nreduction written to {out} (reduction.csv, initial_guess.json, reduction.png)")
     return 0
 
 

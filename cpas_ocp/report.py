@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import json
-import shutil
-import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -13,8 +11,8 @@ import pandas as pd
 from scipy.stats import norm
 
 from .diagnostics import sensor_summary, worst_windows
-from .errors import InputError
 from .estimation import Fit
+from .output_folder import atomic_folder
 from .plots import plot_drag_areas, plot_sensors
 from .uncertainty import Covariance
 from .units import FT
@@ -135,12 +133,7 @@ def fit_summary(fit: Fit) -> str:
 def write_report(fit: Fit, cov: Covariance | None, out: str | Path) -> Path:
     """Write the report folder atomically: all of it or nothing."""
     out = Path(out)
-    if out.exists() and any(out.iterdir()) and not (out / "result.json").exists():
-        raise InputError(str(out), "(folder)", "a new or empty folder, or an earlier report "
-                         "folder to replace")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=".cpas-report-", dir=out.parent))
-    try:
+    with atomic_folder(out, "result.json") as tmp:
         (tmp / "result.json").write_text(json.dumps(result_dict(fit, cov), indent=2))
         rows = [{"parameter": n, "value": fit.parameters[n],
                  "std": (cov.std.get(n, np.nan) if cov else np.nan),
@@ -152,9 +145,4 @@ def write_report(fit: Fit, cov: Covariance | None, out: str | Path) -> Path:
             f"# Reconstruction of {fit.test.name}\n\n{fit.test.label}\n\n```\n"
             f"{parameter_table(fit, cov)}\n\n{fit_summary(fit)}\n```\n\n"
             + "".join(f"![{p.stem}]({p.name})\n\n" for p in sorted(tmp.glob("*.png"))))
-        if out.exists():
-            shutil.rmtree(out)
-        tmp.rename(out)
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
     return out
