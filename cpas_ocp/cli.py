@@ -69,7 +69,8 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def _solver_options(s: argparse.ArgumentParser) -> None:
-    s.add_argument("--grid-step", type=float, default=0.01, help="shooting interval [s]")
+    s.add_argument("--grid-step", type=float, default=None,
+                   help="shooting interval [s] (default: the fastest sensor's sampling interval)")
     s.add_argument("--verbose", action="store_true", help="show Ipopt's iteration log")
 
 
@@ -122,12 +123,13 @@ def _demo(args: argparse.Namespace) -> int:
 
 
 def _run_reconstruction(test: FlightTest, args: argparse.Namespace) -> None:
-    from .estimation import Estimator, Settings
+    from .estimation import Estimator, Settings, default_grid_step
     from .report import fit_summary, parameter_table, write_report
     from .uncertainty import SingularKKT
     settings = Settings(grid_step=args.grid_step, verbose=args.verbose)
+    step = args.grid_step if args.grid_step is not None else default_grid_step(test)
     print(f"building the multiple-shooting NLP of {test.name} "
-          f"({test.t_end - test.t_start:.1f} s at {args.grid_step * 1e3:g} ms) ...", flush=True)
+          f"({test.t_end - test.t_start:.1f} s at {step * 1e3:g} ms) ...", flush=True)
     est = Estimator(test, settings=settings)
     print(f"solving: {est.size_text()} ...", flush=True)
     fit = est.solve(progress=not args.verbose)

@@ -95,8 +95,11 @@ def model_outputs(model: Model, traj: Trajectory, params: dict[str, float], sens
 
 
 def simulate_problem(problem: Problem, out: str | Path, seed: int,
-                     effects: list[Effect] | None = None) -> FlightTest:
+                     effects: list[Effect] | None = None, noise: bool = True) -> FlightTest:
     """Simulate `problem` with sensor noise drawn from `seed`; write a test folder at `out`.
+
+    `noise=False` writes the noise-free outputs (event times stay noisy), for
+    checking a transcription against the simulator.
 
     Writes manifest.json, one CSV per sensor (in the manifest's units) and
     truth.json (``{"parameters": {name: value}}``, SI).  Nothing is left
@@ -137,7 +140,8 @@ def simulate_problem(problem: Problem, out: str | Path, seed: int,
             for j, ch in enumerate(model.sensor_channels[s["name"]]):
                 sigma = sensor.noise_sigma(ch, clean[:, j])
                 dim = SENSOR_COLUMNS[s["kind"]][ch]
-                cols[ch] = (clean[:, j] + sigma * rng.standard_normal(len(t))) \
+                draw = rng.standard_normal(len(t)) if noise else np.zeros(len(t))
+                cols[ch] = (clean[:, j] + sigma * draw) \
                     / FACTORS[dim][s["columns"][ch]]
             pd.DataFrame(cols).to_csv(tmp / s["file"], index=False, float_format="%.9g")
         full_truth = {p.name: float(v) for p, v in

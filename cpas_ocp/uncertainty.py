@@ -41,6 +41,25 @@ class Covariance:
         d = np.sqrt(np.clip(np.diag(self.matrix), 1e-300, None))
         return self.matrix / np.outer(d, d)
 
+    def mahalanobis(self, delta: dict[str, float], rank_tol: float = 1e-9) -> tuple[float, int]:
+        """Squared Mahalanobis length of a parameter offset, and the degrees of freedom.
+
+        `delta[name]` is an offset (SI) of every free parameter not on a bound,
+        e.g. estimate minus truth.  If the estimate is Gaussian with this
+        covariance, the result follows chi-square with `rank` degrees of
+        freedom.  Constrained combinations (the load-cell scales' fixed
+        geometric mean) leave the covariance singular; the length is taken in
+        the range of the correlation matrix, eigenvalues below `rank_tol` times
+        the largest dropped.
+        """
+        keep = [i for i, n in enumerate(self.names) if n not in self.at_bound]
+        d = np.sqrt(np.diag(self.matrix)[keep])
+        x = np.array([delta[self.names[i]] for i in keep]) / d
+        w, v = np.linalg.eigh(self.matrix[np.ix_(keep, keep)] / np.outer(d, d))
+        ok = w > rank_tol * w.max()
+        y = v[:, ok].T @ x
+        return float(np.sum(y**2 / w[ok])), int(ok.sum())
+
 
 @dataclass
 class Linearization:

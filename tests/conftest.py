@@ -18,18 +18,24 @@ START_GUESS_OFFSET_S = 0.3
 
 
 @pytest.fixture(scope="session")
-def drogue_folder(tmp_path_factory: pytest.TempPathFactory):
-    """A factory: the simulated `drogue` test folder for a seed (simulated once per seed)."""
-    cache: dict[int, Path] = {}
+def problem_folder(tmp_path_factory: pytest.TempPathFactory):
+    """A factory: the simulated test folder of a built-in problem and seed (simulated once)."""
+    cache: dict[tuple[str, int], Path] = {}
 
-    def make(seed: int) -> Path:
-        if seed not in cache:
-            folder = tmp_path_factory.mktemp(f"drogue{seed}") / "test"
-            simulate_problem(load_problem("drogue"), folder, seed)
-            cache[seed] = folder
-        return cache[seed]
+    def make(problem: str, seed: int) -> Path:
+        if (problem, seed) not in cache:
+            folder = tmp_path_factory.mktemp(f"{problem}{seed}") / "test"
+            simulate_problem(load_problem(problem), folder, seed)
+            cache[problem, seed] = folder
+        return cache[problem, seed]
 
     return make
+
+
+@pytest.fixture(scope="session")
+def drogue_folder(problem_folder):
+    """A factory: the simulated `drogue` test folder for a seed."""
+    return lambda seed: problem_folder("drogue", seed)
 
 
 def offset_events(folder: Path, dest: Path, offset: float) -> Path:
@@ -44,7 +50,7 @@ def offset_events(folder: Path, dest: Path, offset: float) -> Path:
     (dest / "truth.json").unlink()  # the estimator's folder carries no truth
     k = 0
     for event in manifest["events"]:
-        if event["name"] in ("bag_strip", "disreef"):
+        if event["name"] in ("line_stretch", "bag_strip", "disreef"):
             stage = event.get("stage", "stage1")
             t_true = truth[f"t_start[{event['parachute']},{stage}]"]
             event["time"]["value"] = t_true + offset * (-1) ** k
@@ -54,19 +60,26 @@ def offset_events(folder: Path, dest: Path, offset: float) -> Path:
 
 
 @pytest.fixture(scope="session")
-def drogue_fit(drogue_folder, tmp_path_factory: pytest.TempPathFactory):
-    """A factory: (fit, covariance, truth) of the seed's test with start guesses 0.3 s off."""
-    cache: dict[int, tuple[Fit, Covariance, dict[str, float]]] = {}
+def problem_fit(problem_folder, tmp_path_factory: pytest.TempPathFactory):
+    """A factory: (fit, covariance, truth) of a problem's seed with start guesses 0.3 s off."""
+    cache: dict[tuple[str, int], tuple[Fit, Covariance, dict[str, float]]] = {}
 
-    def make(seed: int) -> tuple[Fit, Covariance, dict[str, float]]:
-        if seed not in cache:
-            folder = drogue_folder(seed)
+    def make(problem: str, seed: int) -> tuple[Fit, Covariance, dict[str, float]]:
+        if (problem, seed) not in cache:
+            folder = problem_folder(problem, seed)
             truth = json.loads((folder / "truth.json").read_text())["parameters"]
-            shifted = offset_events(folder, tmp_path_factory.mktemp(f"shifted{seed}") / "test",
-                                    START_GUESS_OFFSET_S)
+            shifted = offset_events(
+                folder, tmp_path_factory.mktemp(f"shifted-{problem}{seed}") / "test",
+                START_GUESS_OFFSET_S)
             est = Estimator(load_test(shifted))
             fit = est.solve()
-            cache[seed] = (fit, est.covariance(fit), truth)
-        return cache[seed]
+            cache[problem, seed] = (fit, est.covariance(fit), truth)
+        return cache[problem, seed]
 
     return make
+
+
+@pytest.fixture(scope="session")
+def drogue_fit(problem_fit):
+    """A factory: (fit, covariance, truth) of the `drogue` seed with start guesses 0.3 s off."""
+    return lambda seed: problem_fit("drogue", seed)

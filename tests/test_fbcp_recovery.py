@@ -1,0 +1,53 @@
+"""Single-shot reconstruction of the simulated FBCP phase recovers the synthetic truth.
+
+Two 7 ft FBCPs fill in about 0.13 s at 150 m/s, so the start, fill constant
+and shape of each rise rest on some 25 samples per sensor at 200 Hz.  Start
+guesses are 0.3 s off (through the line-stretch events) and the inflation
+guesses come from the offline reduction.
+
+Tolerances come from the noise, through the reported covariance:
+- jointly, the squared Mahalanobis distance of estimate from truth below the
+  chi-square 0.999 quantile for its degrees of freedom;
+- singly, every estimate within 4 reported standard deviations;
+- the reported sigmas are small enough for those checks to mean something:
+  drag areas to 5 %, over-inflation to 2 %, start times to 5 ms.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.stats import chi2
+
+from cpas_ocp.parameters import split_name
+
+from .conftest import START_GUESS_OFFSET_S
+
+SEEDS = [1, 2]
+SIGMA_CEILING = {"CdS": 0.05, "Ck": 0.02}  # relative
+START_SIGMA_CEILING_S = 0.005
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_fbcp_truth_recovered_within_the_noise(problem_fit, seed: int) -> None:
+    fit, cov, truth = problem_fit("fbcp", seed)
+    assert fit.solver.success, fit.solver.status
+    assert fit.settings.grid_step == pytest.approx(0.005)  # the 200 Hz sensors set the grid
+    guess_err = [abs(fit.guess[n] - truth[n]) for n in fit.free if n.startswith("t_start[")]
+    assert min(guess_err) == pytest.approx(START_GUESS_OFFSET_S, abs=1e-6)
+    assert abs(fit.chi_square / fit.dof - 1.0) < 5 * np.sqrt(2.0 / fit.dof)
+    assert not cov.at_bound
+
+    std = cov.std
+    for name in fit.free:
+        base, _ = split_name(name)
+        if base in SIGMA_CEILING:
+            assert std[name] / fit.parameters[name] < SIGMA_CEILING[base], name
+        if base == "t_start":
+            assert std[name] < START_SIGMA_CEILING_S, name
+    z = {n: (fit.parameters[n] - truth[n]) / std[n] for n in fit.free}
+    worst = max(z, key=lambda n: abs(z[n]))
+    assert abs(z[worst]) < 4.0, f"{worst}: {z[worst]:.2f} sigma"
+    m2, dof = cov.mahalanobis({n: fit.parameters[n] - truth[n] for n in fit.free})
+    assert dof == len(fit.free) - 1  # the load-cell scales' geometric mean is fixed
+    assert m2 < chi2.ppf(0.999, dof), f"Mahalanobis^2 {m2:.1f} on {dof} dof"
