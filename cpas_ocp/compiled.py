@@ -1,9 +1,10 @@
 """Native code for the estimator's per-instance Jacobians, compiled once per model and cached.
 
 CasADi evaluates SX functions in its virtual machine.  The same function
-emitted as C and compiled by the system C compiler at -O1 runs about four
-times faster on the RK4-step Jacobians that dominate a reconstruction (and
--O2 costs twice the compile time for 10 % more).  The C source is hashed and
+emitted as C and compiled by the system C compiler at -O1 (-O0 for very
+large sources, see `LARGE_SOURCE_BYTES`) runs about four times faster on the
+RK4-step Jacobians that dominate a reconstruction (and -O2 costs twice the
+compile time for 10 % more).  The C source is hashed and
 the shared library is kept under that hash in the cache folder
 (``$CPAS_OCP_CACHE``, else ``~/.cache/cpas-ocp``), so a model structure is
 compiled once per machine: every test folder with the same vehicle,
@@ -27,7 +28,16 @@ from pathlib import Path
 
 import casadi as ca
 
-FLAGS = ("-O1", "-shared", "-fPIC")
+FLAGS = ("-shared", "-fPIC")
+# gcc's time at -O1 grows faster than the source: a 4 MB Jacobian (a GPS model
+# integrated back over its lag) took 400 s.  Sources above this size are built
+# at -O0, still about twice as fast as the virtual machine.
+LARGE_SOURCE_BYTES = 1_000_000
+
+
+def optimisation(source: Path) -> str:
+    """-O1 for ordinary sources, -O0 for very large ones."""
+    return "-O0" if source.stat().st_size > LARGE_SOURCE_BYTES else "-O1"
 
 
 def cache_folder() -> Path:
@@ -75,7 +85,8 @@ def _compile(functions: list[ca.Function], cc: str) -> list[ca.Function]:
         jobs = []
         for src, lib in missing:
             partial = src.parent / lib.name
-            jobs.append((subprocess.Popen([cc, *FLAGS, "-o", str(partial), str(src), "-lm"],
+            jobs.append((subprocess.Popen([cc, optimisation(src), *FLAGS, "-o", str(partial),
+                                           str(src), "-lm"],
                                           stdout=subprocess.DEVNULL, stderr=subprocess.PIPE),
                          partial, lib))
         # Wait for every job before judging any, so none is still writing into the
@@ -99,6 +110,6 @@ def _generate(fn: ca.Function, folder: Path) -> Path:
 
 def _digest(source: Path) -> str:
     h = hashlib.sha256(source.read_bytes())
-    h.update(" ".join(FLAGS).encode())
+    h.update(" ".join([optimisation(source), *FLAGS]).encode())
     h.update(ca.__version__.encode())
     return h.hexdigest()[:20]

@@ -25,6 +25,7 @@ import numpy as np
 
 from .effects.base import Capture, Constraint, Effect, State
 from .flight_test import FlightTest
+from .integration import rk4
 from .parameters import Parameter
 from .units import G0
 
@@ -50,10 +51,33 @@ class ModelContext:
     forces: list[ca.SX] = field(default_factory=list)
     mass: ca.SX | float = 0.0
     y: dict[str, dict[str, ca.SX]] = field(default_factory=dict)
+    state_vector: ca.SX | None = None
+    state_names: tuple[str, ...] = ()
 
     def scale(self, name: str, factor: ca.SX | float) -> None:
         """Multiply quantity `name` (1 if not yet set) by `factor`."""
         self.q[name] = self.q.get(name, 1.0) * factor
+
+    def at_time_offset(self, expr: ca.SX, dt: ca.SX | float, steps: int) -> ca.SX:
+        """`expr` (a function of state and time) evaluated at t + dt instead of t.
+
+        The state at t + dt comes from `steps` RK4 steps of the dynamics
+        from the state at t (backwards for dt < 0); parameters and captured
+        values are unchanged.  Available in the second pass, when every state
+        derivative is known.  A sensor that reports with a time lag tau sees
+        ``at_time_offset(y, -tau, n)``; the step dt/steps should stay well
+        below the time scale of the dynamics (inflation: about 0.1 s).
+        """
+        if self.state_vector is None:
+            raise RuntimeError("at_time_offset is available in the observations pass only")
+        xdot = ca.vertcat(*(self.xdot[n] for n in self.state_names))
+        p = ca.vertcat(*self.p.values())
+        c = ca.vertcat(*self.c.values())
+        f = ca.Function("dynamics", [self.state_vector, self.t, p, c], [xdot])
+        x, t, h = self.state_vector, self.t, dt / steps
+        for _ in range(steps):
+            x, t = rk4(f, x, t, h, p, c), t + h
+        return ca.substitute(expr, ca.vertcat(self.state_vector, self.t), ca.vertcat(x, t))
 
 
 class Model:
@@ -100,6 +124,7 @@ class Model:
         ctx.q["load_factor"] = ca.norm_2(ctx.q["specific_force"]) / G0
         ctx.xdot["position"] = xs["velocity"]
         ctx.xdot["velocity"] = ctx.q["specific_force"] + ca.vertcat(0.0, 0.0, -G0)
+        ctx.state_vector, ctx.state_names = x, tuple(s.name for s in self.states)
         for e in self.effects:
             e.observations(ctx)
         self.ctx = ctx

@@ -24,6 +24,7 @@ import pandas as pd
 from .effects import Effect, baseline_effects
 from .errors import InputError
 from .flight_test import MANIFEST, SENSOR_COLUMNS, FlightTest, load_test, test_from_manifest
+from .integration import rk4
 from .model import Model
 from .problems import Problem
 from .units import FACTORS
@@ -44,12 +45,7 @@ def rk4_step(model: Model) -> ca.Function:
     t, h = ca.SX.sym("t"), ca.SX.sym("h")
     p = ca.SX.sym("p", len(model.parameters))
     c = ca.SX.sym("c", len(model.captures))
-    f = model.rhs
-    k1 = f(x, t, p, c)
-    k2 = f(x + h / 2 * k1, t + h / 2, p, c)
-    k3 = f(x + h / 2 * k2, t + h / 2, p, c)
-    k4 = f(x + h * k3, t + h, p, c)
-    return ca.Function("rk4", [x, t, h, p, c], [x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)],
+    return ca.Function("rk4", [x, t, h, p, c], [rk4(model.rhs, x, t, h, p, c)],
                        ["x", "t", "h", "p", "c"], ["xf"])
 
 

@@ -5,7 +5,8 @@ inflation and drag, forebody drag, canopies with their dry mass on rigid
 risers, per-stage drag scale and per-canopy load-cell scale, and the GPS, IMU
 and load-cell measurement models.  Order matters only in that the sensors
 come after the effects that set their gains.  Further effects (`AddedMass`)
-are added to the list where a problem needs them.
+are added to the list where a problem needs them; sensor errors
+(`SensorBias`, `SensorLag`) go after the sensors they modify.
 """
 
 from .added_mass import AddedMass
@@ -15,6 +16,8 @@ from .drag_scale import DragScale
 from .forebody_drag import ForebodyDrag
 from .loadcell_scale import LoadCellScale
 from .rigid_riser import RigidRiser
+from .sensor_bias import SensorBias
+from .sensor_lag import SensorLag
 from .sensors import GpsSensor, ImuSensor, LoadCellSensor
 
 
@@ -37,6 +40,8 @@ __all__ = [
     "LoadCellScale",
     "LoadCellSensor",
     "RigidRiser",
+    "SensorBias",
+    "SensorLag",
     "State",
     "baseline_effects",
 ]
