@@ -1,0 +1,110 @@
+"""Benchmark: wall time and peak memory per built-in problem, and solve time against samples.
+
+Part 1: each built-in problem is simulated (seed 1) and reconstructed with
+default settings in a fresh subprocess, so that its peak resident memory
+(``ru_maxrss``) is its own.  The compiled model functions are built once
+beforehand, outside the timing.
+
+Part 2: the `fbcp` problem with its IMU and load cells sampled at 100 Hz to
+4 kHz (GPS stays at 10 Hz), i.e. about 1,200 to 48,000 residuals, on a fixed
+5 ms shooting grid, so that only the number of samples changes.  Ratios are
+against the smallest run in this same invocation: time per Ipopt iteration
+and samples, whose log-log slope is the growth exponent (1 = linear).
+
+    python benchmarks/problem_scaling.py [--rates 100 250 ...]
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from cpas_ocp.estimation import Estimator, Settings
+from cpas_ocp.flight_test import load_test
+from cpas_ocp.problems import load_problem, problem_names
+from cpas_ocp.simulate import simulate_problem
+
+
+def run_one(folder: Path, grid_step: float | None) -> dict:
+    """Build and solve one test folder; the caller runs this in a fresh process."""
+    test = load_test(folder)
+    t0 = time.perf_counter()
+    est = Estimator(test, settings=Settings(grid_step=grid_step))
+    build = time.perf_counter() - t0
+    fit = est.solve(progress=False)
+    t1 = time.perf_counter()
+    est.covariance(fit)
+    return {"samples": fit.n_samples, "variables": int(est._z.numel()), "build_s": build,
+            "solve_s": fit.solver.wall_s, "covariance_s": time.perf_counter() - t1,
+            "iterations": fit.solver.iterations, "status": fit.solver.status,
+            "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
+
+
+def in_subprocess(folder: Path, grid_step: float | None) -> dict:
+    cmd = [sys.executable, __file__, "--one", str(folder)]
+    if grid_step is not None:
+        cmd += ["--grid-step", str(grid_step)]
+    out = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
+    return json.loads(out.strip().splitlines()[-1])
+
+
+def with_rate(name: str, rate: float):
+    problem = load_problem(name)
+    rates = {k: (v if k == "gps" else rate) for k, v in problem.simulation["rates_hz"].items()}
+    return dataclasses.replace(problem, simulation={**problem.simulation, "rates_hz": rates})
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--one", type=Path, help=argparse.SUPPRESS)
+    ap.add_argument("--grid-step", type=float, default=None, help=argparse.SUPPRESS)
+    ap.add_argument("--rates", type=float, nargs="+", default=[100, 250, 500, 1000, 2000, 4000])
+    args = ap.parse_args()
+    if args.one:
+        print(json.dumps(run_one(args.one, args.grid_step)))
+        return
+
+    tmp = Path(tempfile.mkdtemp(prefix="cpas-bench-"))
+    print("per problem (seed 1, default settings, fresh process each):")
+    print(f"{'problem':8s} {'samples':>8s} {'variables':>9s} {'build s':>8s} {'solve s':>8s} "
+          f"{'iter':>5s} {'cov s':>6s} {'peak MB':>8s}")
+    for name in problem_names():
+        folder = tmp / name
+        simulate_problem(load_problem(name), folder, seed=1)
+        Estimator(load_test(folder))  # compile (cached) outside the timing
+        r = in_subprocess(folder, None)
+        print(f"{name:8s} {r['samples']:8d} {r['variables']:9d} {r['build_s']:8.1f} "
+              f"{r['solve_s']:8.1f} {r['iterations']:5d} {r['covariance_s']:6.1f} "
+              f"{r['peak_mb']:8.0f}   {r['status']}", flush=True)
+
+    print("\nfbcp, 5 ms grid, IMU and load-cell rate varied (fresh process each):")
+    print(f"{'rate Hz':>8s} {'samples':>8s} {'solve s':>8s} {'iter':>5s} {'s/iter':>7s} "
+          f"{'ratio':>6s} {'samples ratio':>13s} {'peak MB':>8s}")
+    rows = []
+    for rate in args.rates:
+        folder = tmp / f"fbcp-{rate:g}"
+        simulate_problem(with_rate("fbcp", rate), folder, seed=1)
+        if not rows:
+            Estimator(load_test(folder), settings=Settings(grid_step=0.005))
+        r = in_subprocess(folder, 0.005)
+        per_iter = r["solve_s"] / r["iterations"]
+        rows.append((r["samples"], per_iter))
+        print(f"{rate:8g} {r['samples']:8d} {r['solve_s']:8.2f} {r['iterations']:5d} "
+              f"{per_iter:7.3f} {per_iter / rows[0][1]:6.2f} {r['samples'] / rows[0][0]:13.1f} "
+              f"{r['peak_mb']:8.0f}", flush=True)
+    n, t = np.log([r[0] for r in rows]), np.log([r[1] for r in rows])
+    slope = np.polyfit(n, t, 1)[0]
+    print(f"\ngrowth exponent of time per iteration in samples (log-log slope): {slope:.2f}")
+
+
+if __name__ == "__main__":
+    main()
