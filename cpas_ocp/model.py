@@ -71,8 +71,8 @@ class ModelContext:
         if self.state_vector is None:
             raise RuntimeError("at_time_offset is available in the observations pass only")
         xdot = ca.vertcat(*(self.xdot[n] for n in self.state_names))
-        p = ca.vertcat(*self.p.values())
-        c = ca.vertcat(*self.c.values())
+        p = ca.vertcat(ca.SX(0, 1), *self.p.values())
+        c = ca.vertcat(ca.SX(0, 1), *self.c.values())
         f = ca.Function("dynamics", [self.state_vector, self.t, p, c], [xdot])
         x, t, h = self.state_vector, self.t, dt / steps
         for _ in range(steps):

@@ -37,11 +37,8 @@ class SensorLag(Effect):
 
     @classmethod
     def gps(cls) -> SensorLag:
+        """GPS position and velocity lag, up to 0.2 s (four backward RK4 steps)."""
         return cls()
-
-    @classmethod
-    def load_cell(cls) -> SensorLag:
-        return cls("load_cell", 0.1, "loadcell_lag")
 
     def parameters(self, test: FlightTest) -> list[Parameter]:
         return [Parameter(param_name("lag", s.name), "s", 0.0, -self.max_lag, self.max_lag,
