@@ -71,7 +71,7 @@ from cpas_ocp.inflation import fill_length, infinite_mass_cds
 from cpas_ocp.model import Model
 from cpas_ocp.parameters import param_name
 from cpas_ocp.problems import load_problem
-from cpas_ocp.reduction import Reduction, gps_state, initial_guess, reduce
+from cpas_ocp.reduction import gps_state, reduce_and_guess, stage_starts
 from cpas_ocp.simulate import Trajectory, simulate, simulate_problem
 
 INFLATION_PARAMETERS = ("CdS", "Ck", "n_p", "expopen", "t_k")
@@ -208,15 +208,13 @@ def legacy_reconstruction(test: FlightTest, step: float, peak_iterations: int) -
 
     # a. offline reduction with the observed start times.
     model = Model(test, baseline_effects())
-    guess = initial_guess(test, model)
     chutes = list(test.parachutes)
     for chute in chutes:
         if chute.inflation != "infinite_mass":
             raise ValueError(f"{chute.name}: this benchmark's legacy path handles infinite-mass "
                              "canopies only")
-    starts = {(c.name, s): guess[param_name("t_start", c.name, s)]
-              for c in chutes for s in c.stages}
-    red: Reduction = reduce(test, starts)
+    guess, red = reduce_and_guess(test, model)
+    starts = stage_starts(test, guess)
     stages = list(dict.fromkeys(s for c in chutes for s in c.stages))
     log("[legacy] a. reduction: stage scale factors "
         + ", ".join(f"{s} {red.stage_scale[s]:.4f}" for s in stages))

@@ -126,8 +126,8 @@ def _run_reconstruction(test: FlightTest, args: argparse.Namespace) -> None:
     from .estimation import Estimator, Settings, default_grid_step
     from .report import fit_summary, parameter_table, write_report
     from .uncertainty import SingularKKT
-    settings = Settings(grid_step=args.grid_step, verbose=args.verbose)
     step = args.grid_step if args.grid_step is not None else default_grid_step(test)
+    settings = Settings(grid_step=step, verbose=args.verbose)
     print(f"building the multiple-shooting NLP of {test.name} "
           f"({test.t_end - test.t_start:.1f} s at {step * 1e3:g} ms) ...", flush=True)
     est = Estimator(test, settings=settings)

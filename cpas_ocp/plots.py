@@ -12,7 +12,7 @@ import numpy as np
 
 from .estimation import Fit
 from .parameters import param_name
-from .reduction import reduce
+from .reduction import reduce, stage_starts
 from .units import FT, LBF
 
 # Display units: the engineers' customary ones, per channel.
@@ -55,8 +55,7 @@ def plot_sensors(fit: Fit, folder: Path) -> list[Path]:
 def plot_drag_areas(fit: Fit, folder: Path) -> Path:
     """Each canopy's reconstructed drag area against its offline (Eq. 3) reduction."""
     q = fit.quantities()
-    starts = {(c.name, s): fit.parameters[param_name("t_start", c.name, s)]
-              for c in fit.test.parachutes for s in c.stages}
+    starts = stage_starts(fit.test, fit.parameters)
     red = reduce(fit.test, starts)
     chutes = fit.test.parachutes
     fig, axes = plt.subplots(len(chutes), 1, figsize=(10, 3.2 * len(chutes)), sharex=True,

@@ -100,11 +100,21 @@ def _steady_windows(test: FlightTest, starts: dict[tuple[str, str], float]
     return windows
 
 
+def stage_starts(test: FlightTest, values: dict[str, float]) -> dict[tuple[str, str], float]:
+    """Start time (s) of every canopy's every stage, keyed (canopy, stage), from `values`."""
+    return {(c.name, s): values[param_name("t_start", c.name, s)]
+            for c in test.parachutes for s in c.stages}
+
+
 def initial_guess(test: FlightTest, model: Model) -> dict[str, float]:
     """Initial values of the model parameters from the test folder alone."""
+    return reduce_and_guess(test, model)[0]
+
+
+def reduce_and_guess(test: FlightTest, model: Model) -> tuple[dict[str, float], Reduction]:
+    """The initial guess and the reduction it came from (start times from the events)."""
     guess = {p.name: p.default for p in model.parameters}
-    starts = {(c.name, s): guess[param_name("t_start", c.name, s)]
-              for c in test.parachutes for s in c.stages}
+    starts = stage_starts(test, guess)
     red = reduce(test, starts)
     bounds = {p.name: (p.lower, p.upper) for p in model.parameters}
     for stage, s in red.stage_scale.items():
@@ -141,4 +151,4 @@ def initial_guess(test: FlightTest, model: Model) -> dict[str, float]:
             v_i = float(np.interp(t0, red.t, red.airspeed))
             guess[param_name("n_p", chute.name, stage)] = float(
                 np.clip(t_fp * v_i / chute.diameter, 1.0, 30.0))
-    return guess
+    return guess, red

@@ -21,8 +21,7 @@ from .effects import baseline_effects
 from .flight_test import FlightTest
 from .model import Model
 from .output_folder import atomic_folder
-from .parameters import param_name
-from .reduction import Reduction, initial_guess, reduce
+from .reduction import Reduction, reduce_and_guess, stage_starts
 from .units import FT
 
 
@@ -48,10 +47,7 @@ def guess_table(model: Model, guess: dict[str, float]) -> str:
 def write_reduction(test: FlightTest, out: str | Path) -> tuple[Path, Model, dict[str, float]]:
     """Reduce `test`, write reduction.csv, initial_guess.json and reduction.png to `out`."""
     model = Model(test, baseline_effects())
-    guess = initial_guess(test, model)
-    starts = {(c.name, s): guess[param_name("t_start", c.name, s)]
-              for c in test.parachutes for s in c.stages}
-    red = reduce(test, starts)
+    guess, red = reduce_and_guess(test, model)
     out = Path(out)
     with atomic_folder(out, "initial_guess.json") as tmp:
         reduction_frame(red).to_csv(tmp / "reduction.csv", index=False)
@@ -63,7 +59,7 @@ def write_reduction(test: FlightTest, out: str | Path) -> tuple[Path, Model, dic
             "stage_scale": red.stage_scale,
             "stage_windows_s": {k: list(v) for k, v in red.stage_windows.items()},
         }, indent=2))
-        _plot(test, red, starts, tmp / "reduction.png")
+        _plot(test, red, stage_starts(test, guess), tmp / "reduction.png")
     return out, model, guess
 
 
@@ -71,9 +67,9 @@ def _plot(test: FlightTest, red: Reduction, starts: dict[tuple[str, str], float]
           path: Path) -> None:
     fig, ax = plt.subplots(figsize=(10, 4.5))
     ax.plot(red.t, red.cds_imu / FT**2, lw=0.6, color="0.4", label="IMU, Eq. 2 (total)")
-    total = sum(red.cds_riser.values())
     if red.cds_riser:
-        ax.plot(red.t, total / FT**2, lw=0.6, color="C0", label="risers summed, Eq. 3")
+        ax.plot(red.t, sum(red.cds_riser.values()) / FT**2, lw=0.6, color="C0",
+                label="risers summed, Eq. 3")
     for k, (name, curve) in enumerate(red.cds_riser.items()):
         ax.plot(red.t, curve / FT**2, lw=0.5, color=f"C{k + 1}", label=f"riser {name}")
     for stage, (a, b) in red.stage_windows.items():
