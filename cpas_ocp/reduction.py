@@ -11,9 +11,10 @@ Without any simulation, on the IMU's time base:
   the load-cell drag times that factor.
 
 From these curves the initial guess of every canopy's inflation parameters
-follows: CdS from the scaled riser drag area in the steady window, Ck from its
-peak, n_p from the time of the peak after the observed start.  The guess never
-uses anything but the test folder.
+follows: CdS from the scaled riser drag area in the steady window, then the
+start time and shape of every stage from a least-squares fit of the Eq. 5/6
+curve to that drag area (`stage_curve_fit`).  The guess never uses anything
+but the test folder.
 """
 
 from __future__ import annotations
@@ -23,9 +24,16 @@ from dataclasses import dataclass
 import numpy as np
 
 from .atmosphere import density_at, wind_at
-from .flight_test import FlightTest
+from .flight_test import FlightTest, Parachute
 from .model import Model
 from .parameters import param_name
+from .stage_curve_fit import (
+    MAX_WINDOW_S,
+    StageData,
+    fit_stage_curve,
+    fitted_names,
+    parameter_bounds,
+)
 from .units import G0
 
 SETTLE_S = 1.0  # time after a stage start before its drag area counts as steady (s)
@@ -111,6 +119,35 @@ def initial_guess(test: FlightTest, model: Model) -> dict[str, float]:
     return reduce_and_guess(test, model)[0]
 
 
+def _fit_stage(test: FlightTest, model: Model, red: Reduction, chute: Parachute, k: int,
+               starts: dict[tuple[str, str], float], guess: dict[str, float]
+               ) -> dict[str, float] | None:
+    """Curve-fitted shape and start of stage k of `chute` (`stage_curve_fit`), or None.
+
+    The window runs from halfway back to the previous stage's observed start
+    (at most 1 s before this one) to just before the next stage's, at most
+    MAX_WINDOW_S after this one.
+    """
+    stage = chute.stages[k]
+    t0 = starts[(chute.name, stage)]
+    prev_start = starts[(chute.name, chute.stages[k - 1])] if k else test.t_start
+    next_start = (starts[(chute.name, chute.stages[k + 1])] if k + 1 < len(chute.stages)
+                  else test.t_end)
+    lo = max(t0 - 1.0, prev_start + 0.5 * (t0 - prev_start))
+    hi = min(t0 + MAX_WINDOW_S, next_start - 0.1)
+    sel = (red.t >= lo) & (red.t <= hi)
+    names = fitted_names(chute, stage)
+    bounds = parameter_bounds(model.parameters, names)
+    t_lo, t_hi = bounds[names[0]]
+    bounds[names[0]] = (max(t_lo, lo), min(t_hi, hi))
+    cds_of = [guess[param_name("CdS", chute.name, s)] for s in chute.stages]
+    data = StageData(chute, stage, red.t[sel],
+                     red.stage_scale.get(stage, 1.0) * red.cds_riser[chute.name][sel],
+                     red.airspeed[sel], cds_of[k - 1] if k else 0.0, cds_of[k], cds_of[-1],
+                     bounds)
+    return fit_stage_curve(data)
+
+
 def reduce_and_guess(test: FlightTest, model: Model) -> tuple[dict[str, float], Reduction]:
     """The initial guess and the reduction it came from (start times from the events)."""
     guess = {p.name: p.default for p in model.parameters}
@@ -123,32 +160,17 @@ def reduce_and_guess(test: FlightTest, model: Model) -> tuple[dict[str, float], 
             guess[name] = float(np.clip(s, *bounds[name]))
     for chute in test.parachutes:
         curve = red.cds_riser.get(chute.name)
-        for k, stage in enumerate(chute.stages):
-            scale = red.stage_scale.get(stage, 1.0)
-            if curve is None:
-                continue
-            t0 = starts[(chute.name, stage)]
+        if curve is None:
+            continue
+        for stage in chute.stages:
             a, b = red.stage_windows[stage]
             steady = (red.t >= a) & (red.t <= b)
-            cds = scale * float(np.median(curve[steady])) if steady.any() else None
-            if cds is None or cds <= 0:
-                continue
-            guess[param_name("CdS", chute.name, stage)] = cds
-            if chute.inflation != "infinite_mass":
-                continue
-            prev_start = starts[(chute.name, chute.stages[k - 1])] if k else test.t_start
-            next_start = (starts[(chute.name, chute.stages[k + 1])]
-                          if k + 1 < len(chute.stages) else test.t_end)
-            lo = max(t0 - 1.0, prev_start + 0.5 * (t0 - prev_start))
-            hi = min(t0 + 2.0, next_start - 0.5)
-            near = (red.t >= lo) & (red.t <= hi)
-            if not near.any():
-                continue
-            i_peak = int(np.flatnonzero(near)[np.argmax(curve[near])])
-            guess[param_name("Ck", chute.name, stage)] = float(
-                np.clip(scale * curve[i_peak] / cds, 1.02, 2.5))
-            t_fp = max(red.t[i_peak] - t0, 0.2)
-            v_i = float(np.interp(t0, red.t, red.airspeed))
-            guess[param_name("n_p", chute.name, stage)] = float(
-                np.clip(t_fp * v_i / chute.diameter, 1.0, 30.0))
+            cds = red.stage_scale.get(stage, 1.0) * float(np.median(curve[steady])) \
+                if steady.any() else 0.0
+            if cds > 0:
+                guess[param_name("CdS", chute.name, stage)] = cds
+        for k in range(len(chute.stages)):
+            shape = _fit_stage(test, model, red, chute, k, starts, guess)
+            if shape is not None:
+                guess.update(shape)
     return guess, red

@@ -59,6 +59,13 @@ def offset_events(folder: Path, dest: Path, offset: float) -> Path:
     return dest
 
 
+def event_errors(fit: Fit, truth: dict[str, float]) -> float:
+    """Smallest distance (s) between an observed inflation-start event and the true start."""
+    errors = [abs(e.time - truth[f"t_start[{e.parachute},{e.stage or 'stage1'}]"])
+              for e in fit.test.events if e.name in ("line_stretch", "bag_strip", "disreef")]
+    return min(errors)
+
+
 @pytest.fixture(scope="session")
 def problem_fit(problem_folder, tmp_path_factory: pytest.TempPathFactory):
     """A factory: (fit, covariance, truth) of a problem's seed with start guesses 0.3 s off."""
