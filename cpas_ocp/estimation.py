@@ -338,6 +338,12 @@ class Estimator:
                                     zip(pb, self.pscale, strict=True)], np.full(ncap, 0.01)])
         self._ubz = np.concatenate([np.full(X.numel(), inf), [p.upper / sc for p, sc in
                                     zip(pb, self.pscale, strict=True)], np.full(ncap, inf)])
+        first = 0
+        for st in m.states:  # states known at the start of the phase: first node held
+            if st.pinned:
+                self._lbz[first:first + st.size] = self._ubz[first:first + st.size] = \
+                    st.initial / st.scale
+            first += st.size
         # Gauss-Newton converges linearly, so Ipopt's dual infeasibility plateaus near
         # 1e-4 (scaled) long after the estimate has stopped moving; accept a point where
         # the objective no longer changes (relative 1e-9, i.e. ~1e-5 in chi-square, over
@@ -419,12 +425,19 @@ class Estimator:
         return value, jac
 
     def initial_point(self) -> np.ndarray:
-        """Shooting nodes from GPS, parameters from the reduction, captures from GPS speed."""
+        """Shooting nodes from GPS (and the effects' own state guesses), parameters from the
+        reduction, captures from GPS speed."""
         m = self.model
         pos, vel = gps_state(self.test, self.t)
         x0 = np.zeros((m.nx, len(self.t)))
         x0[m.state_slice("position")] = pos.T
         x0[m.state_slice("velocity")] = vel.T
+        for effect in m.effects:
+            for name, value in effect.state_guess(self.test, self.t, self.values).items():
+                x0[m.state_slice(name)] = value
+        for st in m.states:
+            if st.pinned:
+                x0[m.state_slice(st.name), 0] = st.initial
         p0 = np.array([self.values[f] for f in self.free]) / self.pscale
         speed = np.linalg.norm(vel, axis=1)
         c0 = np.array([np.interp(self.values[c.time_parameter], self.t, speed)

@@ -53,6 +53,8 @@ class ModelContext:
     y: dict[str, dict[str, ca.SX]] = field(default_factory=dict)
     state_vector: ca.SX | None = None
     state_names: tuple[str, ...] = ()
+    # Canopies that are bodies of their own (elastic risers); the others ride on the vehicle.
+    separate_bodies: set[str] = field(default_factory=set)
 
     def scale(self, name: str, factor: ca.SX | float) -> None:
         """Multiply quantity `name` (1 if not yet set) by `factor`."""

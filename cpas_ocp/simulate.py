@@ -122,7 +122,8 @@ def simulate_problem(problem: Problem, out: str | Path, seed: int,
     unknown = sorted(set(truth) - set(model.parameter_names))
     if unknown:
         raise ValueError(f"problem {problem.name}: truth names unknown parameters {unknown}")
-    x0 = np.concatenate([sim["initial_state"][s.name] for s in model.states])
+    x0 = np.concatenate([np.broadcast_to(sim["initial_state"].get(s.name, s.initial), s.size)
+                         for s in model.states])
     traj = simulate(model, truth, x0, t0, t1, step)
 
     tmp = Path(tempfile.mkdtemp(prefix=".cpas-sim-", dir=out.parent if out.parent.exists()

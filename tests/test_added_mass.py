@@ -2,18 +2,23 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
 import pytest
+from scipy.stats import chi2
 
 from cpas_ocp.effects import AddedMass, baseline_effects
 from cpas_ocp.effects.added_mass import K_APPARENT, K_ENCLOSED, PROJECTED_RATIO
+from cpas_ocp.estimation import STATISTICALLY_CONVERGED, Estimator
 from cpas_ocp.flight_test import load_test
 from cpas_ocp.model import Model
 from cpas_ocp.parameters import param_name
 from cpas_ocp.problems import load_problem
-from cpas_ocp.simulate import simulate
+from cpas_ocp.simulate import simulate, simulate_problem
+
+from .conftest import START_GUESS_OFFSET_S, offset_events
 
 FACTOR = 1.4
 
@@ -72,3 +77,50 @@ def test_riser_gathers_the_air_while_the_canopy_grows(runs) -> None:
     late = t > t[-1] - 2.0
     diff = np.abs(out["added"][1][tension][late] - out["rigid"][1][tension][late])
     assert np.max(diff) < 0.02 * np.mean(out["rigid"][1][tension][late])
+
+
+@pytest.fixture(scope="module")
+def fbcp_with_added_mass(tmp_path_factory):
+    """fbcp seed 1 made with added mass (k_A = 1.4), events 0.3 s off; fits with and without."""
+    problem = load_problem("fbcp")
+    truth = {**problem.truth, **{param_name("added_mass_factor", c["name"]): FACTOR
+                                 for c in problem.manifest["parachutes"]}}
+    root = tmp_path_factory.mktemp("fbcp-added-mass")
+    simulate_problem(dataclasses.replace(problem, truth=truth), root / "sim", 1,
+                     effects=[*baseline_effects(), AddedMass()])
+    test = load_test(offset_events(root / "sim", root / "test", START_GUESS_OFFSET_S))
+    with_it = Estimator(test, [*baseline_effects(), AddedMass()])
+    fit = with_it.solve()
+    without = Estimator(test).solve()
+    return truth, fit, with_it.covariance(fit), without
+
+
+def test_added_mass_recovered_from_the_reduction(fbcp_with_added_mass) -> None:
+    """Every parameter, the two added-mass factors included, within the noise of the truth.
+
+    Same tolerances as the fbcp recovery test: squared Mahalanobis distance
+    below the chi-square 0.999 quantile, every estimate within 4 sigma.
+    """
+    truth, fit, cov, _ = fbcp_with_added_mass
+    assert fit.solver.status == STATISTICALLY_CONVERGED
+    assert {param_name("added_mass_factor", c.name) for c in fit.test.parachutes} <= set(fit.free)
+    z = {n: (fit.parameters[n] - truth[n]) / cov.std[n] for n in fit.free}
+    worst = max(z, key=lambda n: abs(z[n]))
+    assert abs(z[worst]) < 4.0, f"{worst}: {z[worst]:.2f} sigma"
+    m2, dof = cov.mahalanobis({n: fit.parameters[n] - truth[n] for n in fit.free})
+    assert m2 < chi2.ppf(0.999, dof), f"Mahalanobis^2 {m2:.1f} on {dof} dof"
+    # Measured on 10 % of the nominal value or better: the data do see the air mass.
+    assert all(cov.std[n] < 0.1 for n in fit.free if n.startswith("added_mass_factor"))
+
+
+def test_fit_without_added_mass_is_rejected(fbcp_with_added_mass) -> None:
+    """Leaving added mass out of the model costs far more than its two parameters buy.
+
+    The likelihood-ratio statistic (chi-square difference, nested models) is
+    compared with the chi-square 0.999 quantile for 2 degrees of freedom.
+    """
+    _, fit, _, without = fbcp_with_added_mass
+    assert without.solver.success
+    delta = without.chi_square - fit.chi_square
+    assert delta > chi2.ppf(0.999, 2), f"delta chi-square {delta:.1f}"
+    assert without.chi_square / without.dof > fit.chi_square / fit.dof

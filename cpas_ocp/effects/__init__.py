@@ -6,13 +6,15 @@ risers, per-stage drag scale and per-canopy load-cell scale, and the GPS, IMU
 and load-cell measurement models.  Order matters only in that the sensors
 come after the effects that set their gains.  Further effects (`AddedMass`)
 are added to the list where a problem needs them; sensor errors
-(`SensorBias`, `SensorLag`) go after the sensors they modify.
+(`SensorBias`, `SensorLag`) go after the sensors they modify.  `ElasticRiser`
+replaces `RigidRiser` (see `with_elastic_risers`).
 """
 
 from .added_mass import AddedMass
 from .base import Capture, Constraint, Effect, State
 from .canopy_inflation import CanopyInflation
 from .drag_scale import DragScale
+from .elastic_riser import ElasticRiser
 from .forebody_drag import ForebodyDrag
 from .loadcell_scale import LoadCellScale
 from .rigid_riser import RigidRiser
@@ -27,6 +29,11 @@ def baseline_effects() -> list[Effect]:
             GpsSensor(), ImuSensor(), LoadCellSensor()]
 
 
+def with_elastic_risers(effects: list[Effect]) -> list[Effect]:
+    """`effects` with every `RigidRiser` replaced by an `ElasticRiser` of default properties."""
+    return [ElasticRiser() if isinstance(e, RigidRiser) else e for e in effects]
+
+
 __all__ = [
     "AddedMass",
     "CanopyInflation",
@@ -34,6 +41,7 @@ __all__ = [
     "Constraint",
     "DragScale",
     "Effect",
+    "ElasticRiser",
     "ForebodyDrag",
     "GpsSensor",
     "ImuSensor",
@@ -44,4 +52,5 @@ __all__ = [
     "SensorLag",
     "State",
     "baseline_effects",
+    "with_elastic_risers",
 ]

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import casadi as ca
+import numpy as np
 
 from ..parameters import Parameter
 
@@ -31,12 +32,20 @@ if TYPE_CHECKING:
 
 @dataclass(frozen=True)
 class State:
-    """A differential state: name, size, SI unit, typical magnitude (for scaling)."""
+    """A differential state: name, size, SI unit, typical magnitude (for scaling).
+
+    `initial` is the value of every component at the start of a simulation
+    unless the problem's initial state names it.  A `pinned` state is known
+    at the start of the phase: the estimator holds its first node at
+    `initial` instead of estimating it.
+    """
 
     name: str
     size: int
     unit: str
     scale: float
+    initial: float = 0.0
+    pinned: bool = False
 
 
 @dataclass(frozen=True)
@@ -77,6 +86,14 @@ class Effect:
 
     def captures(self, test: FlightTest) -> list[Capture]:
         return []
+
+    def state_guess(self, test: FlightTest, t: np.ndarray,
+                    values: dict[str, float]) -> dict[str, np.ndarray]:
+        """Initial guess of this effect's states on the shooting grid `t` (s), from the data.
+
+        `values` holds the initial parameter values.  States left out start at zero.
+        """
+        return {}
 
     def forces(self, ctx: ModelContext) -> None:
         """First pass: forces, masses, state derivatives, quantities."""

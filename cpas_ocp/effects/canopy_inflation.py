@@ -86,7 +86,7 @@ class CanopyInflation(Effect):
                         Parameter(param_name("expopen", *idx), "1", 1.0, 0.3, 6.0,
                                   description="opening shape exponent", scale=1.0),
                     ]
-                t0 = self._observed_start(test, chute, k)
+                t0 = self.observed_start(test, chute, k)
                 lo = max(test.t_start, t0 - self.start_window)
                 hi = min(test.t_end, t0 + self.start_window)
                 out.append(Parameter(param_name("t_start", *idx), "s", t0, lo, hi,
@@ -99,7 +99,7 @@ class CanopyInflation(Effect):
                 for c in test.parachutes for s in c.stages]
 
     @staticmethod
-    def _observed_start(test: FlightTest, chute: Parachute, k: int) -> float:
+    def observed_start(test: FlightTest, chute: Parachute, k: int) -> float:
         """The observed time a stage starts inflating: bag strip / line stretch or disreef."""
         stage = chute.stages[k]
         if k == 0:

@@ -1,0 +1,145 @@
+"""Each canopy its own body on an elastic riser: a spring-damper that carries tension only.
+
+Instead of lumping the canopy onto the vehicle (`RigidRiser`), the canopy
+moves along the riser line, the unit vector e from the vehicle toward the
+trailing canopy (the vehicle's drag direction; its slow rotation is
+neglected).  Its position along e, relative to the unstretched riser, is the
+stretch s (m), a state with its rate s' (m/s).  The riser force is
+
+    T = k_s s + c_s s'   (N),  k_s = m_p (2 pi f)^2,  c_s = 2 zeta m_p (2 pi f)
+
+parameterised by the natural frequency f = ``riser_frequency[P]`` (Hz) and
+damping ratio zeta = ``riser_damping_ratio[P]`` of the canopy's dry mass m_p
+on the riser (the air mass m_A lowers the actual frequency).  The bounds
+(f up to 25 Hz, zeta up to 1) keep the fastest mode within RK4's stability
+on grids of 10 ms and finer.
+
+clipped smoothly at zero once the canopy has left the vehicle (a riser cannot
+push).  Before the canopy's first stage starts, the pack rides in the vehicle:
+the link then also carries compression, and the switch from link to riser
+runs smoothly over DEPLOY_S after the start, so the motion stays smooth in
+the start time.
+
+The canopy sees the air at V_c = V - s' (V the vehicle's airspeed), so its
+drag is the `drag[P]` of the canopy-inflation effect times (V_c / V)^2.  Its
+equation of motion along e (paper Eq. 1, m_c = m_p + m_A):
+
+    m_c (a_v . e + s'') = D_c + m_p g . e - T + dm_A/dt V_c
+
+with a_v the vehicle's acceleration; the vehicle feels T e and carries only
+its own mass.  With the `added_mass` effect (listed after this one) m_A and
+dm_A/dt come from it and stay with the canopy; without it m_c = m_p.  The
+load cell reads T.
+
+Quantities written: ``tension[P]`` (N), ``stretch[P]`` (m).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import casadi as ca
+import numpy as np
+
+from ..inflation import smoothstep
+from ..parameters import Parameter, param_name
+from ..units import G0
+from .base import Effect, State
+from .canopy_inflation import CanopyInflation
+from .rigid_riser import SLACK_N
+
+if TYPE_CHECKING:
+    from ..flight_test import FlightTest
+    from ..model import ModelContext
+
+DEPLOY_S = 0.05  # time over which the packed link becomes a tension-only riser (s)
+# A canopy whose observed start is this long after the phase begins is packed at the start (s).
+PACKED_MARGIN_S = 0.5
+
+
+@dataclass(frozen=True)
+class ElasticRiser(Effect):
+    """Spring-damper risers; `frequency` (Hz) and `damping_ratio` are the defaults."""
+
+    frequency: float = 8.0
+    damping_ratio: float = 0.3
+    name: str = "elastic_riser"
+
+    def parameters(self, test: FlightTest) -> list[Parameter]:
+        out = []
+        for c in test.parachutes:
+            out += [
+                Parameter(param_name("riser_frequency", c.name), "Hz", self.frequency,
+                          0.5, 25.0, description="natural frequency of the dry canopy on "
+                          "its riser", scale=self.frequency),
+                Parameter(param_name("riser_damping_ratio", c.name), "1", self.damping_ratio,
+                          0.02, 1.0, description="damping ratio of the riser", scale=0.3),
+            ]
+        return out
+
+    def states(self, test: FlightTest) -> list[State]:
+        """Stretch and its rate per canopy; zero and held there at the start of the phase
+        when the canopy is still packed then (its first stage starts later)."""
+        out = []
+        for c in test.parachutes:
+            packed = CanopyInflation.observed_start(test, c, 0) > test.t_start + PACKED_MARGIN_S
+            out += [State(param_name("stretch", c.name), 1, "m", 0.1, pinned=packed),
+                    State(param_name("stretch_rate", c.name), 1, "m/s", 1.0, pinned=packed)]
+        return out
+
+    def state_guess(self, test: FlightTest, t: np.ndarray,
+                    values: dict[str, float]) -> dict[str, np.ndarray]:
+        """Quasi-static stretch T / k_s from each canopy's load cell (smoothed over 5 samples)."""
+        out = {}
+        for cell in test.sensors_of("load_cell"):
+            chute = test.parachute(cell.parachute)
+            omega = 2.0 * math.pi * values[param_name("riser_frequency", chute.name)]
+            tension = np.convolve(cell.data["tension"].to_numpy(), np.ones(5) / 5.0, mode="same")
+            stretch = np.interp(t, cell.time, tension) / (chute.dry_mass * omega**2)
+            out[param_name("stretch", chute.name)] = stretch
+            out[param_name("stretch_rate", chute.name)] = np.gradient(stretch, t)
+        return out
+
+    def forces(self, ctx: ModelContext) -> None:
+        e = ctx.q["drag_direction"]
+        for chute in ctx.test.parachutes:
+            if param_name("added_mass", chute.name) in ctx.q:
+                raise ValueError("list the added_mass effect after elastic_riser: the canopy's "
+                                 "air mass belongs to the canopy body")
+            ctx.separate_bodies.add(chute.name)
+            s = ctx.x[param_name("stretch", chute.name)]
+            s_dot = ctx.x[param_name("stretch_rate", chute.name)]
+            omega = 2.0 * math.pi * ctx.p[param_name("riser_frequency", chute.name)]
+            zeta = ctx.p[param_name("riser_damping_ratio", chute.name)]
+            linear = chute.dry_mass * omega * (omega * s + 2.0 * zeta * s_dot)
+            pulled = 0.5 * (linear + ca.sqrt(linear**2 + SLACK_N**2))
+            t_deploy = ctx.p[param_name("t_start", chute.name, chute.stages[0])]
+            released = smoothstep(2.0 * (ctx.t - t_deploy) / DEPLOY_S - 1.0)
+            ctx.q[param_name("riser_force", chute.name)] = (
+                (1.0 - released) * linear + released * pulled)
+            ctx.q[param_name("tension", chute.name)] = pulled
+            ctx.q[param_name("stretch", chute.name)] = s
+            ctx.forces.append(ctx.q[param_name("riser_force", chute.name)] * e)
+
+    def observations(self, ctx: ModelContext) -> None:
+        e = ctx.q["drag_direction"]
+        a_v = ctx.q["specific_force"] + ca.vertcat(0.0, 0.0, -G0)
+        gravity_along = ca.dot(ca.vertcat(0.0, 0.0, -G0), e)
+        airspeed = ctx.q["airspeed"]
+        for chute in ctx.test.parachutes:
+            s_dot = ctx.x[param_name("stretch_rate", chute.name)]
+            v_c = airspeed - s_dot
+            drag = ca.dot(ctx.q[param_name("drag", chute.name)], e) * (v_c / airspeed) ** 2
+            m_c = chute.dry_mass
+            push = drag + chute.dry_mass * gravity_along - ctx.q[param_name("riser_force",
+                                                                              chute.name)]
+            m_a = ctx.q.get(param_name("added_mass", chute.name))
+            if m_a is not None:
+                m_c = m_c + m_a
+                # -dm_A/dt v_air . e = dm_A/dt V for the vehicle's air; the canopy's is V_c.
+                gathered = -ca.dot(ctx.q[param_name("added_momentum_rate", chute.name)], e)
+                push = push + gathered * v_c / airspeed
+            ctx.xdot[param_name("stretch", chute.name)] = s_dot
+            ctx.xdot[param_name("stretch_rate", chute.name)] = push / m_c - ca.dot(a_v, e)
