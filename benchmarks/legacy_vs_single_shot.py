@@ -214,7 +214,9 @@ def legacy_reconstruction(test: FlightTest, step: float, peak_iterations: int) -
             raise ValueError(f"{chute.name}: this benchmark's legacy path handles infinite-mass "
                              "canopies only")
     guess, red = reduce_and_guess(test, model)
-    starts = stage_starts(test, guess)
+    # The legacy sequence keeps the observed event times (the model's defaults),
+    # not the start times the library's own curve fit finds.
+    starts = stage_starts(test, {p.name: p.default for p in model.parameters})
     stages = list(dict.fromkeys(s for c in chutes for s in c.stages))
     log("[legacy] a. reduction: stage scale factors "
         + ", ".join(f"{s} {red.stage_scale[s]:.4f}" for s in stages))
