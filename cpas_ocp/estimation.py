@@ -338,12 +338,10 @@ class Estimator:
                                     zip(pb, self.pscale, strict=True)], np.full(ncap, 0.01)])
         self._ubz = np.concatenate([np.full(X.numel(), inf), [p.upper / sc for p, sc in
                                     zip(pb, self.pscale, strict=True)], np.full(ncap, inf)])
-        first = 0
         for st in m.states:  # states known at the start of the phase: first node held
             if st.pinned:
-                self._lbz[first:first + st.size] = self._ubz[first:first + st.size] = \
-                    st.initial / st.scale
-            first += st.size
+                first_node = m.state_slice(st.name)
+                self._lbz[first_node] = self._ubz[first_node] = st.initial / st.scale
         # Gauss-Newton converges linearly, so Ipopt's dual infeasibility plateaus near
         # 1e-4 (scaled) long after the estimate has stopped moving; accept a point where
         # the objective no longer changes (relative 1e-9, i.e. ~1e-5 in chi-square, over

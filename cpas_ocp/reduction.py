@@ -32,7 +32,6 @@ from .stage_curve_fit import (
     StageData,
     fit_stage_curve,
     fitted_names,
-    parameter_bounds,
 )
 from .units import G0
 
@@ -119,9 +118,9 @@ def initial_guess(test: FlightTest, model: Model) -> dict[str, float]:
     return reduce_and_guess(test, model)[0]
 
 
-def _fit_stage(test: FlightTest, model: Model, red: Reduction, chute: Parachute, k: int,
-               starts: dict[tuple[str, str], float], guess: dict[str, float]
-               ) -> dict[str, float] | None:
+def _fit_stage(test: FlightTest, red: Reduction, chute: Parachute, k: int,
+               starts: dict[tuple[str, str], float], guess: dict[str, float],
+               bounds: dict[str, tuple[float, float]]) -> dict[str, float] | None:
     """Curve-fitted shape and start of stage k of `chute` (`stage_curve_fit`), or None.
 
     The window runs from halfway back to the previous stage's observed start
@@ -137,14 +136,13 @@ def _fit_stage(test: FlightTest, model: Model, red: Reduction, chute: Parachute,
     hi = min(t0 + MAX_WINDOW_S, next_start - 0.1)
     sel = (red.t >= lo) & (red.t <= hi)
     names = fitted_names(chute, stage)
-    bounds = parameter_bounds(model.parameters, names)
     t_lo, t_hi = bounds[names[0]]
-    bounds[names[0]] = (max(t_lo, lo), min(t_hi, hi))
+    fit_bounds = {**{n: bounds[n] for n in names}, names[0]: (max(t_lo, lo), min(t_hi, hi))}
     cds_of = [guess[param_name("CdS", chute.name, s)] for s in chute.stages]
     data = StageData(chute, stage, red.t[sel],
                      red.stage_scale.get(stage, 1.0) * red.cds_riser[chute.name][sel],
                      red.airspeed[sel], cds_of[k - 1] if k else 0.0, cds_of[k], cds_of[-1],
-                     bounds)
+                     fit_bounds)
     return fit_stage_curve(data)
 
 
@@ -170,7 +168,7 @@ def reduce_and_guess(test: FlightTest, model: Model) -> tuple[dict[str, float], 
             if cds > 0:
                 guess[param_name("CdS", chute.name, stage)] = cds
         for k in range(len(chute.stages)):
-            shape = _fit_stage(test, model, red, chute, k, starts, guess)
+            shape = _fit_stage(test, red, chute, k, starts, guess, bounds)
             if shape is not None:
                 guess.update(shape)
     return guess, red

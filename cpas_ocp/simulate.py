@@ -122,8 +122,7 @@ def simulate_problem(problem: Problem, out: str | Path, seed: int,
     unknown = sorted(set(truth) - set(model.parameter_names))
     if unknown:
         raise ValueError(f"problem {problem.name}: truth names unknown parameters {unknown}")
-    x0 = np.concatenate([np.broadcast_to(sim["initial_state"].get(s.name, s.initial), s.size)
-                         for s in model.states])
+    x0 = initial_state(model, sim)
     traj = simulate(model, truth, x0, t0, t1, step)
 
     tmp = Path(tempfile.mkdtemp(prefix=".cpas-sim-", dir=out.parent if out.parent.exists()
@@ -153,6 +152,17 @@ def simulate_problem(problem: Problem, out: str | Path, seed: int,
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     return load_test(out)
+
+
+def initial_state(model: Model, simulation: dict) -> np.ndarray:
+    """The state vector at the start of a problem's simulation (SI).
+
+    States the problem's ``initial_state`` names take its values; the others
+    (those effects add) start at their declared `State.initial`.
+    """
+    given = simulation["initial_state"]
+    return np.concatenate([np.broadcast_to(given.get(s.name, s.initial), s.size)
+                           for s in model.states])
 
 
 def _on_grid(t: np.ndarray, t0: float, step: float) -> np.ndarray:

@@ -28,7 +28,7 @@ from scipy.optimize import least_squares
 
 from .flight_test import Parachute
 from .inflation import fill_length, finite_mass_cds, infinite_mass_cds
-from .parameters import Parameter, param_name
+from .parameters import param_name
 
 # Fraction of the climb from CdS_{i-1} to CdS_i at which the start-time search begins.
 CLIMB_FRACTION = 0.2
@@ -114,8 +114,7 @@ def curve_function(data: StageData) -> ca.Function:
     """CasADi curve of the stage over a vector of times: (t, *fitted, V_i) -> CdS (m^2)."""
     t = ca.SX.sym("t")
     v_i = ca.SX.sym("V_i")
-    theta = [ca.SX.sym(n) for n in ("t_start", "a", "b", "c", "d")[:len(
-        fitted_names(data.chute, data.stage))]]
+    theta = [ca.SX.sym(n) for n in fitted_names(data.chute, data.stage)]
     length = fill_length(data.chute.fill_length, data.chute.diameter, data.cds_prev,
                          data.cds_steady, data.cds_full_open)
     if data.chute.inflation == "infinite_mass":
@@ -129,10 +128,3 @@ def curve_function(data: StageData) -> ca.Function:
     cds = ca.if_else(t >= theta[0], rise, data.cds_prev)
     fn = ca.Function("stage_curve", [t, *theta, v_i], [cds])
     return fn.map(data.t.size)
-
-
-def parameter_bounds(parameters: list[Parameter], names: list[str]
-                     ) -> dict[str, tuple[float, float]]:
-    """(lower, upper) of each named parameter."""
-    by_name = {p.name: p for p in parameters}
-    return {n: (by_name[n].lower, by_name[n].upper) for n in names}

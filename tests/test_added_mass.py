@@ -16,7 +16,7 @@ from cpas_ocp.flight_test import load_test
 from cpas_ocp.model import Model
 from cpas_ocp.parameters import param_name
 from cpas_ocp.problems import load_problem
-from cpas_ocp.simulate import simulate, simulate_problem
+from cpas_ocp.simulate import initial_state, simulate, simulate_problem
 
 from .conftest import START_GUESS_OFFSET_S, offset_events
 
@@ -35,8 +35,8 @@ def runs(drogue_folder):
     for label, effects in (("rigid", baseline_effects()),
                            ("added", [*baseline_effects(), AddedMass()])):
         model = Model(test, effects)
-        x0 = np.concatenate([sim["initial_state"][s.name] for s in model.states])
-        traj = simulate(model, truth, x0, float(sim["t_begin"]), float(sim["t_end"]), 1e-3)
+        traj = simulate(model, truth, initial_state(model, sim), float(sim["t_begin"]),
+                        float(sim["t_end"]), 1e-3)
         pvec = model.parameter_vector(truth)
         cvec = np.array([traj.captures[c.name] for c in model.captures])
         q = np.asarray(model.quantities.map(len(traj.t))(traj.x.T, traj.t, pvec, cvec))

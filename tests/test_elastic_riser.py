@@ -15,7 +15,7 @@ from cpas_ocp.flight_test import load_test
 from cpas_ocp.model import Model
 from cpas_ocp.parameters import param_name
 from cpas_ocp.problems import load_problem
-from cpas_ocp.simulate import simulate, simulate_problem
+from cpas_ocp.simulate import initial_state, simulate, simulate_problem
 
 from .conftest import START_GUESS_OFFSET_S, offset_events
 
@@ -24,9 +24,8 @@ DAMPING_RATIO = 0.25
 
 
 def _quantities(model: Model, truth: dict[str, float], sim: dict) -> tuple[np.ndarray, dict]:
-    x0 = np.concatenate([np.broadcast_to(sim["initial_state"].get(s.name, s.initial), s.size)
-                         for s in model.states])
-    traj = simulate(model, truth, x0, float(sim["t_begin"]), float(sim["t_end"]), 5e-4)
+    traj = simulate(model, truth, initial_state(model, sim), float(sim["t_begin"]),
+                    float(sim["t_end"]), 5e-4)
     pvec = model.parameter_vector(truth)
     cvec = np.array([traj.captures[c.name] for c in model.captures])
     q = np.asarray(model.quantities.map(len(traj.t))(traj.x.T, traj.t, pvec, cvec))

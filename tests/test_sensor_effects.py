@@ -23,7 +23,7 @@ from cpas_ocp.estimation import Estimator
 from cpas_ocp.flight_test import FlightTest, load_test
 from cpas_ocp.model import Model
 from cpas_ocp.problems import load_problem
-from cpas_ocp.simulate import simulate, simulate_problem
+from cpas_ocp.simulate import initial_state, simulate, simulate_problem
 
 CASES = {
     "bias": ([SensorBias.imu(), SensorBias.load_cell()],
@@ -65,9 +65,8 @@ def test_time_offset_matches_the_trajectory(tmp_path) -> None:
     problem = load_problem("fbcp")
     sim, truth = problem.simulation, {**problem.truth, "lag[gps]": lag}
     model = Model(test, [*baseline_effects(), SensorLag.gps()])
-    x0 = np.concatenate([sim["initial_state"][s.name] for s in model.states])
     step = 5e-4
-    traj = simulate(model, truth, x0, sim["t_begin"], sim["t_end"], step)
+    traj = simulate(model, truth, initial_state(model, sim), sim["t_begin"], sim["t_end"], step)
     p = model.parameter_vector(truth)
     c = np.array([traj.captures[cap.name] for cap in model.captures])
     now, then = round(0.95 / step), round((0.95 - lag) / step)  # fbcp1 starts at 0.80 s

@@ -8,17 +8,17 @@ stretch s (m), a state with its rate s' (m/s).  The riser force is
 
     T = k_s s + c_s s'   (N),  k_s = m_p (2 pi f)^2,  c_s = 2 zeta m_p (2 pi f)
 
-parameterised by the natural frequency f = ``riser_frequency[P]`` (Hz) and
-damping ratio zeta = ``riser_damping_ratio[P]`` of the canopy's dry mass m_p
-on the riser (the air mass m_A lowers the actual frequency).  The bounds
-(f up to 25 Hz, zeta up to 1) keep the fastest mode within RK4's stability
-on grids of 10 ms and finer.
-
 clipped smoothly at zero once the canopy has left the vehicle (a riser cannot
-push).  Before the canopy's first stage starts, the pack rides in the vehicle:
-the link then also carries compression, and the switch from link to riser
-runs smoothly over DEPLOY_S after the start, so the motion stays smooth in
-the start time.
+push).  It is parameterised by the natural frequency f = ``riser_frequency[P]``
+(Hz) and damping ratio zeta = ``riser_damping_ratio[P]`` of the canopy's dry
+mass m_p on the riser (the air mass m_A lowers the actual frequency).  The
+bounds (f up to 25 Hz, zeta up to 1) keep the fastest mode within RK4's
+stability on grids of 10 ms and finer.
+
+Before the canopy's first stage starts, the pack rides in the vehicle: the
+link then also carries compression, and the switch from link to riser runs
+smoothly over DEPLOY_S after the start, so the motion stays smooth in the
+start time.
 
 The canopy sees the air at V_c = V - s' (V the vehicle's airspeed), so its
 drag is the `drag[P]` of the canopy-inflation effect times (V_c / V)^2.  Its
@@ -48,7 +48,7 @@ from ..parameters import Parameter, param_name
 from ..units import G0
 from .base import Effect, State
 from .canopy_inflation import CanopyInflation
-from .rigid_riser import SLACK_N
+from .rigid_riser import tension_only
 
 if TYPE_CHECKING:
     from ..flight_test import FlightTest
@@ -114,7 +114,7 @@ class ElasticRiser(Effect):
             omega = 2.0 * math.pi * ctx.p[param_name("riser_frequency", chute.name)]
             zeta = ctx.p[param_name("riser_damping_ratio", chute.name)]
             linear = chute.dry_mass * omega * (omega * s + 2.0 * zeta * s_dot)
-            pulled = 0.5 * (linear + ca.sqrt(linear**2 + SLACK_N**2))
+            pulled = tension_only(linear)
             t_deploy = ctx.p[param_name("t_start", chute.name, chute.stages[0])]
             released = smoothstep(2.0 * (ctx.t - t_deploy) / DEPLOY_S - 1.0)
             ctx.q[param_name("riser_force", chute.name)] = (

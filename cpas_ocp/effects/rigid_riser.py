@@ -31,6 +31,11 @@ if TYPE_CHECKING:
 SLACK_N = 50.0  # width of the smooth zero clip of riser tension (N)
 
 
+def tension_only(force: ca.SX) -> ca.SX:
+    """Riser force (N) clipped smoothly at zero: (F + sqrt(F^2 + eps^2)) / 2, eps = SLACK_N."""
+    return 0.5 * (force + ca.sqrt(force**2 + SLACK_N**2))
+
+
 @dataclass(frozen=True)
 class RigidRiser(Effect):
     name: str = "rigid_riser"
@@ -51,5 +56,4 @@ class RigidRiser(Effect):
             if m_a is not None:
                 pull = pull - ctx.q[param_name("added_momentum_rate", chute.name)] - m_a * a
             along = ca.dot(pull, ctx.q["drag_direction"])
-            ctx.q[param_name("tension", chute.name)] = 0.5 * (
-                along + ca.sqrt(along**2 + SLACK_N**2))
+            ctx.q[param_name("tension", chute.name)] = tension_only(along)
