@@ -1,6 +1,7 @@
 """The `cpas-ocp` command line.
 
     cpas-ocp problems                         list the built-in test phases
+    cpas-ocp effects [--model FILE]           list the effects a model block may name
     cpas-ocp simulate NAME --out DIR --seed N write a synthetic test folder (+ truth.json)
     cpas-ocp reduce TEST_DIR --out DIR        offline reduction (Eqs. 2-3) and initial guess
     cpas-ocp reconstruct TEST_DIR --out DIR   reconstruct a test folder, write the report
@@ -21,6 +22,7 @@ from .errors import InputError, SolverFailure
 
 if TYPE_CHECKING:
     from .flight_test import FlightTest
+    from .model_spec import ModelSpec
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -43,6 +45,11 @@ def _parser() -> argparse.ArgumentParser:
     s = sub.add_parser("problems", help="list the built-in test phases")
     s.set_defaults(run=_problems)
 
+    s = sub.add_parser("effects", help="list the effects a model block may name, with options")
+    s.add_argument("--plugin", type=Path, action="append", default=[],
+                   help="also list the effects a plug-in file defines")
+    s.set_defaults(run=_effects)
+
     s = sub.add_parser("simulate", help="simulate a built-in problem into a test folder")
     s.add_argument("name")
     s.add_argument("--out", required=True, type=Path)
@@ -52,11 +59,13 @@ def _parser() -> argparse.ArgumentParser:
     s = sub.add_parser("reduce", help="offline drag-area reduction and the initial guess")
     s.add_argument("test_dir", type=Path)
     s.add_argument("--out", required=True, type=Path)
+    _model_option(s)
     s.set_defaults(run=_reduce)
 
     s = sub.add_parser("reconstruct", help="reconstruct a test folder")
     s.add_argument("test_dir", type=Path)
     s.add_argument("--out", required=True, type=Path)
+    _model_option(s)
     _solver_options(s)
     s.set_defaults(run=_reconstruct)
 
@@ -66,6 +75,17 @@ def _parser() -> argparse.ArgumentParser:
     _solver_options(s)
     s.set_defaults(run=_demo)
     return p
+
+
+def _model_option(s: argparse.ArgumentParser) -> None:
+    s.add_argument("--model", type=Path, default=None, metavar="FILE",
+                   help="a JSON model block (effects, plugins, fix, free) used instead of "
+                        "the manifest's")
+
+
+def _spec(test: FlightTest, model_file: Path | None) -> ModelSpec:
+    from .model_spec import load_model_file, spec_of_test
+    return load_model_file(model_file) if model_file is not None else spec_of_test(test)
 
 
 def _solver_options(s: argparse.ArgumentParser) -> None:
@@ -82,6 +102,20 @@ def _problems(args: argparse.Namespace) -> int:
     return 0
 
 
+def _effects(args: argparse.Namespace) -> int:
+    from .effects.registry import BASELINE, BUILTIN, load_plugin
+    entries = dict(BUILTIN)
+    for path in args.plugin:
+        entries.update(load_plugin(path))
+    for name, entry in entries.items():
+        mark = "*" if name in BASELINE else " "
+        options = ", ".join(entry.options()) or "-"
+        print(f"{mark} {name:17s} {entry.summary}\n  {'':17s} options: {options}"
+              + (f"; from {entry.source}" if entry.source != "cpas_ocp" else ""))
+    print("\n* in the baseline set (used when a manifest has no model block)")
+    return 0
+
+
 def _simulate(args: argparse.Namespace) -> int:
     from .problems import load_problem
     from .simulate import simulate_problem
@@ -94,7 +128,7 @@ def _reduce(args: argparse.Namespace) -> int:
     from .flight_test import load_test
     from .reduction_report import guess_table, write_reduction
     test = load_test(args.test_dir)
-    out, model, guess = write_reduction(test, args.out)
+    out, model, guess = write_reduction(test, args.out, _spec(test, args.model))
     print(guess_table(model, guess))
     print(f"\nreduction written to {out} (reduction.csv, initial_guess.json, reduction.png)")
     return 0
@@ -103,7 +137,7 @@ def _reduce(args: argparse.Namespace) -> int:
 def _reconstruct(args: argparse.Namespace) -> int:
     from .flight_test import load_test
     test = load_test(args.test_dir)
-    _run_reconstruction(test, args)
+    _run_reconstruction(test, args, _spec(test, args.model))
     return 0
 
 
@@ -118,11 +152,11 @@ def _demo(args: argparse.Namespace) -> int:
     print(f"simulating the built-in 'drogue' problem (seed {args.seed}) into {test_dir}")
     test = simulate_problem(load_problem("drogue"), test_dir, args.seed)
     args.out = args.out / "report"
-    _run_reconstruction(test, args)
+    _run_reconstruction(test, args, _spec(test, None))
     return 0
 
 
-def _run_reconstruction(test: FlightTest, args: argparse.Namespace) -> None:
+def _run_reconstruction(test: FlightTest, args: argparse.Namespace, spec: ModelSpec) -> None:
     from .estimation import Estimator, Settings, default_grid_step
     from .report import fit_summary, parameter_table, write_report
     from .uncertainty import SingularKKT
@@ -130,7 +164,7 @@ def _run_reconstruction(test: FlightTest, args: argparse.Namespace) -> None:
     settings = Settings(grid_step=step, verbose=args.verbose)
     print(f"building the multiple-shooting NLP of {test.name} "
           f"({test.t_end - test.t_start:.1f} s at {step * 1e3:g} ms) ...", flush=True)
-    est = Estimator(test, settings=settings)
+    est = Estimator(test, spec, settings=settings)
     print(f"solving: {est.size_text()} ...", flush=True)
     fit = est.solve(progress=not args.verbose)
     try:

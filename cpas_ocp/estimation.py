@@ -25,17 +25,18 @@ from __future__ import annotations
 
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 
 import casadi as ca
 import numpy as np
 
 from .compiled import compile_functions
-from .effects import Effect, baseline_effects
+from .effects import Effect
 from .errors import SolverFailure
 from .flight_test import FlightTest
 from .model import Model
+from .model_spec import ModelSpec, spec_from_effects, spec_of_test
 from .reduction import gps_state, initial_guess
 from .simulate import rk4_step
 from .uncertainty import (
@@ -167,25 +168,36 @@ class Fit:
 class Estimator:
     """Builds the NLP of one test phase once; `solve` may then be called repeatedly."""
 
-    def __init__(self, test: FlightTest, effects: list[Effect] | None = None,
+    def __init__(self, test: FlightTest, effects: Sequence[Effect] | ModelSpec | None = None,
                  settings: Settings | None = None) -> None:
+        """`effects`: an effect list, a `ModelSpec`, or None for the model the manifest declares.
+
+        `settings.free` and `settings.fixed` override the spec's choice.
+        """
         self.test = test
         self.settings = settings or Settings()
         if self.settings.grid_step is None:
             self.settings = replace(self.settings, grid_step=default_grid_step(test))
-        self.model = Model(test, effects if effects is not None else baseline_effects())
+        if effects is None:
+            self.spec = spec_of_test(test)
+        elif isinstance(effects, ModelSpec):
+            self.spec = effects
+        else:
+            self.spec = spec_from_effects(effects)
+        self.model = self.spec.model(test)
         m, s = self.model, self.settings
         names = m.parameter_names
         if s.free is None:
-            self.free = [p.name for p in m.parameters if p.estimable and p.name != "CdS_V"]
+            self.free = self.spec.free_names(m)
         else:
             unknown = sorted(set(s.free) - set(names))
             if unknown:
                 raise ValueError(f"cannot estimate unknown parameters {unknown}")
             self.free = list(s.free)
-        self.guess = initial_guess(test, m)
+        fixed = {**self.spec.fixed_values(m), **s.fixed}
+        self.guess = initial_guess(test, m, fixed)
         self.guess.update(s.guess)
-        self.values = {**self.guess, **s.fixed}
+        self.values = {**self.guess, **fixed}
 
         h = float(s.grid_step)
         n = int(np.floor((test.t_end - test.t_start) / h + 1e-9))
@@ -614,7 +626,7 @@ def cubic_bspline(u: ca.MX) -> ca.MX:
                       ca.if_else(a < 2.0, (2.0 - a) ** 3 / 6.0, 0.0))
 
 
-def reconstruct(test: FlightTest, effects: list[Effect] | None = None,
+def reconstruct(test: FlightTest, effects: Sequence[Effect] | ModelSpec | None = None,
                 settings: Settings | None = None) -> Fit:
     """Reconstruct one test phase: build the NLP, solve it, return the Fit."""
     return Estimator(test, effects, settings).solve()

@@ -135,34 +135,44 @@ class FlightTest:
         return tuple(s for s in self.sensors if s.kind == kind)
 
 
+SCHEMAS = ("manifest.schema.json", "series.schema.json", "model.schema.json")
+
+
 @cache
-def _schema_registry() -> tuple[dict[str, Any], referencing.Registry]:
+def _schema_registry() -> tuple[dict[str, dict[str, Any]], referencing.Registry]:
     folder = resources.files("cpas_ocp.schemas")
-    schemas = {name: json.loads(folder.joinpath(name).read_text())
-               for name in ("manifest.schema.json", "series.schema.json")}
+    schemas = {name: json.loads(folder.joinpath(name).read_text()) for name in SCHEMAS}
     registry = referencing.Registry().with_resources(
         (s["$id"], referencing.Resource.from_contents(s)) for s in schemas.values()
     )
-    return schemas["manifest.schema.json"], registry
+    return schemas, registry
 
 
-def _json_path(parts: Any) -> str:
-    out = ""
+def _json_path(parts: Any, prefix: str = "") -> str:
+    out = prefix
     for p in parts:
         out += f"[{p}]" if isinstance(p, int) else (f".{p}" if out else str(p))
     return out or "(top level)"
 
 
-def validate_manifest(manifest: Any, file: str = MANIFEST) -> None:
-    """Validate a manifest object against the JSON Schema; raise InputError on the first problem."""
-    schema, registry = _schema_registry()
-    validator = jsonschema.Draft202012Validator(schema, registry=registry)
-    error = jsonschema.exceptions.best_match(validator.iter_errors(manifest))
+def validate_block(obj: Any, schema: str, file: str, prefix: str = "") -> None:
+    """Validate `obj` against one of the shipped JSON Schemas; InputError on the first problem.
+
+    `prefix` is the field path of `obj` inside its file (empty at top level).
+    """
+    schemas, registry = _schema_registry()
+    validator = jsonschema.Draft202012Validator(schemas[schema], registry=registry)
+    error = jsonschema.exceptions.best_match(validator.iter_errors(obj))
     if error is not None:
         # Descend to the most specific cause so the message names the leaf field.
         while error.context:
             error = jsonschema.exceptions.best_match(error.context)
-        raise InputError(file, _json_path(error.absolute_path), error.message)
+        raise InputError(file, _json_path(error.absolute_path, prefix), error.message)
+
+
+def validate_manifest(manifest: Any, file: str = MANIFEST) -> None:
+    """Validate a manifest object against the JSON Schema; raise InputError on the first problem."""
+    validate_block(manifest, "manifest.schema.json", file)
 
 
 def _si(quantity: dict[str, Any], dimension: str) -> float:

@@ -113,14 +113,16 @@ def stage_starts(test: FlightTest, values: dict[str, float]) -> dict[tuple[str, 
             for c in test.parachutes for s in c.stages}
 
 
-def initial_guess(test: FlightTest, model: Model) -> dict[str, float]:
-    """Initial values of the model parameters from the test folder alone."""
-    return reduce_and_guess(test, model)[0]
+def initial_guess(test: FlightTest, model: Model,
+                  fixed: dict[str, float] | None = None) -> dict[str, float]:
+    """Initial values of the model parameters from the test folder alone (`fixed` held)."""
+    return reduce_and_guess(test, model, fixed)[0]
 
 
 def _fit_stage(test: FlightTest, red: Reduction, chute: Parachute, k: int,
                starts: dict[tuple[str, str], float], guess: dict[str, float],
-               bounds: dict[str, tuple[float, float]]) -> dict[str, float] | None:
+               bounds: dict[str, tuple[float, float]],
+               fixed: dict[str, float]) -> dict[str, float] | None:
     """Curve-fitted shape and start of stage k of `chute` (`stage_curve_fit`), or None.
 
     The window runs from halfway back to the previous stage's observed start
@@ -142,19 +144,24 @@ def _fit_stage(test: FlightTest, red: Reduction, chute: Parachute, k: int,
     data = StageData(chute, stage, red.t[sel],
                      red.stage_scale.get(stage, 1.0) * red.cds_riser[chute.name][sel],
                      red.airspeed[sel], cds_of[k - 1] if k else 0.0, cds_of[k], cds_of[-1],
-                     fit_bounds)
+                     fit_bounds, {n: v for n, v in fixed.items() if n in names})
     return fit_stage_curve(data)
 
 
-def reduce_and_guess(test: FlightTest, model: Model) -> tuple[dict[str, float], Reduction]:
-    """The initial guess and the reduction it came from (start times from the events)."""
-    guess = {p.name: p.default for p in model.parameters}
+def reduce_and_guess(test: FlightTest, model: Model, fixed: dict[str, float] | None = None
+                     ) -> tuple[dict[str, float], Reduction]:
+    """The initial guess and the reduction it came from (start times from the events).
+
+    Parameters in `fixed` keep their values, and the curve fits hold them.
+    """
+    fixed = dict(fixed or {})
+    guess = {p.name: p.default for p in model.parameters} | fixed
     starts = stage_starts(test, guess)
     red = reduce(test, starts)
     bounds = {p.name: (p.lower, p.upper) for p in model.parameters}
     for stage, s in red.stage_scale.items():
         name = param_name("drag_scale", stage)
-        if name in guess:
+        if name in guess and name not in fixed:
             guess[name] = float(np.clip(s, *bounds[name]))
     for chute in test.parachutes:
         curve = red.cds_riser.get(chute.name)
@@ -165,10 +172,11 @@ def reduce_and_guess(test: FlightTest, model: Model) -> tuple[dict[str, float], 
             steady = (red.t >= a) & (red.t <= b)
             cds = red.stage_scale.get(stage, 1.0) * float(np.median(curve[steady])) \
                 if steady.any() else 0.0
-            if cds > 0:
-                guess[param_name("CdS", chute.name, stage)] = cds
+            name = param_name("CdS", chute.name, stage)
+            if cds > 0 and name not in fixed:
+                guess[name] = cds
         for k in range(len(chute.stages)):
-            shape = _fit_stage(test, red, chute, k, starts, guess, bounds)
+            shape = _fit_stage(test, red, chute, k, starts, guess, bounds, fixed)
             if shape is not None:
                 guess.update(shape)
     return guess, red

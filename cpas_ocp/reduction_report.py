@@ -17,9 +17,9 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import pandas as pd
 
-from .effects import baseline_effects
 from .flight_test import FlightTest
 from .model import Model
+from .model_spec import ModelSpec
 from .output_folder import atomic_folder
 from .reduction import Reduction, reduce_and_guess, stage_starts
 from .units import FT
@@ -44,10 +44,14 @@ def guess_table(model: Model, guess: dict[str, float]) -> str:
     return "\n".join(lines)
 
 
-def write_reduction(test: FlightTest, out: str | Path) -> tuple[Path, Model, dict[str, float]]:
-    """Reduce `test`, write reduction.csv, initial_guess.json and reduction.png to `out`."""
-    model = Model(test, baseline_effects())
-    guess, red = reduce_and_guess(test, model)
+def write_reduction(test: FlightTest, out: str | Path, spec: ModelSpec
+                    ) -> tuple[Path, Model, dict[str, float]]:
+    """Reduce `test`, write reduction.csv, initial_guess.json and reduction.png to `out`.
+
+    The guess covers the parameters of the model `spec` describes and holds its fixed values.
+    """
+    model = spec.model(test)
+    guess, red = reduce_and_guess(test, model, spec.fixed_values(model))
     out = Path(out)
     with atomic_folder(out, "initial_guess.json") as tmp:
         reduction_frame(red).to_csv(tmp / "reduction.csv", index=False)

@@ -21,11 +21,12 @@ import casadi as ca
 import numpy as np
 import pandas as pd
 
-from .effects import Effect, baseline_effects
+from .effects import Effect
 from .errors import InputError
 from .flight_test import MANIFEST, SENSOR_COLUMNS, FlightTest, load_test, test_from_manifest
 from .integration import rk4
 from .model import Model
+from .model_spec import spec_from_block
 from .problems import Problem
 from .units import FACTORS
 
@@ -94,6 +95,9 @@ def simulate_problem(problem: Problem, out: str | Path, seed: int,
                      effects: list[Effect] | None = None, noise: bool = True) -> FlightTest:
     """Simulate `problem` with sensor noise drawn from `seed`; write a test folder at `out`.
 
+    The truth model is `effects` if given, else the problem's ``simulation.model``
+    block (a hidden effect the manifest's model lacks), else the manifest's.
+
     `noise=False` writes the noise-free outputs (event times stay noisy), for
     checking a transcription against the simulator.
 
@@ -118,7 +122,11 @@ def simulate_problem(problem: Problem, out: str | Path, seed: int,
         sample_times[s["name"]] = t0 + np.arange(round((t1 - t0) * rate) + 1) / rate
     planned = {name: pd.DataFrame({"time": t}) for name, t in sample_times.items()}
     test = test_from_manifest(manifest, out, series=planned)
-    model = Model(test, effects if effects is not None else baseline_effects())
+    if effects is not None:
+        model = Model(test, effects)
+    else:  # the truth's own effect set if the problem gives one, else the manifest's model
+        block = sim.get("model", manifest.get("model"))
+        model = spec_from_block(block, f"problem {problem.name}", Path()).model(test)
     unknown = sorted(set(truth) - set(model.parameter_names))
     if unknown:
         raise ValueError(f"problem {problem.name}: truth names unknown parameters {unknown}")

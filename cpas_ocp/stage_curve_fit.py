@@ -20,7 +20,7 @@ not show the rise (no samples, or no climb) is left to the caller's defaults.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import casadi as ca
 import numpy as np
@@ -42,7 +42,9 @@ class StageData:
     """The reduced drag-area history (m^2) around one stage and what the fit holds fixed.
 
     `t`, `cds` and `airspeed` (s, m^2, m/s) cover the stage's window only;
-    `bounds` maps each fitted parameter name to the model's (lower, upper).
+    `bounds` maps each fitted parameter name to the model's (lower, upper);
+    `fixed` holds shape parameters the model keeps fixed (e.g. a Pilot's
+    expopen = 1), which the fit keeps too.
     """
 
     chute: Parachute
@@ -54,6 +56,7 @@ class StageData:
     cds_steady: float
     cds_full_open: float
     bounds: dict[str, tuple[float, float]]
+    fixed: dict[str, float] = field(default_factory=dict)
 
 
 def fitted_names(chute: Parachute, stage: str) -> list[str]:
@@ -76,21 +79,33 @@ def fit_stage_curve(data: StageData) -> dict[str, float] | None:
     t_cross = float(data.t[above[0]])
     i_peak = int(np.argmax(smooth))
     curve = curve_function(data)
-    lower = np.array([data.bounds[n][0] for n in names])
-    upper = np.array([data.bounds[n][1] for n in names])
+    free = np.array([n not in data.fixed for n in names])
+    held = np.array([data.fixed.get(n, np.nan) for n in names])
+    lower = np.array([data.bounds[n][0] for n in names])[free]
+    upper = np.array([data.bounds[n][1] for n in names])[free]
+
+    def full(theta: np.ndarray) -> np.ndarray:
+        out = held.copy()
+        out[free] = theta
+        return out
 
     def residual(theta: np.ndarray) -> np.ndarray:
-        v_i = float(np.interp(theta[0], data.t, data.airspeed))
-        return np.asarray(curve(data.t[None, :], *theta, v_i)).ravel() - data.cds
+        values = full(theta)
+        v_i = float(np.interp(values[0], data.t, data.airspeed))
+        return np.asarray(curve(data.t[None, :], *values, v_i)).ravel() - data.cds
 
+    if not free.any():
+        return dict(zip(names, (float(v) for v in held), strict=True))
+    expopen_name = param_name("expopen", data.chute.name, data.stage)
+    starting = (data.fixed[expopen_name],) if expopen_name in data.fixed else STARTING_EXPOPEN
     best = None
-    for expopen in STARTING_EXPOPEN:
-        theta0 = _starting_point(data, t_cross, i_peak, expopen)
+    for expopen in starting:
+        theta0 = _starting_point(data, t_cross, i_peak, expopen)[free]
         theta0 = np.clip(theta0, lower + 1e-9 * (upper - lower), upper - 1e-9 * (upper - lower))
         sol = least_squares(residual, theta0, bounds=(lower, upper), x_scale="jac")
         if best is None or sol.cost < best.cost:
             best = sol
-    return dict(zip(names, (float(v) for v in best.x), strict=True))
+    return dict(zip(names, (float(v) for v in full(best.x)), strict=True))
 
 
 def _starting_point(data: StageData, t_cross: float, i_peak: int, expopen: float) -> np.ndarray:

@@ -21,6 +21,8 @@ if TYPE_CHECKING:
 
 @dataclass(frozen=True)
 class GpsSensor(Effect):
+    """GPS: the vehicle's position (m, east-north-up) and velocity (m/s)."""
+
     name: str = "gps"
 
     def observations(self, ctx: ModelContext) -> None:
@@ -32,6 +34,8 @@ class GpsSensor(Effect):
 
 @dataclass(frozen=True)
 class ImuSensor(Effect):
+    """IMU: load factor |f| / g0 of the vehicle's specific force (g)."""
+
     name: str = "imu"
 
     def observations(self, ctx: ModelContext) -> None:
@@ -41,6 +45,8 @@ class ImuSensor(Effect):
 
 @dataclass(frozen=True)
 class LoadCellSensor(Effect):
+    """Riser load cell: the canopy's riser tension times its load-cell gain (N)."""
+
     name: str = "load_cell"
 
     def observations(self, ctx: ModelContext) -> None:

@@ -1,0 +1,169 @@
+"""The effect set of a reconstruction and which of its parameters are estimated.
+
+A manifest's optional ``model`` block (or a model file given on the command
+line) says which effects make up the model, in composition order, which
+plug-in files define further effects, which parameters are held at given
+values (``fix``) and which parameters that are fixed by default are estimated
+(``free``, e.g. the forebody drag area ``CdS_V``)::
+
+    "model": {
+      "effects": ["canopy_inflation", "forebody_drag",
+                  {"effect": "elastic_riser", "frequency": 8.0},
+                  "added_mass", "drag_scale", "loadcell_scale", "gps", "imu", "load_cell"],
+      "fix": {"riser_damping_ratio[drogue1]": 0.3,
+              "CdS_V": {"value": 200, "unit": "ft^2"}},
+      "plugins": ["breathing.py"]
+    }
+
+Without a block the baseline effect set is used, with every estimable
+parameter free except ``CdS_V`` (it comes from the aerodynamic database).
+Every mistake raises InputError naming the file and the field.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from .effects.base import Effect
+from .effects.registry import BASELINE, BUILTIN, EffectType, load_plugin
+from .errors import InputError
+from .flight_test import MANIFEST, FlightTest, validate_block
+from .model import Model
+from .units import FACTORS
+
+# Estimable parameters that stay fixed unless a model names them in `free`.
+FIXED_BY_DEFAULT = ("CdS_V",)
+RISER_MODELS = ("rigid_riser", "elastic_riser")
+
+
+@dataclass(frozen=True)
+class ModelSpec:
+    """Effects in composition order, fixed values as given, extra free names, and their source.
+
+    `fix` keeps the values as written ({value, unit} or a number in the
+    parameter's SI unit); `fixed_values` converts them once the model's
+    parameters, and so their units, are known.
+    """
+
+    effects: tuple[Effect, ...]
+    fix: dict[str, Any] = field(default_factory=dict)
+    free: tuple[str, ...] = ()
+    source: str = "(baseline)"
+
+    @property
+    def effect_names(self) -> list[str]:
+        return [e.name for e in self.effects]
+
+    def model(self, test: FlightTest) -> Model:
+        """The composed model; a composition error is reported against the model's source."""
+        try:
+            model = Model(test, self.effects)
+        except ValueError as exc:
+            raise InputError(self.source, "model.effects", str(exc)) from None
+        names = set(model.parameter_names)
+        for i, name in enumerate(self.free):
+            if name not in names:
+                raise InputError(self.source, f"model.free[{i}]",
+                                 f"a parameter of this model; got {name!r}")
+        for name in self.fix:
+            if name not in names:
+                raise InputError(self.source, f"model.fix.{name}",
+                                 "a parameter of this model (see the parameter table)")
+        return model
+
+    def fixed_values(self, model: Model) -> dict[str, float]:
+        """The `fix` entries in SI, converted with each parameter's declared unit."""
+        out = {}
+        for name, given in self.fix.items():
+            prm = model.parameter(name)
+            if isinstance(given, int | float):
+                out[name] = float(given)
+                continue
+            value, unit = float(given["value"]), given["unit"]
+            out[name] = value * _conversion(unit, prm.unit, self.source, f"model.fix.{name}.unit")
+        return out
+
+    def free_names(self, model: Model) -> list[str]:
+        """Parameters to estimate: estimable ones minus fixed, plus those named `free`."""
+        fixed = set(self.fix)
+        return [p.name for p in model.parameters
+                if p.name not in fixed
+                and ((p.estimable and p.name not in FIXED_BY_DEFAULT) or p.name in self.free)]
+
+
+def _conversion(unit: str, si_unit: str, file: str, field_path: str) -> float:
+    if unit == si_unit:
+        return 1.0
+    for table in FACTORS.values():
+        if unit in table and si_unit in table:
+            return table[unit] / table[si_unit]
+    raise InputError(file, field_path, f"a unit convertible to {si_unit!r}; got {unit!r}")
+
+
+def baseline_spec() -> ModelSpec:
+    """The baseline effect set with default options."""
+    return ModelSpec(tuple(BUILTIN[name].build({}, "(baseline)", name) for name in BASELINE))
+
+
+def spec_from_effects(effects: Sequence[Effect]) -> ModelSpec:
+    """A spec around an effect list built in code (nothing fixed beyond the defaults)."""
+    return ModelSpec(tuple(effects), source="(effects given in code)")
+
+
+def spec_from_block(block: dict[str, Any] | None, file: str, base_dir: Path) -> ModelSpec:
+    """Resolve a validated `model` block; plug-in paths are relative to `base_dir`."""
+    if block is None:
+        return baseline_spec()
+    registry: dict[str, EffectType] = dict(BUILTIN)
+    for i, rel in enumerate(block.get("plugins", [])):
+        for name, entry in load_plugin(base_dir / rel).items():
+            if name in registry:
+                raise InputError(file, f"model.plugins[{i}]",
+                                 f"effects with new names; {name!r} is already "
+                                 f"registered by {registry[name].source}")
+            registry[name] = entry
+    names = [BUILTIN[n].name for n in BASELINE]
+    effects: list[Effect] = []
+    if "effects" in block:
+        names = []
+        for i, item in enumerate(block["effects"]):
+            path = f"model.effects[{i}]"
+            name, options = (item, {}) if isinstance(item, str) else (
+                item["effect"], {k: v for k, v in item.items() if k != "effect"})
+            if name not in registry:
+                raise InputError(file, path, f"a registered effect ({', '.join(sorted(registry))});"
+                                             f" got {name!r}")
+            if name in names:
+                raise InputError(file, path, f"each effect once; {name!r} is listed twice")
+            names.append(name)
+            effects.append(registry[name].build(options, file, path))
+    else:
+        effects = [registry[n].build({}, file, "model") for n in names]
+    risers = [n for n in names if n in RISER_MODELS]
+    if len(risers) > 1:
+        raise InputError(file, "model.effects", f"one riser model; got {' and '.join(risers)}")
+    return ModelSpec(tuple(effects), dict(block.get("fix", {})), tuple(block.get("free", [])),
+                     file)
+
+
+def spec_of_test(test: FlightTest) -> ModelSpec:
+    """The model a test folder's manifest declares (the baseline when it declares none)."""
+    base = test.path if test.path is not None else Path()
+    return spec_from_block(test.manifest.get("model"), str(base / MANIFEST), base)
+
+
+def load_model_file(path: str | Path) -> ModelSpec:
+    """A model block stored on its own in a JSON file (`cpas-ocp reconstruct --model FILE`)."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(str(path), "(file)", "an existing JSON model file")
+    try:
+        block = json.loads(path.read_text())
+    except json.JSONDecodeError as exc:
+        raise InputError(str(path), f"line {exc.lineno}", f"valid JSON ({exc.msg})") from None
+    validate_block(block, "model.schema.json", str(path), prefix="model")
+    return spec_from_block(block, str(path), path.parent)
