@@ -98,7 +98,7 @@ def _problems(args: argparse.Namespace) -> int:
     from .problems import load_problem, problem_names
     for name in problem_names():
         prob = load_problem(name)
-        print(f"{name:10s} {prob.title}\n{'':10s} {prob.label}")
+        print(f"{name:12s} {prob.title}\n{'':12s} {prob.label}")
     return 0
 
 

@@ -33,9 +33,21 @@ def problem_names() -> list[str]:
 
 
 def load_problem(name: str) -> Problem:
+    """A built-in problem by name.
+
+    A problem file may extend another (``"extends": "drogue"``): it inherits
+    the manifest, simulation and truth, and gives its own title, a ``model``
+    block for the manifest (the effect set its data are made with and
+    reconstructed by), and truth values for the parameters that block adds.
+    """
     names = problem_names()
     if name not in names:
         raise InputError("problem", "name", f"one of {', '.join(names)}; got {name!r}")
     raw = json.loads(resources.files("cpas_ocp.problem_data").joinpath(f"{name}.json").read_text())
+    if "extends" in raw:
+        base = load_problem(raw["extends"])
+        manifest = {**base.manifest, "name": raw["name"], "model": raw["model"]}
+        return Problem(raw["name"], raw["title"], raw["label"], manifest, base.simulation,
+                       {**base.truth, **raw["truth"]["parameters"]})
     return Problem(raw["name"], raw["title"], raw["label"], raw["manifest"], raw["simulation"],
                    raw["truth"]["parameters"])
