@@ -60,8 +60,8 @@ class Settings:
     fit is heading for; None: only Ipopt's own tests end the run);
     compile: evaluate the per-interval and per-sample Jacobians as native
     code (`cpas_ocp.compiled`; falls back to CasADi's VM without a compiler);
-    free: parameter names to estimate (default: every estimable parameter
-    except the forebody drag area, which comes from the aero database);
+    free: parameter names to estimate (default: the model's choice,
+    `ModelSpec.free_names`);
     fixed: values of parameters held fixed (default: their model default).
     """
 

@@ -16,7 +16,8 @@ values (``fix``) and which parameters that are fixed by default are estimated
     }
 
 Without a block the baseline effect set is used, with every estimable
-parameter free except ``CdS_V`` (it comes from the aerodynamic database).
+parameter free except those fixed by default (`Parameter.free_by_default`:
+``CdS_V``, which comes from the aerodynamic database, and fly-out angles).
 Every mistake raises InputError naming the file and the field.
 """
 
@@ -35,8 +36,6 @@ from .flight_test import MANIFEST, FlightTest, validate_block
 from .model import Model
 from .units import FACTORS
 
-# Estimable parameters that stay fixed unless a model names them in `free`.
-FIXED_BY_DEFAULT = ("CdS_V",)
 RISER_MODELS = ("rigid_riser", "elastic_riser")
 
 
@@ -66,9 +65,9 @@ class ModelSpec:
             raise InputError(self.source, "model.effects", str(exc)) from None
         names = set(model.parameter_names)
         for i, name in enumerate(self.free):
-            if name not in names:
+            if name not in names or not model.parameter(name).estimable:
                 raise InputError(self.source, f"model.free[{i}]",
-                                 f"a parameter of this model; got {name!r}")
+                                 f"an estimable parameter of this model; got {name!r}")
         for name in self.fix:
             if name not in names:
                 raise InputError(self.source, f"model.fix.{name}",
@@ -88,11 +87,11 @@ class ModelSpec:
         return out
 
     def free_names(self, model: Model) -> list[str]:
-        """Parameters to estimate: estimable ones minus fixed, plus those named `free`."""
+        """Parameters to estimate: those free by default minus `fix`, plus those named `free`."""
         fixed = set(self.fix)
         return [p.name for p in model.parameters
                 if p.name not in fixed
-                and ((p.estimable and p.name not in FIXED_BY_DEFAULT) or p.name in self.free)]
+                and ((p.estimable and p.free_by_default) or p.name in self.free)]
 
 
 def _conversion(unit: str, si_unit: str, file: str, field_path: str) -> float:

@@ -19,7 +19,10 @@ class Parameter:
 
     `default` is the value used when the parameter is not estimated and no
     better value is known; `lower`/`upper` bound it when it is estimated.
-    `scale` is its typical magnitude, used to scale the NLP.
+    `scale` is its typical magnitude, used to scale the NLP.  A parameter that
+    is `estimable` but not `free_by_default` (the forebody drag area, which
+    comes from the aerodynamic database; fly-out angles, which the drag scale
+    factors absorb) is estimated only when a model names it in ``free``.
     """
 
     name: str
@@ -30,6 +33,7 @@ class Parameter:
     estimable: bool = True
     description: str = ""
     scale: float = 1.0
+    free_by_default: bool = True
 
 
 def param_name(base: str, *index: str) -> str:

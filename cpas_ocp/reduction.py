@@ -6,7 +6,8 @@ Without any simulation, on the IMU's time base:
 * IMU drag area, Eq. 2:      PRF*CdS_total = W_T G / q - (CdS)_V;
 * riser drag area, Eq. 3:    PRF*CdS_P = (F_P + W_p,P G) / q;
 * per-stage scale factor: the time mean of the IMU drag area over the
-  stage's steady window divided by that of the summed riser drag areas.  It
+  stage's steady window divided by that of the summed riser drag areas
+  (each times the cosine of its fly-out angle in a cluster, Eq. 7).  It
   is the initial guess of ``drag_scale[stage]``, since the trajectory's drag is
   the load-cell drag times that factor.
 
@@ -63,8 +64,14 @@ def gps_state(test: FlightTest, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return pos, vel
 
 
-def reduce(test: FlightTest, starts: dict[tuple[str, str], float]) -> Reduction:
-    """Offline reduction with stage start times `starts[(canopy, stage)]` (s)."""
+def reduce(test: FlightTest, starts: dict[tuple[str, str], float],
+           flyout: dict[tuple[str, str], float] | None = None) -> Reduction:
+    """Offline reduction with stage start times `starts[(canopy, stage)]` (s).
+
+    `flyout[(canopy, stage)]` (rad, default 0) are the fly-out angles of a
+    cluster: the IMU drag area is matched to sum_i cos(theta_i) CdS_i (Eq. 7).
+    """
+    flyout = flyout or {}
     imu = test.sensors_of("imu_load_factor")
     cells = test.sensors_of("load_cell")
     base = imu[0] if imu else (cells[0] if cells else test.sensors[0])
@@ -86,7 +93,8 @@ def reduce(test: FlightTest, starts: dict[tuple[str, str], float]) -> Reduction:
     scale = {}
     for stage, (a, b) in windows.items():
         sel = (t >= a) & (t <= b)
-        riser_sum = sum(cds_riser.values())
+        riser_sum = sum(np.cos(flyout.get((name, stage), 0.0)) * cds
+                        for name, cds in cds_riser.items())
         if imu and cds_riser and sel.sum() > 3:
             scale[stage] = float(np.mean(cds_imu[sel]) / np.mean(riser_sum[sel]))
         else:
@@ -157,7 +165,10 @@ def reduce_and_guess(test: FlightTest, model: Model, fixed: dict[str, float] | N
     fixed = dict(fixed or {})
     guess = {p.name: p.default for p in model.parameters} | fixed
     starts = stage_starts(test, guess)
-    red = reduce(test, starts)
+    flyout = {(c.name, s): guess[param_name("flyout_angle", c.name, s)]
+              for c in test.parachutes for s in c.stages
+              if param_name("flyout_angle", c.name, s) in guess}
+    red = reduce(test, starts, flyout)
     bounds = {p.name: (p.lower, p.upper) for p in model.parameters}
     for stage, s in red.stage_scale.items():
         name = param_name("drag_scale", stage)

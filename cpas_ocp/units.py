@@ -7,6 +7,8 @@ Temperature-like affine units are deliberately absent: nothing here needs them.
 
 from __future__ import annotations
 
+import math
+
 G0 = 9.80665  # standard gravity, m/s^2
 FT = 0.3048  # m
 LB = 0.45359237  # kg (pound mass)
@@ -25,6 +27,7 @@ FACTORS: dict[str, dict[str, float]] = {
     "acceleration": {"m/s^2": 1.0, "ft/s^2": FT, "g": G0},
     "load_factor": {"g": 1.0, "1": 1.0},
     "dimensionless": {"1": 1.0, "": 1.0},
+    "angle": {"rad": 1.0, "deg": math.pi / 180.0},
     "stiffness": {"N/m": 1.0, "lbf/ft": LBF / FT},
     "pressure": {"Pa": 1.0, "psf": LBF / FT**2, "hPa": 100.0, "kPa": 1e3,
                  "psi": LBF / (FT / 12) ** 2},

@@ -15,6 +15,7 @@ from .base import Capture, Constraint, Effect, State
 from .canopy_inflation import CanopyInflation
 from .drag_scale import DragScale
 from .elastic_riser import ElasticRiser
+from .fly_out import FlyOut
 from .forebody_drag import ForebodyDrag
 from .loadcell_scale import LoadCellScale
 from .rigid_riser import RigidRiser
@@ -42,6 +43,7 @@ __all__ = [
     "DragScale",
     "Effect",
     "ElasticRiser",
+    "FlyOut",
     "ForebodyDrag",
     "GpsSensor",
     "ImuSensor",

@@ -48,7 +48,7 @@ from ..parameters import Parameter, param_name
 from ..units import G0
 from .base import Effect, State
 from .canopy_inflation import CanopyInflation
-from .rigid_riser import tension_only
+from .rigid_riser import along_riser, tension_only
 
 if TYPE_CHECKING:
     from ..flight_test import FlightTest
@@ -119,7 +119,7 @@ class ElasticRiser(Effect):
             released = smoothstep(2.0 * (ctx.t - t_deploy) / DEPLOY_S - 1.0)
             ctx.q[param_name("riser_force", chute.name)] = (
                 (1.0 - released) * linear + released * pulled)
-            ctx.q[param_name("tension", chute.name)] = pulled
+            ctx.q[param_name("tension", chute.name)] = along_riser(ctx, chute.name, pulled)
             ctx.q[param_name("stretch", chute.name)] = s
             ctx.forces.append(ctx.q[param_name("riser_force", chute.name)] * e)
 

@@ -24,6 +24,7 @@ from .base import Effect
 from .canopy_inflation import CanopyInflation
 from .drag_scale import DragScale
 from .elastic_riser import ElasticRiser
+from .fly_out import FlyOut
 from .forebody_drag import ForebodyDrag
 from .loadcell_scale import LoadCellScale
 from .rigid_riser import RigidRiser
@@ -80,6 +81,7 @@ def _builtin() -> dict[str, EffectType]:
     entries = [
         EffectType("canopy_inflation", CanopyInflation),
         EffectType("forebody_drag", ForebodyDrag),
+        EffectType("fly_out", FlyOut),
         EffectType("rigid_riser", RigidRiser),
         EffectType("elastic_riser", ElasticRiser),
         EffectType("added_mass", AddedMass),

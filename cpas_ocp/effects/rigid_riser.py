@@ -10,7 +10,8 @@ smooth maximum, (T + sqrt(T^2 + eps^2)) / 2 with eps = 50 N (under 2 N of
 difference once the riser carries more than 600 N), so the estimation problem
 stays differentiable where the canopy starts to pull.
 
-Quantities written: ``tension[P]`` (N).
+Quantities written: ``tension[P]`` (N), along the riser: the axial pull over
+cos(theta) where the `fly_out` effect sets a fly-out angle theta.
 """
 
 from __future__ import annotations
@@ -36,8 +37,15 @@ def tension_only(force: ca.SX) -> ca.SX:
     return 0.5 * (force + ca.sqrt(force**2 + SLACK_N**2))
 
 
+def along_riser(ctx: ModelContext, chute: str, axial: ca.SX) -> ca.SX:
+    """Riser tension (N) from its component along the drag axis: over cos(fly-out angle)."""
+    return axial / ctx.q.get(param_name("axial_fraction", chute), 1.0)
+
+
 @dataclass(frozen=True)
 class RigidRiser(Effect):
+    """Canopies on inextensible risers, with their dry mass (paper Eq. 3)."""
+
     name: str = "rigid_riser"
 
     def forces(self, ctx: ModelContext) -> None:
@@ -55,5 +63,5 @@ class RigidRiser(Effect):
             m_a = ctx.q.get(param_name("added_mass", chute.name))
             if m_a is not None:
                 pull = pull - ctx.q[param_name("added_momentum_rate", chute.name)] - m_a * a
-            along = ca.dot(pull, ctx.q["drag_direction"])
-            ctx.q[param_name("tension", chute.name)] = tension_only(along)
+            axial = tension_only(ca.dot(pull, ctx.q["drag_direction"]))
+            ctx.q[param_name("tension", chute.name)] = along_riser(ctx, chute.name, axial)
