@@ -23,11 +23,15 @@ class InputError(ValueError):
 class SolverFailure(RuntimeError):
     """Ipopt ended without a converged, feasible solution."""
 
-    def __init__(self, status: str, iterations: int, worst_constraint: str = "") -> None:
+    def __init__(self, status: str, iterations: int, worst_constraint: str = "",
+                 chi_square: float | None = None) -> None:
         self.status = status
         self.iterations = iterations
         self.worst_constraint = worst_constraint
+        self.chi_square = chi_square  # at the last iterate: a diagnostic, not a result
         detail = f"; worst constraint {worst_constraint}" if worst_constraint else ""
+        if chi_square is not None:
+            detail += f"; chi-square {chi_square:.6g} at the last iterate"
         super().__init__(
             f"solver failed: status {status} after {iterations} iterations{detail}"
         )

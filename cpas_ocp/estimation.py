@@ -17,8 +17,9 @@ the capture relations, and the effects' parameter constraints.
 Objective: half the chi-square of all sensor samples in the phase,
 0.5 sum ((y - h(x(t_s), t_s, p, c)) / sigma)^2, where x(t_s) is the node state
 or, for a sample between nodes, one RK4 step from the node before it.
-Weights use the manifest's sigmas; relative noise is evaluated at the
-measured value so the weights do not depend on the parameters.
+Weights use the manifest's sigmas; relative noise is evaluated at the mean
+of each sample's neighbours in the measured series (`Sensor.weighting_sigma`),
+so the weights neither depend on the parameters nor on the sample's own noise.
 """
 
 from __future__ import annotations
@@ -252,8 +253,7 @@ class Estimator:
             dt[np.abs(dt) < 1e-7] = 0.0
             channels = m.sensor_channels[sensor.name]
             meas = np.vstack([sensor.data[c].to_numpy()[keep] for c in channels])
-            sig = np.vstack([sensor.noise_sigma(c, sensor.data[c].to_numpy()[keep])
-                             for c in channels])
+            sig = np.vstack([sensor.weighting_sigma(c)[keep] for c in channels])
             nch = len(channels)
             ym = ca.SX.sym("ym", nch)
             sg = ca.SX.sym("sg", nch)
@@ -485,7 +485,7 @@ class Estimator:
         stats = SolverStats(status, success, int(st["iter_count"]), wall, float(sol["f"]), worst,
                             self._monitor.decrement if self._monitor.stopped else None)
         if not stats.success:
-            raise SolverFailure(stats.status, stats.iterations, worst)
+            raise SolverFailure(stats.status, stats.iterations, worst, 2.0 * stats.objective)
         return self._fit(z, stats)
 
     def _decrement(self, z: np.ndarray) -> float | None:
@@ -516,8 +516,12 @@ class Estimator:
 
     def _linearize(self, z: np.ndarray) -> Linearization:
         idx = self._param_index
+        nx = self.model.nx
+        n_states = self._nz[0]
+        pinned = np.flatnonzero(self._lbz[:nx] == self._ubz[:nx])
         return linearize(self._residual_jacobian, self._constraints, z, self._lbg, self._ubg,
-                         idx, self._lbz[idx], self._ubz[idx])
+                         idx, self._lbz[idx], self._ubz[idx], chain_rows=n_states - nx,
+                         dependent=np.arange(nx, n_states), pinned=pinned)
 
     def _fit(self, z: np.ndarray, stats: SolverStats) -> Fit:
         m = self.model

@@ -13,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from cpas_ocp.errors import SolverFailure
 from cpas_ocp.estimation import STATISTICALLY_CONVERGED, Estimator, Settings
 from cpas_ocp.flight_test import load_test
 from cpas_ocp.parameters import split_name
@@ -20,6 +21,8 @@ from cpas_ocp.parameters import split_name
 from .conftest import START_GUESS_OFFSET_S, event_errors
 
 SEEDS = [1, 2]
+# Iterations Ipopt gets on its own in the statistical-stop comparison.
+IPOPT_ALONE_ITERATIONS = 150
 # Seed 2, kept visible; strict, so these cases fail the suite as soon as they pass.
 # Two disreef start times miss the 20 ms acceptance limit: t_start[drogue2,stage3]
 # is 35 ms early and t_start[drogue1,stage2] 21 ms early, but their reported
@@ -77,17 +80,26 @@ def test_errors_consistent_with_reported_uncertainty(drogue_fit, seed: int) -> N
 
 def test_statistical_stop_is_no_worse_than_ipopt_convergence(drogue_fit) -> None:
     """Stopping on the Gauss-Newton decrement (< 0.01 in chi-square) ends the run long
-    before Ipopt's own tests would, at a chi-square no higher than where they end it.
+    before Ipopt's own tests would, at a chi-square no higher than where Ipopt ends.
 
-    On seed 1 Ipopt alone runs 153 iterations to its acceptable level and ends
-    2.7 higher in chi-square than the statistical stop (after 4 iterations), a
-    few tenths of a sigma away in the inflation shapes: with the reduction's
-    curve-fitted start, the statistical stop is the better point.
+    On seed 1 the statistical stop comes after 4 iterations.  Ipopt alone does not
+    converge: its barrier parameter stalls at 10^-2.5 and it cycles with chi-square
+    3.5 above the statistical stop for 500 iterations (the +-5 ms corner rounding
+    leaves the surface slightly rippled against 10 ms samples).  Ipopt's last iterate,
+    converged or not, is the reference.
     """
     fit, _, _ = drogue_fit(1)
     assert fit.solver.status == STATISTICALLY_CONVERGED
     assert fit.solver.chi2_decrement is not None and fit.solver.chi2_decrement < 0.01
-    full = Estimator(load_test(fit.test.path), settings=Settings(chi2_step_tol=None)).solve()
-    assert full.solver.status != STATISTICALLY_CONVERGED
-    assert full.solver.iterations > fit.solver.iterations
-    assert fit.chi_square - full.chi_square < 0.01
+    ipopt_alone = Settings(chi2_step_tol=None, max_iter=IPOPT_ALONE_ITERATIONS)
+    try:
+        full = Estimator(load_test(fit.test.path), settings=ipopt_alone).solve()
+    except SolverFailure as failure:
+        assert failure.iterations == IPOPT_ALONE_ITERATIONS
+        assert failure.chi_square is not None
+        reference = failure.chi_square
+    else:
+        assert full.solver.status != STATISTICALLY_CONVERGED
+        assert full.solver.iterations > fit.solver.iterations
+        reference = full.chi_square
+    assert fit.chi_square - reference < 0.01
