@@ -22,6 +22,7 @@ from .rigid_riser import RigidRiser
 from .sensor_bias import SensorBias
 from .sensor_lag import SensorLag
 from .sensors import GpsSensor, ImuSensor, LoadCellSensor
+from .wake_deficit import WakeDeficit
 
 
 def baseline_effects() -> list[Effect]:
@@ -53,6 +54,7 @@ __all__ = [
     "SensorBias",
     "SensorLag",
     "State",
+    "WakeDeficit",
     "baseline_effects",
     "with_elastic_risers",
 ]

@@ -72,8 +72,7 @@ class FlyOut(Effect):
 
     def forces(self, ctx: ModelContext) -> None:
         for chute in ctx.test.parachutes:
-            if any(param_name(q, chute.name) in ctx.q for q in ("added_mass", "riser_force")) \
-                    or ctx.separate_bodies:
+            if any(param_name(q, chute.name) in ctx.q for q in ("added_mass", "riser_force")):
                 raise ValueError("list the fly_out effect before the riser and added-mass "
                                  "effects: they act on the axial pull")
             theta = sum(ctx.q[param_name("stage_weight", chute.name, s)]

@@ -31,6 +31,7 @@ from .rigid_riser import RigidRiser
 from .sensor_bias import SensorBias
 from .sensor_lag import SensorLag
 from .sensors import GpsSensor, ImuSensor, LoadCellSensor
+from .wake_deficit import WakeDeficit
 
 
 @dataclass(frozen=True)
@@ -81,6 +82,7 @@ def _builtin() -> dict[str, EffectType]:
     entries = [
         EffectType("canopy_inflation", CanopyInflation),
         EffectType("forebody_drag", ForebodyDrag),
+        EffectType("wake_deficit", WakeDeficit),
         EffectType("fly_out", FlyOut),
         EffectType("rigid_riser", RigidRiser),
         EffectType("elastic_riser", ElasticRiser),

@@ -50,7 +50,9 @@ class RigidRiser(Effect):
 
     def forces(self, ctx: ModelContext) -> None:
         for chute in ctx.test.parachutes:
-            ctx.forces.append(ctx.q[param_name("drag", chute.name)])
+            pull = ctx.q[param_name("drag", chute.name)]
+            ctx.q[param_name("riser_force", chute.name)] = pull  # N, 3-vector on the vehicle
+            ctx.forces.append(pull)
             ctx.mass = ctx.mass + chute.dry_mass
 
     def observations(self, ctx: ModelContext) -> None:
