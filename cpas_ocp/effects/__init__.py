@@ -17,6 +17,7 @@ from .drag_scale import DragScale
 from .elastic_riser import ElasticRiser
 from .fly_out import FlyOut
 from .forebody_drag import ForebodyDrag
+from .loadcell_friction import LoadCellFriction
 from .loadcell_scale import LoadCellScale
 from .rigid_riser import RigidRiser
 from .sensor_bias import SensorBias
@@ -48,6 +49,7 @@ __all__ = [
     "ForebodyDrag",
     "GpsSensor",
     "ImuSensor",
+    "LoadCellFriction",
     "LoadCellScale",
     "LoadCellSensor",
     "RigidRiser",

@@ -26,6 +26,7 @@ from .drag_scale import DragScale
 from .elastic_riser import ElasticRiser
 from .fly_out import FlyOut
 from .forebody_drag import ForebodyDrag
+from .loadcell_friction import LoadCellFriction
 from .loadcell_scale import LoadCellScale
 from .rigid_riser import RigidRiser
 from .sensor_bias import SensorBias
@@ -93,6 +94,7 @@ def _builtin() -> dict[str, EffectType]:
         EffectType("imu", ImuSensor),
         EffectType("load_cell", LoadCellSensor),
         EffectType("imu_bias", SensorBias),
+        EffectType("loadcell_friction", LoadCellFriction),
         EffectType("loadcell_bias", SensorBias,
                     {"kind": "load_cell", "channel": "tension", "unit": "N", "bound": 1.0e4,
                      "scale": 100.0}),
