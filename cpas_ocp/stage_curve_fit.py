@@ -27,7 +27,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from .flight_test import Parachute
-from .inflation import fill_length, finite_mass_cds, infinite_mass_cds
+from .inflation import fill_length, finite_mass_cds, infinite_mass_cds, stage_started
 from .parameters import param_name
 
 # Fraction of the climb from CdS_{i-1} to CdS_i at which the start-time search begins.
@@ -140,6 +140,6 @@ def curve_function(data: StageData) -> ca.Function:
         n_fill, expopen = theta[1:]
         rise = finite_mass_cds(t, theta[0], data.cds_prev, data.cds_steady, n_fill, expopen,
                                length, v_i)
-    cds = ca.if_else(t >= theta[0], rise, data.cds_prev)
+    cds = ca.if_else(stage_started(t, theta[0]), rise, data.cds_prev)
     fn = ca.Function("stage_curve", [t, *theta, v_i], [cds])
     return fn.map(data.t.size)

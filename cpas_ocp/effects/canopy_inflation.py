@@ -33,6 +33,7 @@ from ..inflation import (
     finite_mass_cds,
     infinite_mass_cds,
     smoothstep,
+    stage_started,
 )
 from ..parameters import Parameter, param_name
 from .base import Capture, Effect
@@ -147,7 +148,7 @@ class CanopyInflation(Effect):
                     curve = finite_mass_cds(t, starts[k], prev, steady, n_f,
                                             p[param_name("expopen", *idx)], length, v_i)
                     rise = fill_time(n_f, length, v_i)
-                cds = ca.if_else(t >= starts[k], curve, cds)
+                cds = ca.if_else(stage_started(t, starts[k]), curve, cds)
                 prev = steady
                 arrivals.append(1.0 if k == 0 else
                                 smoothstep(2.0 * (t - starts[k]) / rise - 1.0))
