@@ -202,16 +202,20 @@ def _si(quantity: dict[str, Any], dimension: str) -> float:
     return float(quantity["value"]) * FACTORS[dimension][quantity["unit"]]
 
 
+def read_json(path: Path, missing: str) -> Any:
+    """The JSON content of `path`; InputError with `missing` if absent, the line if invalid."""
+    if not path.is_file():
+        raise InputError(str(path), "(file)", missing)
+    try:
+        return json.loads(path.read_text())
+    except json.JSONDecodeError as exc:
+        raise InputError(str(path), f"line {exc.lineno}", f"valid JSON ({exc.msg})") from None
+
+
 def load_test(folder: str | Path) -> FlightTest:
     """Load and validate a test folder; everything returned is in SI."""
     folder = Path(folder)
-    path = folder / MANIFEST
-    if not path.is_file():
-        raise InputError(str(path), "(file)", "a test folder must contain manifest.json")
-    try:
-        manifest = json.loads(path.read_text())
-    except json.JSONDecodeError as exc:
-        raise InputError(str(path), f"line {exc.lineno}", f"valid JSON ({exc.msg})") from None
+    manifest = read_json(folder / MANIFEST, "a test folder must contain manifest.json")
     return test_from_manifest(manifest, folder)
 
 

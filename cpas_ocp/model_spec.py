@@ -23,7 +23,6 @@ Every mistake raises InputError naming the file and the field.
 
 from __future__ import annotations
 
-import json
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -32,7 +31,7 @@ from typing import Any
 from .effects.base import Effect
 from .effects.registry import BASELINE, BUILTIN, EffectType, load_plugin
 from .errors import InputError
-from .flight_test import MANIFEST, FlightTest, validate_block
+from .flight_test import MANIFEST, FlightTest, read_json, validate_block
 from .model import Model
 from .units import FACTORS
 
@@ -158,11 +157,6 @@ def spec_of_test(test: FlightTest) -> ModelSpec:
 def load_model_file(path: str | Path) -> ModelSpec:
     """A model block stored on its own in a JSON file (`cpas-ocp reconstruct --model FILE`)."""
     path = Path(path)
-    if not path.is_file():
-        raise InputError(str(path), "(file)", "an existing JSON model file")
-    try:
-        block = json.loads(path.read_text())
-    except json.JSONDecodeError as exc:
-        raise InputError(str(path), f"line {exc.lineno}", f"valid JSON ({exc.msg})") from None
+    block = read_json(path, "an existing JSON model file")
     validate_block(block, "model.schema.json", str(path), prefix="model")
     return spec_from_block(block, str(path), path.parent)

@@ -7,9 +7,11 @@ import shutil
 from pathlib import Path
 
 import pytest
+from scipy.stats import chi2
 
 from cpas_ocp.estimation import Estimator, Fit
 from cpas_ocp.flight_test import load_test
+from cpas_ocp.parameters import split_name
 from cpas_ocp.problems import load_problem
 from cpas_ocp.simulate import simulate_problem
 from cpas_ocp.uncertainty import Covariance
@@ -90,3 +92,28 @@ def problem_fit(problem_folder, tmp_path_factory: pytest.TempPathFactory):
 def drogue_fit(problem_fit):
     """A factory: (fit, covariance, truth) of the `drogue` seed with start guesses 0.3 s off."""
     return lambda seed: problem_fit("drogue", seed)
+
+
+def assert_sigmas_resolve(fit: Fit, cov: Covariance, relative: dict[str, float],
+                          start_s: float) -> None:
+    """The reported sigmas are small enough for a truth check to mean something:
+    below `relative[base]` of the value for those bases, below `start_s` for start times."""
+    std = cov.std
+    for name in fit.free:
+        base, _ = split_name(name)
+        if base in relative:
+            assert std[name] / fit.parameters[name] < relative[base], name
+        if base == "t_start":
+            assert std[name] < start_s, name
+
+
+def assert_truth_within_noise(fit: Fit, cov: Covariance, truth: dict[str, float]) -> int:
+    """Every estimate within 4 reported sigma of the truth, and jointly the squared
+    Mahalanobis distance below the chi-square 0.999 quantile; returns its degrees of freedom."""
+    std = cov.std
+    z = {n: (fit.parameters[n] - truth[n]) / std[n] for n in fit.free}
+    worst = max(z, key=lambda n: abs(z[n]))
+    assert abs(z[worst]) < 4.0, f"{worst}: {z[worst]:.2f} sigma"
+    m2, dof = cov.mahalanobis({n: fit.parameters[n] - truth[n] for n in fit.free})
+    assert m2 < chi2.ppf(0.999, dof), f"Mahalanobis^2 {m2:.1f} on {dof} dof"
+    return dof
