@@ -1,7 +1,7 @@
 """The `cpas-ocp` command line.
 
     cpas-ocp problems                         list the built-in test phases
-    cpas-ocp effects [--model FILE]           list the effects a model block may name
+    cpas-ocp effects [--plugin FILE]          list the effects a model block may name
     cpas-ocp simulate NAME --out DIR --seed N write a synthetic test folder (+ truth.json)
     cpas-ocp reduce TEST_DIR --out DIR        offline reduction (Eqs. 2-3) and initial guess
     cpas-ocp reconstruct TEST_DIR --out DIR   reconstruct a test folder, write the report

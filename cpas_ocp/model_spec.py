@@ -62,6 +62,10 @@ class ModelSpec:
             model = Model(test, self.effects)
         except ValueError as exc:
             raise InputError(self.source, "model.effects", str(exc)) from None
+        except KeyError as exc:
+            raise InputError(self.source, "model.effects",
+                             f"effects listed so that each finds what it uses; none before "
+                             f"it provides {exc}") from None
         names = set(model.parameter_names)
         for i, name in enumerate(self.free):
             if name not in names or not model.parameter(name).estimable:
@@ -71,6 +75,15 @@ class ModelSpec:
             if name not in names:
                 raise InputError(self.source, f"model.fix.{name}",
                                  "a parameter of this model (see the parameter table)")
+            if name in self.free:
+                raise InputError(self.source, f"model.fix.{name}",
+                                 "a parameter either fixed or freed, not both")
+        for name, value in self.fixed_values(model).items():
+            prm = model.parameter(name)
+            if not prm.lower <= value <= prm.upper:
+                raise InputError(self.source, f"model.fix.{name}",
+                                 f"a value in [{prm.lower:g}, {prm.upper:g}] {prm.unit} (SI); "
+                                 f"got {value:g}")
         return model
 
     def fixed_values(self, model: Model) -> dict[str, float]:

@@ -65,11 +65,14 @@ def gps_state(test: FlightTest, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def reduce(test: FlightTest, starts: dict[tuple[str, str], float],
-           flyout: dict[tuple[str, str], float] | None = None) -> Reduction:
+           flyout: dict[tuple[str, str], float] | None = None,
+           forebody_cds: float | None = None) -> Reduction:
     """Offline reduction with stage start times `starts[(canopy, stage)]` (s).
 
     `flyout[(canopy, stage)]` (rad, default 0) are the fly-out angles of a
     cluster: the IMU drag area is matched to sum_i cos(theta_i) CdS_i (Eq. 7).
+    `forebody_cds` (m^2) replaces the manifest's forebody drag area (a model
+    that fixes ``CdS_V``).
     """
     flyout = flyout or {}
     imu = test.sensors_of("imu_load_factor")
@@ -82,7 +85,8 @@ def reduce(test: FlightTest, starts: dict[tuple[str, str], float],
     q = 0.5 * density_at(test.atmosphere, pos[:, 2]) * airspeed**2
     G = np.interp(t, imu[0].time, imu[0].data["load_factor"]) if imu else np.ones_like(t)
     w_total = (test.vehicle.mass + sum(p.dry_mass for p in test.parachutes)) * G0
-    cds_imu = w_total * G / q - test.vehicle.forebody_cds
+    cds_imu = w_total * G / q - (test.vehicle.forebody_cds if forebody_cds is None
+                                 else forebody_cds)
     cds_riser = {}
     for cell in cells:
         chute = test.parachute(cell.parachute)
@@ -168,7 +172,7 @@ def reduce_and_guess(test: FlightTest, model: Model, fixed: dict[str, float] | N
     flyout = {(c.name, s): guess[param_name("flyout_angle", c.name, s)]
               for c in test.parachutes for s in c.stages
               if param_name("flyout_angle", c.name, s) in guess}
-    red = reduce(test, starts, flyout)
+    red = reduce(test, starts, flyout, guess.get("CdS_V"))
     bounds = {p.name: (p.lower, p.upper) for p in model.parameters}
     for stage, s in red.stage_scale.items():
         name = param_name("drag_scale", stage)
@@ -184,8 +188,10 @@ def reduce_and_guess(test: FlightTest, model: Model, fixed: dict[str, float] | N
             cds = red.stage_scale.get(stage, 1.0) * float(np.median(curve[steady])) \
                 if steady.any() else 0.0
             name = param_name("CdS", chute.name, stage)
+            # The riser sees PRF*CdS (wake_deficit); the model's CdS is the free-stream one.
+            prf = guess.get(param_name("prf", chute.name), 1.0)
             if cds > 0 and name not in fixed:
-                guess[name] = cds
+                guess[name] = cds / prf
         for k in range(len(chute.stages)):
             shape = _fit_stage(test, red, chute, k, starts, guess, bounds, fixed)
             if shape is not None:

@@ -40,8 +40,8 @@ def test_no_block_is_the_baseline(problem_folder) -> None:
 def test_block_sets_effects_options_fixed_and_free(problem_folder, tmp_path) -> None:
     block = {"effects": FULL, "free": ["CdS_V"],
              "fix": {"riser_damping_ratio[fbcp1]": 0.25,
-                     "CdS_V": {"value": 10.0, "unit": "ft^2"},
-                     "t_start[fbcp2,stage1]": {"value": 2500.0, "unit": "ms"}}}
+                     "CdS[fbcp1,stage1]": {"value": 10.0, "unit": "ft^2"},
+                     "t_start[fbcp2,stage1]": {"value": 850.0, "unit": "ms"}}}
     test = load_test(_with_model(problem_folder("fbcp", 1), tmp_path / "t", block))
     spec = spec_of_test(test)
     model = spec.model(test)
@@ -50,11 +50,10 @@ def test_block_sets_effects_options_fixed_and_free(problem_folder, tmp_path) -> 
     assert riser.frequency == 12.0
     assert model.parameter("riser_frequency[fbcp1]").default == 12.0
     fixed = spec.fixed_values(model)
-    assert fixed["CdS_V"] == pytest.approx(10.0 * FT**2)
-    assert fixed["t_start[fbcp2,stage1]"] == pytest.approx(2.5)
+    assert fixed["CdS[fbcp1,stage1]"] == pytest.approx(10.0 * FT**2)
+    assert fixed["t_start[fbcp2,stage1]"] == pytest.approx(0.85)
     free = spec.free_names(model)
-    # A name both fixed and freed stays fixed: `fix` is the stronger statement.
-    assert "CdS_V" not in free and "riser_damping_ratio[fbcp1]" not in free
+    assert "CdS_V" in free and "riser_damping_ratio[fbcp1]" not in free
     assert "riser_damping_ratio[fbcp2]" in free and "added_mass_factor[fbcp1]" in free
 
 
@@ -89,6 +88,22 @@ BAD_BLOCKS = {
     "fix in a wrong unit": ({"fix": {"CdS_V": {"value": 3.0, "unit": "lbf"}}},
                             "model.fix.CdS_V.unit"),
     "free unknown parameter": ({"free": ["CdS_X"]}, "model.free[0]"),
+    "fixed and freed": ({"free": ["CdS_V"], "fix": {"CdS_V": 1.0}}, "model.fix.CdS_V"),
+    "fixed outside its bounds": ({"fix": {"flyout_angle[fbcp1,stage1]": {"value": 90,
+                                                                         "unit": "deg"}},
+                                  "effects": ["canopy_inflation", "forebody_drag", "fly_out",
+                                              "rigid_riser", "gps"]},
+                                 "model.fix.flyout_angle[fbcp1,stage1]"),
+    "wake deficit before the inflation": (
+        {"effects": ["wake_deficit", "canopy_inflation", "rigid_riser", "gps"]}, "model.effects"),
+    "no riser model": ({"effects": ["canopy_inflation", "gps", "imu", "load_cell"]},
+                       "model.effects"),
+    "option of the wrong type": ({"effects": ["canopy_inflation",
+                                              {"effect": "wake_deficit", "prf": [1]}]},
+                                 "model.effects[1]"),
+    "option out of range": ({"effects": ["canopy_inflation",
+                                         {"effect": "elastic_riser", "frequency": -1}]},
+                            "model.effects[1]"),
     "not a list": ({"effects": "canopy_inflation"}, "model.effects"),
     "added mass before elastic risers": (
         {"effects": ["canopy_inflation", "forebody_drag", "added_mass", "elastic_riser",

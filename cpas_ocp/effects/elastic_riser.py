@@ -55,6 +55,9 @@ if TYPE_CHECKING:
     from ..model import ModelContext
 
 DEPLOY_S = 0.05  # time over which the packed link becomes a tension-only riser (s)
+# Natural frequency (Hz; the upper end keeps RK4 stable on 10 ms grids) and damping ratio.
+FREQUENCY_BOUNDS_HZ = (0.5, 25.0)
+DAMPING_BOUNDS = (0.02, 1.0)
 # A canopy whose observed start is this long after the phase begins is packed at the start (s).
 PACKED_MARGIN_S = 0.5
 
@@ -67,15 +70,21 @@ class ElasticRiser(Effect):
     damping_ratio: float = 0.3
     name: str = "elastic_riser"
 
+    def __post_init__(self) -> None:
+        for label, value, (lo, hi) in (("frequency", self.frequency, FREQUENCY_BOUNDS_HZ),
+                                       ("damping_ratio", self.damping_ratio, DAMPING_BOUNDS)):
+            if not isinstance(value, int | float) or not lo <= value <= hi:
+                raise ValueError(f"{label} must be a number in [{lo:g}, {hi:g}]; got {value!r}")
+
     def parameters(self, test: FlightTest) -> list[Parameter]:
         out = []
         for c in test.parachutes:
             out += [
                 Parameter(param_name("riser_frequency", c.name), "Hz", self.frequency,
-                          0.5, 25.0, description="natural frequency of the dry canopy on "
-                          "its riser", scale=self.frequency),
+                          *FREQUENCY_BOUNDS_HZ, scale=self.frequency,
+                          description="natural frequency of the dry canopy on its riser"),
                 Parameter(param_name("riser_damping_ratio", c.name), "1", self.damping_ratio,
-                          0.02, 1.0, description="damping ratio of the riser", scale=0.3),
+                          *DAMPING_BOUNDS, description="damping ratio of the riser", scale=0.3),
             ]
         return out
 

@@ -72,6 +72,9 @@ class FlyOut(Effect):
 
     def forces(self, ctx: ModelContext) -> None:
         for chute in ctx.test.parachutes:
+            if param_name("drag", chute.name) not in ctx.q:
+                raise ValueError("list the fly_out effect after canopy_inflation: it tilts "
+                                 "the canopy's drag")
             if any(param_name(q, chute.name) in ctx.q for q in ("added_mass", "riser_force")):
                 raise ValueError("list the fly_out effect before the riser and added-mass "
                                  "effects: they act on the axial pull")

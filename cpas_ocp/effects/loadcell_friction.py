@@ -11,9 +11,10 @@ cell sees more.  A steady loss is the stage's drag scale factor
 
 with ``friction_loss[P]`` = phi (the fraction lost in a fast rise, estimable,
 default 0; negative values are allowed so that "no friction" is an interior
-point), tau = `response_s` (0.1 s: a rise of 10 %/s in tension carries the
-friction halfway to its full value) and T_0 = 1 kN keeping the ratio finite
-before the riser loads.  dT/dt is a central difference over RATE_WINDOW_S
+point), tau = `response_s` (0.1 s: a rise of 5.5 T per second, a Drogue's
+fill, carries the friction halfway to its full value; a Main's fill, under
+1 T per second, about a tenth of the way) and T_0 = 1 kN keeping the ratio
+finite before the riser loads.  dT/dt is a central difference over RATE_WINDOW_S
 (40 ms) along the trajectory, like the added-mass rate, so the reading stays
 continuous in the parameters that move the corners of the Eq. 5/6 curve.
 List it after the load-cell sensor.

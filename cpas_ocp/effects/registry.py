@@ -75,7 +75,7 @@ class EffectType:
             kwargs["name"] = self.name
         try:
             return self.cls(**kwargs)
-        except (TypeError, ValueError) as exc:
+        except (TypeError, ValueError, AttributeError, KeyError) as exc:
             raise InputError(file, field_path, f"valid options of {self.name!r}: {exc}") from None
 
 

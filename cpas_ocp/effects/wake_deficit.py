@@ -43,8 +43,10 @@ class WakeDeficit(Effect):
     name: str = "wake_deficit"
 
     def __post_init__(self) -> None:
+        if not isinstance(self.prf, dict):
+            raise ValueError("prf must map parachute types to fractions, e.g. {\"main\": 0.9}")
         for kind, value in self.prf.items():
-            if not MIN_PRF <= float(value) <= 1.0:
+            if not isinstance(value, int | float) or not MIN_PRF <= float(value) <= 1.0:
                 raise ValueError(f"prf of {kind!r} must lie in [{MIN_PRF}, 1]; got {value}")
 
     def parameters(self, test: FlightTest) -> list[Parameter]:
@@ -55,6 +57,9 @@ class WakeDeficit(Effect):
 
     def forces(self, ctx: ModelContext) -> None:
         for chute in ctx.test.parachutes:
+            if param_name("drag", chute.name) not in ctx.q:
+                raise ValueError("list the wake_deficit effect after canopy_inflation: it "
+                                 "scales the canopy's drag")
             if any(param_name(q, chute.name) in ctx.q for q in ("axial_fraction", "riser_force")):
                 raise ValueError("list the wake_deficit effect before fly_out and the riser "
                                  "effects: they use the canopy's drag")
