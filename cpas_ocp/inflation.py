@@ -32,8 +32,9 @@ measurable prediction changes, but the estimation problem becomes twice
 differentiable in every parameter (at the start, for expopen above 0.5,
 since the ramp grows as the fourth power; a floor of 1e-12 under tau leaves a
 step of (CdS_i - CdS_{i-1}) 1e-12^expopen where the stage switches on: a
-millionth of the stage's growth at expopen 0.5, far below the noise).  Unrounded, the RK4 integral of a kinked
-drag area is itself kinked wherever a corner crosses an integration point,
+millionth of the stage's growth at expopen 0.5, far below the noise).
+Unrounded, the RK4 integral of a kinked drag area is itself kinked wherever
+a corner crosses an integration point,
 and Ipopt cycled: the `main2` fit, with its finite-mass fill ends sharp,
 oscillated between two points 0.2 apart in chi-square for 500 iterations.
 
