@@ -60,6 +60,25 @@ class ModelContext:
         """Multiply quantity `name` (1 if not yet set) by `factor`."""
         self.q[name] = self.q.get(name, 1.0) * factor
 
+    def scale_drag(self, chute: str, factor: ca.SX | float, effect: str,
+                   users: tuple[str, ...]) -> None:
+        """Multiply canopy `chute`'s ``drag[P]`` by `factor` on behalf of `effect`.
+
+        The drag must already exist (the `canopy_inflation` effect writes it) and
+        none of the quantities `users` (``<quantity>[P]`` of the effects that
+        consume the drag) may yet: the order of the effect list is checked, not
+        assumed.
+        """
+        drag = f"drag[{chute}]"
+        if drag not in self.q:
+            raise ValueError(f"list the {effect} effect after canopy_inflation: it changes "
+                             f"the canopy's drag")
+        early = [u for u in users if f"{u}[{chute}]" in self.q]
+        if early:
+            raise ValueError(f"list the {effect} effect before the effects that write "
+                             f"{', '.join(early)}: they use the canopy's drag")
+        self.scale(drag, factor)
+
     def at_time_offset(self, expr: ca.SX, dt: ca.SX | float, steps: int) -> ca.SX:
         """`expr` (a function of state and time) evaluated at t + dt instead of t.
 

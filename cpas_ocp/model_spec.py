@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from .effects import baseline_effects
 from .effects.base import Effect
 from .effects.registry import BASELINE, BUILTIN, EffectType, load_plugin
 from .errors import InputError
@@ -117,7 +118,7 @@ def _conversion(unit: str, si_unit: str, file: str, field_path: str) -> float:
 
 def baseline_spec() -> ModelSpec:
     """The baseline effect set with default options."""
-    return ModelSpec(tuple(BUILTIN[name].build({}, "(baseline)", name) for name in BASELINE))
+    return ModelSpec(tuple(baseline_effects()))
 
 
 def spec_from_effects(effects: Sequence[Effect]) -> ModelSpec:
@@ -137,23 +138,19 @@ def spec_from_block(block: dict[str, Any] | None, file: str, base_dir: Path) -> 
                                  f"effects with new names; {name!r} is already "
                                  f"registered by {registry[name].source}")
             registry[name] = entry
-    names = [BUILTIN[n].name for n in BASELINE]
+    names: list[str] = []
     effects: list[Effect] = []
-    if "effects" in block:
-        names = []
-        for i, item in enumerate(block["effects"]):
-            path = f"model.effects[{i}]"
-            name, options = (item, {}) if isinstance(item, str) else (
-                item["effect"], {k: v for k, v in item.items() if k != "effect"})
-            if name not in registry:
-                raise InputError(file, path, f"a registered effect ({', '.join(sorted(registry))});"
-                                             f" got {name!r}")
-            if name in names:
-                raise InputError(file, path, f"each effect once; {name!r} is listed twice")
-            names.append(name)
-            effects.append(registry[name].build(options, file, path))
-    else:
-        effects = [registry[n].build({}, file, "model") for n in names]
+    for i, item in enumerate(block.get("effects", BASELINE)):
+        path = f"model.effects[{i}]"
+        name, options = (item, {}) if isinstance(item, str) else (
+            item["effect"], {k: v for k, v in item.items() if k != "effect"})
+        if name not in registry:
+            raise InputError(file, path, f"a registered effect ({', '.join(sorted(registry))});"
+                                         f" got {name!r}")
+        if name in names:
+            raise InputError(file, path, f"each effect once; {name!r} is listed twice")
+        names.append(name)
+        effects.append(registry[name].build(options, file, path))
     risers = [n for n in names if n in RISER_MODELS]
     if len(risers) > 1:
         raise InputError(file, "model.effects", f"one riser model; got {' and '.join(risers)}")

@@ -19,6 +19,7 @@ from .fly_out import FlyOut
 from .forebody_drag import ForebodyDrag
 from .loadcell_friction import LoadCellFriction
 from .loadcell_scale import LoadCellScale
+from .registry import BASELINE, BUILTIN
 from .rigid_riser import RigidRiser
 from .sensor_bias import SensorBias
 from .sensor_lag import SensorLag
@@ -27,9 +28,8 @@ from .wake_deficit import WakeDeficit
 
 
 def baseline_effects() -> list[Effect]:
-    """A fresh list of the baseline effects, in composition order."""
-    return [CanopyInflation(), ForebodyDrag(), RigidRiser(), DragScale(), LoadCellScale(),
-            GpsSensor(), ImuSensor(), LoadCellSensor()]
+    """A fresh list of the baseline effects (`registry.BASELINE`), in composition order."""
+    return [BUILTIN[name].build({}, "(baseline)", name) for name in BASELINE]
 
 
 def with_elastic_risers(effects: list[Effect]) -> list[Effect]:

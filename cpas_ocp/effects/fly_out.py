@@ -72,14 +72,8 @@ class FlyOut(Effect):
 
     def forces(self, ctx: ModelContext) -> None:
         for chute in ctx.test.parachutes:
-            if param_name("drag", chute.name) not in ctx.q:
-                raise ValueError("list the fly_out effect after canopy_inflation: it tilts "
-                                 "the canopy's drag")
-            if any(param_name(q, chute.name) in ctx.q for q in ("added_mass", "riser_force")):
-                raise ValueError("list the fly_out effect before the riser and added-mass "
-                                 "effects: they act on the axial pull")
             theta = sum(ctx.q[param_name("stage_weight", chute.name, s)]
                         * ctx.p[param_name("flyout_angle", chute.name, s)] for s in chute.stages)
             axial = ca.cos(theta)
+            ctx.scale_drag(chute.name, axial, self.name, ("added_mass", "riser_force"))
             ctx.q[param_name("axial_fraction", chute.name)] = axial
-            ctx.scale(param_name("drag", chute.name), axial)

@@ -57,10 +57,5 @@ class WakeDeficit(Effect):
 
     def forces(self, ctx: ModelContext) -> None:
         for chute in ctx.test.parachutes:
-            if param_name("drag", chute.name) not in ctx.q:
-                raise ValueError("list the wake_deficit effect after canopy_inflation: it "
-                                 "scales the canopy's drag")
-            if any(param_name(q, chute.name) in ctx.q for q in ("axial_fraction", "riser_force")):
-                raise ValueError("list the wake_deficit effect before fly_out and the riser "
-                                 "effects: they use the canopy's drag")
-            ctx.scale(param_name("drag", chute.name), ctx.p[param_name("prf", chute.name)])
+            ctx.scale_drag(chute.name, ctx.p[param_name("prf", chute.name)], self.name,
+                           ("axial_fraction", "riser_force"))
