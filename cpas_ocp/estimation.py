@@ -36,10 +36,10 @@ from .compiled import compile_functions
 from .effects import Effect
 from .errors import SolverFailure
 from .flight_test import FlightTest
-from .model import Model
+from .model import Model, timing_label
 from .model_spec import ModelSpec, spec_from_effects, spec_of_test
 from .reduction import gps_state, initial_guess
-from .simulate import rk4_step
+from .simulate import rk4_step, simulate
 from .uncertainty import (
     Covariance,
     Linearization,
@@ -109,6 +109,9 @@ class SensorResidual:
     def normalized(self) -> np.ndarray:
         return (self.measured - self.model) / self.sigma
 
+
+# Sensor name under which observed event times appear among the residuals.
+EVENTS = "events"
 
 # Status of a run ended by the statistical test (`Settings.chi2_step_tol`).
 STATISTICALLY_CONVERGED = "Solved_Gauss_Newton_Step_Below_Tolerance"
@@ -288,15 +291,20 @@ class Estimator:
         # Captured quantities at free event times: cubic B-spline weights of node values.
         z_all = ca.vertcat(ca.vec(X), P, C)
         for i, cap in enumerate(m.captures):
-            prm = m.parameter(cap.time_parameter)
-            lo = self.values.get(prm.name, prm.default) if prm.name not in free_index else prm.lower
-            hi = self.values.get(prm.name, prm.default) if prm.name not in free_index else prm.upper
+            if cap.at_time is not None:
+                lo = hi = cap.at_time
+                t_event = ca.MX(cap.at_time)
+            else:
+                prm = m.parameter(cap.time_parameter)
+                fixed = prm.name not in free_index
+                lo = self.values.get(prm.name, prm.default) if fixed else prm.lower
+                hi = self.values.get(prm.name, prm.default) if fixed else prm.upper
+                t_event = pfull[m.parameter_names.index(prm.name)]
             k0 = max(int(np.floor((lo - self.t[0]) / h)) - 2, 0)
             k1 = min(int(np.ceil((hi - self.t[0]) / h)) + 2, n)
             kw = np.arange(k0, k1 + 1)
             qfn = m.capture_function(cap.name).map(len(kw), "serial")
             node_vals = qfn(Xp[:, kw], ca.DM(self.t[kw]).T, pfull, Cp)
-            t_event = pfull[m.parameter_names.index(prm.name)]
             w = cubic_bspline((t_event - ca.DM(self.t[kw]).T) / h)
             con = (Cp[i] - ca.dot(w, node_vals)) / cscale
             g.append(con)
@@ -304,14 +312,24 @@ class Estimator:
             lbg.append([0.0])
             ubg.append([0.0])
 
-        # Parameter constraints declared by effects.
-        p_sx = ca.vertcat(*[m.ctx.p[p.name] for p in m.parameters])
+        # Constraints on parameters and captured values declared by effects.
+        p_sx = ca.vertcat(ca.SX(0, 1), *[m.ctx.p[p.name] for p in m.parameters])
+        c_sx = ca.vertcat(ca.SX(0, 1), *[m.ctx.c[c.name] for c in m.captures])
         for con in m.constraints:
-            fn = ca.Function("con", [p_sx], [con.expr])
-            g.append(fn(pfull))
+            fn = ca.Function("con", [p_sx, c_sx], [con.expr])
+            g.append(fn(pfull, Cp))
             g_jac.append(ca.jacobian(g[-1], z_all))
             lbg.append([con.lower])
             ubg.append([con.upper])
+
+        # Observed event times the model predicts (a Pilot's Main bag lift and bag strip).
+        predicted = m.event_times(pfull, Cp)
+        for j, (timing, event) in enumerate(m.timings):
+            r = (event.time - predicted[j]) / event.sigma
+            residual_blocks.append(r)
+            residual_jacs.append(ca.jacobian(r, z_all))
+            self._samples.append((EVENTS, (timing_label(timing),), np.array([event.time]),
+                                  np.array([[event.time]]), np.array([[event.sigma]])))
 
         self._z = z_all
         residual = ca.vertcat(*residual_blocks)
@@ -329,12 +347,19 @@ class Estimator:
         gradient = ca.densify(ca.mtimes(jac.T, residual))
         grad_f = ca.Function("grad_f", [self._z, empty], [obj, gradient], ["x", "p"],
                              ["f", "grad_f_x"])
-        # Gauss-Newton Hessian of the Lagrangian: J'J of the weighted residuals; the
-        # curvature of the continuity constraints is neglected (small-residual problems).
+        # Gauss-Newton Hessian of the Lagrangian: J'J of the weighted residuals plus the
+        # exact curvature of the few capture and effect constraints (a capture at a free
+        # time bends in that time; without it a Pilot's bag-strip constraint made the
+        # steps cycle); the curvature of the continuity constraints is neglected
+        # (small-residual problems).
         sigma_f = ca.MX.sym("sigma_f")
-        hess = ca.Function("gauss_newton", [self._z, empty, sigma_f,
-                                            ca.MX.sym("lam_g", self._g.numel())],
-                           [sigma_f * ca.triu(ca.mtimes(jac.T, jac))],
+        lam_g = ca.MX.sym("lam_g", self._g.numel())
+        n_gaps = nx * n
+        small = ca.vertcat(*g[1:])
+        curvature = (ca.hessian(ca.dot(lam_g[n_gaps:], small), z_all)[0] if small.numel()
+                     else ca.MX(z_all.numel(), z_all.numel()))
+        hess = ca.Function("gauss_newton", [self._z, empty, sigma_f, lam_g],
+                           [ca.triu(sigma_f * ca.mtimes(jac.T, jac) + curvature)],
                            ["x", "p", "lam_f", "lam_g"], ["hess_gamma_x_x"])
         self._unpack = ca.Function("unpack", [self._z], [Xp, pfull, Cp])
         self._residuals = ca.Function("residuals", [self._z], residual_blocks)
@@ -347,7 +372,8 @@ class Estimator:
         pb = [m.parameter(f) for f in self.free]
         inf = np.inf
         self._lbz = np.concatenate([np.full(X.numel(), -inf), [p.lower / sc for p, sc in
-                                    zip(pb, self.pscale, strict=True)], np.full(ncap, 0.01)])
+                                    zip(pb, self.pscale, strict=True)],
+                                    [c.lower / cscale for c in m.captures]])
         self._ubz = np.concatenate([np.full(X.numel(), inf), [p.upper / sc for p, sc in
                                     zip(pb, self.pscale, strict=True)], np.full(ncap, inf)])
         for st in m.states:  # states known at the start of the phase: first node held
@@ -442,16 +468,36 @@ class Estimator:
         x0 = np.zeros((m.nx, len(self.t)))
         x0[m.state_slice("position")] = pos.T
         x0[m.state_slice("velocity")] = vel.T
+        guessed = {"position", "velocity"}
         for effect in m.effects:
             for name, value in effect.state_guess(self.test, self.t, self.values).items():
                 x0[m.state_slice(name)] = value
+                guessed.add(name)
         for st in m.states:
             if st.pinned:
                 x0[m.state_slice(st.name), 0] = st.initial
+        unguessed = [st for st in m.states if st.name not in guessed]
+        if unguessed:
+            # States no effect guesses from the data (a Pilot's separation): a forward
+            # simulation from the first node with the initial parameter values.
+            h = self.t[1] - self.t[0]
+            traj = simulate(m, self.values, x0[:, 0], self.t[0], self.t[-1], step=h)
+            for st in unguessed:
+                rows = m.state_slice(st.name)
+                x0[rows] = np.array([np.interp(self.t, traj.t, col) for col in traj.x[:, rows].T])
         p0 = np.array([self.values[f] for f in self.free]) / self.pscale
+        # Captured values: each capture's quantity at the guessed state nearest its time
+        # (the start airspeeds the captures themselves feed in at the GPS speed).
         speed = np.linalg.norm(vel, axis=1)
-        c0 = np.array([np.interp(self.values[c.time_parameter], self.t, speed)
-                       for c in m.captures]) / self._cscale
+        times = [c.at_time if c.at_time is not None else self.values[c.time_parameter]
+                 for c in m.captures]
+        c_speed = np.interp(times, self.t, speed)
+        pvec = m.parameter_vector(self.values)
+        c0 = np.empty(len(m.captures))
+        for i, (cap, tc) in enumerate(zip(m.captures, times, strict=True)):
+            k = int(np.argmin(np.abs(self.t - tc)))
+            c0[i] = float(m.capture_function(cap.name)(x0[:, k], self.t[k], pvec, c_speed))
+        c0 = np.maximum(c0, [c.lower for c in m.captures]) / self._cscale
         return np.concatenate([(x0 / self._xscale[:, None]).ravel(order="F"), p0, c0])
 
     # ------------------------------------------------------------------ solve

@@ -23,10 +23,10 @@ from typing import TypeVar
 import casadi as ca
 import numpy as np
 
-from .effects.base import Capture, Constraint, Effect, State
-from .flight_test import FlightTest
+from .effects.base import Capture, Constraint, Effect, EventTiming, State
+from .flight_test import Event, FlightTest
 from .integration import rk4
-from .parameters import Parameter
+from .parameters import Parameter, param_name, split_name
 from .units import G0
 
 T = TypeVar("T", Parameter, State, Capture)
@@ -111,11 +111,14 @@ class Model:
             [p for e in self.effects for p in e.parameters(test)], "parameter")
         self.states: list[State] = _unique_by_name(
             [*CORE_STATES, *(s for e in self.effects for s in e.states(test))], "state")
+        self.timings = self._observed_timings()
         self.captures: list[Capture] = _unique_by_name(
-            [c for e in self.effects for c in e.captures(test)], "capture")
+            [c for e in self.effects for c in e.captures(test)]
+            + [c for timing, event in self.timings for c in _crossing_captures(timing, event)],
+            "capture")
         names = {p.name for p in self.parameters}
         for cap in self.captures:
-            if cap.time_parameter not in names:
+            if cap.at_time is None and cap.time_parameter not in names:
                 raise ValueError(f"capture {cap.name} refers to unknown parameter "
                                  f"{cap.time_parameter}")
 
@@ -148,6 +151,12 @@ class Model:
         ctx.state_vector, ctx.state_names = x, tuple(s.name for s in self.states)
         for e in self.effects:
             e.observations(ctx)
+        for timing, _ in self.timings:
+            if timing.crossing is not None:
+                gap = ctx.q[timing.crossing]
+                xdot = ca.vertcat(*(ctx.xdot[n] for n in ctx.state_names))
+                ctx.q[_rate_name(timing.crossing)] = (ca.jtimes(gap, x, xdot)
+                                                      + ca.jacobian(gap, t))
         self.ctx = ctx
         self.constraints: list[Constraint] = [c_ for e in self.effects
                                               for c_ in e.constraints(ctx)]
@@ -170,6 +179,19 @@ class Model:
             "quantities", args, [ca.vertcat(*(ctx.q[n] for n in self.quantity_names))])
         self._capture_fns = {cap.name: ca.Function(f"capture{i}", args, [ctx.q[cap.quantity]])
                              for i, cap in enumerate(self.captures)}
+        predicted = [_predicted_time(timing, event, ctx) for timing, event in self.timings]
+        self.event_times = ca.Function("event_times", [p, c], [ca.vertcat(ca.SX(0, 1),
+                                                                           *predicted)])
+
+    def _observed_timings(self) -> list[tuple[EventTiming, Event]]:
+        """The effects' event timings whose event the test observed, each with that event."""
+        out = []
+        for e in self.effects:
+            for timing in e.event_timings(self.test):
+                event = self.test.event(timing.event, timing.parachute, timing.stage)
+                if event is not None:
+                    out.append((timing, event))
+        return out
 
     def _environment(self, ctx: ModelContext) -> None:
         """Air-relative velocity, density and dynamic pressure at the vehicle."""
@@ -210,6 +232,42 @@ class Model:
     def parameter_vector(self, values: dict[str, float]) -> np.ndarray:
         """Full parameter vector from a dict, defaults where a value is absent."""
         return np.array([values.get(p.name, p.default) for p in self.parameters], dtype=float)
+
+
+# Floor of a crossing quantity's rate in the predicted time g/g' (units of g per s): keeps
+# the prediction finite where a poor first guess has the quantity not yet rising.
+RATE_FLOOR = 0.1
+
+
+def timing_label(timing: EventTiming) -> str:
+    """``main_bag_lift[pilot1]``: the event and the canopy (and stage) it belongs to."""
+    index = (timing.parachute,) if timing.stage is None else (timing.parachute, timing.stage)
+    return param_name(timing.event, *index)
+
+
+def _rate_name(quantity: str) -> str:
+    base, index = split_name(quantity)
+    return param_name(f"{base}_rate", *index)
+
+
+def _crossing_captures(timing: EventTiming, event: Event) -> list[Capture]:
+    """A crossing quantity and its rate, captured at the observed time of the event."""
+    if timing.crossing is None:
+        return []
+    label = timing_label(timing)
+    return [Capture(f"gap@{label}", "", timing.crossing, "", at_time=event.time),
+            Capture(f"gap_rate@{label}", "", _rate_name(timing.crossing), "",
+                    at_time=event.time)]
+
+
+def _predicted_time(timing: EventTiming, event: Event, ctx: ModelContext) -> ca.SX:
+    """The model's time of an observed event (s), from parameters and captured values."""
+    if timing.time is not None:
+        return ctx.q[timing.time]
+    label = timing_label(timing)
+    rate = ctx.c[f"gap_rate@{label}"]
+    rate = 0.5 * (rate + ca.sqrt(rate**2 + RATE_FLOOR**2))
+    return event.time - ctx.c[f"gap@{label}"] / rate
 
 
 def _unique_by_name(items: list[T], what: str) -> list[T]:

@@ -36,7 +36,7 @@ from .flight_test import MANIFEST, FlightTest, read_json, validate_block
 from .model import Model
 from .units import FACTORS
 
-RISER_MODELS = ("rigid_riser", "elastic_riser")
+RISER_MODELS = ("rigid_riser", "elastic_riser", "pilot_deployment")
 
 
 @dataclass(frozen=True)

@@ -10,7 +10,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from .estimation import Fit
+from .estimation import EVENTS, Fit
 from .parameters import param_name
 from .reduction import reduce, stage_starts
 from .units import FT, LBF
@@ -26,7 +26,7 @@ DISPLAY = {
 def plot_sensors(fit: Fit, folder: Path) -> list[Path]:
     """One figure per sensor: each channel's data and model, normalised residuals beneath."""
     paths = []
-    for sensor in dict.fromkeys(r.sensor for r in fit.residuals):
+    for sensor in dict.fromkeys(r.sensor for r in fit.residuals if r.sensor != EVENTS):
         rows = [r for r in fit.residuals if r.sensor == sensor]
         fig, axes = plt.subplots(2 * len(rows), 1, figsize=(10, 2.6 * len(rows) + 1.5),
                                  sharex=True, gridspec_kw={"height_ratios": [3, 1] * len(rows)})
@@ -50,6 +50,32 @@ def plot_sensors(fit: Fit, folder: Path) -> list[Path]:
         plt.close(fig)
         paths.append(path)
     return paths
+
+
+def plot_events(fit: Fit, folder: Path) -> Path | None:
+    """Observed event times (with their 1 and 2 sigma) against the model's, one row each."""
+    rows = [r for r in fit.residuals if r.sensor == EVENTS]
+    if not rows:
+        return None
+    fig, ax = plt.subplots(figsize=(10, 0.6 * len(rows) + 1.6))
+    for i, r in enumerate(rows):
+        t_obs, t_model, sigma = float(r.measured[0]), float(r.model[0]), float(r.sigma[0])
+        ax.errorbar(t_obs, i, xerr=2 * sigma, fmt="none", ecolor="0.75", elinewidth=6)
+        ax.errorbar(t_obs, i, xerr=sigma, fmt="o", color="0.35", ms=4, elinewidth=6,
+                    label="observed ±1σ, ±2σ" if i == 0 else None)
+        ax.plot(t_model, i, "|", color="C3", ms=18, mew=2, label="model" if i == 0 else None)
+        ax.annotate(f"{(t_obs - t_model) / sigma:+.2f}σ", (t_obs + 2.5 * sigma, i),
+                    va="center", fontsize=8)
+    ax.set_yticks(range(len(rows)), [r.channel for r in rows])
+    ax.set_ylim(-0.7, len(rows) - 0.3)
+    ax.set_xlabel("time [s]")
+    ax.legend(loc="lower right", fontsize=8)
+    fig.suptitle(f"{fit.test.name}: observed event times against the model")
+    fig.tight_layout()
+    path = folder / "events.png"
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
 
 
 def plot_drag_areas(fit: Fit, folder: Path) -> Path:

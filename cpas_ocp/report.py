@@ -11,9 +11,9 @@ import pandas as pd
 from scipy.stats import norm
 
 from .diagnostics import sensor_summary, worst_windows
-from .estimation import Fit
+from .estimation import EVENTS, Fit
 from .output_folder import atomic_folder
-from .plots import plot_drag_areas, plot_sensors
+from .plots import plot_drag_areas, plot_events, plot_sensors
 from .uncertainty import Covariance
 from .units import FT
 
@@ -47,6 +47,11 @@ SENSOR_UNITS = {"east": "m", "north": "m", "up": "m", "v_east": "m/s", "v_north"
                 "v_up": "m/s", "load_factor": "g", "tension": "N"}
 
 
+def channel_unit(sensor: str, channel: str) -> str:
+    """SI unit of a residual channel (event times are in s)."""
+    return "s" if sensor == EVENTS else SENSOR_UNITS.get(channel, "SI")
+
+
 def result_dict(fit: Fit, cov: Covariance | None) -> dict[str, Any]:
     """Everything a reader of result.json needs; SI units, stated per value."""
     std = cov.std if cov is not None else {}
@@ -65,7 +70,7 @@ def result_dict(fit: Fit, cov: Covariance | None) -> dict[str, Any]:
     fixed = {n: {"value": v, "unit": fit.model.parameter(n).unit}
              for n, v in fit.parameters.items() if n not in fit.free}
     summary = sensor_summary(fit)
-    residuals = {s: {"rms": e["rms"], "unit": {c: SENSOR_UNITS.get(c, "SI") for c in e["rms"]},
+    residuals = {s: {"rms": e["rms"], "unit": {c: channel_unit(s, c) for c in e["rms"]},
                      "normalized_rms": e["normalized_rms"], "samples": e["samples"]}
                  for s, e in summary.items()}
     n = fit.n_samples
@@ -120,7 +125,7 @@ def fit_summary(fit: Fit) -> str:
            f"{fit.solver.wall_s:.1f} s;  chi²/dof = {fit.chi_square:.1f}/{fit.dof}"
            f" = {fit.chi_square / fit.dof:.3f};  AIC {ic['aic']:.1f}, BIC {ic['bic']:.1f}"]
     for s, e in sensor_summary(fit).items():
-        rms = ", ".join(f"{c} {v:.4g} {SENSOR_UNITS.get(c, '')}" for c, v in e["rms"].items())
+        rms = ", ".join(f"{c} {v:.4g} {channel_unit(s, c)}" for c, v in e["rms"].items())
         out.append(f"  {s:16s} normalised RMS {e['normalized_rms']:.3f}   (RMS {rms})")
     worst = worst_windows(fit, top=1)
     if worst:
@@ -141,6 +146,7 @@ def write_report(fit: Fit, cov: Covariance | None, out: str | Path) -> Path:
         pd.DataFrame(rows).to_csv(tmp / "parameters.csv", index=False)
         plot_sensors(fit, tmp)
         plot_drag_areas(fit, tmp)
+        plot_events(fit, tmp)
         (tmp / "report.md").write_text(
             f"# Reconstruction of {fit.test.name}\n\n{fit.test.label}\n\n```\n"
             f"{parameter_table(fit, cov)}\n\n{fit_summary(fit)}\n```\n\n"

@@ -55,7 +55,8 @@ def simulate(model: Model, params: dict[str, float], x0: np.ndarray, t0: float, 
     """Integrate from t0 to t1 on a grid of `step`, stopping exactly at capture times."""
     pvec = model.parameter_vector(params)
     names = model.parameter_names
-    pending = sorted(((pvec[names.index(cap.time_parameter)], i)
+    pending = sorted(((cap.at_time if cap.at_time is not None
+                       else pvec[names.index(cap.time_parameter)], i)
                       for i, cap in enumerate(model.captures)))
     cvec = np.zeros(len(model.captures))
     speed = float(ca.norm_2(x0[model.state_slice("velocity")]))
@@ -113,7 +114,11 @@ def simulate_problem(problem: Problem, out: str | Path, seed: int,
     truth = dict(problem.truth)
     manifest = json.loads(json.dumps(problem.manifest))
     manifest["name"] = f"{problem.name}-seed{seed}"
-    manifest["events"] = _observed_events(sim["events"], truth, rng)
+    # Timing noise of every event, drawn first and in the listed order.
+    timing_noise = rng.standard_normal(len(sim["events"]))
+    derived = sim.get("start_at_crossing", {})
+    manifest["events"] = _observed_events(sim["events"], truth, timing_noise,
+                                          skip=set(derived))
 
     t0, t1, step = float(sim["t_begin"]), float(sim["t_end"]), float(sim["step"])
     sample_times = {}
@@ -131,7 +136,12 @@ def simulate_problem(problem: Problem, out: str | Path, seed: int,
     if unknown:
         raise ValueError(f"problem {problem.name}: truth names unknown parameters {unknown}")
     x0 = initial_state(model, sim)
+    for name, quantity in derived.items():
+        truth[name] = first_crossing(model, simulate(model, {**truth, name: t1}, x0, t0, t1,
+                                                      step), {**truth, name: t1}, quantity)
     traj = simulate(model, truth, x0, t0, t1, step)
+    manifest["events"] = _observed_events(sim["events"], truth, timing_noise,
+                                          model_times=_true_event_times(model, traj, truth))
 
     tmp = Path(tempfile.mkdtemp(prefix=".cpas-sim-", dir=out.parent if out.parent.exists()
                                 else None))
@@ -177,13 +187,31 @@ def _on_grid(t: np.ndarray, t0: float, step: float) -> np.ndarray:
     return t0 + step * np.rint((t - t0) / step)
 
 
-def _observed_events(spec: list[dict], truth: dict[str, float],
-                     rng: np.random.Generator) -> list[dict]:
-    """Events as a video or pyro log would report them: truth-based times plus timing noise."""
+def _observed_events(spec: list[dict], truth: dict[str, float], noise: np.ndarray,
+                     skip: set[str] | None = None,
+                     model_times: dict[tuple[str, str], float] | None = None) -> list[dict]:
+    """Events as a video or pyro log would report them: true times plus timing noise.
+
+    A true time is given (``time``), follows a truth parameter (``from_parameter``
+    plus ``offset``), or is the model's own event (``from_model``: a Pilot's
+    Main bag lift), taken from `model_times` by (event, parachute).  Events that
+    depend on parameters in `skip`, or on the model while `model_times` is not
+    yet known, are left out.  `noise` holds one standard normal draw per
+    listed event.
+    """
     events = []
-    for e in spec:
-        base = truth[e["from_parameter"]] + e["offset"] if "from_parameter" in e else e["time"]
-        t = base + e["sigma"] * rng.standard_normal()
+    for e, draw in zip(spec, noise, strict=True):
+        if "from_parameter" in e:
+            if e["from_parameter"] in (skip or set()):
+                continue
+            base = truth[e["from_parameter"]] + e["offset"]
+        elif e.get("from_model"):
+            if model_times is None:
+                continue
+            base = model_times[(e["name"], e["parachute"])]
+        else:
+            base = e["time"]
+        t = base + e["sigma"] * draw
         ev = {"name": e["name"], "parachute": e["parachute"],
               "time": {"value": round(float(t), 4), "unit": "s"},
               "sigma": {"value": e["sigma"], "unit": "s"}}
@@ -191,3 +219,39 @@ def _observed_events(spec: list[dict], truth: dict[str, float],
             ev["stage"] = e["stage"]
         events.append(ev)
     return events
+
+
+def _quantity_series(model: Model, traj: Trajectory, params: dict[str, float],
+                     quantity: str) -> np.ndarray:
+    """A scalar model quantity along a simulated trajectory."""
+    pvec = model.parameter_vector(params)
+    cvec = np.array([traj.captures[c.name] for c in model.captures])
+    values = model.quantities.map(len(traj.t))(traj.x.T, traj.t, pvec, cvec)
+    return np.asarray(values)[model.quantity_names.index(quantity)]
+
+
+def first_crossing(model: Model, traj: Trajectory, params: dict[str, float],
+                    quantity: str) -> float:
+    """The time (s) a quantity first rises through zero, interpolated between steps."""
+    g = _quantity_series(model, traj, params, quantity)
+    up = np.flatnonzero((g[:-1] < 0.0) & (g[1:] >= 0.0))
+    if up.size == 0:
+        raise ValueError(f"{quantity} never rises through zero in the simulation")
+    k = int(up[0])
+    return float(traj.t[k] + (traj.t[k + 1] - traj.t[k]) * -g[k] / (g[k + 1] - g[k]))
+
+
+def _true_event_times(model: Model, traj: Trajectory,
+                      params: dict[str, float]) -> dict[tuple[str, str], float]:
+    """The true time of every event the model's effects predict, by (event, parachute)."""
+    out = {}
+    pvec = model.parameter_vector(params)
+    cvec = np.array([traj.captures[c.name] for c in model.captures])
+    quantities = dict(zip(model.quantity_names, np.asarray(
+        model.quantities(traj.x[-1], traj.t[-1], pvec, cvec)).ravel(), strict=True))
+    for effect in model.effects:
+        for timing in effect.event_timings(model.test):
+            key = (timing.event, timing.parachute)
+            out[key] = (quantities[timing.time] if timing.time is not None
+                        else first_crossing(model, traj, params, timing.crossing))
+    return out

@@ -7,18 +7,21 @@ and load-cell measurement models.  Order matters only in that the sensors
 come after the effects that set their gains.  Further effects (`AddedMass`)
 are added to the list where a problem needs them; sensor errors
 (`SensorBias`, `SensorLag`) go after the sensors they modify.  `ElasticRiser`
-replaces `RigidRiser` (see `with_elastic_risers`).
+replaces `RigidRiser` (see `with_elastic_risers`); `PilotDeployment` is the
+riser model of a Pilot phase, from mortar fire to Main bag strip.
 """
 
 from .added_mass import AddedMass
-from .base import Capture, Constraint, Effect, State
+from .base import Capture, Constraint, Effect, EventTiming, State
 from .canopy_inflation import CanopyInflation
+from .deployment_load import DeploymentLoad
 from .drag_scale import DragScale
 from .elastic_riser import ElasticRiser
 from .fly_out import FlyOut
 from .forebody_drag import ForebodyDrag
 from .loadcell_friction import LoadCellFriction
 from .loadcell_scale import LoadCellScale
+from .pilot_deployment import PilotDeployment
 from .registry import BASELINE, BUILTIN
 from .rigid_riser import RigidRiser
 from .sensor_bias import SensorBias
@@ -42,9 +45,11 @@ __all__ = [
     "CanopyInflation",
     "Capture",
     "Constraint",
+    "DeploymentLoad",
     "DragScale",
     "Effect",
     "ElasticRiser",
+    "EventTiming",
     "FlyOut",
     "ForebodyDrag",
     "GpsSensor",
@@ -52,6 +57,7 @@ __all__ = [
     "LoadCellFriction",
     "LoadCellScale",
     "LoadCellSensor",
+    "PilotDeployment",
     "RigidRiser",
     "SensorBias",
     "SensorLag",

@@ -17,6 +17,7 @@ writing one subclass in one file and naming it in the problem.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -55,17 +56,48 @@ class Capture:
     Example: a stage's start airspeed V_i is ``airspeed`` captured at
     ``t_start[drogue1,stage2]``.  The estimator makes it a decision variable
     tied to the trajectory; the simulator records it when the event happens.
+    With `at_time` set, the instant is that fixed time (s) instead, and
+    `time_parameter` is empty (an observed event time, see `EventTiming`).
+    `lower` bounds the captured value in the estimation problem.
     """
 
     name: str
     time_parameter: str
     quantity: str
     unit: str
+    at_time: float | None = None
+    lower: float = -math.inf
+
+
+@dataclass(frozen=True)
+class EventTiming:
+    """How the model predicts the time of an observed event.
+
+    Either `time` names a scalar quantity that is the predicted time itself
+    (s, a function of parameters and captured values only: a Pilot's Main bag
+    lift at t_i + t_f), or `crossing` names a scalar quantity of the state
+    whose first rise through zero is the event (the Main bag strips when the
+    deployed length reaches the line length).  For a crossing the model
+    captures the quantity g and its rate g' at the observed time t_obs and
+    predicts t_obs - g/g' (the first-order time of the crossing).  Where the
+    test has no such event, the timing is not used.
+    """
+
+    event: str
+    parachute: str
+    stage: str | None = None
+    time: str | None = None
+    crossing: str | None = None
+
+    def __post_init__(self) -> None:
+        if (self.time is None) == (self.crossing is None):
+            raise ValueError(f"event timing {self.event}: give exactly one of time, crossing")
 
 
 @dataclass(frozen=True)
 class Constraint:
-    """A constraint lower <= expr(parameters) <= upper declared by an effect."""
+    """A constraint lower <= expr <= upper declared by an effect; expr is a function of
+    the parameters and the captured values (``ctx.p``, ``ctx.c``)."""
 
     label: str
     expr: ca.SX
@@ -85,6 +117,10 @@ class Effect:
         return []
 
     def captures(self, test: FlightTest) -> list[Capture]:
+        return []
+
+    def event_timings(self, test: FlightTest) -> list[EventTiming]:
+        """Observable events this effect predicts (their quantities it writes in `forces`)."""
         return []
 
     def state_guess(self, test: FlightTest, t: np.ndarray,

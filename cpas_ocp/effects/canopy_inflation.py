@@ -9,7 +9,9 @@ the trajectory at t_i.  Drag areas here are the aerodynamic ones the
 trajectory feels, pressure recovery included (PRF * CdS in the paper's terms).
 
 Quantities written: ``cds[P]`` (m^2), ``drag[P]`` (N, 3-vector, against the
-air-relative velocity) and ``stage_weight[P,S]`` (the weight of stage S in
+air-relative velocity), ``rise_end[P,S]`` (s: t_i plus the fill time t_f,
+finite mass, or the time to peak t_fp, infinite mass) and
+``stage_weight[P,S]`` (the weight of stage S in
 the canopy's sensor gains: 1 through the stage, handed to the next stage
 along a C2 smoothstep that spans the next stage's rise, from its start t_i to
 its peak or full fill; the first stage also covers the time before
@@ -45,6 +47,9 @@ if TYPE_CHECKING:
 # Delay from mortar fire to inflation start used only when no bag-strip or
 # line-stretch observation exists (s).
 MORTAR_TO_INFLATION_S = 0.5
+# Lower bound of a captured start airspeed in the estimation problem (m/s); the fill
+# time n L / V_i divides by it.
+MIN_START_AIRSPEED = 0.01
 
 
 @dataclass(frozen=True)
@@ -96,7 +101,7 @@ class CanopyInflation(Effect):
 
     def captures(self, test: FlightTest) -> list[Capture]:
         return [Capture(param_name("V_start", c.name, s), param_name("t_start", c.name, s),
-                        "airspeed", "m/s")
+                        "airspeed", "m/s", lower=MIN_START_AIRSPEED)
                 for c in test.parachutes for s in c.stages]
 
     @staticmethod
@@ -149,6 +154,7 @@ class CanopyInflation(Effect):
                                             p[param_name("expopen", *idx)], length, v_i)
                     rise = fill_time(n_f, length, v_i)
                 cds = ca.if_else(stage_started(t, starts[k]), curve, cds)
+                ctx.q[param_name("rise_end", *idx)] = starts[k] + rise
                 prev = steady
                 arrivals.append(1.0 if k == 0 else
                                 smoothstep(2.0 * (t - starts[k]) / rise - 1.0))

@@ -22,12 +22,14 @@ from ..errors import InputError
 from .added_mass import AddedMass
 from .base import Effect
 from .canopy_inflation import CanopyInflation
+from .deployment_load import DeploymentLoad
 from .drag_scale import DragScale
 from .elastic_riser import ElasticRiser
 from .fly_out import FlyOut
 from .forebody_drag import ForebodyDrag
 from .loadcell_friction import LoadCellFriction
 from .loadcell_scale import LoadCellScale
+from .pilot_deployment import PilotDeployment
 from .rigid_riser import RigidRiser
 from .sensor_bias import SensorBias
 from .sensor_lag import SensorLag
@@ -87,6 +89,8 @@ def _builtin() -> dict[str, EffectType]:
         EffectType("fly_out", FlyOut),
         EffectType("rigid_riser", RigidRiser),
         EffectType("elastic_riser", ElasticRiser),
+        EffectType("pilot_deployment", PilotDeployment),
+        EffectType("deployment_load", DeploymentLoad),
         EffectType("added_mass", AddedMass),
         EffectType("drag_scale", DragScale),
         EffectType("loadcell_scale", LoadCellScale),
