@@ -38,7 +38,9 @@ def load_problem(name: str) -> Problem:
     A problem file may extend another (``"extends": "drogue"``): it inherits
     the manifest, simulation and truth, and gives its own title, a ``model``
     block for the manifest (the effect set its data are made with and
-    reconstructed by), and truth values for the parameters that block adds.
+    reconstructed by), truth values for the parameters that block adds, and
+    optionally simulation settings that replace the base's (a shorter
+    ``t_end``).
     """
     names = problem_names()
     if name not in names:
@@ -47,7 +49,8 @@ def load_problem(name: str) -> Problem:
     if "extends" in raw:
         base = load_problem(raw["extends"])
         manifest = {**base.manifest, "name": raw["name"], "model": raw["model"]}
-        return Problem(raw["name"], raw["title"], raw["label"], manifest, base.simulation,
+        simulation = {**base.simulation, **raw.get("simulation", {})}
+        return Problem(raw["name"], raw["title"], raw["label"], manifest, simulation,
                        {**base.truth, **raw["truth"]["parameters"]})
     return Problem(raw["name"], raw["title"], raw["label"], raw["manifest"], raw["simulation"],
                    raw["truth"]["parameters"])
