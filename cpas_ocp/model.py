@@ -263,7 +263,12 @@ def _crossing_captures(timing: EventTiming, event: Event) -> list[Capture]:
 def _predicted_time(timing: EventTiming, event: Event, ctx: ModelContext) -> ca.SX:
     """The model's time of an observed event (s), from parameters and captured values."""
     if timing.time is not None:
-        return ctx.q[timing.time]
+        predicted = ctx.q[timing.time]
+        if ca.depends_on(predicted, ca.vertcat(ctx.t, *ctx.x.values())):
+            raise ValueError(f"the predicted time {timing.time} of {timing_label(timing)} "
+                             "must depend on parameters and captured values only; give a "
+                             "state quantity as a crossing instead")
+        return predicted
     label = timing_label(timing)
     rate = ctx.c[f"gap_rate@{label}"]
     rate = 0.5 * (rate + ca.sqrt(rate**2 + RATE_FLOOR**2))

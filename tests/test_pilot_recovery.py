@@ -28,9 +28,10 @@ import pytest
 from scipy.stats import chi2
 
 from cpas_ocp.cli import main
+from cpas_ocp.effects import Effect, EventTiming
 from cpas_ocp.estimation import EVENTS, Estimator, Fit
 from cpas_ocp.flight_test import load_test
-from cpas_ocp.model import timing_label
+from cpas_ocp.model import Model, timing_label
 from cpas_ocp.model_spec import spec_of_test
 from cpas_ocp.problems import load_problem
 from cpas_ocp.simulate import first_crossing, initial_state, simulate
@@ -116,3 +117,19 @@ def test_pilot_without_a_mortar_fire_is_an_input_error(problem_folder, tmp_path,
     assert code == 2
     assert len(err.splitlines()) == 1 and "manifest.json" in err and "mortar_fire" in err, err
     assert not (tmp_path / "out").exists()
+
+
+class _StateTimedLift(Effect):
+    """Predicts the Main bag lift with a quantity of the state: not a time."""
+
+    name = "state_timed_lift"
+
+    def event_timings(self, test):
+        return [EventTiming("main_bag_lift", "pilot1", time="altitude")]
+
+
+def test_a_predicted_time_that_depends_on_the_state_is_refused(problem_folder) -> None:
+    test = load_test(problem_folder("pilot", 1))
+    effects = [*spec_of_test(test).effects, _StateTimedLift()]
+    with pytest.raises(ValueError, match="crossing instead"):
+        Model(test, effects)
