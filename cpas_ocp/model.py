@@ -56,6 +56,17 @@ class ModelContext:
     # Canopies that are bodies of their own (elastic risers); the others ride on the vehicle.
     separate_bodies: set[str] = field(default_factory=set)
 
+    def separate_body(self, chute: str, effect: str) -> None:
+        """Make canopy `chute` a body of its own (on behalf of riser model `effect`).
+
+        Its air mass then belongs to that body, so the `added_mass` effect must
+        come later in the list: it must not yet have lumped the air onto the vehicle.
+        """
+        if f"added_mass[{chute}]" in self.q:
+            raise ValueError(f"list the added_mass effect after {effect}: the canopy's air "
+                             f"mass belongs to the canopy's own body")
+        self.separate_bodies.add(chute)
+
     def scale(self, name: str, factor: ca.SX | float) -> None:
         """Multiply quantity `name` (1 if not yet set) by `factor`."""
         self.q[name] = self.q.get(name, 1.0) * factor

@@ -43,12 +43,8 @@ def plot_sensors(fit: Fit, folder: Path) -> list[Path]:
             lim = max(4.0, float(np.percentile(np.abs(r.normalized), 99.5)))
             axr.set_ylim(-lim, lim)
         axes[-1].set_xlabel("time [s]")
-        fig.suptitle(f"{fit.test.name}: {sensor}, model vs measurement")
-        fig.tight_layout()
-        path = folder / f"sensor_{sensor}.png"
-        fig.savefig(path, dpi=110)
-        plt.close(fig)
-        paths.append(path)
+        paths.append(_save(fig, f"{fit.test.name}: {sensor}, model vs measurement",
+                           folder / f"sensor_{sensor}.png"))
     return paths
 
 
@@ -70,12 +66,8 @@ def plot_events(fit: Fit, folder: Path) -> Path | None:
     ax.set_ylim(-0.7, len(rows) - 0.3)
     ax.set_xlabel("time [s]")
     ax.legend(loc="lower right", fontsize=8)
-    fig.suptitle(f"{fit.test.name}: observed event times against the model")
-    fig.tight_layout()
-    path = folder / "events.png"
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(fig, f"{fit.test.name}: observed event times against the model",
+                 folder / "events.png")
 
 
 def plot_drag_areas(fit: Fit, folder: Path) -> Path:
@@ -100,11 +92,13 @@ def plot_drag_areas(fit: Fit, folder: Path) -> Path:
         ax.set_ylabel(f"{chute.name} CdS [ft²]")
         ax.legend(loc="best", fontsize=8)
     axes[-1, 0].set_xlabel("time [s]  (dashed: reconstructed inflation start times)")
-    fig.suptitle(f"{fit.test.name}: canopy drag areas")
+    return _save(fig, f"{fit.test.name}: canopy drag areas", folder / "drag_areas.png")
+
+
+def _save(fig: plt.Figure, title: str, path: Path) -> Path:
+    """Title, lay out, write at 110 dpi and close a figure; returns `path`."""
+    fig.suptitle(title)
     fig.tight_layout()
-    path = folder / "drag_areas.png"
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
-
-

@@ -114,10 +114,7 @@ class ElasticRiser(Effect):
     def forces(self, ctx: ModelContext) -> None:
         e = ctx.q["drag_direction"]
         for chute in ctx.test.parachutes:
-            if param_name("added_mass", chute.name) in ctx.q:
-                raise ValueError("list the added_mass effect after elastic_riser: the canopy's "
-                                 "air mass belongs to the canopy body")
-            ctx.separate_bodies.add(chute.name)
+            ctx.separate_body(chute.name, self.name)
             s = ctx.x[param_name("stretch", chute.name)]
             s_dot = ctx.x[param_name("stretch_rate", chute.name)]
             omega = 2.0 * math.pi * ctx.p[param_name("riser_frequency", chute.name)]

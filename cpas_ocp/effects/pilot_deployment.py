@@ -183,10 +183,7 @@ class PilotDeployment(Effect):
     def forces(self, ctx: ModelContext) -> None:
         e = ctx.q["drag_direction"]
         for chute in ctx.test.parachutes:
-            if param_name("added_mass", chute.name) in ctx.q:
-                raise ValueError("list the added_mass effect after pilot_deployment: the "
-                                 "canopy's air mass belongs to the Pilot body")
-            ctx.separate_bodies.add(chute.name)
+            ctx.separate_body(chute.name, self.name)
             s, s_dot, x, x_dot = (ctx.x[param_name(n, chute.name)] for n in (
                 "separation", "separation_rate", "deployed", "deployed_rate"))
             omega = 2.0 * math.pi * self.riser_frequency
