@@ -38,6 +38,9 @@ from cpas_ocp.problems import load_problem
 from cpas_ocp.simulate import simulate_problem
 
 
+MAX_ITERATIONS = 200  # each fit that converges takes 100-140
+
+
 def variant(spec: ModelSpec, replace: str, by: object | None) -> ModelSpec:
     """`spec` with the effect named `replace` swapped for `by` (or dropped)."""
     effects = [by if e.name == replace else e for e in spec.effects]
@@ -46,8 +49,9 @@ def variant(spec: ModelSpec, replace: str, by: object | None) -> ModelSpec:
 
 def run(label: str, test: FlightTest, spec: ModelSpec,
         guess: dict[str, float]) -> tuple[Estimator, Fit | None]:
-    est = Estimator(test, spec, Settings(guess={k: v for k, v in guess.items()
-                                                if k in spec.free_names(spec.model(test))}))
+    free = spec.free_names(spec.model(test))
+    est = Estimator(test, spec, Settings(max_iter=MAX_ITERATIONS,
+                                         guess={k: v for k, v in guess.items() if k in free}))
     t0 = time.perf_counter()
     try:
         fit = est.solve(progress=True)
