@@ -37,7 +37,6 @@ from cpas_ocp.model_spec import ModelSpec, spec_of_test
 from cpas_ocp.problems import load_problem
 from cpas_ocp.simulate import simulate_problem
 
-
 MAX_ITERATIONS = 200  # each fit that converges takes 100-140
 
 
