@@ -5,6 +5,7 @@
     cpas-ocp simulate NAME --out DIR --seed N write a synthetic test folder (+ truth.json)
     cpas-ocp reduce TEST_DIR --out DIR        offline reduction (Eqs. 2-3) and initial guess
     cpas-ocp reconstruct TEST_DIR --out DIR   reconstruct a test folder, write the report
+    cpas-ocp whatif TEST_DIR --constrain EXPR re-solve under constraints: cost, test, push
     cpas-ocp demo [--out DIR]                 simulate the built-in Drogue test and reconstruct it
 
 Exit codes: 0 success, 2 bad input (one line naming file, field and
@@ -21,8 +22,10 @@ from typing import TYPE_CHECKING
 from .errors import InputError, SolverFailure
 
 if TYPE_CHECKING:
+    from .estimation import Estimator, Fit
     from .flight_test import FlightTest
     from .model_spec import ModelSpec
+    from .uncertainty import Covariance
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -68,6 +71,15 @@ def _parser() -> argparse.ArgumentParser:
     _model_option(s)
     _solver_options(s)
     s.set_defaults(run=_reconstruct)
+
+    s = sub.add_parser("whatif", help="re-solve under constraints and report what they cost")
+    s.add_argument("test_dir", type=Path)
+    s.add_argument("--constrain", action="append", required=True, metavar="EXPR",
+                   help="NAME == VALUE [UNIT], NAME <= VALUE or NAME >= VALUE, e.g. "
+                        "'Ck[drogue1,stage1] == 1' (repeatable)")
+    _model_option(s)
+    _solver_options(s)
+    s.set_defaults(run=_whatif)
 
     s = sub.add_parser("demo", help="simulate the built-in Drogue test and reconstruct it")
     s.add_argument("--out", type=Path, default=Path("cpas-demo"))
@@ -141,6 +153,19 @@ def _reconstruct(args: argparse.Namespace) -> int:
     return 0
 
 
+def _whatif(args: argparse.Namespace) -> int:
+    from .flight_test import load_test
+    from .whatif import parse_constraint, what_if, whatif_text
+    test = load_test(args.test_dir)
+    est = _estimator(test, args, _spec(test, args.model))
+    constraints = [parse_constraint(text, est) for text in args.constrain]
+    print(f"solving without the constraints: {est.size_text()} ...", flush=True)
+    fit, cov = _fit_and_covariance(est, args)
+    print("solving with them ...", flush=True)
+    print(whatif_text(what_if(est, fit, cov, constraints, progress=not args.verbose)))
+    return 0
+
+
 def _demo(args: argparse.Namespace) -> int:
     import shutil
 
@@ -157,24 +182,34 @@ def _demo(args: argparse.Namespace) -> int:
 
 
 def _run_reconstruction(test: FlightTest, args: argparse.Namespace, spec: ModelSpec) -> None:
-    from .estimation import Estimator, Settings, default_grid_step
     from .report import fit_summary, parameter_table, write_report
-    from .uncertainty import SingularKKT
-    step = args.grid_step if args.grid_step is not None else default_grid_step(test)
-    settings = Settings(grid_step=step, verbose=args.verbose)
-    print(f"building the multiple-shooting NLP of {test.name} "
-          f"({test.t_end - test.t_start:.1f} s at {step * 1e3:g} ms) ...", flush=True)
-    est = Estimator(test, spec, settings=settings)
+    est = _estimator(test, args, spec)
     print(f"solving: {est.size_text()} ...", flush=True)
-    fit = est.solve(progress=not args.verbose)
-    try:
-        cov = est.covariance(fit)
-    except SingularKKT as exc:
-        print(f"warning: no uncertainties: {exc}", file=sys.stderr)
-        cov = None
+    fit, cov = _fit_and_covariance(est, args)
     out = write_report(fit, cov, args.out)
     print()
     print(parameter_table(fit, cov))
     print()
     print(fit_summary(fit))
     print(f"\nreport written to {out} (result.json, parameters.csv, report.md, figures)")
+
+
+def _estimator(test: FlightTest, args: argparse.Namespace, spec: ModelSpec) -> Estimator:
+    """The NLP of a test phase with the command line's solver options (built and announced)."""
+    from .estimation import Estimator, Settings, default_grid_step
+    step = args.grid_step if args.grid_step is not None else default_grid_step(test)
+    print(f"building the multiple-shooting NLP of {test.name} "
+          f"({test.t_end - test.t_start:.1f} s at {step * 1e3:g} ms) ...", flush=True)
+    return Estimator(test, spec, settings=Settings(grid_step=step, verbose=args.verbose))
+
+
+def _fit_and_covariance(est: Estimator, args: argparse.Namespace
+                        ) -> tuple[Fit, Covariance | None]:
+    """Solve; the covariance, or None with a warning where the KKT matrix is singular."""
+    from .uncertainty import SingularKKT
+    fit = est.solve(progress=not args.verbose)
+    try:
+        return fit, est.covariance(fit)
+    except SingularKKT as exc:
+        print(f"warning: no uncertainties: {exc}", file=sys.stderr)
+        return fit, None

@@ -146,6 +146,8 @@ class Fit:
     solver: SolverStats
     settings: Settings
     z: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))
+    # d(chi^2)/d(value) of each parameter a what-if bound holds (SI; see `Estimator.solve`).
+    sensitivities: dict[str, float] = field(default_factory=dict)
 
     @property
     def chi_square(self) -> float:
@@ -508,15 +510,28 @@ class Estimator:
                 f"{nP} parameters, {nC} captured speeds), {self._g.numel()} constraints, "
                 f"{sum(len(s_[2]) * len(s_[1]) for s_ in self._samples)} residuals")
 
-    def solve(self, progress: bool = False) -> Fit:
-        """Solve the NLP from the reduction's initial point; raise SolverFailure if it fails.
+    def solve(self, progress: bool = False, start: Fit | None = None,
+              bounds: dict[str, tuple[float, float]] | None = None) -> Fit:
+        """Solve the NLP; raise SolverFailure if it fails.
 
+        It starts from the reduction's initial point, or from the solution of
+        `start` (a fit of this same estimator).  `bounds` replaces the bounds of
+        free parameters (SI; equal bounds pin a value): a what-if constraint.
+        The fit then reports, per bounded parameter, the sensitivity of the
+        optimal chi-square to the bound, d(chi^2)/d(value) (its Lagrange
+        multiplier, times 2, per SI unit).
         With `progress`, a one-line iteration counter with chi-square is shown on stderr.
         """
-        z0 = self.initial_point()
+        z0 = self.initial_point() if start is None else start.z
+        lbz, ubz = self._lbz.copy(), self._ubz.copy()
+        n_states = self._nz[0]
+        for name, (lo, hi) in (bounds or {}).items():
+            i = self.free.index(name)
+            lbz[n_states + i], ubz[n_states + i] = lo / self.pscale[i], hi / self.pscale[i]
+        z0 = np.clip(z0, lbz, ubz)
         t0 = time.perf_counter()
         self._monitor.reset(progress)
-        sol = self._solver(x0=z0, lbx=self._lbz, ubx=self._ubz, lbg=self._lbg, ubg=self._ubg)
+        sol = self._solver(x0=z0, lbx=lbz, ubx=ubz, lbg=self._lbg, ubg=self._ubg)
         self._monitor.finish()
         wall = time.perf_counter() - t0
         st = self._solver.stats()
@@ -532,7 +547,23 @@ class Estimator:
                             self._monitor.decrement if self._monitor.stopped else None)
         if not stats.success:
             raise SolverFailure(stats.status, stats.iterations, worst, 2.0 * stats.objective)
-        return self._fit(z, stats)
+        fit = self._fit(z, stats)
+        if bounds:
+            fit.sensitivities = self._bound_sensitivities(z, np.asarray(sol["lam_g"]).ravel(),
+                                                          list(bounds))
+        return fit
+
+    def _bound_sensitivities(self, z: np.ndarray, lam_g: np.ndarray,
+                             names: list[str]) -> dict[str, float]:
+        """d(chi^2)/d(value) of each bounded parameter at a solution: twice the gradient of
+        the Lagrangian of the other constraints in that parameter (SI units)."""
+        r, jac = self._residual_jacobian(z)
+        grad = jac.sparse().T @ np.asarray(r).ravel()
+        _, jac_g = self._constraints(z)
+        grad = grad + jac_g.sparse().T @ lam_g
+        n_states = self._nz[0]
+        return {n: float(2.0 * grad[n_states + self.free.index(n)]
+                         / self.pscale[self.free.index(n)]) for n in names}
 
     def _decrement(self, z: np.ndarray) -> float | None:
         """Gauss-Newton chi-square decrement at an Ipopt iterate (None if not feasible).
