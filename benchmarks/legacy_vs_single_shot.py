@@ -169,10 +169,7 @@ def initial_state(test: FlightTest, model: Model) -> np.ndarray:
 def quantity_series(model: Model, traj: Trajectory, params: dict[str, float],
                     name: str) -> np.ndarray:
     """One scalar model quantity (e.g. ``tension[drogue1]``) on the trajectory grid."""
-    pvec = model.parameter_vector(params)
-    cvec = np.array([traj.captures[c.name] for c in model.captures])
-    vals = np.asarray(model.quantities.map(len(traj.t))(traj.x.T, traj.t, pvec, cvec))
-    return vals[model.quantity_names.index(name)]
+    return model.quantities_along(traj.t, traj.x, params, traj.captures)[name]
 
 
 def smooth(y: np.ndarray, width: int = SMOOTH_SAMPLES) -> np.ndarray:

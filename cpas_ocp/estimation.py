@@ -164,11 +164,7 @@ class Fit:
 
     def quantities(self) -> dict[str, np.ndarray]:
         """Every scalar model quantity (cds[P], tension[P], dynamic_pressure, ...) on the grid."""
-        pvec = self.model.parameter_vector(self.parameters)
-        cvec = np.array([self.captures[c.name] for c in self.model.captures])
-        fn = self.model.quantities.map(len(self.t))
-        vals = np.asarray(fn(self.x.T, self.t, pvec, cvec))
-        return dict(zip(self.model.quantity_names, vals, strict=True))
+        return self.model.quantities_along(self.t, self.x, self.parameters, self.captures)
 
 
 class Estimator:

@@ -244,6 +244,18 @@ class Model:
         """Full parameter vector from a dict, defaults where a value is absent."""
         return np.array([values.get(p.name, p.default) for p in self.parameters], dtype=float)
 
+    def capture_vector(self, captured: dict[str, float]) -> np.ndarray:
+        """The captured values in the model's order, from a dict by capture name."""
+        return np.array([captured[c.name] for c in self.captures], dtype=float)
+
+    def quantities_along(self, t: np.ndarray, x: np.ndarray, params: dict[str, float],
+                         captured: dict[str, float]) -> dict[str, np.ndarray]:
+        """Every scalar quantity at times `t` (s) and states `x` (one row per time)."""
+        fn = self.quantities.map(len(t))
+        values = np.asarray(fn(x.T, t, self.parameter_vector(params),
+                               self.capture_vector(captured)))
+        return dict(zip(self.quantity_names, values, strict=True))
+
 
 # Floor of a crossing quantity's rate in the predicted time g/g' (units of g per s): keeps
 # the prediction finite where a poor first guess has the quantity not yet rising.

@@ -86,10 +86,9 @@ def model_outputs(model: Model, traj: Trajectory, params: dict[str, float], sens
     idx = np.rint((times - traj.t[0]) / (traj.t[1] - traj.t[0])).astype(int)
     if np.any(np.abs(traj.t[idx] - times) > 1e-9):
         raise ValueError("sample times must lie on the simulation grid")
-    pvec = model.parameter_vector(params)
-    cvec = np.array([traj.captures[c.name] for c in model.captures])
     fn = model.outputs[sensor].map(len(times))
-    return np.asarray(fn(traj.x[idx].T, times, pvec, cvec)).T
+    return np.asarray(fn(traj.x[idx].T, times, model.parameter_vector(params),
+                         model.capture_vector(traj.captures))).T
 
 
 def simulate_problem(problem: Problem, out: str | Path, seed: int,
@@ -221,19 +220,10 @@ def _observed_events(spec: list[dict], truth: dict[str, float], noise: np.ndarra
     return events
 
 
-def _quantity_series(model: Model, traj: Trajectory, params: dict[str, float],
-                     quantity: str) -> np.ndarray:
-    """A scalar model quantity along a simulated trajectory."""
-    pvec = model.parameter_vector(params)
-    cvec = np.array([traj.captures[c.name] for c in model.captures])
-    values = model.quantities.map(len(traj.t))(traj.x.T, traj.t, pvec, cvec)
-    return np.asarray(values)[model.quantity_names.index(quantity)]
-
-
 def first_crossing(model: Model, traj: Trajectory, params: dict[str, float],
                     quantity: str) -> float:
     """The time (s) a quantity first rises through zero, interpolated between steps."""
-    g = _quantity_series(model, traj, params, quantity)
+    g = model.quantities_along(traj.t, traj.x, params, traj.captures)[quantity]
     up = np.flatnonzero((g[:-1] < 0.0) & (g[1:] >= 0.0))
     if up.size == 0:
         raise ValueError(f"{quantity} never rises through zero in the simulation")
@@ -245,13 +235,10 @@ def _true_event_times(model: Model, traj: Trajectory,
                       params: dict[str, float]) -> dict[tuple[str, str], float]:
     """The true time of every event the model's effects predict, by (event, parachute)."""
     out = {}
-    pvec = model.parameter_vector(params)
-    cvec = np.array([traj.captures[c.name] for c in model.captures])
-    quantities = dict(zip(model.quantity_names, np.asarray(
-        model.quantities(traj.x[-1], traj.t[-1], pvec, cvec)).ravel(), strict=True))
+    at_end = model.quantities_along(traj.t[-1:], traj.x[-1:], params, traj.captures)
     for effect in model.effects:
         for timing in effect.event_timings(model.test):
             key = (timing.event, timing.parachute)
-            out[key] = (quantities[timing.time] if timing.time is not None
+            out[key] = (float(at_end[timing.time][0]) if timing.time is not None
                         else first_crossing(model, traj, params, timing.crossing))
     return out

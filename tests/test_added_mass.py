@@ -37,10 +37,7 @@ def runs(drogue_folder):
         model = Model(test, effects)
         traj = simulate(model, truth, initial_state(model, sim), float(sim["t_begin"]),
                         float(sim["t_end"]), 1e-3)
-        pvec = model.parameter_vector(truth)
-        cvec = np.array([traj.captures[c.name] for c in model.captures])
-        q = np.asarray(model.quantities.map(len(traj.t))(traj.x.T, traj.t, pvec, cvec))
-        out[label] = (traj, dict(zip(model.quantity_names, q, strict=True)))
+        out[label] = (traj, model.quantities_along(traj.t, traj.x, truth, traj.captures))
     return test, truth, out
 
 

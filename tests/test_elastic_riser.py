@@ -27,10 +27,7 @@ DAMPING_RATIO = 0.25
 def _quantities(model: Model, truth: dict[str, float], sim: dict) -> tuple[np.ndarray, dict]:
     traj = simulate(model, truth, initial_state(model, sim), float(sim["t_begin"]),
                     float(sim["t_end"]), 5e-4)
-    pvec = model.parameter_vector(truth)
-    cvec = np.array([traj.captures[c.name] for c in model.captures])
-    q = np.asarray(model.quantities.map(len(traj.t))(traj.x.T, traj.t, pvec, cvec))
-    return traj.t, dict(zip(model.quantity_names, q, strict=True))
+    return traj.t, model.quantities_along(traj.t, traj.x, truth, traj.captures)
 
 
 def test_settled_riser_carries_the_rigid_load_at_its_static_stretch(drogue_folder) -> None:

@@ -14,7 +14,7 @@ from cpas_ocp.flight_test import load_test
 from cpas_ocp.model import Model
 from cpas_ocp.parameters import param_name
 from cpas_ocp.problems import load_problem
-from cpas_ocp.simulate import initial_state, simulate, simulate_problem
+from cpas_ocp.simulate import initial_state, model_outputs, simulate, simulate_problem
 
 from .conftest import START_GUESS_OFFSET_S, offset_events
 
@@ -32,14 +32,9 @@ def test_reading_is_low_in_the_rise_and_high_in_the_decay(problem_folder) -> Non
     sim = problem.simulation
     traj = simulate(model, truth, initial_state(model, sim), float(sim["t_begin"]),
                     float(sim["t_end"]), 1e-3)
-    pvec = model.parameter_vector(truth)
-    cvec = np.array([traj.captures[c.name] for c in model.captures])
-    q = dict(zip(model.quantity_names,
-                 np.asarray(model.quantities.map(len(traj.t))(traj.x.T, traj.t, pvec, cvec)),
-                 strict=True))
+    q = model.quantities_along(traj.t, traj.x, truth, traj.captures)
     sensor = test.sensors_of("load_cell")[0]
-    reading = np.asarray(model.outputs[sensor.name].map(len(traj.t))(
-        traj.x.T, traj.t, pvec, cvec)).ravel()
+    reading = model_outputs(model, traj, truth, sensor.name, traj.t).ravel()
     tension = q[param_name("tension", sensor.parachute)]
     # The calibration gain k_P / s_stage of the single stage, without friction.
     gain = (truth[param_name("loadcell_scale", sensor.parachute)]

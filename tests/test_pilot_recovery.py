@@ -96,9 +96,8 @@ def test_predicted_main_bag_strip_is_the_simulated_crossing(problem_folder) -> N
     traj = simulate(model, truth, initial_state(model, sim), sim["t_begin"], sim["t_end"],
                     sim["step"])
     crossing = first_crossing(model, traj, truth, "main_line_gap[pilot1]")
-    pvec = model.parameter_vector(truth)
-    cvec = np.array([traj.captures[c.name] for c in model.captures])
-    predicted = np.asarray(model.event_times(pvec, cvec)).ravel()
+    predicted = np.asarray(model.event_times(model.parameter_vector(truth),
+                                             model.capture_vector(traj.captures))).ravel()
     index = [timing_label(t) for t, _ in model.timings].index("main_bag_strip[pilot1]")
     assert abs(predicted[index] - crossing) < 0.003
     # ... and the Pilot's bag strip is its inflation start, where the riser comes taut.

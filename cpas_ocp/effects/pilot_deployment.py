@@ -43,6 +43,7 @@ fires at the observed ``mortar_fire`` time t_m.
 
 Parameters: ``mortar_speed[P]`` (m/s).  Quantities written: ``separation[P]``
 (m), ``tension[P]`` (N, the Pilot riser), ``deployment_flux[P]`` (N),
+``main_bag_mass[P]`` (kg, what is left in the bag),
 ``riser_gap[P]`` (s - x - L_r, m), ``main_line_gap[P]`` (x - L_main, m),
 ``bag_strip_time[P]`` and ``main_bag_lift_time[P]`` (s).  Events predicted: the Pilot's
 ``bag_strip``, ``main_bag_lift`` and ``main_bag_strip``.
@@ -196,7 +197,9 @@ class PilotDeployment(Effect):
             recoil = -chute.dry_mass * self._mortar_push(ctx, chute)
             ctx.forces.append(((1.0 - lifted) * tension + lifted * flux + recoil) * e)
             # The Main bag leaves the vehicle's mass at bag lift, less what has paid out.
-            ctx.mass = ctx.mass - lifted * self._bag_mass(deployed)
+            bag_mass = ctx.q[param_name("main_bag_mass", chute.name)] = (
+                self.main_bag_mass - self.paid_out_mass(deployed))
+            ctx.mass = ctx.mass - lifted * bag_mass
             ctx.q[param_name("separation", chute.name)] = s
             ctx.q[param_name("deployment_flux", chute.name)] = lifted * flux
             ctx.q[param_name("tension", chute.name)] = tension
@@ -212,16 +215,16 @@ class PilotDeployment(Effect):
         relative_gravity = ca.dot(ca.vertcat(0.0, 0.0, -G0) - a_v, e)
         airspeed = ctx.q["airspeed"]
         for chute in ctx.test.parachutes:
-            s_dot, x, x_dot = (ctx.x[param_name(n, chute.name)] for n in (
-                "separation_rate", "deployed", "deployed_rate"))
+            s_dot, x_dot = (ctx.x[param_name(n, chute.name)] for n in (
+                "separation_rate", "deployed_rate"))
             tension = ctx.q[param_name("tension", chute.name)]
             # Dynamic pressure at the Pilot and at the bag, which trail at s' and x'.
             q_pilot = ctx.q["dynamic_pressure"] * ((airspeed - s_dot) / airspeed) ** 2
             q_bag = ctx.q["dynamic_pressure"] * ((airspeed - x_dot) / airspeed) ** 2
             canopy = ca.dot(ctx.q[param_name("drag", chute.name)], e) / ctx.q["dynamic_pressure"]
             pilot = ((canopy + self.pack_cds) * q_pilot - tension) / chute.dry_mass
-            bag = (tension + self.main_bag_cds * q_bag) / self._bag_mass(
-                _positive(x, LENGTH_ROUNDING_M))
+            bag = (tension + self.main_bag_cds * q_bag) / ctx.q[param_name("main_bag_mass",
+                                                                         chute.name)]
             fired = self._fired(ctx, chute)
             lifted = self._lifted(ctx, chute)
             ctx.xdot[param_name("separation", chute.name)] = s_dot
@@ -229,10 +232,6 @@ class PilotDeployment(Effect):
                 self._mortar_push(ctx, chute) + fired * (pilot + relative_gravity))
             ctx.xdot[param_name("deployed", chute.name)] = x_dot
             ctx.xdot[param_name("deployed_rate", chute.name)] = lifted * (bag + relative_gravity)
-
-    def _bag_mass(self, deployed: ca.SX) -> ca.SX:
-        """Mass (kg) of the Main bag with what has not yet paid out of it."""
-        return self.main_bag_mass - self.paid_out_mass(deployed)
 
     # --- event timing ------------------------------------------------------------------
 
