@@ -101,9 +101,15 @@ def _spec(test: FlightTest, model_file: Path | None) -> ModelSpec:
 
 
 def _solver_options(s: argparse.ArgumentParser) -> None:
+    from .uncertainty import HESSIANS
     s.add_argument("--grid-step", type=float, default=None,
                    help="shooting interval [s] (default: the fastest sensor's sampling interval)")
     s.add_argument("--verbose", action="store_true", help="show Ipopt's iteration log")
+    s.add_argument("--hessian", choices=HESSIANS, default="gauss-newton",
+                   help="curvature the covariance inverts (exact: the Lagrangian's, slower)")
+    s.add_argument("--rescale-sigmas", action="store_true",
+                   help="the sensor sigmas are not trusted: scale the covariance and the "
+                        "what-if test by chi^2/dof")
 
 
 def _problems(args: argparse.Namespace) -> int:
@@ -203,13 +209,14 @@ def _estimator(test: FlightTest, args: argparse.Namespace, spec: ModelSpec) -> E
     return Estimator(test, spec, settings=Settings(grid_step=step, verbose=args.verbose))
 
 
-def _fit_and_covariance(est: Estimator, args: argparse.Namespace
-                        ) -> tuple[Fit, Covariance | None]:
-    """Solve; the covariance, or None with a warning where the KKT matrix is singular."""
-    from .uncertainty import SingularKKT
+def _fit_and_covariance(est: Estimator, args: argparse.Namespace) -> tuple[Fit, Covariance]:
+    """Solve, and the covariance the command line asks for (a warning where the data leave
+    a parameter combination undetermined)."""
     fit = est.solve(progress=not args.verbose)
-    try:
-        return fit, est.covariance(fit)
-    except SingularKKT as exc:
-        print(f"warning: no uncertainties: {exc}", file=sys.stderr)
-        return fit, None
+    if args.hessian == "exact":
+        print("exact-Hessian covariance ...", flush=True)
+    cov = est.covariance(fit, args.rescale_sigmas, args.hessian)
+    if cov.undetermined:
+        print(f"warning: the data do not determine {', '.join(cov.undetermined)} "
+              f"(see the identifiability lines)", file=sys.stderr)
+    return fit, cov

@@ -41,9 +41,9 @@ from .model_spec import ModelSpec, spec_from_effects, spec_of_test
 from .reduction import gps_state, initial_guess
 from .simulate import rk4_step, simulate
 from .uncertainty import (
+    HESSIANS,
     Covariance,
     Linearization,
-    SingularKKT,
     gauss_newton_decrement,
     kkt_covariance,
     linearize,
@@ -146,6 +146,8 @@ class Fit:
     solver: SolverStats
     settings: Settings
     z: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))
+    # Lagrange multipliers of the NLP's constraints at the solution (CasADi's sign).
+    multipliers: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))
     # d(chi^2)/d(value) of each parameter a what-if bound holds (SI; see `Estimator.solve`).
     sensitivities: dict[str, float] = field(default_factory=dict)
 
@@ -392,6 +394,7 @@ class Estimator:
             "ipopt.sb": "yes", "hess_lag": hess, "jac_g": jac_g, "grad_f": grad_f,
         }
         nlp = {"x": self._z, "f": self._obj, "g": self._g}
+        self._hessian_product: ca.Function | None = None
         self._monitor = _Monitor(self._z.numel(), self._g.numel(), self._decrement,
                                  s.chi2_step_tol)  # the solver keeps only a reference
         opts["iteration_callback"] = self._monitor
@@ -544,6 +547,7 @@ class Estimator:
         if not stats.success:
             raise SolverFailure(stats.status, stats.iterations, worst, 2.0 * stats.objective)
         fit = self._fit(z, stats)
+        fit.multipliers = np.asarray(sol["lam_g"]).ravel()
         if bounds:
             fit.sensitivities = self._bound_sensitivities(z, np.asarray(sol["lam_g"]).ravel(),
                                                           list(bounds))
@@ -566,21 +570,42 @@ class Estimator:
 
         Feasible means every scaled constraint within STOP_CONSTRAINT_TOL (the
         shooting gaps then below 1 mm and 0.1 mm/s), evaluated here rather than
-        taken from Ipopt, whose reported values may be scaled.  None as well
-        when the KKT system is singular there.
+        taken from Ipopt, whose reported values may be scaled.
         """
         lin = self._linearize(z)
         if lin.c.size and float(np.max(np.abs(lin.c))) > STOP_CONSTRAINT_TOL:
             return None
-        try:
-            return gauss_newton_decrement(lin)
-        except SingularKKT:
-            return None
+        return gauss_newton_decrement(lin)
 
-    def covariance(self, fit: Fit, scale_by_residual: bool = False) -> Covariance:
-        """Covariance of the free parameters at `fit` (Gauss-Newton KKT parameter block)."""
+    def covariance(self, fit: Fit, scale_by_residual: bool = False,
+                   hessian: str = "gauss-newton") -> Covariance:
+        """Covariance of the free parameters at `fit`: the KKT system's parameter block.
+
+        `hessian` is "gauss-newton" (J'J of the weighted residuals) or "exact"
+        (the Hessian of the Lagrangian at the fit's multipliers; see
+        `uncertainty`).  `scale_by_residual` multiplies it by chi^2/dof, for
+        sensor sigmas that are not trusted.
+        """
+        if hessian not in HESSIANS:
+            raise ValueError(f"hessian must be one of {HESSIANS}; got {hessian!r}")
+        product = None
+        if hessian == "exact":
+            fn = self._lagrangian_hessian_product()
+            product = lambda Z: np.asarray(  # noqa: E731
+                fn.map(Z.shape[1], "serial")(fit.z, fit.multipliers, Z))
         return kkt_covariance(self._linearize(fit.z), self._param_index, self.pscale,
-                              self.free, scale_by_residual)
+                              self.free, scale_by_residual, product)
+
+    def _lagrangian_hessian_product(self) -> ca.Function:
+        """(z, lambda, v) -> H v, H the Hessian of 0.5 |r|^2 + lambda' g in the scaled z
+        (forward over reverse mode on the NLP's expression graph; built on first use)."""
+        if self._hessian_product is None:
+            lam = ca.MX.sym("lam", self._g.numel())
+            v = ca.MX.sym("v", self._z.numel())
+            grad = ca.gradient(self._obj + ca.dot(lam, self._g), self._z)
+            self._hessian_product = ca.Function("hessian_product", [self._z, lam, v],
+                                                [ca.jtimes(grad, self._z, v)])
+        return self._hessian_product
 
     @property
     def _param_index(self) -> np.ndarray:

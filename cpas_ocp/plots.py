@@ -1,4 +1,5 @@
-"""Figures of a fit: model against measurement per sensor, and canopy drag areas."""
+"""Figures of a fit: model against measurement per sensor, canopy drag areas, event
+times and parameter correlations."""
 
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ import numpy as np
 from .estimation import EVENTS, Fit
 from .parameters import param_name
 from .reduction import reduce, stage_starts
+from .uncertainty import Covariance
 from .units import FT, LBF
 
 # Display units: the engineers' customary ones, per channel.
@@ -93,6 +95,24 @@ def plot_drag_areas(fit: Fit, folder: Path) -> Path:
         ax.legend(loc="best", fontsize=8)
     axes[-1, 0].set_xlabel("time [s]  (dashed: reconstructed inflation start times)")
     return _save(fig, f"{fit.test.name}: canopy drag areas", folder / "drag_areas.png")
+
+
+def plot_correlation(cov: Covariance, name: str, folder: Path) -> Path | None:
+    """The parameters' correlation matrix as a map (undetermined parameters and those on a
+    bound left out; None where fewer than two remain)."""
+    keep = [i for i, n in enumerate(cov.names) if n not in cov.undetermined
+            and n not in cov.at_bound]
+    if len(keep) < 2:
+        return None
+    rho = cov.correlation()[np.ix_(keep, keep)]
+    labels = [cov.names[i] for i in keep]
+    size = 3.0 + 0.22 * len(keep)
+    fig, ax = plt.subplots(figsize=(size + 1.2, size))
+    im = ax.imshow(rho, cmap="RdBu_r", vmin=-1, vmax=1)
+    ax.set_xticks(range(len(keep)), labels, rotation=90, fontsize=6)
+    ax.set_yticks(range(len(keep)), labels, fontsize=6)
+    fig.colorbar(im, ax=ax, shrink=0.8, label="correlation ρ")
+    return _save(fig, f"{name}: parameter correlations", folder / "correlation.png")
 
 
 def _save(fig: plt.Figure, title: str, path: Path) -> Path:

@@ -13,12 +13,13 @@ from scipy.stats import norm
 from .diagnostics import sensor_summary, worst_windows
 from .estimation import EVENTS, Fit
 from .output_folder import atomic_folder
-from .plots import plot_drag_areas, plot_events, plot_sensors
-from .uncertainty import Covariance
+from .plots import plot_correlation, plot_drag_areas, plot_events, plot_sensors
+from .uncertainty import POORLY_DETERMINED, Covariance
 from .units import FT
 
 Z95 = float(norm.ppf(0.975))  # two-sided 95 % quantile of the standard normal
-STRONG_CORRELATION = 0.9  # |rho| from which a parameter pair is listed
+STRONG_CORRELATION = 0.9  # |rho| from which a parameter pair is named in the terminal
+REPORTED_CORRELATION = 0.5  # |rho| from which report.md lists a pair (the map shows all)
 
 
 def information_criteria(fit: Fit) -> dict[str, float]:
@@ -62,6 +63,8 @@ def result_dict(fit: Fit, cov: Covariance | None) -> dict[str, Any]:
                  "initial": fit.guess.get(name, prm.default)}
         if cov is not None and name in cov.at_bound:
             entry["at_bound"] = True
+        elif cov is not None and name in cov.undetermined:
+            entry["undetermined"] = True
         elif name in std:
             entry["std"] = std[name]
             entry["ci95"] = [fit.parameters[name] - Z95 * std[name],
@@ -88,10 +91,15 @@ def result_dict(fit: Fit, cov: Covariance | None) -> dict[str, Any]:
         "residuals": residuals,
         "fit": {"chi_square": fit.chi_square, "samples": n, "free_parameters": len(fit.free),
                 "chi_square_per_dof": fit.chi_square / fit.dof, **information_criteria(fit),
-                "covariance": "Gauss-Newton KKT, sensor sigmas as given" if cov else "none"},
+                "covariance": cov.describe() if cov else "none"},
         "worst_windows": worst,
         "strong_correlations": [] if cov is None else [
             {"a": a, "b": b, "rho": r} for a, b, r in strong_correlations(cov)],
+        "correlation": None if cov is None else {
+            "names": cov.names, "matrix": np.round(cov.correlation(), 6).tolist()},
+        "identifiability": [] if cov is None else [
+            {"weights": w.weights, "other": w.other, "std": w.std,
+             "curvature_ratio": w.curvature_ratio, "text": w.text()} for w in cov.weak],
         "model": {"effects": [e.name for e in fit.model.effects],
                   "grid_step_s": fit.settings.grid_step,
                   "fill_length": {c.name: c.fill_length for c in fit.test.parachutes}},
@@ -99,23 +107,44 @@ def result_dict(fit: Fit, cov: Covariance | None) -> dict[str, Any]:
 
 
 def parameter_table(fit: Fit, cov: Covariance | None) -> str:
-    """A readable terminal table of the estimated parameters."""
+    """A readable terminal table of the estimated parameters: value, 1 sigma, 95 % interval,
+    correlations and the combinations the data do not determine."""
     std = cov.std if cov is not None else {}
-    lines = [f"{'parameter':30s} {'value':>11s} {'± 1σ':>10s}  {'unit':5s} {'initial':>10s}"]
+    lines = [f"{'parameter':30s} {'value':>11s} {'± 1σ':>10s} {'95 % interval':>25s}  "
+             f"{'unit':5s} {'initial':>10s}"]
     for name in fit.free:
         prm = fit.model.parameter(name)
         v = fit.parameters[name]
-        s = f"{std[name]:10.4g}" if name in std else f"{'—':>10s}"
+        if name in std:
+            half = Z95 * std[name]
+            s, ci = f"{std[name]:10.4g}", f"[{v - half:.5g}, {v + half:.5g}]"
+        else:
+            s, ci = f"{'—':>10s}", f"{'—':>25s}"
         extra = f"   ({v / FT**2:7.2f} ft²)" if prm.unit == "m^2" else ""
-        flag = "  at bound" if cov is not None and name in cov.at_bound else ""
-        lines.append(f"{name:30s} {v:11.5g} {s}  {prm.unit:5s} "
+        flag = ""
+        if cov is not None and name in cov.at_bound:
+            flag = "  at bound"
+        elif cov is not None and name in cov.undetermined:
+            flag = "  undetermined"
+        lines.append(f"{name:30s} {v:11.5g} {s} {ci:>25s}  {prm.unit:5s} "
                      f"{fit.guess.get(name, prm.default):10.4g}{extra}{flag}")
     if cov is not None:
         pairs = strong_correlations(cov)
         lines.append(f"correlations |ρ| ≥ {STRONG_CORRELATION}: "
                      + ("none" if not pairs else f"{len(pairs)}, strongest "
                         + "; ".join(f"{a} ~ {b} {r:+.3f}" for a, b, r in pairs[:3])))
+        lines.append(identifiability_text(cov))
     return "\n".join(lines)
+
+
+def identifiability_text(cov: Covariance) -> str:
+    """One line when the data determine every parameter combination; else one per weak one."""
+    if not cov.weak:
+        return (f"identifiability: every combination of the {len(cov.names)} parameters is "
+                f"determined (none worse than ±{POORLY_DETERMINED:g} parameter scales)")
+    return "\n".join([f"identifiability: {len(cov.weak)} combination"
+                      f"{'s' if len(cov.weak) > 1 else ''} the data do not fix:"]
+                     + [f"  {w.text()}" for w in cov.weak])
 
 
 def fit_summary(fit: Fit) -> str:
@@ -135,6 +164,15 @@ def fit_summary(fit: Fit) -> str:
     return "\n".join(out)
 
 
+def correlation_markdown(cov: Covariance, threshold: float = REPORTED_CORRELATION) -> str:
+    """The covariance's provenance and the correlated pairs, as report.md lists them."""
+    pairs = strong_correlations(cov, threshold)
+    rows = "".join(f"| {a} | {b} | {r:+.3f} |\n" for a, b, r in pairs)
+    return (f"Uncertainties: {cov.describe()}.\n\n"
+            f"Correlations with |ρ| ≥ {threshold} ({len(pairs)}; correlation.png shows all):\n\n"
+            + (f"| parameter | parameter | ρ |\n|---|---|---|\n{rows}\n" if pairs else "none\n\n"))
+
+
 def write_report(fit: Fit, cov: Covariance | None, out: str | Path) -> Path:
     """Write the report folder atomically: all of it or nothing."""
     out = Path(out)
@@ -147,8 +185,11 @@ def write_report(fit: Fit, cov: Covariance | None, out: str | Path) -> Path:
         plot_sensors(fit, tmp)
         plot_drag_areas(fit, tmp)
         plot_events(fit, tmp)
+        if cov is not None:
+            plot_correlation(cov, fit.test.name, tmp)
         (tmp / "report.md").write_text(
             f"# Reconstruction of {fit.test.name}\n\n{fit.test.label}\n\n```\n"
             f"{parameter_table(fit, cov)}\n\n{fit_summary(fit)}\n```\n\n"
+            + (correlation_markdown(cov) if cov is not None else "")
             + "".join(f"![{p.stem}]({p.name})\n\n" for p in sorted(tmp.glob("*.png"))))
     return out

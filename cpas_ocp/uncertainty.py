@@ -19,35 +19,104 @@ problem (a combination the data do not determine) from a regular one.  On
 the 120 s `main3` problem (144,000-row KKT system) this takes about 2 s and
 little memory, where a sparse LU of the whole KKT matrix took 10 s and 1 GB.
 
+The exact alternative replaces (JZ)'(JZ) by Z' H Z, where H is the Hessian
+of the Lagrangian 0.5 |r|^2 + lambda' g at the solution's multipliers: the
+observed information, with the residuals' own curvature and the curvature of
+the shooting gaps.  For a small-residual fit the two agree; where they differ
+the quadratic model of chi-square is poor and a profile likelihood tells more.
+
 Parameters held on an active bound are projected out: they are reported as
 such and enter as fixed.  Everything is computed in the NLP's scaled
 coordinates and converted back to SI.  With `scale_by_residual` the
 covariance is multiplied by chi^2 / (N - n_p), for when the sensor sigmas are
 not trusted.
+
+Identifiability: a direction of the reduced Hessian whose curvature is below
+SINGULAR_RATIO of the largest is not determined by the data at all; one whose
+standard deviation exceeds POORLY_DETERMINED (in units of the parameters'
+typical magnitudes, `Parameter.scale`) is determined too poorly to mean
+anything.  Both are named as parameter combinations (`WeakCombination`).
+The covariance is then the inverse on the determined directions only (a
+pseudo-inverse); the parameters that take part in an undetermined direction
+get no standard deviation (never NaN) and are listed as `undetermined`.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import casadi as ca
 import numpy as np
 import scipy.sparse as sp
+from scipy.linalg import qr
 from scipy.sparse.linalg import splu
+
+
+@dataclass(frozen=True)
+class WeakCombination:
+    """A parameter combination the data determine poorly or not at all.
+
+    `weights`: the unit direction's components on the free parameters, each
+    in units of that parameter's typical magnitude (`Parameter.scale`),
+    largest first and only those above 0.05 in size; `other` is the part of
+    the direction (0-1) that lies in the initial state or the captured
+    speeds.  `std` is the standard deviation along the direction in the same
+    units (None where the data do not determine it at all; `curvature_ratio`
+    is then the largest of the undetermined subspace).
+    """
+
+    weights: dict[str, float]
+    other: float
+    std: float | None
+    curvature_ratio: float
+
+    def text(self) -> str:
+        terms = " ".join(f"{w:+.2f} {n}" for n, w in self.weights.items()) or "(no parameter)"
+        if self.other > 0.05:
+            terms += f" (+{self.other:.2f} initial state / captured speeds)"
+        if self.std is None:
+            return f"{terms}: not determined at all (curvature below {SINGULAR_RATIO:.0e} " \
+                   f"of the largest)"
+        return (f"{terms}: determined only to ±{self.std:.3g} parameter scales "
+                f"(curvature {self.curvature_ratio:.1e} of the largest)")
 
 
 @dataclass
 class Covariance:
-    """Covariance of the free parameters (SI), in the order of `names`."""
+    """Covariance of the free parameters (SI), in the order of `names`.
+
+    `hessian` names the curvature it inverts ("gauss-newton" or "exact");
+    `scaled` says whether it was multiplied by `residual_variance`
+    (chi^2 per degree of freedom); `weak` lists the combinations the data
+    determine poorly or not at all, `undetermined` the parameters in the
+    latter: they have no std, and their rows and columns hold the inverse on
+    the determined directions only, so that a combination orthogonal to the
+    undetermined ones (the sum of two drag areas the data cannot split) has
+    its proper variance d' C d.
+    """
 
     names: list[str]
     matrix: np.ndarray
     at_bound: list[str]
     residual_variance: float
+    hessian: str = "gauss-newton"
+    scaled: bool = False
+    weak: list[WeakCombination] = field(default_factory=list)
+    undetermined: list[str] = field(default_factory=list)
 
     @property
     def std(self) -> dict[str, float]:
-        return {n: float(np.sqrt(max(self.matrix[i, i], 0.0))) for i, n in enumerate(self.names)}
+        """Standard deviation (SI) of every parameter the data determine."""
+        return {n: float(np.sqrt(max(self.matrix[i, i], 0.0))) for i, n in enumerate(self.names)
+                if n not in self.undetermined}
+
+    def describe(self) -> str:
+        """How the covariance was obtained, for reports."""
+        how = "exact Hessian of the Lagrangian" if self.hessian == "exact" else "Gauss-Newton"
+        return (f"KKT parameter block, {how}; sensor sigmas "
+                + (f"scaled by chi^2/dof = {self.residual_variance:.3f}" if self.scaled
+                   else "as given"))
 
     def correlation(self) -> np.ndarray:
         d = np.sqrt(np.clip(np.diag(self.matrix), 1e-300, None))
@@ -64,7 +133,8 @@ class Covariance:
         the range of the correlation matrix, eigenvalues below `rank_tol` times
         the largest dropped.
         """
-        keep = [i for i, n in enumerate(self.names) if n not in self.at_bound]
+        keep = [i for i, n in enumerate(self.names)
+                if n not in self.at_bound and n not in self.undetermined]
         d = np.sqrt(np.diag(self.matrix)[keep])
         x = np.array([delta[self.names[i]] for i in keep]) / d
         w, v = np.linalg.eigh(self.matrix[np.ix_(keep, keep)] / np.outer(d, d))
@@ -172,15 +242,27 @@ def reduce_linearization(lin: Linearization) -> ReducedProblem:
 
 @dataclass
 class _NullSpace:
-    """The reduced problem restricted to B dw = -b: dw = dw0 + N y, Hessian H = (JZN)'(JZN)."""
+    """The reduced problem restricted to B dw = -b: dw = dw0 + N y, with Hessian N'HN in y.
+
+    `determined` marks the eigen-directions whose curvature is above
+    SINGULAR_RATIO of the largest; the others are left out of every inverse.
+    """
 
     N: np.ndarray
     dw0: np.ndarray
     H_eigenvalues: np.ndarray
     H_eigenvectors: np.ndarray
+    determined: np.ndarray
+
+    def inverse(self) -> np.ndarray:
+        """(N'HN)^+ on the determined directions, in y."""
+        V = self.H_eigenvectors[:, self.determined]
+        return (V / self.H_eigenvalues[self.determined]) @ V.T
 
 
-def _null_space(red: ReducedProblem) -> _NullSpace:
+def _null_space(red: ReducedProblem, hessian: np.ndarray | None = None) -> _NullSpace:
+    """Null space of the remaining constraints and the eigen-decomposition of the Hessian
+    there; `hessian` is the reduced Hessian in w (default: Gauss-Newton, (JZ)'(JZ))."""
     n = red.free.size
     if red.B.size:
         U, sv, Vt = np.linalg.svd(red.B)
@@ -189,33 +271,55 @@ def _null_space(red: ReducedProblem) -> _NullSpace:
         dw0 = -Vt[:rank].T @ ((U[:, :rank].T @ red.b) / sv[:rank])
     else:
         N, dw0 = np.eye(n), np.zeros(n)
-    G = red.JZ @ N
-    w, V = np.linalg.eigh(G.T @ G)
-    if w.size and (not np.all(np.isfinite(w)) or w[0] <= SINGULAR_RATIO * w[-1]):
-        raise SingularKKT(f"the Gauss-Newton KKT system is singular (curvature ratio "
-                          f"{w[0] / w[-1]:.1e}): some parameter combination is not "
-                          f"determined by the data")
-    return _NullSpace(N, dw0, w, V)
+    if hessian is None:
+        G = red.JZ @ N
+        H = G.T @ G
+    else:
+        H = N.T @ hessian @ N
+    w, V = np.linalg.eigh(0.5 * (H + H.T))
+    if not np.all(np.isfinite(w)):
+        raise ValueError("the reduced Hessian has non-finite entries")
+    top = w.max() if w.size else 1.0
+    determined = w > SINGULAR_RATIO * max(top, 1e-300)
+    return _NullSpace(N, dw0, w, V, determined)
 
 
+HESSIANS = ("gauss-newton", "exact")  # curvatures a covariance may invert
 # Smallest to largest curvature (in the scaled coordinates) below which the
 # data are taken not to determine a combination of the free coordinates.
 SINGULAR_RATIO = 1e-13
+# Standard deviation along a direction, in units of the parameters' typical magnitudes
+# (`Parameter.scale`), above which the combination is reported as poorly determined: the
+# data then leave it uncertain by more than the size of the parameters themselves.
+POORLY_DETERMINED = 1.0
+# Part of a parameter's unit vector in the undetermined directions above which the
+# parameter itself is undetermined (eigenvectors are accurate to far better than this).
+UNDETERMINED_LOADING = 1e-2
+WEIGHT_SHOWN = 0.05  # smallest component of a weak combination that is named
 
 
 def kkt_covariance(lin: Linearization, param_index: np.ndarray, param_scale: np.ndarray,
-                   names: list[str], scale_by_residual: bool = False) -> Covariance:
-    """Covariance of the free parameters at a solution, in SI (`param_scale` converts)."""
+                   names: list[str], scale_by_residual: bool = False,
+                   hessian_product: Callable[[np.ndarray], np.ndarray] | None = None
+                   ) -> Covariance:
+    """Covariance of the free parameters at a solution, in SI (`param_scale` converts).
+
+    `hessian_product(Z)` returns H Z for the Hessian H of the Lagrangian in the
+    scaled decision vector; without it the Gauss-Newton curvature is used.
+    """
     red = reduce_linearization(lin)
-    ns = _null_space(red)
-    inv = (ns.H_eigenvectors / ns.H_eigenvalues) @ ns.H_eigenvectors.T
-    cov_w = ns.N @ inv @ ns.N.T
+    if hessian_product is None:
+        ns = _null_space(red)
+    else:
+        ns = _null_space(red, red.Z.T @ np.asarray(hessian_product(red.Z)))
+    cov_w = ns.N @ ns.inverse() @ ns.N.T
     position = {int(col): i for i, col in enumerate(red.free)}
     cov_scaled = np.zeros((param_index.size, param_index.size))
     rows = [i for i, col in enumerate(param_index) if int(col) in position]
     at = [position[int(param_index[i])] for i in rows]
     cov_scaled[np.ix_(rows, rows)] = cov_w[np.ix_(at, at)]
     cov_scaled = 0.5 * (cov_scaled + cov_scaled.T)
+    weak, undetermined = _weak_combinations(ns, rows, at, names)
     n_free = int((~lin.on_bound).sum())
     dof = max(lin.r.size - n_free, 1)
     variance = float(lin.r @ lin.r) / dof
@@ -223,7 +327,53 @@ def kkt_covariance(lin: Linearization, param_index: np.ndarray, param_scale: np.
     if scale_by_residual:
         cov = cov * variance
     return Covariance(list(names), cov,
-                      [n for n, b in zip(names, lin.on_bound, strict=True) if b], variance)
+                      [n for n, b in zip(names, lin.on_bound, strict=True) if b], variance,
+                      "gauss-newton" if hessian_product is None else "exact", scale_by_residual,
+                      weak, undetermined)
+
+
+def _weak_combinations(ns: _NullSpace, rows: list[int], at: list[int], names: list[str]
+                       ) -> tuple[list[WeakCombination], list[str]]:
+    """The poorly or un-determined directions as parameter combinations, and the parameters
+    that take part in an undetermined one (`rows`: parameter indices, `at`: their w index).
+
+    The undetermined directions span a subspace in which any basis is as good
+    as another; it is rotated so that each direction leads with its own
+    parameter and has none of the other directions' leading parameters (a
+    pivoted QR picks them): two canopies the data cannot tell apart then read
+    CdS[a] - CdS[b], stage by stage, rather than an arbitrary mixture.
+    """
+    top = ns.H_eigenvalues.max() if ns.H_eigenvalues.size else 1.0
+    undetermined_w = ns.N @ ns.H_eigenvectors[:, ~ns.determined]
+    loading = np.zeros(len(names))
+    for i, a in zip(rows, at, strict=True):
+        loading[i] = float(np.linalg.norm(undetermined_w[a]))
+    directions: list[tuple[np.ndarray, float | None, float]] = []
+    if undetermined_w.shape[1]:
+        P = undetermined_w[at]
+        k = undetermined_w.shape[1]
+        _, _, pivots = qr(P.T, pivoting=True)
+        lead = P[pivots[:k]]
+        if np.linalg.matrix_rank(lead) == k:
+            undetermined_w = undetermined_w @ np.linalg.inv(lead)
+        for j in range(k):
+            d = undetermined_w[:, j]
+            directions.append((d / np.linalg.norm(d), None,
+                               float(ns.H_eigenvalues[~ns.determined].max() / top)))
+    for j in np.flatnonzero(ns.determined):
+        std = 1.0 / np.sqrt(ns.H_eigenvalues[j])
+        if std > POORLY_DETERMINED:
+            directions.append((ns.N @ ns.H_eigenvectors[:, j], float(std),
+                               float(ns.H_eigenvalues[j] / top)))
+    weak = []
+    for d, std, ratio in directions:
+        comp = {names[i]: float(d[a]) for i, a in zip(rows, at, strict=True)}
+        sign = np.sign(max(comp.values(), key=abs, default=1.0)) or 1.0
+        shown = {n: sign * c for n, c in sorted(comp.items(), key=lambda kv: -abs(kv[1]))
+                 if abs(c) >= WEIGHT_SHOWN}
+        other = float(np.sqrt(max(1.0 - sum(c * c for c in comp.values()), 0.0)))
+        weak.append(WeakCombination(shown, other, std, ratio))
+    return weak, [n for i, n in enumerate(names) if loading[i] > UNDETERMINED_LOADING]
 
 
 def gauss_newton_decrement(lin: Linearization) -> float:
@@ -233,19 +383,16 @@ def gauss_newton_decrement(lin: Linearization) -> float:
     point its decrease, |J dz|^2, bounds the squared Mahalanobis distance
     (in the covariance's metric) of the current parameters from the
     linearised optimum: a decrease below 0.01 puts every parameter within
-    0.1 standard deviation of where the fit is heading.
+    0.1 standard deviation of where the fit is heading.  Directions the data
+    do not determine take no step.
     """
     red = reduce_linearization(lin)
     ns = _null_space(red)
     base = red.r + red.JZ @ ns.dw0
     gradient = ns.N.T @ (red.JZ.T @ base)
-    y = -(ns.H_eigenvectors @ ((ns.H_eigenvectors.T @ gradient) / ns.H_eigenvalues))
+    y = -(ns.inverse() @ gradient)
     after = base + red.JZ @ (ns.N @ y)
     return max(float(lin.r @ lin.r - after @ after), 0.0)
-
-
-class SingularKKT(ValueError):
-    """The Gauss-Newton KKT system is singular: some parameter combination is undetermined."""
 
 
 def _csc(m: ca.DM) -> sp.csc_matrix:

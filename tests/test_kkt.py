@@ -1,5 +1,5 @@
-"""The reduced Gauss-Newton KKT system: the same answers as the full one, and a clear error
-where the data fix nothing."""
+"""The reduced KKT system: the same answers as the full one, and an identifiability report
+(never NaN) where the data fix a combination poorly or not at all."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ import pytest
 import scipy.sparse as sp
 
 from cpas_ocp.uncertainty import (
+    POORLY_DETERMINED,
     Linearization,
-    SingularKKT,
     gauss_newton_decrement,
     kkt_covariance,
 )
@@ -17,9 +17,12 @@ from cpas_ocp.uncertainty import (
 NX, NODES = 2, 6  # states per node, nodes
 
 
-def _chain_problem(seed: int, singular: bool = False) -> tuple[Linearization, np.ndarray]:
+def _chain_problem(seed: int, singular: bool = False, split: float = 0.0
+                   ) -> tuple[Linearization, np.ndarray]:
     """A small shooting problem: z = (x_0 .. x_5, p_1, p_2, c), gaps x_{k+1} - M x_k - b p,
-    one capture relation, p_1 on nothing; residuals see every node and p."""
+    one capture relation, p_1 on nothing; residuals see every node and p.  `singular`:
+    p_1 and p_2 enter only through their sum, apart from a residual-only difference of
+    relative size `split`."""
     rng = np.random.default_rng(seed)
     n_states = NX * NODES
     nz = n_states + 3
@@ -37,7 +40,7 @@ def _chain_problem(seed: int, singular: bool = False) -> tuple[Linearization, np
     A = np.vstack([*rows, capture])
     J = rng.standard_normal((40, nz))
     if singular:  # the residuals see p_1 and p_2 only through their sum
-        J[:, n_states + 1] = J[:, n_states]
+        J[:, n_states + 1] = J[:, n_states] * (1.0 + split * rng.standard_normal(J.shape[0]))
         A[:, n_states + 1] = A[:, n_states]
     c = 1e-3 * rng.standard_normal(A.shape[0])
     lin = Linearization(np.zeros(nz), rng.standard_normal(40), sp.csc_matrix(J),
@@ -82,7 +85,43 @@ def test_a_parameter_on_its_bound_is_held() -> None:
     assert cov.matrix[0, 0] == pytest.approx(np.linalg.inv(K)[params[0], params[0]], rel=1e-9)
 
 
-def test_a_direction_no_residual_sees_is_reported_not_solved() -> None:
+def test_an_undetermined_combination_is_named_and_nothing_is_nan() -> None:
     lin, params = _chain_problem(12, singular=True)
-    with pytest.raises(SingularKKT, match="not determined"):
-        kkt_covariance(lin, params, np.ones(2), ["p1", "p2"])
+    cov = kkt_covariance(lin, params, np.ones(2), ["p1", "p2"])
+    assert np.all(np.isfinite(cov.matrix))
+    assert cov.undetermined == ["p1", "p2"] and cov.std == {}
+    (weak,) = cov.weak
+    assert weak.std is None
+    # The data fix p1 + p2; the report names the difference, in equal and opposite parts.
+    assert weak.weights["p1"] == pytest.approx(np.sqrt(0.5), abs=1e-6)
+    assert weak.weights["p2"] == pytest.approx(-np.sqrt(0.5), abs=1e-6)
+    assert weak.other < 1e-6
+    assert "not determined at all" in weak.text()
+    # The step takes no part in the undetermined direction and stays finite.
+    assert np.isfinite(gauss_newton_decrement(lin))
+
+
+def test_a_poorly_determined_combination_keeps_its_finite_sigma() -> None:
+    lin, params = _chain_problem(12, singular=True, split=1e-3)
+    cov = kkt_covariance(lin, params, np.ones(2), ["p1", "p2"])
+    assert cov.undetermined == []
+    (weak,) = cov.weak
+    assert weak.std is not None and weak.std > POORLY_DETERMINED
+    # The reported combination's sigma is the covariance's own along that direction.
+    d = np.array([weak.weights["p1"], weak.weights["p2"]])
+    assert weak.std == pytest.approx(float(np.sqrt(d @ cov.matrix @ d)), rel=1e-6)
+    assert f"±{weak.std:.3g}" in weak.text()
+
+
+def test_exact_hessian_of_a_linear_problem_is_the_gauss_newton_one() -> None:
+    lin, params = _chain_problem(11)
+    JtJ = (lin.J.T @ lin.J).toarray()
+    gn = kkt_covariance(lin, params, np.ones(2), ["p1", "p2"])
+    exact = kkt_covariance(lin, params, np.ones(2), ["p1", "p2"],
+                           hessian_product=lambda Z: JtJ @ Z)
+    np.testing.assert_allclose(exact.matrix, gn.matrix, rtol=1e-9)
+    assert exact.hessian == "exact" and gn.hessian == "gauss-newton"
+    # A curvature the residuals add (r'd2r) changes the answer the way it should.
+    bent = kkt_covariance(lin, params, np.ones(2), ["p1", "p2"],
+                          hessian_product=lambda Z: 2.0 * JtJ @ Z)
+    np.testing.assert_allclose(bent.matrix, 0.5 * gn.matrix, rtol=1e-9)

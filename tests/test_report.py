@@ -47,4 +47,12 @@ def test_report_folder_carries_values_uncertainties_and_fit_statistics(drogue_fi
         assert c["rho"] == pytest.approx(rho[index[c["a"]], index[c["b"]]])
     sizes = [abs(c["rho"]) for c in result["strong_correlations"]]
     assert sizes == sorted(sizes, reverse=True)
-    assert "correlations |ρ|" in parameter_table(fit, cov)
+    table = parameter_table(fit, cov)
+    assert "correlations |ρ|" in table
+    # The full matrix, the covariance's provenance and the identifiability verdict.
+    np.testing.assert_allclose(np.array(result["correlation"]["matrix"]), rho, atol=1e-6)
+    assert result["correlation"]["names"] == cov.names
+    assert result["fit"]["covariance"] == cov.describe()
+    assert result["identifiability"] == [] and "every combination" in table
+    assert (out / "correlation.png").exists()
+    assert "Correlations with |ρ| ≥" in (out / "report.md").read_text()
