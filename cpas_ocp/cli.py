@@ -68,6 +68,12 @@ def _parser() -> argparse.ArgumentParser:
     s = sub.add_parser("reconstruct", help="reconstruct a test folder")
     s.add_argument("test_dir", type=Path)
     s.add_argument("--out", required=True, type=Path)
+    s.add_argument("--profile", action="append", default=[], metavar="NAME",
+                   help="also profile the likelihood of this free parameter (repeatable)")
+    s.add_argument("--profile-span", type=float, default=3.0, metavar="SIGMAS",
+                   help="profile over the estimate -+ this many sigma (default 3)")
+    s.add_argument("--profile-points", type=int, default=13, metavar="N",
+                   help="values per profile (default 13)")
     _model_option(s)
     _solver_options(s)
     s.set_defaults(run=_reconstruct)
@@ -188,15 +194,25 @@ def _demo(args: argparse.Namespace) -> int:
 
 
 def _run_reconstruction(test: FlightTest, args: argparse.Namespace, spec: ModelSpec) -> None:
+    from .profile_likelihood import profile
     from .report import fit_summary, parameter_table, write_report
     est = _estimator(test, args, spec)
+    names = getattr(args, "profile", [])
+    unknown = [n for n in names if n not in est.free]
+    if unknown:
+        raise InputError("--profile", unknown[0],
+                         f"a free parameter of the fit ({', '.join(est.free)})")
     print(f"solving: {est.size_text()} ...", flush=True)
     fit, cov = _fit_and_covariance(est, args)
-    out = write_report(fit, cov, args.out)
+    profiles = [profile(est, fit, cov, n, args.profile_span, args.profile_points,
+                        progress=not args.verbose) for n in names]
+    out = write_report(fit, cov, args.out, profiles)
     print()
     print(parameter_table(fit, cov))
     print()
     print(fit_summary(fit))
+    for prof in profiles:
+        print(f"profile likelihood, {prof.text()}")
     print(f"\nreport written to {out} (result.json, parameters.csv, report.md, figures)")
 
 

@@ -1,5 +1,5 @@
 """Figures of a fit: model against measurement per sensor, canopy drag areas, event
-times and parameter correlations."""
+times, parameter correlations and profile likelihoods."""
 
 from __future__ import annotations
 
@@ -13,6 +13,7 @@ import numpy as np
 
 from .estimation import EVENTS, Fit
 from .parameters import param_name
+from .profile_likelihood import THRESHOLD, Profile
 from .reduction import reduce, stage_starts
 from .uncertainty import Covariance
 from .units import FT, LBF
@@ -113,6 +114,28 @@ def plot_correlation(cov: Covariance, name: str, folder: Path) -> Path | None:
     ax.set_yticks(range(len(keep)), labels, fontsize=6)
     fig.colorbar(im, ax=ax, shrink=0.8, label="correlation ρ")
     return _save(fig, f"{name}: parameter correlations", folder / "correlation.png")
+
+
+def plot_profile(prof: Profile, name: str, folder: Path) -> Path:
+    """A parameter's profile likelihood against the covariance's parabola, with both 95 %
+    intervals."""
+    fig, ax = plt.subplots(figsize=(7, 4.2))
+    fine = np.linspace(prof.values.min(), prof.values.max(), 200)
+    ax.plot(fine, ((fine - prof.estimate) / prof.std) ** 2, "--", color="0.5",
+            label="covariance: ((θ - θ̂)/σ)²")
+    ax.plot(prof.values, prof.delta_chi_square, "o-", color="C3", ms=4, label="profile Δχ²")
+    ax.axhline(THRESHOLD, color="k", lw=0.6)
+    for v in prof.interval():
+        if v is not None:
+            ax.axvline(v, color="C3", lw=0.8, ls=":")
+    for v in prof.wald_interval():
+        ax.axvline(v, color="0.5", lw=0.8, ls=":")
+    ax.set_xlabel(f"{prof.name} [{prof.unit}]")
+    ax.set_ylabel("Δχ²  (95 %: 3.84)")
+    ax.set_ylim(bottom=-0.2)
+    ax.legend(loc="upper center", fontsize=8)
+    safe = "".join(ch if ch.isalnum() or ch in "_-" else "_" for ch in prof.name)
+    return _save(fig, f"{name}: profile likelihood", folder / f"profile_{safe}.png")
 
 
 def _save(fig: plt.Figure, title: str, path: Path) -> Path:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -13,7 +14,8 @@ from scipy.stats import norm
 from .diagnostics import sensor_summary, worst_windows
 from .estimation import EVENTS, Fit
 from .output_folder import atomic_folder
-from .plots import plot_correlation, plot_drag_areas, plot_events, plot_sensors
+from .plots import plot_correlation, plot_drag_areas, plot_events, plot_profile, plot_sensors
+from .profile_likelihood import Profile
 from .uncertainty import POORLY_DETERMINED, Covariance
 from .units import FT
 
@@ -53,7 +55,8 @@ def channel_unit(sensor: str, channel: str) -> str:
     return "s" if sensor == EVENTS else SENSOR_UNITS.get(channel, "SI")
 
 
-def result_dict(fit: Fit, cov: Covariance | None) -> dict[str, Any]:
+def result_dict(fit: Fit, cov: Covariance | None,
+                profiles: Sequence[Profile] = ()) -> dict[str, Any]:
     """Everything a reader of result.json needs; SI units, stated per value."""
     std = cov.std if cov is not None else {}
     params = {}
@@ -100,6 +103,7 @@ def result_dict(fit: Fit, cov: Covariance | None) -> dict[str, Any]:
         "identifiability": [] if cov is None else [
             {"weights": w.weights, "other": w.other, "std": w.std,
              "curvature_ratio": w.curvature_ratio, "text": w.text()} for w in cov.weak],
+        "profiles": {p.name: p.as_dict() for p in profiles},
         "model": {"effects": [e.name for e in fit.model.effects],
                   "grid_step_s": fit.settings.grid_step,
                   "fill_length": {c.name: c.fill_length for c in fit.test.parachutes}},
@@ -173,11 +177,12 @@ def correlation_markdown(cov: Covariance, threshold: float = REPORTED_CORRELATIO
             + (f"| parameter | parameter | ρ |\n|---|---|---|\n{rows}\n" if pairs else "none\n\n"))
 
 
-def write_report(fit: Fit, cov: Covariance | None, out: str | Path) -> Path:
+def write_report(fit: Fit, cov: Covariance | None, out: str | Path,
+                 profiles: Sequence[Profile] = ()) -> Path:
     """Write the report folder atomically: all of it or nothing."""
     out = Path(out)
     with atomic_folder(out, "result.json") as tmp:
-        (tmp / "result.json").write_text(json.dumps(result_dict(fit, cov), indent=2))
+        (tmp / "result.json").write_text(json.dumps(result_dict(fit, cov, profiles), indent=2))
         rows = [{"parameter": n, "value": fit.parameters[n],
                  "std": (cov.std.get(n, np.nan) if cov else np.nan),
                  "unit": fit.model.parameter(n).unit} for n in fit.free]
@@ -187,9 +192,12 @@ def write_report(fit: Fit, cov: Covariance | None, out: str | Path) -> Path:
         plot_events(fit, tmp)
         if cov is not None:
             plot_correlation(cov, fit.test.name, tmp)
+        for prof in profiles:
+            plot_profile(prof, fit.test.name, tmp)
         (tmp / "report.md").write_text(
             f"# Reconstruction of {fit.test.name}\n\n{fit.test.label}\n\n```\n"
             f"{parameter_table(fit, cov)}\n\n{fit_summary(fit)}\n```\n\n"
             + (correlation_markdown(cov) if cov is not None else "")
+            + "".join(f"Profile likelihood, {p.text()}\n\n" for p in profiles)
             + "".join(f"![{p.stem}]({p.name})\n\n" for p in sorted(tmp.glob("*.png"))))
     return out
