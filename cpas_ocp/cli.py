@@ -81,8 +81,9 @@ def _parser() -> argparse.ArgumentParser:
     s = sub.add_parser("whatif", help="re-solve under constraints and report what they cost")
     s.add_argument("test_dir", type=Path)
     s.add_argument("--constrain", action="append", required=True, metavar="EXPR",
-                   help="NAME == VALUE [UNIT], NAME <= VALUE or NAME >= VALUE, e.g. "
-                        "'Ck[drogue1,stage1] == 1' (repeatable)")
+                   help="NAME == VALUE [UNIT], NAME <= VALUE or NAME >= VALUE on a free "
+                        "parameter, e.g. 'Ck[drogue1,stage1] == 1', or a peak limit, e.g. "
+                        "'peak_load[drogue1] <= 30000 lbf' (repeatable)")
     _model_option(s)
     _solver_options(s)
     s.set_defaults(run=_whatif)

@@ -63,7 +63,10 @@ class Settings:
     code (`cpas_ocp.compiled`; falls back to CasADi's VM without a compiler);
     free: parameter names to estimate (default: the model's choice,
     `ModelSpec.free_names`);
-    fixed: values of parameters held fixed (default: their model default).
+    fixed: values of parameters held fixed (default: their model default);
+    limits: model quantities held within (lower, upper) (SI) at every node,
+    e.g. ``{"tension[drogue1]": (-inf, 133e3)}``: a what-if on a derived
+    quantity (`whatif`).  Between nodes the quantity is not checked.
     """
 
     grid_step: float | None = None
@@ -76,6 +79,7 @@ class Settings:
     fixed: dict[str, float] = field(default_factory=dict)
     guess: dict[str, float] = field(default_factory=dict)
     verbose: bool = False
+    limits: dict[str, tuple[float, float]] = field(default_factory=dict)
 
 
 MIN_GRID_STEP_S = 0.001
@@ -322,6 +326,27 @@ class Estimator:
             lbg.append([con.lower])
             ubg.append([con.upper])
 
+        # What-if limits on model quantities, at every node (after the few constraints
+        # whose curvature the Hessian carries).
+        n_small = len(g)
+        self.limit_rows: dict[str, tuple[slice, float]] = {}
+        offset = sum(int(np.size(a)) for a in lbg)
+        for qname, (lo, hi) in s.limits.items():
+            if qname not in m.quantity_names:
+                raise ValueError(f"no model quantity {qname!r} to limit")
+            finite = [abs(v) for v in (lo, hi) if np.isfinite(v) and v != 0.0]
+            qscale = max(finite) if finite else 1.0
+            qi = m.quantity_names.index(qname)
+            fn = ca.Function("limit", [xs, ts, ps, cs], [m.quantities(xs, ts, ps, cs)[qi] / qscale])
+            value, jac = self._mapped_block(fn, self._local_jacobian(fn, 1),
+                                            [np.arange(n + 1)], self.t, [])
+            g.append(value)
+            g_jac.append(jac)
+            lbg.append(np.full(n + 1, lo / qscale))
+            ubg.append(np.full(n + 1, hi / qscale))
+            self.limit_rows[qname] = (slice(offset, offset + n + 1), qscale)
+            offset += n + 1
+
         # Observed event times the model predicts (a Pilot's Main bag lift and bag strip).
         predicted = m.event_times(pfull, Cp)
         for j, (timing, event) in enumerate(m.timings):
@@ -355,8 +380,9 @@ class Estimator:
         sigma_f = ca.MX.sym("sigma_f")
         lam_g = ca.MX.sym("lam_g", self._g.numel())
         n_gaps = nx * n
-        small = ca.vertcat(*g[1:])
-        curvature = (ca.hessian(ca.dot(lam_g[n_gaps:], small), z_all)[0] if small.numel()
+        small = ca.vertcat(*g[1:n_small])
+        lam_small = lam_g[n_gaps:n_gaps + small.numel()]
+        curvature = (ca.hessian(ca.dot(lam_small, small), z_all)[0] if small.numel()
                      else ca.MX(z_all.numel(), z_all.numel()))
         hess = ca.Function("gauss_newton", [self._z, empty, sigma_f, lam_g],
                            [ca.triu(sigma_f * ca.mtimes(jac.T, jac) + curvature)],

@@ -5,7 +5,14 @@ significant at the 0.1 % level.  Six reported sigma from the estimate it is
 rejected, and, since the problem is nearly linear there, the cost and the
 Lagrange multiplier agree with the covariance: chi-square rises by about
 (d/sigma)^2 and d(chi^2)/d(value) is about 2 d / sigma^2 (each within 20 %).
-An inequality the fit does not touch costs nothing and is not counted.
+An inequality the fit does not touch costs nothing and is not counted; one
+the fit presses against is tested against the chi-bar-squared mixture
+(half the chi-square tail for one inequality).
+
+A limit on a derived quantity, the peak riser load, binds the whole
+trajectory.  Where the data want the peak at X0 and it is held at X < X0, the
+cost is close to quadratic in X0 - X, so the multiplier and the cost agree:
+delta chi^2 ~ -d(chi^2)/dX (X0 - X) / 2 (within 20 %).
 """
 
 from __future__ import annotations
@@ -19,7 +26,7 @@ from cpas_ocp.cli import main
 from cpas_ocp.errors import InputError
 from cpas_ocp.estimation import Estimator
 from cpas_ocp.flight_test import load_test
-from cpas_ocp.units import FT
+from cpas_ocp.units import FT, LBF
 from cpas_ocp.whatif import parse_constraint, what_if
 
 NAME = "CdS[fbcp1,stage1]"
@@ -82,3 +89,44 @@ def test_whatif_command_bad_expression_is_one_line_exit_2(problem_folder, capsys
     code = main(["whatif", str(problem_folder("fbcp", 1)), "--constrain", "Ck[fbcp1] == 1"])
     err = capsys.readouterr().err.strip()
     assert code == 2 and len(err.splitlines()) == 1 and "Ck[fbcp1]" in err, err
+
+
+def test_one_sided_constraint_is_tested_against_chi_bar_squared(fbcp_study) -> None:
+    est, fit, cov, _ = fbcp_study
+    limit = fit.parameters[NAME] - 2.0 * cov.std[NAME]
+    result = what_if(est, fit, cov, [parse_constraint(f"{NAME} <= {limit!r}", est)])
+    assert result.active == [NAME]
+    assert result.delta_chi_square == pytest.approx(4.0, rel=0.2)
+    assert result.p_value == pytest.approx(0.5 * chi2.sf(result.delta_chi_square, 1), rel=1e-9)
+
+
+def test_peak_load_limit_binds_and_its_multiplier_matches_its_cost(fbcp_study) -> None:
+    est, fit, cov, _ = fbcp_study
+    peak = float(fit.quantities()["tension[fbcp1]"].max())
+    limit_lbf = round(0.97 * peak / LBF)
+    result = what_if(est, fit, cov, [parse_constraint(
+        f"peak_load[fbcp1] <= {limit_lbf} lbf", est)])
+    limit = limit_lbf * LBF
+    assert result.active == ["peak_load[fbcp1]"]
+    held = float(result.constrained.quantities()["tension[fbcp1]"].max())
+    assert held <= limit * (1 + 1e-6) and held == pytest.approx(limit, rel=1e-4)
+    sensitivity = result.constrained.sensitivities["peak_load[fbcp1]"]
+    assert sensitivity < 0.0  # a higher limit would fit better
+    assert result.delta_chi_square > 0.1
+    assert result.delta_chi_square == pytest.approx(-sensitivity * (peak - limit) / 2, rel=0.2)
+
+
+def test_peak_limit_above_the_peak_costs_nothing_and_mistakes_are_named(fbcp_study) -> None:
+    est, fit, cov, _ = fbcp_study
+    peak = float(fit.quantities()["tension[fbcp2]"].max())
+    result = what_if(est, fit, cov, [parse_constraint(
+        f"peak_load[fbcp2] <= {1.05 * peak / 1e3!r} kN", est)])
+    assert result.active == [] and result.p_value == 1.0
+    assert abs(result.delta_chi_square) < 0.01
+    for text, field in (("peak_load[nope] <= 5000 lbf", "peak_load[nope]"),
+                        ("peak_load[fbcp1] >= 5000 lbf", "peak_load[fbcp1]"),
+                        ("peak_load[fbcp1] <= 5000 s", "peak_load[fbcp1] unit"),
+                        ("peak_speed <= 3", "peak_speed")):
+        with pytest.raises(InputError) as err:
+            parse_constraint(text, est)
+        assert err.value.field == field
