@@ -4,6 +4,8 @@ Part 1: each built-in problem is simulated (seed 1) and reconstructed with
 default settings in a fresh subprocess, so that its peak resident memory
 (``VmHWM``, the high-water mark of this process image alone) is its own.
 The compiled model functions are built once beforehand, outside the timing.
+The covariance is timed against the solve it follows, in the same process:
+the Gauss-Newton one always, the exact-Hessian one with ``--exact``.
 
 Part 2: the `fbcp` problem with its IMU and load cells sampled at 100 Hz to
 4 kHz (GPS stays at 10 Hz), i.e. about 1,200 to 48,000 residuals, on a fixed
@@ -12,6 +14,7 @@ against the smallest run in this same invocation: time per Ipopt iteration
 and samples, whose log-log slope is the growth exponent (1 = linear).
 
     python benchmarks/problem_scaling.py [--problems drogue pilot ...] [--rates 100 250 ...]
+                                         [--exact]
 """
 
 from __future__ import annotations
@@ -34,7 +37,7 @@ from cpas_ocp.problems import load_problem, problem_names
 from cpas_ocp.simulate import simulate_problem
 
 
-def run_one(folder: Path, grid_step: float | None) -> dict:
+def run_one(folder: Path, grid_step: float | None, exact: bool = False) -> dict:
     """Build and solve one test folder; the caller runs this in a fresh process."""
     test = load_test(folder)
     t0 = time.perf_counter()
@@ -43,8 +46,12 @@ def run_one(folder: Path, grid_step: float | None) -> dict:
     fit = est.solve(progress=False)
     t1 = time.perf_counter()
     est.covariance(fit)
+    t2 = time.perf_counter()
+    if exact:
+        est.covariance(fit, hessian="exact")
     return {"samples": fit.n_samples, "variables": int(est._z.numel()), "build_s": build,
-            "solve_s": fit.solver.wall_s, "covariance_s": time.perf_counter() - t1,
+            "solve_s": fit.solver.wall_s, "covariance_s": t2 - t1,
+            "exact_s": time.perf_counter() - t2 if exact else None,
             "iterations": fit.solver.iterations, "status": fit.solver.status,
             "peak_mb": peak_memory_mb()}
 
@@ -69,10 +76,12 @@ def peak_memory_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
-def in_subprocess(folder: Path, grid_step: float | None) -> dict:
+def in_subprocess(folder: Path, grid_step: float | None, exact: bool = False) -> dict:
     cmd = [sys.executable, __file__, "--one", str(folder)]
     if grid_step is not None:
         cmd += ["--grid-step", str(grid_step)]
+    if exact:
+        cmd += ["--exact"]
     out = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
     return json.loads(out.strip().splitlines()[-1])
 
@@ -92,15 +101,18 @@ def main() -> None:
                     ", ".join(MEASURED_ELSEWHERE) + ")")
     ap.add_argument("--rates", type=float, nargs="*", default=[100, 250, 500, 1000, 2000, 4000],
                     help="IMU and load-cell rates of the fbcp scaling runs (none: skip them)")
+    ap.add_argument("--exact", action="store_true",
+                    help="also time the exact-Hessian covariance")
     args = ap.parse_args()
     if args.one:
-        print(json.dumps(run_one(args.one, args.grid_step)))
+        print(json.dumps(run_one(args.one, args.grid_step, args.exact)))
         return
 
     tmp = Path(tempfile.mkdtemp(prefix="cpas-bench-"))
     print("per problem (seed 1, default settings, fresh process each):")
     print(f"{'problem':8s} {'samples':>8s} {'variables':>9s} {'build s':>8s} {'solve s':>8s} "
-          f"{'iter':>5s} {'cov s':>6s} {'peak MB':>8s}")
+          f"{'iter':>5s} {'cov s':>6s} {'cov/solve':>9s} {'exact s':>8s} {'exact/solve':>11s} "
+          f"{'peak MB':>8s}")
     names = args.problems or [n for n in problem_names() if n not in MEASURED_ELSEWHERE]
     for name in sorted(set(MEASURED_ELSEWHERE) - set(names)):
         print(f"{name:8s} timed by {MEASURED_ELSEWHERE[name]}")
@@ -108,9 +120,12 @@ def main() -> None:
         folder = tmp / name
         simulate_problem(load_problem(name), folder, seed=1)
         Estimator(load_test(folder))  # compile (cached) outside the timing
-        r = in_subprocess(folder, None)
+        r = in_subprocess(folder, None, args.exact)
+        exact = (f"{r['exact_s']:8.1f} {r['exact_s'] / r['solve_s']:11.2f}" if args.exact
+                 else f"{'-':>8s} {'-':>11s}")
         print(f"{name:8s} {r['samples']:8d} {r['variables']:9d} {r['build_s']:8.1f} "
               f"{r['solve_s']:8.1f} {r['iterations']:5d} {r['covariance_s']:6.1f} "
+              f"{r['covariance_s'] / r['solve_s']:9.3f} {exact} "
               f"{r['peak_mb']:8.0f}   {r['status']}", flush=True)
 
     if not args.rates:
