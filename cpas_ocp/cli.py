@@ -195,14 +195,12 @@ def _demo(args: argparse.Namespace) -> int:
 
 
 def _run_reconstruction(test: FlightTest, args: argparse.Namespace, spec: ModelSpec) -> None:
-    from .profile_likelihood import profile
+    from .profile_likelihood import profile, require_free
     from .report import fit_summary, parameter_table, write_report
     est = _estimator(test, args, spec)
     names = getattr(args, "profile", [])
-    unknown = [n for n in names if n not in est.free]
-    if unknown:
-        raise InputError("--profile", unknown[0],
-                         f"a free parameter of the fit ({', '.join(est.free)})")
+    for name in names:
+        require_free(est, name)
     print(f"solving: {est.size_text()} ...", flush=True)
     fit, cov = _fit_and_covariance(est, args)
     profiles = [profile(est, fit, cov, n, args.profile_span, args.profile_points,

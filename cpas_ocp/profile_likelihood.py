@@ -95,12 +95,17 @@ def _crossing(values: np.ndarray, delta: np.ndarray, estimate: float) -> float |
     return None
 
 
+def require_free(est: Estimator, name: str) -> None:
+    """InputError unless `name` is a free parameter of `est` (checked before any solve)."""
+    if name not in est.free:
+        raise InputError("--profile", name, f"a free parameter of the fit ({', '.join(est.free)})")
+
+
 def profile(est: Estimator, fit: Fit, cov: Covariance, name: str, span: float = 3.0,
             points: int = 13, progress: bool = False) -> Profile:
     """The profile of free parameter `name` over estimate -+ `span` sigma at `points` values
     (clipped to the parameter's bounds), from the fit `fit` of `est`."""
-    if name not in est.free:
-        raise InputError("--profile", name, f"a free parameter of the fit ({', '.join(est.free)})")
+    require_free(est, name)
     std = cov.std.get(name)
     if std is None or name in cov.at_bound or std <= 0.0:
         raise InputError("--profile", name, "a parameter the fit determines (not on a bound, "

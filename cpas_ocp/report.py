@@ -183,8 +183,8 @@ def write_report(fit: Fit, cov: Covariance | None, out: str | Path,
     out = Path(out)
     with atomic_folder(out, "result.json") as tmp:
         (tmp / "result.json").write_text(json.dumps(result_dict(fit, cov, profiles), indent=2))
-        rows = [{"parameter": n, "value": fit.parameters[n],
-                 "std": (cov.std.get(n, np.nan) if cov else np.nan),
+        std = cov.std if cov is not None else {}
+        rows = [{"parameter": n, "value": fit.parameters[n], "std": std.get(n, np.nan),
                  "unit": fit.model.parameter(n).unit} for n in fit.free]
         pd.DataFrame(rows).to_csv(tmp / "parameters.csv", index=False)
         plot_sensors(fit, tmp)

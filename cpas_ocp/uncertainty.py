@@ -252,7 +252,16 @@ class _NullSpace:
     dw0: np.ndarray
     H_eigenvalues: np.ndarray
     H_eigenvectors: np.ndarray
-    determined: np.ndarray
+
+    @property
+    def largest(self) -> float:
+        """The largest curvature (1 for an empty problem): the reference of every ratio."""
+        return float(self.H_eigenvalues.max()) if self.H_eigenvalues.size else 1.0
+
+    @property
+    def determined(self) -> np.ndarray:
+        """The eigen-directions with curvature above SINGULAR_RATIO of the largest."""
+        return self.H_eigenvalues > SINGULAR_RATIO * max(self.largest, 1e-300)
 
     def inverse(self) -> np.ndarray:
         """(N'HN)^+ on the determined directions, in y."""
@@ -279,9 +288,7 @@ def _null_space(red: ReducedProblem, hessian: np.ndarray | None = None) -> _Null
     w, V = np.linalg.eigh(0.5 * (H + H.T))
     if not np.all(np.isfinite(w)):
         raise ValueError("the reduced Hessian has non-finite entries")
-    top = w.max() if w.size else 1.0
-    determined = w > SINGULAR_RATIO * max(top, 1e-300)
-    return _NullSpace(N, dw0, w, V, determined)
+    return _NullSpace(N, dw0, w, V)
 
 
 HESSIANS = ("gauss-newton", "exact")  # curvatures a covariance may invert
@@ -343,7 +350,7 @@ def _weak_combinations(ns: _NullSpace, rows: list[int], at: list[int], names: li
     pivoted QR picks them): two canopies the data cannot tell apart then read
     CdS[a] - CdS[b], stage by stage, rather than an arbitrary mixture.
     """
-    top = ns.H_eigenvalues.max() if ns.H_eigenvalues.size else 1.0
+    top = ns.largest
     undetermined_w = ns.N @ ns.H_eigenvectors[:, ~ns.determined]
     loading = np.zeros(len(names))
     for i, a in zip(rows, at, strict=True):

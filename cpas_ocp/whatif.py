@@ -64,13 +64,15 @@ PEAKS = {"load": ("tension", "N"), "tension": ("tension", "N"),
 
 @dataclass(frozen=True)
 class Constraint:
-    """``name op value``: a free parameter held at (==) or behind (<=, >=) a value (SI), or
-    the peak of a model quantity (`quantity`, e.g. ``tension[drogue1]``) held below one."""
+    """``name op value``: a free parameter held at (==) or behind (<=, >=) a value (SI, in
+    `unit`), or the peak of a model quantity (`quantity`, e.g. ``tension[drogue1]``) held
+    below one."""
 
     name: str
     op: str
     value: float
     text: str
+    unit: str
     quantity: str | None = None
 
     def bounds(self, lower: float, upper: float) -> tuple[float, float]:
@@ -98,7 +100,7 @@ def parse_constraint(text: str, est: Estimator, source: str = "--constrain") -> 
     if not prm.lower <= value <= prm.upper:
         raise InputError(source, name, f"a value within its bounds [{prm.lower:g}, "
                                        f"{prm.upper:g}] {prm.unit}; got {value:g}")
-    return Constraint(name, op, value, text.strip())
+    return Constraint(name, op, value, text.strip(), prm.unit)
 
 
 def _peak_constraint(name: str, op: str, value: float, unit: str | None, text: str,
@@ -115,7 +117,8 @@ def _peak_constraint(name: str, op: str, value: float, unit: str | None, text: s
     if op != "<=":
         raise InputError(source, name, "'<=': a peak is limited from above (every node below "
                                        "the value); '==' and '>=' do not say where it occurs")
-    return Constraint(name, op, _to_si(value, unit, si, source, name), text.strip(), quantity)
+    return Constraint(name, op, _to_si(value, unit, si, source, name), text.strip(), si,
+                      quantity)
 
 
 def _to_si(value: float, unit: str | None, si: str, source: str, name: str) -> float:
@@ -247,15 +250,14 @@ def whatif_text(result: WhatIfResult, top: int = 8) -> str:
     lines = [f"constraint{'s' if len(result.constraints) > 1 else ''}: "
              + "; ".join(c.text for c in result.constraints)]
     dof = len(result.active)
-    scaled = "" if result.statistic == max(result.delta_chi_square, 0.0) else \
-        f"; {result.statistic:.2f} after dividing by chi^2/dof"
+    cov = result.covariance
+    scaled = f"; {result.statistic:.2f} after dividing by chi^2/dof" if cov and cov.scaled else ""
     lines.append(f"chi-square {result.free.chi_square:.1f} -> {result.constrained.chi_square:.1f}"
                  f"  (increase {result.delta_chi_square:.2f}{scaled}; likelihood-ratio p = "
                  f"{result.p_value:.3g} on {dof} active constraint{'s' if dof != 1 else ''})")
-    units = {c.name: PEAKS[c.name.removeprefix("peak_").split("[")[0]][1] for c in
-             result.constraints if c.quantity is not None}
+    units = {c.name: c.unit for c in result.constraints}
     for name, d in result.constrained.sensitivities.items():
-        unit = units.get(name) or result.constrained.model.parameter(name).unit
+        unit = units[name]
         state = "active" if name in result.active else "inactive"
         lines.append(f"  {name}: d(chi^2)/d(value) = {d:+.4g} per {unit} ({state})")
     lines.append("parameters that moved most (in sigma of the unconstrained fit):")
