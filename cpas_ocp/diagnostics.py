@@ -1,12 +1,15 @@
-"""Where the model fits worst: residual statistics per sensor and per time window."""
+"""Where the model fits worst: residual statistics per sensor, per time window and per
+phase window (deployment, inflation, steady flight of each canopy)."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
-from .estimation import Fit, SensorResidual
+from .estimation import EVENTS, Fit, SensorResidual
+from .phase_windows import OUTSIDE, PhaseWindow, window_index, windows_for_sensor
 
 
 @dataclass(frozen=True)
@@ -63,3 +66,74 @@ def _windows(r: SensorResidual, width: float) -> list[Window]:
                               float(np.sqrt(z2[sel].mean())), int(sel.sum())))
         start += width / 2
     return out
+
+
+@dataclass(frozen=True)
+class WindowStatistic:
+    """The residuals of one sensor channel in one phase window.
+
+    rms: root mean square of measured minus model (SI, the channel's unit);
+    normalized_rms: that of (measured - model) / sigma (1 for a model that
+    explains the data to the noise); chi_square: the window's sum of squared
+    normalised residuals; fraction: its share of the fit's total chi-square.
+    t0, t1 (s): the window's bounds (for OUTSIDE, the first and last sample).
+    """
+
+    sensor: str
+    channel: str
+    window: str
+    t0: float
+    t1: float
+    samples: int
+    rms: float
+    normalized_rms: float
+    chi_square: float
+    fraction: float
+
+    @property
+    def excess(self) -> float:
+        """chi^2 - n: what the window holds beyond the noise (expected 0 +- sqrt(2 n))."""
+        return self.chi_square - self.samples
+
+
+def window_statistics(fit: Fit, windows: Sequence[PhaseWindow]) -> list[WindowStatistic]:
+    """Residual statistics of every sensor channel in every phase window it has samples in.
+
+    Each sample counts in exactly one window (`phase_windows.window_index`; load
+    cells see their own canopy's windows, vehicle sensors every canopy's), and
+    samples outside every window are reported under OUTSIDE, so that a channel's
+    window chi-squares add up to its total.  Observed event times are left out.
+    """
+    total = fit.chi_square
+    out: list[WindowStatistic] = []
+    for r in fit.residuals:
+        if r.sensor == EVENTS or r.t.size == 0:
+            continue
+        applicable = windows_for_sensor(fit.test, r.sensor, windows)
+        index = window_index(r.t, applicable)
+        z2 = r.normalized**2
+        d2 = (r.measured - r.model) ** 2
+        for i in [*range(len(applicable)), -1]:
+            sel = index == i
+            if not sel.any():
+                continue
+            t0, t1 = ((applicable[i].t0, applicable[i].t1) if i >= 0
+                      else (float(r.t[sel][0]), float(r.t[sel][-1])))
+            chi2 = float(np.sum(z2[sel]))
+            out.append(WindowStatistic(
+                r.sensor, r.channel, applicable[i].name if i >= 0 else OUTSIDE, t0, t1,
+                int(sel.sum()), float(np.sqrt(np.mean(d2[sel]))),
+                float(np.sqrt(np.mean(z2[sel]))), chi2, chi2 / total if total > 0 else 0.0))
+    return out
+
+
+def worst_place(fit: Fit, windows: Sequence[PhaseWindow]) -> str:
+    """One line naming the sensor channel and phase window where the model fails most beyond
+    the noise: the largest chi-square excess chi^2 - n."""
+    stats = window_statistics(fit, windows)
+    if not stats:
+        return "no sensor samples to compare with the model"
+    w = max(stats, key=lambda s: s.excess)
+    return (f"{w.sensor} {w.channel}, {w.window} ({w.t0:.2f}-{w.t1:.2f} s): chi-square "
+            f"{w.chi_square:.1f} on {w.samples} samples (excess {w.excess:+.1f}), normalised "
+            f"RMS {w.normalized_rms:.2f}, {100 * w.fraction:.1f} % of the total chi-square")

@@ -1,8 +1,9 @@
-"""Figures of a fit: model against measurement per sensor, canopy drag areas, event
-times, parameter correlations and profile likelihoods."""
+"""Figures of a fit: model against measurement per sensor (also with the phase windows
+shaded), canopy drag areas, event times, parameter correlations and profile likelihoods."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 
 import matplotlib
@@ -13,6 +14,7 @@ import numpy as np
 
 from .estimation import EVENTS, Fit
 from .parameters import param_name
+from .phase_windows import PhaseWindow, windows_for_sensor
 from .profile_likelihood import THRESHOLD, Profile
 from .reduction import reduce, stage_starts
 from .uncertainty import Covariance
@@ -136,6 +138,49 @@ def plot_profile(prof: Profile, name: str, folder: Path) -> Path:
     ax.legend(loc="upper center", fontsize=8)
     safe = "".join(ch if ch.isalnum() or ch in "_-" else "_" for ch in prof.name)
     return _save(fig, f"{name}: profile likelihood", folder / f"profile_{safe}.png")
+
+
+# Shading of the phase windows, by kind: light, distinct colours.
+WINDOW_COLOURS = {"deployment": "#cfe2f3", "inflation": "#f9d5cf", "steady": "#d9ead3"}
+
+
+def plot_sensor_residuals(fit: Fit, windows: Sequence[PhaseWindow], folder: Path) -> list[Path]:
+    """One figure per sensor (``residuals_<sensor>.png``): for each channel the model over
+    the measurement (display units), and beneath it the normalised residuals with the
+    +-1 and +-3 sigma bands; the phase windows that apply to the sensor (its own canopy's
+    for a load cell) are shaded by kind, each kind labelled once."""
+    paths = []
+    for sensor in dict.fromkeys(r.sensor for r in fit.residuals if r.sensor != EVENTS):
+        rows = [r for r in fit.residuals if r.sensor == sensor]
+        shown = windows_for_sensor(fit.test, sensor, windows)
+        fig, axes = plt.subplots(2 * len(rows), 1, figsize=(10, 2.8 * len(rows) + 1.5),
+                                 sharex=True, gridspec_kw={"height_ratios": [3, 1.4] * len(rows)})
+        for i, r in enumerate(rows):
+            unit, k = DISPLAY.get(r.channel, ("SI", 1.0))
+            ax, axr = axes[2 * i], axes[2 * i + 1]
+            labelled: set[str] = set()
+            for w in shown:
+                colour = WINDOW_COLOURS.get(w.kind, "0.9")
+                label = w.kind if i == 0 and w.kind not in labelled else None
+                labelled.add(w.kind)
+                for a in (ax, axr):
+                    a.axvspan(w.t0, w.t1, color=colour, alpha=0.6, lw=0, zorder=0,
+                              label=label if a is ax else None)
+            ax.plot(r.t, r.measured * k, ".", ms=1.5, color="0.55", label="measured")
+            ax.plot(r.t, r.model * k, "-", lw=1.0, color="C3", label="model")
+            ax.set_ylabel(f"{r.channel} [{unit}]")
+            ax.legend(loc="best", fontsize=7, ncol=2)
+            axr.axhspan(-3, 3, color="0.4", alpha=0.12, zorder=0.5, lw=0)
+            axr.axhspan(-1, 1, color="0.4", alpha=0.2, zorder=0.6, lw=0)
+            axr.plot(r.t, r.normalized, ".", ms=1.5, color="C0", zorder=2)
+            axr.axhline(0, color="k", lw=0.5, zorder=1)
+            axr.set_ylabel("res/σ (±1, ±3)")
+            lim = max(4.0, float(np.percentile(np.abs(r.normalized), 99.5)))
+            axr.set_ylim(-lim, lim)
+        axes[-1].set_xlabel("time [s]")
+        paths.append(_save(fig, f"{fit.test.name}: {sensor}, residuals by phase window",
+                           folder / f"residuals_{sensor}.png"))
+    return paths
 
 
 def _save(fig: plt.Figure, title: str, path: Path) -> Path:
