@@ -6,6 +6,9 @@
     cpas-ocp reduce TEST_DIR --out DIR        offline reduction (Eqs. 2-3) and initial guess
     cpas-ocp reconstruct TEST_DIR --out DIR   reconstruct a test folder, write the report
     cpas-ocp whatif TEST_DIR --constrain EXPR re-solve under constraints: cost, test, push
+    cpas-ocp diagnose TEST_DIR --out DIR      fit, find where it fails, rank the missing effects
+    cpas-ocp compare TEST_DIR --model A --model B --out DIR
+                                              fit two effect sets, test which the data prefer
     cpas-ocp demo [--out DIR]                 simulate the built-in Drogue test and reconstruct it
 
 Exit codes: 0 success, 2 bad input (one line naming file, field and
@@ -87,6 +90,31 @@ def _parser() -> argparse.ArgumentParser:
     _model_option(s)
     _solver_options(s)
     s.set_defaults(run=_whatif)
+
+    s = sub.add_parser("diagnose", help="fit, then find where the model fails and which "
+                                        "effect is missing")
+    s.add_argument("test_dir", type=Path)
+    s.add_argument("--out", required=True, type=Path)
+    s.add_argument("--plugin", type=Path, action="append", default=[], metavar="FILE",
+                   help="also test the effects this Python file defines (repeatable)")
+    s.add_argument("--confirm", type=int, default=3, metavar="N",
+                   help="refit with at most N significant effects to confirm them (default 3)")
+    s.add_argument("--alpha", type=float, default=0.01,
+                   help="family-wise significance level (default 0.01)")
+    _model_option(s)
+    _solver_options(s)
+    s.set_defaults(run=_diagnose)
+
+    s = sub.add_parser("compare", help="fit two effect sets and test which the data prefer")
+    s.add_argument("test_dir", type=Path)
+    s.add_argument("--model", type=str, action="append", required=True, metavar="FILE",
+                   help="a JSON model block, or 'manifest' for the test's own model; "
+                        "give it twice")
+    s.add_argument("--out", required=True, type=Path)
+    s.add_argument("--plugin", type=Path, action="append", default=[], metavar="FILE",
+                   help="a Python file whose effects the model files may name (repeatable)")
+    _solver_options(s)
+    s.set_defaults(run=_compare)
 
     s = sub.add_parser("demo", help="simulate the built-in Drogue test and reconstruct it")
     s.add_argument("--out", type=Path, default=Path("cpas-demo"))
@@ -176,6 +204,65 @@ def _whatif(args: argparse.Namespace) -> int:
     fit, cov = _fit_and_covariance(est, args)
     print("solving with them ...", flush=True)
     print(whatif_text(what_if(est, fit, cov, constraints, progress=not args.verbose)))
+    return 0
+
+
+def _diagnose(args: argparse.Namespace) -> int:
+    from .diagnosis import diagnose
+    from .discrepancy_report import write_diagnosis
+    from .effects.registry import load_plugin
+    from .flight_test import load_test
+    _check_alpha(args.alpha)
+    test = load_test(args.test_dir)
+    plugins = {}
+    for path in args.plugin:
+        plugins.update(load_plugin(path))
+    spec = _spec(test, args.model)
+    est = _estimator(test, args, spec)
+    print(f"solving: {est.size_text()} ...", flush=True)
+    fit, cov = _fit_and_covariance(est, args)
+    print("testing the effects the model does not use ...", flush=True)
+    diag = diagnose(fit, spec, plugins, args.confirm, args.alpha, progress=not args.verbose)
+    out = write_diagnosis(diag, cov, args.out)
+    print()
+    print(diag.text())
+    print(f"\ndiagnosis written to {out} (diagnosis.md, diagnosis.json, windows.csv, figures)")
+    return 0
+
+
+def _check_alpha(alpha: float) -> None:
+    if not 0.0 < alpha < 1.0:
+        raise InputError("(command line)", "--alpha", f"a level in (0, 1); got {alpha:g}")
+
+
+def _compare(args: argparse.Namespace) -> int:
+    from .discrepancy_report import write_comparison
+    from .effects.registry import load_plugin
+    from .flight_test import load_test
+    from .model_comparison import compare
+    from .model_spec import load_model_file, spec_of_test
+    if len(args.model) != 2:
+        raise InputError("(command line)", "--model",
+                         f"exactly two models (--model A --model B); got {len(args.model)}")
+    test = load_test(args.test_dir)
+    plugins = {}
+    for path in args.plugin:
+        plugins.update(load_plugin(path))
+    specs = [spec_of_test(test) if m == "manifest" else load_model_file(m, plugins)
+             for m in args.model]
+    labels = tuple(Path(m).stem if m != "manifest" else "manifest" for m in args.model)
+    if labels[0] == labels[1]:
+        labels = (f"A: {labels[0]}", f"B: {labels[1]}")
+    est = _estimator(test, args, specs[0])
+    print(f"solving {labels[0]}: {est.size_text()} ...", flush=True)
+    fit_a = est.solve(progress=not args.verbose)
+    print(f"solving {labels[1]} from it ...", flush=True)
+    comparison = compare(fit_a, specs[0], specs[1], labels, progress=not args.verbose)
+    out = write_comparison(comparison, args.out)
+    print()
+    print(comparison.text())
+    print(f"\ncomparison written to {out} (comparison.md, comparison.json, windows.csv, "
+          "figures)")
     return 0
 
 

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .estimation import EVENTS, Fit, SensorResidual
+from .estimation import PSEUDO_SENSORS, Fit, SensorResidual
 from .phase_windows import OUTSIDE, PhaseWindow, window_index, windows_for_sensor
 
 
@@ -107,7 +107,7 @@ def window_statistics(fit: Fit, windows: Sequence[PhaseWindow]) -> list[WindowSt
     total = fit.chi_square
     out: list[WindowStatistic] = []
     for r in fit.residuals:
-        if r.sensor == EVENTS or r.t.size == 0:
+        if r.sensor in PSEUDO_SENSORS or r.t.size == 0:
             continue
         applicable = windows_for_sensor(fit.test, r.sensor, windows)
         index = window_index(r.t, applicable)

@@ -45,6 +45,7 @@ from .uncertainty import (
     Covariance,
     Linearization,
     gauss_newton_decrement,
+    gauss_newton_step,
     kkt_covariance,
     linearize,
 )
@@ -116,6 +117,10 @@ class SensorResidual:
 
 # Sensor name under which observed event times appear among the residuals.
 EVENTS = "events"
+# Sensor name under which the model's priors on free parameters appear (`ModelSpec.priors`).
+PRIORS = "priors"
+# Residuals that are not a sensor's time series.
+PSEUDO_SENSORS = (EVENTS, PRIORS)
 
 # Status of a run ended by the statistical test (`Settings.chi2_step_tol`).
 STATISTICALLY_CONVERGED = "Solved_Gauss_Newton_Step_Below_Tolerance"
@@ -356,6 +361,16 @@ class Estimator:
             self._samples.append((EVENTS, (timing_label(timing),), np.array([event.time]),
                                   np.array([[event.time]]), np.array([[event.sigma]])))
 
+        # Priors on free parameters: independent measurements of them (`ModelSpec.priors`).
+        for name, (value, sigma) in self.spec.prior_values(m).items():
+            if name not in free_index:
+                raise ValueError(f"a prior on {name}, which this estimator holds fixed")
+            r = (value - pfull[m.parameter_names.index(name)]) / sigma
+            residual_blocks.append(r)
+            residual_jacs.append(ca.jacobian(r, z_all))
+            self._samples.append((PRIORS, (name,), np.array([self.t[0]]),
+                                  np.array([[value]]), np.array([[sigma]])))
+
         self._z = z_all
         residual = ca.vertcat(*residual_blocks)
         jac = ca.vertcat(*residual_jacs)
@@ -527,6 +542,34 @@ class Estimator:
         c0 = np.maximum(c0, [c.lower for c in m.captures]) / self._cscale
         return np.concatenate([(x0 / self._xscale[:, None]).ravel(order="F"), p0, c0])
 
+    def point_from(self, fit: Fit, values: dict[str, float] | None = None) -> np.ndarray:
+        """This NLP's decision vector at `fit`, a fit of another model of the same test on
+        the same grid: states, parameters and captured values by name.
+
+        States the fit's model lacks come from this model's effects' guesses
+        (`Effect.state_guess`), else zero; parameters it lacks take this
+        estimator's values; `values` (SI) override both.
+        """
+        if fit.t.shape != self.t.shape or not np.allclose(fit.t, self.t):
+            raise ValueError("the fit was made on another shooting grid")
+        m = self.model
+        known = {**self.values, **{k: v for k, v in fit.parameters.items()
+                                   if k in m.parameter_names}, **(values or {})}
+        x0 = np.zeros((m.nx, len(self.t)))
+        theirs = {st.name for st in fit.model.states}
+        for effect in m.effects:
+            for name, guess in effect.state_guess(self.test, self.t, known).items():
+                if name not in theirs:
+                    x0[m.state_slice(name)] = guess
+        for st in m.states:
+            if st.name in theirs:
+                x0[m.state_slice(st.name)] = fit.x[:, fit.model.state_slice(st.name)].T
+            elif st.pinned:
+                x0[m.state_slice(st.name), 0] = st.initial
+        p0 = np.array([known[f] for f in self.free]) / self.pscale
+        c0 = np.array([fit.captures[c.name] for c in m.captures]) / self._cscale
+        return np.concatenate([(x0 / self._xscale[:, None]).ravel(order="F"), p0, c0])
+
     # ------------------------------------------------------------------ solve
     def size_text(self) -> str:
         """One line describing the NLP's size."""
@@ -535,19 +578,21 @@ class Estimator:
                 f"{nP} parameters, {nC} captured speeds), {self._g.numel()} constraints, "
                 f"{sum(len(s_[2]) * len(s_[1]) for s_ in self._samples)} residuals")
 
-    def solve(self, progress: bool = False, start: Fit | None = None,
+    def solve(self, progress: bool = False, start: Fit | np.ndarray | None = None,
               bounds: dict[str, tuple[float, float]] | None = None) -> Fit:
         """Solve the NLP; raise SolverFailure if it fails.
 
-        It starts from the reduction's initial point, or from the solution of
-        `start` (a fit of this same estimator).  `bounds` replaces the bounds of
+        It starts from the reduction's initial point, from the solution of
+        `start` (a fit of this same estimator) or from `start` itself (a
+        decision vector, e.g. `point_from`).  `bounds` replaces the bounds of
         free parameters (SI; equal bounds pin a value): a what-if constraint.
         The fit then reports, per bounded parameter, the sensitivity of the
         optimal chi-square to the bound, d(chi^2)/d(value) (its Lagrange
         multiplier, times 2, per SI unit).
         With `progress`, a one-line iteration counter with chi-square is shown on stderr.
         """
-        z0 = self.initial_point() if start is None else start.z
+        z0 = (self.initial_point() if start is None
+              else start.z if isinstance(start, Fit) else np.asarray(start, dtype=float))
         lbz, ubz = self._lbz.copy(), self._ubz.copy()
         n_states = self._nz[0]
         for name, (lo, hi) in (bounds or {}).items():
@@ -622,6 +667,21 @@ class Estimator:
         return kkt_covariance(self._linearize(fit.z), self._param_index, self.pscale,
                               self.free, scale_by_residual, product)
 
+    def gauss_newton_estimate(self, z: np.ndarray, release: Sequence[str] = ()
+                              ) -> tuple[dict[str, float], Covariance]:
+        """The free parameters after one Gauss-Newton step from `z` (SI), and their covariance
+        there; parameters in `release` are treated as unbounded (see `_linearize`).
+
+        At the optimum of a model with some parameters held at null values, the
+        step's components along them are their linearised estimates (`score_test`).
+        """
+        lin = self._linearize(z, release)
+        dz = gauss_newton_step(lin)
+        idx = self._param_index
+        values = (z[idx] + dz[idx]) * self.pscale
+        cov = kkt_covariance(lin, idx, self.pscale, self.free)
+        return dict(zip(self.free, map(float, values), strict=True)), cov
+
     def _lagrangian_hessian_product(self) -> ca.Function:
         """(z, lambda, v) -> H v, H the Hessian of 0.5 |r|^2 + lambda' g in the scaled z
         (forward over reverse mode on the NLP's expression graph; built on first use)."""
@@ -638,13 +698,19 @@ class Estimator:
         nX, nP, _ = self._nz
         return np.arange(nX, nX + nP)
 
-    def _linearize(self, z: np.ndarray) -> Linearization:
+    def _linearize(self, z: np.ndarray, release: Sequence[str] = ()) -> Linearization:
+        """The problem linearised at `z`; the free parameters named in `release` are treated
+        as unbounded (a score test's parameters sit on a bound at their null values)."""
         idx = self._param_index
         nx = self.model.nx
         n_states = self._nz[0]
         pinned = np.flatnonzero(self._lbz[:nx] == self._ubz[:nx])
+        lower, upper = self._lbz[idx].copy(), self._ubz[idx].copy()
+        for name in release:
+            i = self.free.index(name)
+            lower[i], upper[i] = -np.inf, np.inf
         return linearize(self._residual_jacobian, self._constraints, z, self._lbg, self._ubg,
-                         idx, self._lbz[idx], self._ubz[idx], chain_rows=n_states - nx,
+                         idx, lower, upper, chain_rows=n_states - nx,
                          dependent=np.arange(nx, n_states), pinned=pinned)
 
     def _fit(self, z: np.ndarray, stats: SolverStats) -> Fit:

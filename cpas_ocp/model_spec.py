@@ -12,8 +12,15 @@ values (``fix``) and which parameters that are fixed by default are estimated
                   "added_mass", "drag_scale", "loadcell_scale", "gps", "imu", "load_cell"],
       "fix": {"riser_damping_ratio[drogue1]": 0.3,
               "CdS_V": {"value": 200, "unit": "ft^2"}},
-      "plugins": ["breathing.py"]
+      "plugins": ["breathing.py"],
+      "priors": {"CdS[drogue1,stage3]": {"value": 226, "sigma": 6, "unit": "ft^2"}}
     }
+
+A prior is an independent measurement of a free parameter (a drag area from
+wind-tunnel or earlier flight tests, say): it adds ((value - p) / sigma)^2
+to the chi-square, and appears among the residuals as the pseudo-sensor
+``priors``.  Within one test a wake deficit (PRF) and the drag areas enter
+only as their product; a prior on the free-stream drag area separates them.
 
 Without a block the baseline effect set is used, with every estimable
 parameter free except those fixed by default (`Parameter.free_by_default`:
@@ -52,6 +59,7 @@ class ModelSpec:
     fix: dict[str, Any] = field(default_factory=dict)
     free: tuple[str, ...] = ()
     source: str = "(baseline)"
+    priors: dict[str, Any] = field(default_factory=dict)
 
     @property
     def effect_names(self) -> list[str]:
@@ -79,6 +87,16 @@ class ModelSpec:
             if name in self.free:
                 raise InputError(self.source, f"model.fix.{name}",
                                  "a parameter either fixed or freed, not both")
+        for name, given in self.priors.items():
+            if name not in names or not model.parameter(name).estimable:
+                raise InputError(self.source, f"model.priors.{name}",
+                                 "an estimable parameter of this model")
+            if name in self.fix:
+                raise InputError(self.source, f"model.priors.{name}",
+                                 "a parameter that is estimated, not fixed")
+            if not given["sigma"] > 0:
+                raise InputError(self.source, f"model.priors.{name}.sigma",
+                                 f"a positive number; got {given['sigma']}")
         for name, value in self.fixed_values(model).items():
             prm = model.parameter(name)
             if not prm.lower <= value <= prm.upper:
@@ -97,6 +115,16 @@ class ModelSpec:
                 continue
             value, unit = float(given["value"]), given["unit"]
             out[name] = value * _conversion(unit, prm.unit, self.source, f"model.fix.{name}.unit")
+        return out
+
+    def prior_values(self, model: Model) -> dict[str, tuple[float, float]]:
+        """The priors as (value, sigma) in each parameter's SI unit."""
+        out = {}
+        for name, given in self.priors.items():
+            unit = given.get("unit", model.parameter(name).unit)
+            factor = _conversion(unit, model.parameter(name).unit, self.source,
+                                 f"model.priors.{name}.unit")
+            out[name] = (float(given["value"]) * factor, float(given["sigma"]) * factor)
         return out
 
     def free_names(self, model: Model) -> list[str]:
@@ -126,11 +154,13 @@ def spec_from_effects(effects: Sequence[Effect]) -> ModelSpec:
     return ModelSpec(tuple(effects), source="(effects given in code)")
 
 
-def spec_from_block(block: dict[str, Any] | None, file: str, base_dir: Path) -> ModelSpec:
-    """Resolve a validated `model` block; plug-in paths are relative to `base_dir`."""
+def spec_from_block(block: dict[str, Any] | None, file: str, base_dir: Path,
+                    plugins: dict[str, EffectType] | None = None) -> ModelSpec:
+    """Resolve a validated `model` block; plug-in paths are relative to `base_dir`;
+    `plugins` are effects registered beforehand (from files named on the command line)."""
     if block is None:
         return baseline_spec()
-    registry: dict[str, EffectType] = dict(BUILTIN)
+    registry: dict[str, EffectType] = {**BUILTIN, **(plugins or {})}
     for i, rel in enumerate(block.get("plugins", [])):
         for name, entry in load_plugin(base_dir / rel).items():
             if name in registry:
@@ -155,7 +185,7 @@ def spec_from_block(block: dict[str, Any] | None, file: str, base_dir: Path) -> 
     if len(risers) > 1:
         raise InputError(file, "model.effects", f"one riser model; got {' and '.join(risers)}")
     return ModelSpec(tuple(effects), dict(block.get("fix", {})), tuple(block.get("free", [])),
-                     file)
+                     file, dict(block.get("priors", {})))
 
 
 def spec_of_test(test: FlightTest) -> ModelSpec:
@@ -164,9 +194,11 @@ def spec_of_test(test: FlightTest) -> ModelSpec:
     return spec_from_block(test.manifest.get("model"), str(base / MANIFEST), base)
 
 
-def load_model_file(path: str | Path) -> ModelSpec:
-    """A model block stored on its own in a JSON file (`cpas-ocp reconstruct --model FILE`)."""
+def load_model_file(path: str | Path, plugins: dict[str, EffectType] | None = None
+                    ) -> ModelSpec:
+    """A model block stored on its own in a JSON file (`cpas-ocp reconstruct --model FILE`);
+    `plugins` as in `spec_from_block`."""
     path = Path(path)
     block = read_json(path, "an existing JSON model file")
     validate_block(block, "model.schema.json", str(path), prefix="model")
-    return spec_from_block(block, str(path), path.parent)
+    return spec_from_block(block, str(path), path.parent, plugins)

@@ -12,7 +12,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from .estimation import EVENTS, Fit
+from .estimation import EVENTS, PSEUDO_SENSORS, Fit, SensorResidual
 from .parameters import param_name
 from .phase_windows import PhaseWindow, windows_for_sensor
 from .profile_likelihood import THRESHOLD, Profile
@@ -31,7 +31,8 @@ DISPLAY = {
 def plot_sensors(fit: Fit, folder: Path) -> list[Path]:
     """One figure per sensor: each channel's data and model, normalised residuals beneath."""
     paths = []
-    for sensor in dict.fromkeys(r.sensor for r in fit.residuals if r.sensor != EVENTS):
+    for sensor in dict.fromkeys(r.sensor for r in fit.residuals
+                                if r.sensor not in PSEUDO_SENSORS):
         rows = [r for r in fit.residuals if r.sensor == sensor]
         fig, axes = plt.subplots(2 * len(rows), 1, figsize=(10, 2.6 * len(rows) + 1.5),
                                  sharex=True, gridspec_kw={"height_ratios": [3, 1] * len(rows)})
@@ -150,7 +151,8 @@ def plot_sensor_residuals(fit: Fit, windows: Sequence[PhaseWindow], folder: Path
     +-1 and +-3 sigma bands; the phase windows that apply to the sensor (its own canopy's
     for a load cell) are shaded by kind, each kind labelled once."""
     paths = []
-    for sensor in dict.fromkeys(r.sensor for r in fit.residuals if r.sensor != EVENTS):
+    for sensor in dict.fromkeys(r.sensor for r in fit.residuals
+                                if r.sensor not in PSEUDO_SENSORS):
         rows = [r for r in fit.residuals if r.sensor == sensor]
         shown = windows_for_sensor(fit.test, sensor, windows)
         fig, axes = plt.subplots(2 * len(rows), 1, figsize=(10, 2.8 * len(rows) + 1.5),
@@ -158,29 +160,69 @@ def plot_sensor_residuals(fit: Fit, windows: Sequence[PhaseWindow], folder: Path
         for i, r in enumerate(rows):
             unit, k = DISPLAY.get(r.channel, ("SI", 1.0))
             ax, axr = axes[2 * i], axes[2 * i + 1]
-            labelled: set[str] = set()
-            for w in shown:
-                colour = WINDOW_COLOURS.get(w.kind, "0.9")
-                label = w.kind if i == 0 and w.kind not in labelled else None
-                labelled.add(w.kind)
-                for a in (ax, axr):
-                    a.axvspan(w.t0, w.t1, color=colour, alpha=0.6, lw=0, zorder=0,
-                              label=label if a is ax else None)
+            _shade_windows([ax, axr], shown, legend=i == 0)
             ax.plot(r.t, r.measured * k, ".", ms=1.5, color="0.55", label="measured")
             ax.plot(r.t, r.model * k, "-", lw=1.0, color="C3", label="model")
             ax.set_ylabel(f"{r.channel} [{unit}]")
             ax.legend(loc="best", fontsize=7, ncol=2)
-            axr.axhspan(-3, 3, color="0.4", alpha=0.12, zorder=0.5, lw=0)
-            axr.axhspan(-1, 1, color="0.4", alpha=0.2, zorder=0.6, lw=0)
-            axr.plot(r.t, r.normalized, ".", ms=1.5, color="C0", zorder=2)
-            axr.axhline(0, color="k", lw=0.5, zorder=1)
-            axr.set_ylabel("res/σ (±1, ±3)")
-            lim = max(4.0, float(np.percentile(np.abs(r.normalized), 99.5)))
-            axr.set_ylim(-lim, lim)
+            _plot_normalized(axr, r)
         axes[-1].set_xlabel("time [s]")
         paths.append(_save(fig, f"{fit.test.name}: {sensor}, residuals by phase window",
                            folder / f"residuals_{sensor}.png"))
     return paths
+
+
+def plot_residual_comparison(fit_a: Fit, fit_b: Fit, labels: tuple[str, str],
+                             windows: Sequence[PhaseWindow], folder: Path) -> list[Path]:
+    """One figure per sensor (``compare_<sensor>.png``): each channel's normalised residuals
+    under model A (left) and model B (right), same scale, phase windows shaded, the
+    normalised RMS of each in its panel's title."""
+    paths = []
+    for sensor in dict.fromkeys(r.sensor for r in fit_a.residuals
+                                if r.sensor not in PSEUDO_SENSORS):
+        pairs = [(a, b) for a, b in zip(fit_a.residuals, fit_b.residuals, strict=True)
+                 if a.sensor == sensor]
+        shown = windows_for_sensor(fit_a.test, sensor, windows)
+        fig, axes = plt.subplots(len(pairs), 2, figsize=(12, 2.2 * len(pairs) + 1.2),
+                                 sharex=True, sharey="row", squeeze=False)
+        for i, pair in enumerate(pairs):
+            for j, (r, label) in enumerate(zip(pair, labels, strict=True)):
+                ax = axes[i, j]
+                _shade_windows([ax], shown, legend=i == 0 and j == 0)
+                _plot_normalized(ax, r)
+                rms = float(np.sqrt(np.mean(r.normalized**2)))
+                ax.set_title(f"{label}: {r.channel}, normalised RMS {rms:.3f}", fontsize=9)
+                if i == 0 and j == 0 and shown:
+                    ax.legend(loc="upper right", fontsize=7)
+            lim = max(4.0, *(float(np.percentile(np.abs(r.normalized), 99.5)) for r in pair))
+            axes[i, 0].set_ylim(-lim, lim)
+        for ax in axes[-1]:
+            ax.set_xlabel("time [s]")
+        paths.append(_save(fig, f"{fit_a.test.name}: {sensor}, {labels[0]} against {labels[1]}",
+                           folder / f"compare_{sensor}.png"))
+    return paths
+
+
+def _shade_windows(axes: list[plt.Axes], windows: Sequence[PhaseWindow], legend: bool) -> None:
+    """Shade the phase windows by kind on every axis; label each kind once on the first."""
+    labelled: set[str] = set()
+    for w in windows:
+        label = w.kind if legend and w.kind not in labelled else None
+        labelled.add(w.kind)
+        for a in axes:
+            a.axvspan(w.t0, w.t1, color=WINDOW_COLOURS.get(w.kind, "0.9"), alpha=0.6, lw=0,
+                      zorder=0, label=label if a is axes[0] else None)
+
+
+def _plot_normalized(ax: plt.Axes, r: SensorResidual) -> None:
+    """Normalised residuals with the +-1 and +-3 sigma bands."""
+    ax.axhspan(-3, 3, color="0.4", alpha=0.12, zorder=0.5, lw=0)
+    ax.axhspan(-1, 1, color="0.4", alpha=0.2, zorder=0.6, lw=0)
+    ax.plot(r.t, r.normalized, ".", ms=1.5, color="C0", zorder=2)
+    ax.axhline(0, color="k", lw=0.5, zorder=1)
+    ax.set_ylabel("res/σ (±1, ±3)")
+    lim = max(4.0, float(np.percentile(np.abs(r.normalized), 99.5)))
+    ax.set_ylim(-lim, lim)
 
 
 def _save(fig: plt.Figure, title: str, path: Path) -> Path:

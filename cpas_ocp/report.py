@@ -12,7 +12,8 @@ import pandas as pd
 from scipy.stats import norm
 
 from .diagnostics import sensor_summary, worst_windows
-from .estimation import EVENTS, Fit
+from .estimation import EVENTS, PRIORS, Fit
+from .model_comparison import Criteria
 from .output_folder import atomic_folder
 from .plots import plot_correlation, plot_drag_areas, plot_events, plot_profile, plot_sensors
 from .profile_likelihood import Profile
@@ -25,14 +26,10 @@ REPORTED_CORRELATION = 0.5  # |rho| from which report.md lists a pair (the map s
 
 
 def information_criteria(fit: Fit) -> dict[str, float]:
-    """AIC and BIC of a fit with known sensor sigmas: chi^2 + 2k and chi^2 + k ln N.
-
-    k counts the free parameters (those held on a bound included), not the
-    shooting states; both drop the constant sum of log sigma, so only
-    differences between fits of the same data mean anything.
-    """
-    k, n = len(fit.free), fit.n_samples
-    return {"aic": fit.chi_square + 2.0 * k, "bic": fit.chi_square + k * float(np.log(n))}
+    """AIC and BIC of a fit with known sensor sigmas (`model_comparison.Criteria`): only
+    differences between fits of the same data mean anything."""
+    c = Criteria.of(fit)
+    return {"aic": c.aic, "bic": c.bic}
 
 
 def strong_correlations(cov: Covariance,
@@ -50,8 +47,10 @@ SENSOR_UNITS = {"east": "m", "north": "m", "up": "m", "v_east": "m/s", "v_north"
                 "v_up": "m/s", "load_factor": "g", "tension": "N"}
 
 
-def channel_unit(sensor: str, channel: str) -> str:
-    """SI unit of a residual channel (event times are in s)."""
+def channel_unit(fit: Fit, sensor: str, channel: str) -> str:
+    """SI unit of a residual channel (event times are in s, a prior in its parameter's unit)."""
+    if sensor == PRIORS:
+        return fit.model.parameter(channel).unit
     return "s" if sensor == EVENTS else SENSOR_UNITS.get(channel, "SI")
 
 
@@ -76,7 +75,7 @@ def result_dict(fit: Fit, cov: Covariance | None,
     fixed = {n: {"value": v, "unit": fit.model.parameter(n).unit}
              for n, v in fit.parameters.items() if n not in fit.free}
     summary = sensor_summary(fit)
-    residuals = {s: {"rms": e["rms"], "unit": {c: channel_unit(s, c) for c in e["rms"]},
+    residuals = {s: {"rms": e["rms"], "unit": {c: channel_unit(fit, s, c) for c in e["rms"]},
                      "normalized_rms": e["normalized_rms"], "samples": e["samples"]}
                  for s, e in summary.items()}
     n = fit.n_samples
@@ -158,7 +157,7 @@ def fit_summary(fit: Fit) -> str:
            f"{fit.solver.wall_s:.1f} s;  chi²/dof = {fit.chi_square:.1f}/{fit.dof}"
            f" = {fit.chi_square / fit.dof:.3f};  AIC {ic['aic']:.1f}, BIC {ic['bic']:.1f}"]
     for s, e in sensor_summary(fit).items():
-        rms = ", ".join(f"{c} {v:.4g} {channel_unit(s, c)}" for c, v in e["rms"].items())
+        rms = ", ".join(f"{c} {v:.4g} {channel_unit(fit, s, c)}" for c, v in e["rms"].items())
         out.append(f"  {s:16s} normalised RMS {e['normalized_rms']:.3f}   (RMS {rms})")
     worst = worst_windows(fit, top=1)
     if worst:

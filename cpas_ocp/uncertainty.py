@@ -393,13 +393,29 @@ def gauss_newton_decrement(lin: Linearization) -> float:
     0.1 standard deviation of where the fit is heading.  Directions the data
     do not determine take no step.
     """
+    _, after = _gauss_newton(lin)
+    return max(float(lin.r @ lin.r - after @ after), 0.0)
+
+
+def gauss_newton_step(lin: Linearization) -> np.ndarray:
+    """The Gauss-Newton step dz (scaled decision vector) of `gauss_newton_decrement`.
+
+    At a fit of a smaller model extended by parameters at their null values,
+    its components along those parameters are their linearised estimates:
+    the basis of the score test (`score_test`).
+    """
+    return _gauss_newton(lin)[0]
+
+
+def _gauss_newton(lin: Linearization) -> tuple[np.ndarray, np.ndarray]:
+    """The step dz and the weighted residuals r + J dz it predicts."""
     red = reduce_linearization(lin)
     ns = _null_space(red)
     base = red.r + red.JZ @ ns.dw0
     gradient = ns.N.T @ (red.JZ.T @ base)
     y = -(ns.inverse() @ gradient)
-    after = base + red.JZ @ (ns.N @ y)
-    return max(float(lin.r @ lin.r - after @ after), 0.0)
+    dz = red.dz_p + red.Z @ (ns.dw0 + ns.N @ y)
+    return dz, base + red.JZ @ (ns.N @ y)
 
 
 def _csc(m: ca.DM) -> sp.csc_matrix:

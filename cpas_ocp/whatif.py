@@ -30,13 +30,12 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass, replace
-from math import comb
 
 import numpy as np
-from scipy.stats import chi2
 
 from .errors import InputError
 from .estimation import Estimator, Fit
+from .hypothesis_tests import chi_bar_square_sf
 from .uncertainty import Covariance
 from .units import FACTORS
 
@@ -163,13 +162,7 @@ class WhatIfResult:
         ops = {c.name: c.op for c in self.constraints}
         k_eq = sum(ops[n] == "==" for n in self.active)
         k_in = len(self.active) - k_eq
-        x = self.statistic
-        p = 0.0
-        for j in range(k_in + 1):
-            dof = k_eq + j
-            tail = (1.0 if x <= 0.0 else 0.0) if dof == 0 else float(chi2.sf(x, dof))
-            p += comb(k_in, j) / 2.0**k_in * tail
-        return p
+        return chi_bar_square_sf(self.statistic, k_eq, k_in)
 
     def shifts(self) -> dict[str, tuple[float, float, float]]:
         """Every free parameter: (unconstrained value, constrained value, shift in sigma)."""

@@ -77,6 +77,10 @@ class AddedMass(Effect):
                           description="added mass over its nominal value", scale=1.0)
                 for c in test.parachutes]
 
+    def null_values(self, test: FlightTest) -> dict[str, float]:
+        """No air mass: k_A = 0 (on the lower bound; the alternative is k_A > 0)."""
+        return {param_name("added_mass_factor", c.name): 0.0 for c in test.parachutes}
+
     def forces(self, ctx: ModelContext) -> None:
         r, v = ctx.x["position"], ctx.x["velocity"]
         v_air = -ctx.q["airspeed"] * ctx.q["drag_direction"]

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, ClassVar
 
 import casadi as ca
 import numpy as np
@@ -106,9 +106,14 @@ class Constraint:
 
 
 class Effect:
-    """Base class: an effect contributes nothing until it overrides a hook."""
+    """Base class: an effect contributes nothing until it overrides a hook.
+
+    `replaces` names the effect this one stands in for when it is added to a
+    model that has that one (an elastic riser replaces the rigid riser).
+    """
 
     name: str = "effect"
+    replaces: ClassVar[str | None] = None
 
     def parameters(self, test: FlightTest) -> list[Parameter]:
         return []
@@ -139,3 +144,13 @@ class Effect:
 
     def constraints(self, ctx: ModelContext) -> list[Constraint]:
         return []
+
+    def null_values(self, test: FlightTest) -> dict[str, float] | None:
+        """Values of this effect's parameters at which it changes no prediction: the model
+        without the effect is the model with it at these values (the null hypothesis of
+        its score test, `score_test`).  Parameters not named are held at their defaults.
+
+        None: the model without the effect is not nested in the model with it at any
+        parameter value; it can only be compared by refitting both.
+        """
+        return None

@@ -50,6 +50,11 @@ class DeploymentLoad(Effect):
                           description="inelastic load while lines and risers deploy",
                           scale=2000.0) for t in types]
 
+    def null_values(self, test: FlightTest) -> dict[str, float]:
+        """No deployment load: F = 0 N (the lower bound)."""
+        return {param_name("deployment_load", t): 0.0
+                for t in dict.fromkeys(c.type for c in self._deployed(test))}
+
     @staticmethod
     def _deployed(test: FlightTest) -> list[Parachute]:
         return [c for c in test.parachutes if test.event("mortar_fire", c.name) is not None]

@@ -38,7 +38,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, ClassVar
 
 import casadi as ca
 import numpy as np
@@ -69,6 +69,7 @@ class ElasticRiser(Effect):
     frequency: float = 8.0
     damping_ratio: float = 0.3
     name: str = "elastic_riser"
+    replaces: ClassVar[str | None] = "rigid_riser"
 
     def __post_init__(self) -> None:
         for label, value, (lo, hi) in (("frequency", self.frequency, FREQUENCY_BOUNDS_HZ),
@@ -86,6 +87,20 @@ class ElasticRiser(Effect):
                 Parameter(param_name("riser_damping_ratio", c.name), "1", self.damping_ratio,
                           *DAMPING_BOUNDS, description="damping ratio of the riser", scale=0.3),
             ]
+        return out
+
+    def null_values(self, test: FlightTest) -> dict[str, float]:
+        """The stiffest riser the model resolves: f and zeta at their upper bounds.
+
+        A rigid riser is the limit f -> infinity, which no finite value reaches;
+        at 25 Hz, critically damped, the canopy follows the vehicle with a lag
+        of 1 / (2 pi f) = 6 ms and no ringing, and the score test asks whether
+        a softer or less damped riser explains the data better.
+        """
+        out = {}
+        for c in test.parachutes:
+            out[param_name("riser_frequency", c.name)] = FREQUENCY_BOUNDS_HZ[1]
+            out[param_name("riser_damping_ratio", c.name)] = DAMPING_BOUNDS[1]
         return out
 
     def states(self, test: FlightTest) -> list[State]:

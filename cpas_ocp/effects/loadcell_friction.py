@@ -56,6 +56,11 @@ class LoadCellFriction(Effect):
                           "rise", scale=0.05)
                 for s in test.sensors_of("load_cell")]
 
+    def null_values(self, test: FlightTest) -> dict[str, float]:
+        """No friction: phi = 0 (inside the bounds; either sign is an alternative)."""
+        return {param_name("friction_loss", s.parachute): 0.0
+                for s in test.sensors_of("load_cell")}
+
     def observations(self, ctx: ModelContext) -> None:
         half = 0.5 * RATE_WINDOW_S
         for s in ctx.test.sensors_of("load_cell"):

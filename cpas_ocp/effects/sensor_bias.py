@@ -50,6 +50,10 @@ class SensorBias(Effect):
                           description=f"additive bias of {s.name}.{self.channel}")
                 for s in test.sensors_of(self.kind)]
 
+    def null_values(self, test: FlightTest) -> dict[str, float]:
+        """No bias: b = 0."""
+        return {param_name("bias", s.name, self.channel): 0.0 for s in test.sensors_of(self.kind)}
+
     def observations(self, ctx: ModelContext) -> None:
         for s in ctx.test.sensors_of(self.kind):
             ctx.y[s.name][self.channel] = (ctx.y[s.name][self.channel]

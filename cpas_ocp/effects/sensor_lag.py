@@ -45,6 +45,10 @@ class SensorLag(Effect):
                           scale=0.05, description=f"time lag of {s.name}")
                 for s in test.sensors_of(self.kind)]
 
+    def null_values(self, test: FlightTest) -> dict[str, float]:
+        """No lag: tau = 0 s."""
+        return {param_name("lag", s.name): 0.0 for s in test.sensors_of(self.kind)}
+
     def observations(self, ctx: ModelContext) -> None:
         steps = max(1, math.ceil(self.max_lag / STEP_S))
         for s in ctx.test.sensors_of(self.kind):

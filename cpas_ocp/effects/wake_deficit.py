@@ -55,6 +55,14 @@ class WakeDeficit(Effect):
                           scale=1.0, free_by_default=False)
                 for c in test.parachutes]
 
+    def null_values(self, test: FlightTest) -> dict[str, float]:
+        """Free stream: PRF = 1 (the upper bound; the alternative is a deficit, PRF < 1).
+
+        Within one test PRF*CdS is all the data see, so the test is informative
+        only where the drag areas are known otherwise (priors on `CdS[P,S]`).
+        """
+        return {param_name("prf", c.name): 1.0 for c in test.parachutes}
+
     def forces(self, ctx: ModelContext) -> None:
         for chute in ctx.test.parachutes:
             ctx.scale_drag(chute.name, ctx.p[param_name("prf", chute.name)], self.name,

@@ -1,0 +1,109 @@
+"""Diagnosis of a fit: where the model fails, which known effect is missing, or what the
+unexplained residual looks like.
+
+1. Where: the residual chi-square per sensor channel and phase window
+   (deployment, each stage's inflation and steady state, per canopy), and
+   the one place where it exceeds the noise most (`diagnostics.worst_place`).
+2. What is known: a score test of every library (and plug-in) effect the
+   model does not use (`score_test`), ranked; the significant ones
+   (p < alpha / m for m effects tested) are confirmed, up to `confirm_top`
+   of them, by refitting the model with the effect and testing the
+   likelihood ratio.  The confirmed effect with the smallest likelihood-ratio
+   p-value is the diagnosis.
+3. What is not: the residual tests (whiteness, a periodic line, a lag,
+   correlation with signatures of the fitted trajectory) per channel and
+   window (`residual_diagnosis`).  When no effect is confirmed but the
+   residuals carry significant structure, the report says so and describes
+   that structure: sensor, window, frequency or lag, and what it correlates with.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+from .diagnostics import WindowStatistic, window_statistics, worst_place
+from .effects.registry import EffectType
+from .estimation import Fit
+from .model_spec import ModelSpec
+from .phase_windows import PhaseWindow, phase_windows
+from .residual_diagnosis import Finding, diagnose_residuals, signature_text
+from .score_test import ScoreTest, confirm, confirmed_ranking, score_tests
+
+ALPHA = 0.01  # family-wise level of the diagnosis's tests
+CONFIRM_TOP = 3  # significant score tests confirmed by a refit
+
+
+@dataclass
+class Diagnosis:
+    """What `diagnose` found at one fit; `effects` in their final ranking."""
+
+    fit: Fit
+    windows: list[PhaseWindow]
+    statistics: list[WindowStatistic]
+    worst: str
+    effects: list[ScoreTest]
+    findings: list[Finding]
+    alpha: float = ALPHA
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def tests_made(self) -> int:
+        return sum(t.tested for t in self.effects)
+
+    @property
+    def explanation(self) -> ScoreTest | None:
+        """The confirmed effect that explains the residual best, if any is significant."""
+        m = max(self.tests_made, 1)
+        for t in self.effects:
+            if t.refit is not None and t.refit.p_value < self.alpha / m:
+                return t
+        return None
+
+    @property
+    def structure(self) -> list[Finding]:
+        """The residual findings that are significant after the multiple-test correction."""
+        return [f for f in self.findings if f.significant]
+
+    def verdict(self) -> str:
+        """One paragraph: the effect that is missing, or the signature nobody explains."""
+        best = self.explanation
+        if best is not None:
+            return (f"missing effect: {best.effect} (likelihood ratio {best.refit.statistic:.1f},"
+                    f" p = {best.refit.p_value:.2g}; refit estimates "
+                    + ", ".join(f"{n} = {v:.4g}" for n, v in best.refit_estimate.items())
+                    + ")")
+        if self.structure:
+            return ("no effect in the library explains the residual; its signature:\n"
+                    + signature_text(self.structure))
+        return ("the residuals are consistent with the sensor noise: no effect is significant "
+                f"at the family-wise level {self.alpha:g}")
+
+    def text(self) -> str:
+        """The diagnosis as the command line prints it."""
+        m = max(self.tests_made, 1)
+        lines = [f"worst fit: {self.worst}", "",
+                 f"score tests of the effects the model does not use (significant: p < "
+                 f"{self.alpha:g}/{m}):"]
+        lines += ["  " + t.text() for t in self.effects]
+        refits = [t.refit_text() for t in self.effects if t.refit_text()]
+        if refits:
+            lines += ["", "refits with the leading effects:"] + ["  " + r for r in refits]
+        lines += ["", "residual structure:"]
+        lines += ["  " + f.text() for f in self.structure[:8]] or ["  none significant"]
+        lines += ["", self.verdict()]
+        return "\n".join(lines + self.notes)
+
+
+def diagnose(fit: Fit, spec: ModelSpec, candidates: Mapping[str, EffectType] | None = None,
+             confirm_top: int = CONFIRM_TOP, alpha: float = ALPHA,
+             progress: bool = False) -> Diagnosis:
+    """Diagnose `fit` (made with `spec`): see the module docstring."""
+    windows = phase_windows(fit)
+    tests = score_tests(fit, spec, candidates, progress)
+    m = max(sum(t.tested for t in tests), 1)
+    leading = [t for t in tests if t.significant(alpha, m)][:confirm_top]
+    for t in leading:
+        confirm(fit, t, progress)
+    return Diagnosis(fit, windows, window_statistics(fit, windows), worst_place(fit, windows),
+                     confirmed_ranking(tests), diagnose_residuals(fit, windows, alpha), alpha)

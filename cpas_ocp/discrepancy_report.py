@@ -1,0 +1,129 @@
+"""The output folders of `cpas-ocp diagnose` and `cpas-ocp compare`.
+
+diagnose:  diagnosis.md (the text, the window table, the figures),
+           diagnosis.json (everything, SI), windows.csv (residual statistics
+           per sensor channel and phase window), residuals_<sensor>.png.
+compare:   comparison.md, comparison.json, windows.csv (both models, per
+           channel and window), residuals_<label>_<sensor>.png per model and
+           compare_<sensor>.png (normalised residuals side by side).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+from .diagnosis import Diagnosis
+from .diagnostics import WindowStatistic, window_statistics
+from .model_comparison import Comparison
+from .output_folder import atomic_folder
+from .phase_windows import phase_windows
+from .plots import plot_residual_comparison, plot_sensor_residuals
+from .report import parameter_table
+from .uncertainty import Covariance
+
+
+def write_diagnosis(diag: Diagnosis, cov: Covariance | None, out: str | Path) -> Path:
+    """Write the diagnosis folder atomically: all of it or nothing."""
+    out = Path(out)
+    fit = diag.fit
+    with atomic_folder(out, "diagnosis.json") as tmp:
+        table = _window_frame(diag.statistics)
+        table.to_csv(tmp / "windows.csv", index=False)
+        result: dict[str, Any] = {
+            "test": fit.test.name,
+            "model": [e.name for e in fit.model.effects],
+            "chi_square": fit.chi_square, "samples": fit.n_samples,
+            "parameters": {n: fit.parameters[n] for n in fit.free},
+            "std": cov.std if cov is not None else {},
+            "worst": diag.worst,
+            "windows": [dataclasses.asdict(w) for w in diag.windows],
+            "effects": [t.as_dict() for t in diag.effects],
+            "explanation": diag.explanation.effect if diag.explanation else None,
+            "residual_findings": [dataclasses.asdict(f) for f in diag.findings],
+            "verdict": diag.verdict(),
+        }
+        (tmp / "diagnosis.json").write_text(json.dumps(result, indent=2, default=float))
+        figures = plot_sensor_residuals(fit, diag.windows, tmp)
+        (tmp / "diagnosis.md").write_text(
+            f"# Diagnosis of {fit.test.name}\n\n{fit.test.label}\n\n"
+            f"```\n{parameter_table(fit, cov)}\n\n{diag.text()}\n```\n\n"
+            "## Residuals per sensor channel and phase window\n\n"
+            + _markdown(table) + "\n\n"
+            + "".join(f"![{p.stem}]({p.name})\n\n" for p in figures))
+    return out
+
+
+def write_comparison(comparison: Comparison, out: str | Path) -> Path:
+    """Write the comparison folder atomically."""
+    out = Path(out)
+    fit_a, fit_b = comparison.fits
+    windows = phase_windows(fit_a)
+    with atomic_folder(out, "comparison.json") as tmp:
+        frames = []
+        for label, fit in zip(comparison.labels, comparison.fits, strict=True):
+            frame = _window_frame(window_statistics(fit, windows))
+            frame.insert(0, "model", label)
+            frames.append(frame)
+        table = pd.concat(frames, ignore_index=True)
+        table.to_csv(tmp / "windows.csv", index=False)
+        wide = _before_after(table, comparison.labels)
+        a, b = comparison.criteria
+        result = {
+            "test": fit_a.test.name,
+            "models": {label: {"effects": [e.name for e in fit.model.effects],
+                               "chi_square": c.chi_square, "k": c.k, "n": c.n, "aic": c.aic,
+                               "bic": c.bic,
+                               "parameters": {n: fit.parameters[n] for n in fit.free},
+                               "solver": dataclasses.asdict(fit.solver)}
+                       for label, fit, c in zip(comparison.labels, comparison.fits, (a, b),
+                                                strict=True)},
+            "nesting": comparison.note,
+            "likelihood_ratio": None if comparison.lr is None else {
+                **dataclasses.asdict(comparison.lr), "p_value": comparison.lr.p_value},
+        }
+        (tmp / "comparison.json").write_text(json.dumps(result, indent=2, default=float))
+        figures = []
+        for label, fit in zip(comparison.labels, comparison.fits, strict=True):
+            sub = tmp / _slug(label)
+            sub.mkdir()
+            figures += plot_sensor_residuals(fit, windows, sub)
+        side = plot_residual_comparison(fit_a, fit_b, comparison.labels, windows, tmp)
+        (tmp / "comparison.md").write_text(
+            f"# {comparison.labels[0]} against {comparison.labels[1]} on {fit_a.test.name}\n\n"
+            f"```\n{comparison.text()}\n```\n\n"
+            "## Normalised residual RMS per sensor channel and phase window\n\n"
+            + _markdown(wide) + "\n\n"
+            + "".join(f"![{p.stem}]({p.name})\n\n" for p in side)
+            + "".join(f"![{p.parent.name} {p.stem}]({p.parent.name}/{p.name})\n\n"
+                      for p in figures))
+    return out
+
+
+def _window_frame(stats: list[WindowStatistic]) -> pd.DataFrame:
+    return pd.DataFrame([{**dataclasses.asdict(s), "excess": s.excess} for s in stats])
+
+
+def _before_after(table: pd.DataFrame, labels: tuple[str, str]) -> pd.DataFrame:
+    """Normalised RMS per channel and window, one column per model."""
+    wide = table.pivot_table(index=["sensor", "channel", "window"], columns="model",
+                             values="normalized_rms", sort=False).reset_index()
+    return wide[["sensor", "channel", "window", *labels]]
+
+
+def _markdown(frame: pd.DataFrame) -> str:
+    """A Markdown table of `frame`, numbers to 4 significant digits."""
+    def cell(v: Any) -> str:
+        return f"{v:.4g}" if isinstance(v, float) else str(v)
+    head = "| " + " | ".join(map(str, frame.columns)) + " |"
+    rule = "|" + "---|" * len(frame.columns)
+    rows = ["| " + " | ".join(cell(v) for v in row) + " |" for row in frame.itertuples(False)]
+    return "\n".join([head, rule, *rows])
+
+
+def _slug(label: str) -> str:
+    return "".join(c if c.isalnum() or c in "-_" else "_" for c in label)

@@ -1,0 +1,44 @@
+"""Canopy breathing: the drag area of each canopy oscillates at a fixed frequency.
+
+A full canopy's skirt pulses in and out (a few Hz for canopies of tens of
+feet), so its drag area is CdS (1 + a cos(2 pi f t) + b sin(2 pi f t)).
+The in-phase and quadrature amplitudes ``breathing_cos[P]`` and
+``breathing_sin[P]`` (fractions of the drag area) enter linearly, so that the
+effect vanishes at a = b = 0 (its score test's null) and the fit needs no
+phase search; `frequency` (Hz) is an option, read off the diagnosis's
+periodogram.  List it after canopy_inflation, before the riser effects.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import casadi as ca
+
+from cpas_ocp.effects import Effect
+from cpas_ocp.parameters import Parameter, param_name
+
+
+@dataclass(frozen=True)
+class Breathing(Effect):
+    """Drag-area oscillation at `frequency` Hz, amplitudes ``breathing_cos/sin[P]``."""
+
+    frequency: float = 3.0
+    name: str = "breathing"
+
+    def parameters(self, test) -> list[Parameter]:
+        return [Parameter(param_name(base, c.name), "1", 0.0, -0.3, 0.3, scale=0.05,
+                          description=f"{part} drag-area oscillation amplitude")
+                for c in test.parachutes
+                for base, part in (("breathing_cos", "in-phase"), ("breathing_sin", "quadrature"))]
+
+    def null_values(self, test) -> dict[str, float]:
+        return {p.name: 0.0 for p in self.parameters(test)}
+
+    def forces(self, ctx) -> None:
+        phase = 2.0 * math.pi * self.frequency * ctx.t
+        for chute in ctx.test.parachutes:
+            factor = (1.0 + ctx.p[param_name("breathing_cos", chute.name)] * ca.cos(phase)
+                      + ctx.p[param_name("breathing_sin", chute.name)] * ca.sin(phase))
+            ctx.scale_drag(chute.name, factor, self.name, ("axial_fraction", "riser_force"))
