@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING
 from .errors import InputError, SolverFailure
 
 if TYPE_CHECKING:
+    from .effects.registry import EffectType
     from .estimation import Estimator, Fit
     from .flight_test import FlightTest
     from .model_spec import ModelSpec
@@ -52,8 +53,7 @@ def _parser() -> argparse.ArgumentParser:
     s.set_defaults(run=_problems)
 
     s = sub.add_parser("effects", help="list the effects a model block may name, with options")
-    s.add_argument("--plugin", type=Path, action="append", default=[],
-                   help="also list the effects a plug-in file defines")
+    _plugin_option(s, "also list the effects a plug-in file defines (repeatable)")
     s.set_defaults(run=_effects)
 
     s = sub.add_parser("simulate", help="simulate a built-in problem into a test folder")
@@ -95,8 +95,7 @@ def _parser() -> argparse.ArgumentParser:
                                         "effect is missing")
     s.add_argument("test_dir", type=Path)
     s.add_argument("--out", required=True, type=Path)
-    s.add_argument("--plugin", type=Path, action="append", default=[], metavar="FILE",
-                   help="also test the effects this Python file defines (repeatable)")
+    _plugin_option(s, "also test the effects this Python file defines (repeatable)")
     s.add_argument("--confirm", type=int, default=3, metavar="N",
                    help="refit with at most N significant effects to confirm them (default 3)")
     s.add_argument("--alpha", type=float, default=0.01,
@@ -111,8 +110,7 @@ def _parser() -> argparse.ArgumentParser:
                    help="a JSON model block, or 'manifest' for the test's own model; "
                         "give it twice")
     s.add_argument("--out", required=True, type=Path)
-    s.add_argument("--plugin", type=Path, action="append", default=[], metavar="FILE",
-                   help="a Python file whose effects the model files may name (repeatable)")
+    _plugin_option(s, "a Python file whose effects the model files may name (repeatable)")
     _solver_options(s)
     s.set_defaults(run=_compare)
 
@@ -122,6 +120,20 @@ def _parser() -> argparse.ArgumentParser:
     _solver_options(s)
     s.set_defaults(run=_demo)
     return p
+
+
+def _plugin_option(s: argparse.ArgumentParser, text: str) -> None:
+    s.add_argument("--plugin", type=Path, action="append", default=[], metavar="FILE",
+                   help=text)
+
+
+def _plugins(args: argparse.Namespace) -> dict[str, EffectType]:
+    """The effects of the plug-in files given with --plugin, by name."""
+    from .effects.registry import load_plugin
+    out: dict[str, EffectType] = {}
+    for path in args.plugin:
+        out.update(load_plugin(path))
+    return out
 
 
 def _model_option(s: argparse.ArgumentParser) -> None:
@@ -156,10 +168,8 @@ def _problems(args: argparse.Namespace) -> int:
 
 
 def _effects(args: argparse.Namespace) -> int:
-    from .effects.registry import BASELINE, BUILTIN, load_plugin
-    entries = dict(BUILTIN)
-    for path in args.plugin:
-        entries.update(load_plugin(path))
+    from .effects.registry import BASELINE, BUILTIN
+    entries = {**BUILTIN, **_plugins(args)}
     for name, entry in entries.items():
         mark = "*" if name in BASELINE else " "
         options = ", ".join(entry.options()) or "-"
@@ -210,13 +220,10 @@ def _whatif(args: argparse.Namespace) -> int:
 def _diagnose(args: argparse.Namespace) -> int:
     from .diagnosis import diagnose
     from .discrepancy_report import write_diagnosis
-    from .effects.registry import load_plugin
     from .flight_test import load_test
     _check_alpha(args.alpha)
     test = load_test(args.test_dir)
-    plugins = {}
-    for path in args.plugin:
-        plugins.update(load_plugin(path))
+    plugins = _plugins(args)
     spec = _spec(test, args.model)
     est = _estimator(test, args, spec)
     print(f"solving: {est.size_text()} ...", flush=True)
@@ -237,7 +244,6 @@ def _check_alpha(alpha: float) -> None:
 
 def _compare(args: argparse.Namespace) -> int:
     from .discrepancy_report import write_comparison
-    from .effects.registry import load_plugin
     from .flight_test import load_test
     from .model_comparison import compare
     from .model_spec import load_model_file, spec_of_test
@@ -245,9 +251,7 @@ def _compare(args: argparse.Namespace) -> int:
         raise InputError("(command line)", "--model",
                          f"exactly two models (--model A --model B); got {len(args.model)}")
     test = load_test(args.test_dir)
-    plugins = {}
-    for path in args.plugin:
-        plugins.update(load_plugin(path))
+    plugins = _plugins(args)
     specs = [spec_of_test(test) if m == "manifest" else load_model_file(m, plugins)
              for m in args.model]
     labels = tuple(Path(m).stem if m != "manifest" else "manifest" for m in args.model)
@@ -255,9 +259,9 @@ def _compare(args: argparse.Namespace) -> int:
         labels = (f"A: {labels[0]}", f"B: {labels[1]}")
     est = _estimator(test, args, specs[0])
     print(f"solving {labels[0]}: {est.size_text()} ...", flush=True)
-    fit_a = est.solve(progress=not args.verbose)
+    fit_a, cov_a = _fit_and_covariance(est, args)
     print(f"solving {labels[1]} from it ...", flush=True)
-    comparison = compare(fit_a, specs[0], specs[1], labels, progress=not args.verbose)
+    comparison = compare(fit_a, cov_a, specs[0], specs[1], labels, progress=not args.verbose)
     out = write_comparison(comparison, args.out)
     print()
     print(comparison.text())

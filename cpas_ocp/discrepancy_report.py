@@ -79,9 +79,11 @@ def write_comparison(comparison: Comparison, out: str | Path) -> Path:
                                "chi_square": c.chi_square, "k": c.k, "n": c.n, "aic": c.aic,
                                "bic": c.bic,
                                "parameters": {n: fit.parameters[n] for n in fit.free},
+                               "std": cov.std, "undetermined": cov.undetermined,
                                "solver": dataclasses.asdict(fit.solver)}
-                       for label, fit, c in zip(comparison.labels, comparison.fits, (a, b),
-                                                strict=True)},
+                       for label, fit, cov, c in zip(comparison.labels, comparison.fits,
+                                                     comparison.covariances, (a, b),
+                                                     strict=True)},
             "nesting": comparison.note,
             "likelihood_ratio": None if comparison.lr is None else {
                 **dataclasses.asdict(comparison.lr), "p_value": comparison.lr.p_value},

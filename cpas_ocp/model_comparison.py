@@ -29,6 +29,7 @@ from .errors import SolverFailure
 from .estimation import Estimator, Fit
 from .hypothesis_tests import chi_bar_square_sf
 from .model_spec import ModelSpec
+from .uncertainty import Covariance
 
 
 @dataclass(frozen=True)
@@ -77,8 +78,10 @@ class LikelihoodRatio:
 
 
 def refit(fit: Fit, spec: ModelSpec, free: list[str] | None = None,
-          values: dict[str, float] | None = None, progress: bool = False) -> Fit:
-    """Fit `spec` to `fit`'s test on the same grid, starting from `fit`.
+          values: dict[str, float] | None = None, progress: bool = False
+          ) -> tuple[Estimator, Fit]:
+    """Fit `spec` to `fit`'s test on the same grid, starting from `fit`; the estimator (for
+    the covariance) and the new fit.
 
     `free`: the parameters to estimate (default: the spec's choice); their
     start values are the fit's where it has them, else `values` (SI), else the
@@ -92,7 +95,7 @@ def refit(fit: Fit, spec: ModelSpec, free: list[str] | None = None,
                                    fixed={})
     est = Estimator(fit.test, spec, settings)
     z0 = est.point_from(fit, start)
-    return est.solve(progress=progress, start=z0)
+    return est, est.solve(progress=progress, start=z0)
 
 
 def one_sided_count(spec: ModelSpec, fit: Fit, null: dict[str, float]) -> int:
@@ -123,6 +126,7 @@ class Comparison:
     labels: tuple[str, str]
     specs: tuple[ModelSpec, ModelSpec]
     fits: tuple[Fit, Fit]
+    covariances: tuple[Covariance, Covariance]
     lr: LikelihoodRatio | None
     note: str
 
@@ -178,21 +182,23 @@ def nesting(spec_small: ModelSpec, spec_large: ModelSpec, fit_small: Fit, fit_la
     return dof, min(one_sided_count(spec_large, fit_large, null), dof)
 
 
-def compare(fit_a: Fit, spec_a: ModelSpec, spec_b: ModelSpec, labels: tuple[str, str],
-            progress: bool = False) -> Comparison:
+def compare(fit_a: Fit, cov_a: Covariance, spec_a: ModelSpec, spec_b: ModelSpec,
+            labels: tuple[str, str], progress: bool = False) -> Comparison:
     """Fit `spec_b` from `fit_a` (`refit`; from its own offline reduction if that fails) and
-    compare the two."""
+    compare the two; `cov_a` is `fit_a`'s covariance."""
     try:
-        fit_b = refit(fit_a, spec_b, progress=progress)
+        est_b, fit_b = refit(fit_a, spec_b, progress=progress)
     except SolverFailure:
         settings = dataclasses.replace(fit_a.settings, free=None, guess={}, fixed={}, limits={})
-        fit_b = Estimator(fit_a.test, spec_b, settings).solve(progress=progress)
+        est_b = Estimator(fit_a.test, spec_b, settings)
+        fit_b = est_b.solve(progress=progress)
     lr, note = None, "neither model is nested in the other; compare AIC and BIC"
-    for small, large, (s_spec, l_spec) in ((0, 1, (spec_a, spec_b)), (1, 0, (spec_b, spec_a))):
-        fits = (fit_a, fit_b)
+    fits = (fit_a, fit_b)
+    for small, large, s_spec, l_spec in ((0, 1, spec_a, spec_b), (1, 0, spec_b, spec_a)):
         nested = nesting(s_spec, l_spec, fits[small], fits[large])
         if nested is not None and nested[0] > 0:
             lr = LikelihoodRatio(fits[small].chi_square - fits[large].chi_square, *nested)
             note = f"{labels[small]} is nested in {labels[large]}"
             break
-    return Comparison(labels, (spec_a, spec_b), (fit_a, fit_b), lr, note)
+    return Comparison(labels, (spec_a, spec_b), fits, (cov_a, est_b.covariance(fit_b)), lr,
+                      note)

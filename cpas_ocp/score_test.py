@@ -92,6 +92,7 @@ class ScoreTest:
     refit_estimate: dict[str, float] = field(default_factory=dict)
     refit_note: str = ""
     spec: ModelSpec | None = field(default=None, repr=False)
+    refitted: tuple[Estimator, Fit] | None = field(default=None, repr=False)
 
     @property
     def tested(self) -> bool:
@@ -124,7 +125,7 @@ class ScoreTest:
         out = {}
         for f in dataclasses.fields(self):
             value = getattr(self, f.name)
-            if f.name == "spec":
+            if f.name in ("spec", "refitted"):
                 continue
             if f.name == "refit":
                 value = None if value is None else {**dataclasses.asdict(value),
@@ -235,7 +236,8 @@ def confirm(fit: Fit, result: ScoreTest, progress: bool = False) -> None:
             guess = min(max(result.null[n], prm.lower + inside), prm.upper - inside)
         start[n] = guess
     try:
-        refitted = refit(fit, result.spec, [*fit.free, *result.parameters], start, progress)
+        est, refitted = refit(fit, result.spec, [*fit.free, *result.parameters], start,
+                              progress)
     except SolverFailure as exc:
         result.refit_note = f"the refit did not converge: {exc}"
         return
@@ -243,6 +245,7 @@ def confirm(fit: Fit, result: ScoreTest, progress: bool = False) -> None:
                                    len(result.parameters) - len(result.undetermined),
                                    len(result.one_sided))
     result.refit_estimate = {n: refitted.parameters[n] for n in result.parameters}
+    result.refitted = (est, refitted)
     result.refit_note = (f"{refitted.solver.iterations} iterations, chi-square "
                          f"{fit.chi_square:.1f} -> {refitted.chi_square:.1f}")
 

@@ -111,6 +111,17 @@ BAD_BLOCKS = {
         "model.effects"),
     "plug-in that does not import": ({"plugins": ["broken.py"]}, "broken.py"),
     "missing plug-in": ({"plugins": ["absent.py"]}, "absent.py"),
+    "prior on an unknown parameter": ({"priors": {"CdS[fbcp9,stage1]": {"value": 2.0,
+                                                                        "sigma": 0.1}}},
+                                      "model.priors.CdS[fbcp9,stage1]"),
+    "prior on a fixed parameter": ({"fix": {"CdS_V": 1.0},
+                                    "priors": {"CdS_V": {"value": 1.0, "sigma": 0.1}}},
+                                   "model.priors.CdS_V"),
+    "prior without sigma": ({"priors": {"CdS[fbcp1,stage1]": {"value": 2.0}}},
+                            "model.priors.CdS[fbcp1,stage1]"),
+    "prior in a wrong unit": ({"priors": {"CdS[fbcp1,stage1]": {"value": 2.0, "sigma": 0.1,
+                                                                "unit": "lbf"}}},
+                              "model.priors.CdS[fbcp1,stage1].unit"),
 }
 
 

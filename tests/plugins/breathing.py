@@ -5,8 +5,11 @@ feet), so its drag area is CdS (1 + a cos(2 pi f t) + b sin(2 pi f t)).
 The in-phase and quadrature amplitudes ``breathing_cos[P]`` and
 ``breathing_sin[P]`` (fractions of the drag area) enter linearly, so that the
 effect vanishes at a = b = 0 (its score test's null) and the fit needs no
-phase search; `frequency` (Hz) is an option, read off the diagnosis's
-periodogram.  List it after canopy_inflation, before the riser effects.
+phase search.  The frequency ``breathing_frequency`` (Hz, shared by the
+canopies) starts at the option `frequency`, read off the diagnosis's
+periodogram, and is estimated with the rest; the score test holds it there
+(under the null it has no effect).  List the effect after canopy_inflation,
+before the riser effects.
 """
 
 from __future__ import annotations
@@ -28,16 +31,19 @@ class Breathing(Effect):
     name: str = "breathing"
 
     def parameters(self, test) -> list[Parameter]:
-        return [Parameter(param_name(base, c.name), "1", 0.0, -0.3, 0.3, scale=0.05,
-                          description=f"{part} drag-area oscillation amplitude")
-                for c in test.parachutes
-                for base, part in (("breathing_cos", "in-phase"), ("breathing_sin", "quadrature"))]
+        return [Parameter("breathing_frequency", "Hz", self.frequency, 0.5, 20.0, scale=1.0,
+                          description="drag-area oscillation frequency"),
+                *(Parameter(param_name(base, c.name), "1", 0.0, -0.3, 0.3, scale=0.05,
+                            description=f"{part} drag-area oscillation amplitude")
+                  for c in test.parachutes
+                  for base, part in (("breathing_cos", "in-phase"),
+                                     ("breathing_sin", "quadrature")))]
 
     def null_values(self, test) -> dict[str, float]:
-        return {p.name: 0.0 for p in self.parameters(test)}
+        return {p.name: 0.0 for p in self.parameters(test)[1:]}
 
     def forces(self, ctx) -> None:
-        phase = 2.0 * math.pi * self.frequency * ctx.t
+        phase = 2.0 * math.pi * ctx.p["breathing_frequency"] * ctx.t
         for chute in ctx.test.parachutes:
             factor = (1.0 + ctx.p[param_name("breathing_cos", chute.name)] * ca.cos(phase)
                       + ctx.p[param_name("breathing_sin", chute.name)] * ca.sin(phase))
