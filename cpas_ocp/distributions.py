@@ -54,7 +54,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 from scipy import stats
@@ -92,8 +92,11 @@ def check_sample(name: str, values: Sequence[float] | np.ndarray) -> np.ndarray:
     return x
 
 
-def frozen_distribution(family: str, parameters: Mapping[str, float]):
-    """The untruncated scipy.stats frozen distribution of a family and its parameters."""
+def frozen_distribution(family: str, parameters: Mapping[str, float]) -> Any:
+    """The untruncated scipy.stats frozen distribution of a family and its parameters.
+
+    Typed ``Any``: scipy's frozen-distribution class is not public.
+    """
     if family == "normal":
         return stats.norm(loc=parameters["mean"], scale=parameters["std"])
     if family == "lognormal":
@@ -168,7 +171,7 @@ class Dispersion:
             raise ValueError(f"{self.name}: the {self.family} distribution has no probability "
                              f"between the caps [{self.lower_cap:g}, {self.upper_cap:g}]")
 
-    def frozen(self):
+    def frozen(self) -> Any:
         """The untruncated scipy.stats frozen distribution."""
         return frozen_distribution(self.family, self.parameters)
 
