@@ -667,6 +667,13 @@ class Estimator:
         return kkt_covariance(self._linearize(fit.z), self._param_index, self.pscale,
                               self.free, scale_by_residual, product)
 
+    def evaluate(self, z: np.ndarray) -> tuple[float, float]:
+        """Chi-square at the decision vector `z` and its largest scaled constraint violation
+        (the shooting gaps in units of the state scales)."""
+        lin = self._linearize(z)
+        violation = float(np.max(np.abs(lin.c))) if lin.c.size else 0.0
+        return float(lin.r @ lin.r), violation
+
     def gauss_newton_estimate(self, z: np.ndarray, release: Sequence[str] = ()
                               ) -> tuple[dict[str, float], Covariance]:
         """The free parameters after one Gauss-Newton step from `z` (SI), and their covariance

@@ -288,11 +288,9 @@ def _extended_spec(fit: Fit, spec: ModelSpec, effect: Effect) -> ModelSpec:
 
 def _reproduces(est: Estimator, z: np.ndarray, fit: Fit) -> bool:
     """Whether the extended NLP at `z` is feasible and has the fit's chi-square."""
-    lin = est._linearize(z)
-    if lin.c.size and float(np.max(np.abs(lin.c))) > STOP_CONSTRAINT_TOL:
-        return False
-    chi2 = float(lin.r @ lin.r)
-    return abs(chi2 - fit.chi_square) <= NESTED_CHI2_TOL * max(fit.chi_square, 1.0)
+    chi2, violation = est.evaluate(z)
+    return (violation <= STOP_CONSTRAINT_TOL
+            and abs(chi2 - fit.chi_square) <= NESTED_CHI2_TOL * max(fit.chi_square, 1.0))
 
 
 def _statistic(result: ScoreTest, model, values: dict[str, float], cov) -> None:
