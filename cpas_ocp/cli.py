@@ -9,6 +9,7 @@
     cpas-ocp diagnose TEST_DIR --out DIR      fit, find where it fails, rank the missing effects
     cpas-ocp compare TEST_DIR --model A --model B --out DIR
                                               fit two effect sets, test which the data prefer
+    cpas-ocp campaign TESTS_DIR --out DIR     reconstruct many test folders, tabulate parameters
     cpas-ocp demo [--out DIR]                 simulate the built-in Drogue test and reconstruct it
 
 Exit codes: 0 success, 2 bad input (one line naming file, field and
@@ -113,6 +114,15 @@ def _parser() -> argparse.ArgumentParser:
     _plugin_option(s, "a Python file whose effects the model files may name (repeatable)")
     _solver_options(s)
     s.set_defaults(run=_compare)
+
+    s = sub.add_parser("campaign", help="reconstruct every test folder under a folder, in "
+                                        "parallel, and write the parameter table")
+    s.add_argument("tests_dir", type=Path)
+    s.add_argument("--out", required=True, type=Path)
+    s.add_argument("--workers", type=int, default=2, help="local processes (default 2)")
+    s.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="run on this Dask scheduler (e.g. tcp://host:8786) instead")
+    s.set_defaults(run=_campaign)
 
     s = sub.add_parser("demo", help="simulate the built-in Drogue test and reconstruct it")
     s.add_argument("--out", type=Path, default=Path("cpas-demo"))
@@ -267,6 +277,26 @@ def _compare(args: argparse.Namespace) -> int:
     print(comparison.text())
     print(f"\ncomparison written to {out} (comparison.md, comparison.json, windows.csv, "
           "figures)")
+    return 0
+
+
+def _campaign(args: argparse.Namespace) -> int:
+    from .campaign import campaign_text, find_tests, run_campaign, write_campaign
+    if args.workers < 1:
+        raise InputError("(command line)", "--workers", f"at least 1; got {args.workers}")
+    folders = find_tests(args.tests_dir)
+    where = f"Dask scheduler {args.scheduler}" if args.scheduler else \
+        f"{args.workers} local processes"
+    print(f"reconstructing {len(folders)} test folders on {where} ...", flush=True)
+    outcomes = run_campaign(folders, args.workers, args.scheduler, progress=True)
+    out = write_campaign(outcomes, args.out)
+    print(campaign_text(outcomes))
+    failed = sum(not o.ok for o in outcomes)
+    if failed:
+        print(f"warning: {failed} of {len(outcomes)} tests failed (failures.csv)",
+              file=sys.stderr)
+    print(f"\ncampaign written to {out} (parameters.csv, parameters.parquet, failures.csv, "
+          "campaign.md)")
     return 0
 
 

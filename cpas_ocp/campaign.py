@@ -1,0 +1,198 @@
+"""A campaign: reconstruct many test folders in parallel and tabulate their parameters.
+
+The paper's end product is not one fit but the dispersions of a campaign's
+parameters (Sections IV.C, V-VII).  `run_campaign` reconstructs every test
+folder under a root, each with the model its manifest declares, on local
+processes or, given a scheduler address, on a Dask cluster
+(dask.distributed); a test that fails (bad input, a solver that does not
+converge, anything else) is reported with its reason and does not stop the
+others.  `parameter_table` gives one row per test, canopy-indexed parameter
+and value with its standard deviation, the canopy's type and stage, the
+forebody (vehicle name) and the cluster size, in SI.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+import traceback
+from collections.abc import Iterator, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from .errors import InputError, SolverFailure
+from .flight_test import MANIFEST
+from .parameters import split_name
+
+COLUMNS = ["test", "parameter", "name", "parachute", "type", "stage", "forebody",
+           "cluster_size", "value", "std", "unit"]
+
+
+@dataclass
+class TestOutcome:
+    """The reconstruction of one test folder: its table rows, or why there are none.
+
+    `kind` is "ok", "input" (the folder breaks the test-folder contract),
+    "solver" (Ipopt did not converge) or "error" (anything else, with the
+    exception's type and message).
+    """
+
+    folder: str
+    name: str
+    kind: str
+    message: str = ""
+    rows: list[dict[str, Any]] = field(default_factory=list)
+    wall_s: float = 0.0
+    iterations: int = 0
+    chi_square_per_dof: float = float("nan")
+
+    @property
+    def ok(self) -> bool:
+        return self.kind == "ok"
+
+
+def find_tests(root: str | Path) -> list[Path]:
+    """Every folder under `root` (itself included) that holds a manifest, sorted by path;
+    InputError when there is none."""
+    root = Path(root)
+    if not root.is_dir():
+        raise InputError(str(root), "(folder)", "an existing folder of test folders")
+    found = sorted({p.parent for p in root.rglob(MANIFEST)})
+    if not found:
+        raise InputError(str(root), "(folder)", f"test folders, each holding a {MANIFEST}")
+    return found
+
+
+def reconstruct_folder(folder: str) -> TestOutcome:
+    """Reconstruct one test folder with its manifest's model; never raises (a picklable
+    top-level function, run in a worker process)."""
+    from .estimation import Estimator
+    from .flight_test import load_test
+    t0 = time.perf_counter()
+    name = Path(folder).name
+    try:
+        test = load_test(folder)
+        name = test.name
+        est = Estimator(test)
+        fit = est.solve()
+        cov = est.covariance(fit)
+    except InputError as exc:
+        return TestOutcome(folder, name, "input", str(exc), wall_s=time.perf_counter() - t0)
+    except SolverFailure as exc:
+        return TestOutcome(folder, name, "solver", str(exc), wall_s=time.perf_counter() - t0)
+    except Exception as exc:  # a campaign reports every failure and carries on
+        where = traceback.extract_tb(exc.__traceback__)[-1]
+        return TestOutcome(folder, name, "error",
+                           f"{type(exc).__name__}: {exc} (at {Path(where.filename).name}:"
+                           f"{where.lineno})", wall_s=time.perf_counter() - t0)
+    std = cov.std
+    chutes = {c.name: c for c in test.parachutes}
+    stages = {s for c in test.parachutes for s in c.stages}
+    rows = []
+    for pname in fit.free:
+        base, index = split_name(pname)
+        chute = chutes.get(index[0]) if index else None
+        stage = next((i for i in index if i in stages), "")
+        rows.append({"test": test.name, "parameter": base, "name": pname,
+                     "parachute": chute.name if chute else "", "type": chute.type if chute else "",
+                     "stage": stage, "forebody": test.vehicle.name,
+                     "cluster_size": len(test.parachutes), "value": fit.parameters[pname],
+                     "std": std.get(pname, np.nan), "unit": fit.model.parameter(pname).unit})
+    return TestOutcome(folder, test.name, "ok", rows=rows, wall_s=time.perf_counter() - t0,
+                       iterations=fit.solver.iterations,
+                       chi_square_per_dof=fit.chi_square / fit.dof)
+
+
+def run_campaign(folders: Sequence[str | Path], workers: int = 2, scheduler: str | None = None,
+                 progress: bool = False) -> list[TestOutcome]:
+    """Reconstruct `folders` on `workers` local processes, or on the Dask cluster at
+    `scheduler` (an address such as ``tcp://host:8786``); outcomes in the order of
+    `folders`.  With `progress`, a line on stderr counts finished and failed tests."""
+    paths = [str(Path(f)) for f in folders]
+    outcomes: dict[str, TestOutcome] = {}
+    done = _on_dask(paths, scheduler) if scheduler else _on_processes(paths, workers)
+    for outcome in done:
+        outcomes[outcome.folder] = outcome
+        if progress and sys.stderr.isatty():
+            failed = sum(not o.ok for o in outcomes.values())
+            sys.stderr.write(f"\r  {len(outcomes)}/{len(paths)} tests reconstructed, "
+                             f"{failed} failed   ")
+            sys.stderr.flush()
+    if progress and sys.stderr.isatty():
+        sys.stderr.write("\n")
+    return [outcomes[p] for p in paths]
+
+
+def _on_processes(paths: list[str], workers: int) -> Iterator[TestOutcome]:
+    if workers <= 1:
+        yield from map(reconstruct_folder, paths)
+        return
+    with ProcessPoolExecutor(max_workers=workers) as pool:
+        futures = [pool.submit(reconstruct_folder, p) for p in paths]
+        for future in as_completed(futures):
+            yield future.result()
+
+
+def _on_dask(paths: list[str], scheduler: str) -> Iterator[TestOutcome]:
+    try:
+        from distributed import Client
+        from distributed import as_completed as dask_completed
+    except ImportError:
+        raise InputError("(command line)", "--scheduler",
+                         "dask.distributed installed (pip install 'cpas-ocp[cluster]')") from None
+    try:
+        client = Client(scheduler, timeout=30)
+    except OSError as exc:
+        raise InputError("(command line)", "--scheduler",
+                         f"a reachable Dask scheduler; {scheduler}: {exc}") from None
+    with client:
+        futures = client.map(reconstruct_folder, paths, pure=False)
+        for future in dask_completed(futures):
+            yield future.result()
+
+
+def parameter_table(outcomes: Sequence[TestOutcome]) -> pd.DataFrame:
+    """One row per test and estimated parameter (SI), in the columns of COLUMNS."""
+    rows = [r for o in outcomes if o.ok for r in o.rows]
+    return pd.DataFrame(rows, columns=COLUMNS)
+
+
+def failure_table(outcomes: Sequence[TestOutcome]) -> pd.DataFrame:
+    """One row per failed test: folder, name, kind of failure and its message."""
+    return pd.DataFrame([{"folder": o.folder, "test": o.name, "kind": o.kind,
+                          "message": o.message} for o in outcomes if not o.ok],
+                        columns=["folder", "test", "kind", "message"])
+
+
+def write_campaign(outcomes: Sequence[TestOutcome], out: str | Path) -> Path:
+    """Write parameters.csv and parameters.parquet (the table), failures.csv and
+    campaign.md atomically."""
+    from .output_folder import atomic_folder
+    out = Path(out)
+    table = parameter_table(outcomes)
+    failures = failure_table(outcomes)
+    with atomic_folder(out, "parameters.csv") as tmp:
+        table.to_csv(tmp / "parameters.csv", index=False)
+        table.to_parquet(tmp / "parameters.parquet", index=False)
+        failures.to_csv(tmp / "failures.csv", index=False)
+        (tmp / "campaign.md").write_text(campaign_text(outcomes) + "\n")
+    return out
+
+
+def campaign_text(outcomes: Sequence[TestOutcome]) -> str:
+    """One line per test: status, iterations, chi^2/dof and wall time, or the failure."""
+    lines = [f"{len(outcomes)} tests, {sum(o.ok for o in outcomes)} reconstructed, "
+             f"{sum(not o.ok for o in outcomes)} failed"]
+    for o in outcomes:
+        if o.ok:
+            lines.append(f"  ok      {o.name:28s} {o.iterations:4d} iterations, chi^2/dof "
+                         f"{o.chi_square_per_dof:.3f}, {len(o.rows)} parameters, "
+                         f"{o.wall_s:.1f} s")
+        else:
+            lines.append(f"  FAILED  {o.name:28s} ({o.kind}) {o.message}")
+    return "\n".join(lines)

@@ -1,0 +1,64 @@
+"""A campaign over a small generated set of tests: mixed parachute types and one broken
+folder, on local processes and on a Dask LocalCluster."""
+
+from __future__ import annotations
+
+import shutil
+
+import pandas as pd
+import pytest
+
+from cpas_ocp.campaign import COLUMNS, find_tests, parameter_table, run_campaign
+from cpas_ocp.cli import main
+
+
+@pytest.fixture(scope="module")
+def tests_root(problem_folder, tmp_path_factory):
+    """fbcp seeds 1 and 2, pilot seed 1, and fbcp seed 1 with a NaN run in its IMU series."""
+    root = tmp_path_factory.mktemp("campaign")
+    for name, seed in (("fbcp", 1), ("fbcp", 2), ("pilot", 1)):
+        shutil.copytree(problem_folder(name, seed), root / f"{name}{seed}")
+        (root / f"{name}{seed}" / "truth.json").unlink()
+    shutil.copytree(root / "fbcp1", root / "broken")
+    imu = pd.read_csv(root / "broken" / "imu.csv", comment="#")
+    imu.iloc[50:60, 1] = float("nan")
+    imu.to_csv(root / "broken" / "imu.csv", index=False)
+    return root
+
+
+def test_campaign_tabulates_every_test_and_reports_the_broken_one(tests_root, tmp_path,
+                                                                  capsys) -> None:
+    out = tmp_path / "out"
+    assert main(["campaign", str(tests_root), "--out", str(out), "--workers", "2"]) == 0
+    captured = capsys.readouterr()
+    assert "1 of 4 tests failed" in captured.err
+    table = pd.read_parquet(out / "parameters.parquet")
+    assert list(table.columns) == COLUMNS
+    assert sorted(table.test.unique()) == ["fbcp-seed1", "fbcp-seed2", "pilot-seed1"]
+    assert set(table.type) >= {"fbcp", "pilot"}
+    fbcp = table[(table.test == "fbcp-seed1") & (table.name == "CdS[fbcp1,stage1]")].iloc[0]
+    assert (fbcp.parachute, fbcp.stage, fbcp.cluster_size, fbcp.unit) == ("fbcp1", "stage1", 2,
+                                                                         "m^2")
+    assert fbcp["std"] > 0.0
+    assert pd.read_csv(out / "parameters.csv").shape == table.shape
+    failures = pd.read_csv(out / "failures.csv")
+    assert list(failures.test) == ["broken"] and list(failures.kind) == ["input"]
+    assert "imu.csv" in failures.message[0] and "rows 51-60" in failures.message[0]
+
+
+def test_dask_cluster_gives_the_same_table(tests_root) -> None:
+    distributed = pytest.importorskip("distributed")
+    folders = find_tests(tests_root)
+    local = parameter_table(run_campaign(folders, workers=1))
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as cluster:
+        outcomes = run_campaign(folders, scheduler=cluster.scheduler_address)
+    assert [o.kind for o in outcomes] == ["input", "ok", "ok", "ok"]
+    remote = parameter_table(outcomes)
+    pd.testing.assert_frame_equal(local, remote, check_exact=False, rtol=1e-9)
+
+
+def test_no_test_folders_is_one_line_exit_2(tmp_path, capsys) -> None:
+    assert main(["campaign", str(tmp_path), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "manifest.json" in err
