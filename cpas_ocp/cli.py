@@ -10,6 +10,7 @@
     cpas-ocp compare TEST_DIR --model A --model B --out DIR
                                               fit two effect sets, test which the data prefer
     cpas-ocp campaign TESTS_DIR --out DIR     reconstruct many test folders, tabulate parameters
+    cpas-ocp dispersions CAMPAIGN --out DIR   Monte Carlo cases within the grown hulls
     cpas-ocp demo [--out DIR]                 simulate the built-in Drogue test and reconstruct it
 
 Exit codes: 0 success, 2 bad input (one line naming file, field and
@@ -123,6 +124,14 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="run on this Dask scheduler (e.g. tcp://host:8786) instead")
     s.set_defaults(run=_campaign)
+
+    s = sub.add_parser("dispersions", help="Monte Carlo cases per canopy type and stage from "
+                                           "a campaign's parameter table")
+    s.add_argument("campaign", type=Path, help="a campaign folder or its parameters table")
+    s.add_argument("--out", required=True, type=Path)
+    s.add_argument("--cases", type=int, default=200_000, help="cases per canopy (200,000)")
+    s.add_argument("--seed", type=int, required=True)
+    s.set_defaults(run=_dispersions)
 
     s = sub.add_parser("demo", help="simulate the built-in Drogue test and reconstruct it")
     s.add_argument("--out", type=Path, default=Path("cpas-demo"))
@@ -297,6 +306,26 @@ def _campaign(args: argparse.Namespace) -> int:
               file=sys.stderr)
     print(f"\ncampaign written to {out} (parameters.csv, parameters.parquet, failures.csv, "
           "campaign.md)")
+    return 0
+
+
+def _dispersions(args: argparse.Namespace) -> int:
+    from .dispersion_study import dispersion_models, read_parameter_table, write_dispersions
+    if args.cases < 1:
+        raise InputError("(command line)", "--cases", f"at least 1; got {args.cases}")
+    table = read_parameter_table(args.campaign)
+    models, skipped = dispersion_models(table)
+    if not models:
+        raise InputError(str(args.campaign), "(table)",
+                         "a canopy type and stage with enough tests to disperse; "
+                         + "; ".join(skipped))
+    out = write_dispersions(models, skipped, args.cases, args.seed, args.out)
+    for model in models:
+        print(model.text())
+    for note in skipped:
+        print(f"not dispersed: {note}")
+    print(f"\ndispersions written to {out} (cases_*.parquet, dispersions.json, "
+          "dispersions.md, figures)")
     return 0
 
 

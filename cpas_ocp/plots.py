@@ -1,16 +1,20 @@
 """Figures of a fit: model against measurement per sensor (also with the phase windows
-shaded), canopy drag areas, event times, parameter correlations and profile likelihoods."""
+shaded), canopy drag areas, event times, parameter correlations and profile likelihoods;
+and of a campaign's Monte Carlo dispersions (hull projections, histograms)."""
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
+from scipy.spatial import ConvexHull
 
 from .estimation import EVENTS, PSEUDO_SENSORS, Fit, SensorResidual
 from .parameters import param_name
@@ -19,6 +23,11 @@ from .profile_likelihood import THRESHOLD, Profile
 from .reduction import reduce, stage_starts
 from .uncertainty import Covariance
 from .units import FT, LBF
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+    from .dispersion_study import DispersionModel
 
 # Display units: the engineers' customary ones, per channel.
 DISPLAY = {
@@ -232,3 +241,49 @@ def _save(fig: plt.Figure, title: str, path: Path) -> Path:
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+def plot_hull_projections(model: DispersionModel, cases: pd.DataFrame, path: Path,
+                          shown: int = 5000) -> Path:
+    """Each pair of hull parameters: the test points, the outline of their hull and of the
+    grown hull (the convex hull of the projected vertices), and `shown` Monte Carlo cases."""
+    names = model.hull_names
+    pairs = list(itertools.combinations(range(len(names)), 2))
+    fig, axes = plt.subplots(1, len(pairs), figsize=(5 * len(pairs), 4.5), squeeze=False)
+    grown = model.hull.vertices
+    tests = model.test_points[list(names)].to_numpy()
+    scale = (1.0 + model.hull.growth)
+    own = model.hull.center + (grown - model.hull.center) / scale
+    for ax, (i, j) in zip(axes[0], pairs, strict=True):
+        ax.plot(cases[names[i]].to_numpy()[:shown], cases[names[j]].to_numpy()[:shown], ".",
+                ms=1, color="0.6", label=f"Monte Carlo cases (first {shown:,})")
+        for vertices, style, label in ((own, "C0-", "tests' hull"),
+                                       (grown, "C3--", f"grown {100 * model.hull.growth:.0f} %")):
+            outline = ConvexHull(vertices[:, [i, j]])
+            loop = np.append(outline.vertices, outline.vertices[0])
+            ax.plot(vertices[loop, i], vertices[loop, j], style, lw=1.2, label=label)
+        ax.plot(tests[:, i], tests[:, j], "ko", ms=4, label="tests")
+        ax.set_xlabel(names[i])
+        ax.set_ylabel(names[j])
+    axes[0][0].legend(fontsize=7)
+    return _save(fig, f"{model.label}: convex hull of the inflation parameters", path)
+
+
+def plot_dispersion_histograms(model: DispersionModel, cases: pd.DataFrame, path: Path) -> Path:
+    """Per dispersed parameter: histogram of the cases (density), the fitted capped density,
+    the caps, and the test values as ticks."""
+    names = list(model.dispersions)
+    fig, axes = plt.subplots(1, len(names), figsize=(3.6 * len(names), 3.4), squeeze=False)
+    for ax, name in zip(axes[0], names, strict=True):
+        d = model.dispersions[name]
+        ax.hist(cases[name], bins=60, density=True, color="0.75", label="cases")
+        x = np.linspace(d.lower_cap, d.upper_cap, 200)
+        density = d.frozen().pdf(x) / d.truncated_mass()
+        ax.plot(x, density, "C3-", lw=1.2, label=f"{d.family} (capped)")
+        for cap in (d.lower_cap, d.upper_cap):
+            ax.axvline(cap, color="C3", ls=":", lw=1)
+        ax.plot(model.test_points[name], np.zeros(len(model.test_points)), "k|", ms=14,
+                label="tests")
+        ax.set_xlabel(name)
+    axes[0][0].legend(fontsize=7)
+    return _save(fig, f"{model.label}: dispersions ({model.tests} tests)", path)
