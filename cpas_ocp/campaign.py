@@ -170,8 +170,10 @@ def failure_table(outcomes: Sequence[TestOutcome]) -> pd.DataFrame:
 
 
 def write_campaign(outcomes: Sequence[TestOutcome], out: str | Path) -> Path:
-    """Write parameters.csv and parameters.parquet (the table), failures.csv and
+    """Write parameters.csv and parameters.parquet (the table), failures.csv, the drag-area
+    ratios between configurations (ratios_forebody.csv, ratios_cluster_size.csv) and
     campaign.md atomically."""
+    from .configuration_ratios import CONFIGURATIONS, drag_area_ratios
     from .output_folder import atomic_folder
     out = Path(out)
     table = parameter_table(outcomes)
@@ -180,7 +182,12 @@ def write_campaign(outcomes: Sequence[TestOutcome], out: str | Path) -> Path:
         table.to_csv(tmp / "parameters.csv", index=False)
         table.to_parquet(tmp / "parameters.parquet", index=False)
         failures.to_csv(tmp / "failures.csv", index=False)
-        (tmp / "campaign.md").write_text(campaign_text(outcomes) + "\n")
+        text = campaign_text(outcomes)
+        for by in CONFIGURATIONS:
+            ratios = drag_area_ratios(table, by)
+            ratios.to_csv(tmp / f"ratios_{by}.csv", index=False)
+            text += f"\n\nmean steady drag areas by {by}:\n" + ratios.to_string(index=False)
+        (tmp / "campaign.md").write_text(text + "\n")
     return out
 
 

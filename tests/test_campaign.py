@@ -44,6 +44,8 @@ def test_campaign_tabulates_every_test_and_reports_the_broken_one(tests_root, tm
     failures = pd.read_csv(out / "failures.csv")
     assert list(failures.test) == ["broken"] and list(failures.kind) == ["input"]
     assert "imu.csv" in failures.message[0] and "rows 51-60" in failures.message[0]
+    ratios = pd.read_csv(out / "ratios_cluster_size.csv")
+    assert set(ratios.type) == {"fbcp", "pilot"} and (ratios.ratio == 1.0).all()
 
 
 def test_dask_cluster_gives_the_same_table(tests_root) -> None:
