@@ -1,0 +1,53 @@
+"""Benchmark: forward Monte Carlo of the Drogue's disreef stage (drogue1, stage2), 10,000
+cases through the fitted model, against one case flown the same way in the same process.
+
+Prints the seconds of each, the ratio, the per-case cost and the peak-load quantiles.
+`python benchmarks/peak_load_monte_carlo.py [--cases 10000] [--seed 1]` (about a minute).
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from cpas_ocp.estimation import Estimator
+from cpas_ocp.flight_test import load_test
+from cpas_ocp.parameters import param_name
+from cpas_ocp.peak_loads import stage_peak_loads
+from cpas_ocp.problems import load_problem
+from cpas_ocp.simulate import simulate_problem
+
+SHAPE = ("CdS", "Ck", "n_p", "expopen", "t_k")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--cases", type=int, default=10_000)
+    ap.add_argument("--seed", type=int, default=1)
+    args = ap.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        simulate_problem(load_problem("drogue"), Path(tmp) / "test", args.seed)
+        fit = Estimator(load_test(Path(tmp) / "test")).solve()
+    fitted = {b: fit.parameters[param_name(b, "drogue1", "stage2")] for b in SHAPE}
+    rng = np.random.default_rng(args.seed)
+    cases = pd.DataFrame({b: v * (1 + 0.05 * rng.standard_normal(args.cases))
+                          for b, v in fitted.items()})
+    t0 = time.perf_counter()
+    stage_peak_loads(fit, "drogue1", "stage2", cases.iloc[:1])
+    one = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    result = stage_peak_loads(fit, "drogue1", "stage2", cases)
+    many = time.perf_counter() - t0
+    print(f"1 case: {one:.2f} s; {args.cases} cases: {many:.1f} s; ratio {many / one:.1f} "
+          f"({1e3 * many / args.cases:.2f} ms per case)")
+    print("peak tension quantiles (lbf):",
+          ", ".join(f"{q:g}: {v / 4.4482216:,.0f}" for q, v in result.quantiles().items()))
+
+
+if __name__ == "__main__":
+    main()
