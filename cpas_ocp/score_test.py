@@ -188,6 +188,9 @@ def score_test(fit: Fit, spec: ModelSpec, entry: EffectType) -> ScoreTest:
     except InputError as exc:
         result.note = f"does not apply to this test: {exc.expectation}"
         return result
+    except Exception as exc:  # a user's plug-in may fail in its own code: report, go on
+        result.note = f"could not be added to the model: {type(exc).__name__}: {exc}"
+        return result
     tested = tuple(null)
     result.parameters, result.null = tested, dict(null)
     model = extended.model(fit.test)

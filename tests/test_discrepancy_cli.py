@@ -67,3 +67,26 @@ def test_compare_without_nesting_uses_the_criteria_only(problem_folder, tmp_path
     result = json.loads((out / "comparison.json").read_text())
     assert result["likelihood_ratio"] is None
     assert result["nesting"].startswith("neither model is nested")
+
+
+def test_a_failing_plugin_is_reported_among_the_candidates(problem_fit, tmp_path) -> None:
+    """A user's effect whose code raises is listed as not tested, with the error; the other
+    candidates are still tested."""
+    from cpas_ocp.effects.registry import load_plugin
+    from cpas_ocp.model_spec import baseline_spec
+    from cpas_ocp.score_test import score_test
+    (tmp_path / "bad.py").write_text(
+        "from cpas_ocp.effects import Effect\n"
+        "from cpas_ocp.parameters import Parameter\n\n\n"
+        "class Bad(Effect):\n"
+        "    name = 'bad_effect'\n\n"
+        "    def parameters(self, test):\n"
+        "        return [Parameter('bad_k', '1', 0.0, -1.0, 1.0)]\n\n"
+        "    def null_values(self, test):\n"
+        "        return {'bad_k': 0.0}\n\n"
+        "    def forces(self, ctx):\n"
+        "        raise RuntimeError('half-written physics')\n")
+    fit, _, _ = problem_fit("fbcp", 1)
+    result = score_test(fit, baseline_spec(), load_plugin(tmp_path / "bad.py")["bad_effect"])
+    assert not result.tested
+    assert "RuntimeError: half-written physics" in result.note
