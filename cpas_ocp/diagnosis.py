@@ -3,7 +3,7 @@ unexplained residual looks like.
 
 1. Where: the residual chi-square per sensor channel and phase window
    (deployment, each stage's inflation and steady state, per canopy), and
-   the one place where it exceeds the noise most (`diagnostics.worst_place`).
+   the one place where it exceeds the noise most (`diagnostics.worst_of`).
 2. What is known: a score test of every library (and plug-in) effect the
    model does not use (`score_test`), ranked; the significant ones
    (p < alpha / m for m effects tested) are confirmed, up to `confirm_top`
@@ -22,7 +22,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
-from .diagnostics import WindowStatistic, window_statistics, worst_place
+from .diagnostics import WindowStatistic, window_statistics, worst_of
 from .effects.registry import EffectType
 from .estimation import Fit
 from .model_spec import ModelSpec
@@ -41,11 +41,15 @@ class Diagnosis:
     fit: Fit
     windows: list[PhaseWindow]
     statistics: list[WindowStatistic]
-    worst: str
     effects: list[ScoreTest]
     findings: list[Finding]
     alpha: float = ALPHA
     notes: list[str] = field(default_factory=list)
+
+    @property
+    def worst(self) -> str:
+        """One line naming the channel and window with the largest chi-square excess."""
+        return worst_of(self.statistics)
 
     @property
     def tests_made(self) -> int:
@@ -105,5 +109,5 @@ def diagnose(fit: Fit, spec: ModelSpec, candidates: Mapping[str, EffectType] | N
     leading = [t for t in tests if t.significant(alpha, m)][:confirm_top]
     for t in leading:
         confirm(fit, t, progress)
-    return Diagnosis(fit, windows, window_statistics(fit, windows), worst_place(fit, windows),
-                     confirmed_ranking(tests), diagnose_residuals(fit, windows, alpha), alpha)
+    return Diagnosis(fit, windows, window_statistics(fit, windows), confirmed_ranking(tests),
+                     diagnose_residuals(fit, windows, alpha), alpha)

@@ -130,7 +130,11 @@ def window_statistics(fit: Fit, windows: Sequence[PhaseWindow]) -> list[WindowSt
 def worst_place(fit: Fit, windows: Sequence[PhaseWindow]) -> str:
     """One line naming the sensor channel and phase window where the model fails most beyond
     the noise: the largest chi-square excess chi^2 - n."""
-    stats = window_statistics(fit, windows)
+    return worst_of(window_statistics(fit, windows))
+
+
+def worst_of(stats: Sequence[WindowStatistic]) -> str:
+    """The `worst_place` line from statistics already computed."""
     if not stats:
         return "no sensor samples to compare with the model"
     w = max(stats, key=lambda s: s.excess)

@@ -22,7 +22,7 @@ from .diagnostics import WindowStatistic, window_statistics
 from .model_comparison import Comparison
 from .output_folder import atomic_folder
 from .phase_windows import phase_windows
-from .plots import plot_residual_comparison, plot_sensor_residuals
+from .plots import file_stem, plot_residual_comparison, plot_sensor_residuals
 from .report import parameter_table
 from .uncertainty import Covariance
 
@@ -91,7 +91,7 @@ def write_comparison(comparison: Comparison, out: str | Path) -> Path:
         (tmp / "comparison.json").write_text(json.dumps(result, indent=2, default=float))
         figures = []
         for label, fit in zip(comparison.labels, comparison.fits, strict=True):
-            sub = tmp / _slug(label)
+            sub = tmp / file_stem(label)
             sub.mkdir()
             figures += plot_sensor_residuals(fit, windows, sub)
         side = plot_residual_comparison(fit_a, fit_b, comparison.labels, windows, tmp)
@@ -126,6 +126,3 @@ def _markdown(frame: pd.DataFrame) -> str:
     rows = ["| " + " | ".join(cell(v) for v in row) + " |" for row in frame.itertuples(False)]
     return "\n".join([head, rule, *rows])
 
-
-def _slug(label: str) -> str:
-    return "".join(c if c.isalnum() or c in "-_" else "_" for c in label)

@@ -511,10 +511,9 @@ class Estimator:
         x0[m.state_slice("position")] = pos.T
         x0[m.state_slice("velocity")] = vel.T
         guessed = {"position", "velocity"}
-        for effect in m.effects:
-            for name, value in effect.state_guess(self.test, self.t, self.values).items():
-                x0[m.state_slice(name)] = value
-                guessed.add(name)
+        for name, value in self._state_guesses(self.values).items():
+            x0[m.state_slice(name)] = value
+            guessed.add(name)
         for st in m.states:
             if st.pinned:
                 x0[m.state_slice(st.name), 0] = st.initial
@@ -557,10 +556,9 @@ class Estimator:
                                    if k in m.parameter_names}, **(values or {})}
         x0 = np.zeros((m.nx, len(self.t)))
         theirs = {st.name for st in fit.model.states}
-        for effect in m.effects:
-            for name, guess in effect.state_guess(self.test, self.t, known).items():
-                if name not in theirs:
-                    x0[m.state_slice(name)] = guess
+        for name, guess in self._state_guesses(known).items():
+            if name not in theirs:
+                x0[m.state_slice(name)] = guess
         for st in m.states:
             if st.name in theirs:
                 x0[m.state_slice(st.name)] = fit.x[:, fit.model.state_slice(st.name)].T
@@ -569,6 +567,13 @@ class Estimator:
         p0 = np.array([known[f] for f in self.free]) / self.pscale
         c0 = np.array([fit.captures[c.name] for c in m.captures]) / self._cscale
         return np.concatenate([(x0 / self._xscale[:, None]).ravel(order="F"), p0, c0])
+
+    def _state_guesses(self, values: dict[str, float]) -> dict[str, np.ndarray]:
+        """The effects' own guesses of their states on the grid (`Effect.state_guess`)."""
+        out: dict[str, np.ndarray] = {}
+        for effect in self.model.effects:
+            out.update(effect.state_guess(self.test, self.t, values))
+        return out
 
     # ------------------------------------------------------------------ solve
     def size_text(self) -> str:

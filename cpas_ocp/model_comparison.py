@@ -101,11 +101,7 @@ def refit(fit: Fit, spec: ModelSpec, free: list[str] | None = None,
 def one_sided_count(spec: ModelSpec, fit: Fit, null: dict[str, float]) -> int:
     """How many of the null values in `null` are bounds of their parameters."""
     model = spec.model(fit.test)
-    count = 0
-    for name, value in null.items():
-        prm = model.parameter(name)
-        count += int(value <= prm.lower or value >= prm.upper)
-    return count
+    return sum(model.parameter(name).on_bound(value) for name, value in null.items())
 
 
 def channel_rms(fit: Fit) -> dict[str, float]:

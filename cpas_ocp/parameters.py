@@ -35,6 +35,11 @@ class Parameter:
     scale: float = 1.0
     free_by_default: bool = True
 
+    def on_bound(self, value: float) -> bool:
+        """Whether `value` is one of the bounds: a hypothesis holding the parameter there
+        admits alternatives on one side only (chi-bar-squared tests)."""
+        return value <= self.lower or value >= self.upper
+
 
 def param_name(base: str, *index: str) -> str:
     """`param_name("CdS", "drogue1", "stage1")` -> ``"CdS[drogue1,stage1]"``."""

@@ -146,8 +146,12 @@ def plot_profile(prof: Profile, name: str, folder: Path) -> Path:
     ax.set_ylabel("Δχ²  (95 %: 3.84)")
     ax.set_ylim(bottom=-0.2)
     ax.legend(loc="upper center", fontsize=8)
-    safe = "".join(ch if ch.isalnum() or ch in "_-" else "_" for ch in prof.name)
-    return _save(fig, f"{name}: profile likelihood", folder / f"profile_{safe}.png")
+    return _save(fig, f"{name}: profile likelihood", folder / f"profile_{file_stem(prof.name)}.png")
+
+
+def file_stem(text: str) -> str:
+    """`text` as a file-name part: letters, digits, '-' and '_' kept, anything else '_'."""
+    return "".join(ch if ch.isalnum() or ch in "_-" else "_" for ch in text)
 
 
 # Shading of the phase windows, by kind: light, distinct colours.

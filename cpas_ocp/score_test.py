@@ -318,11 +318,12 @@ def _statistic(result: ScoreTest, model, values: dict[str, float], cov) -> None:
     sided = []
     for j, n in enumerate(names):
         prm = model.parameter(n)
-        if result.null[n] <= prm.lower:
-            lower[j] = 0.0
-            sided.append(n)
-        elif result.null[n] >= prm.upper:
-            upper[j] = 0.0
+        if prm.on_bound(result.null[n]):
+            # The alternative lies on the side of the bound the null value is not.
+            if result.null[n] <= prm.lower:
+                lower[j] = 0.0
+            else:
+                upper[j] = 0.0
             sided.append(n)
     if sided:
         # Nearest point of the cone in W's metric: |L'(t - theta)| with W = L L'.
