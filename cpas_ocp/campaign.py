@@ -16,8 +16,7 @@ from __future__ import annotations
 import sys
 import time
 import traceback
-from collections.abc import Iterator, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -27,6 +26,7 @@ import pandas as pd
 
 from .errors import InputError, SolverFailure
 from .flight_test import MANIFEST
+from .parallel import run_tasks
 from .parameters import split_name
 
 COLUMNS = ["test", "parameter", "name", "parachute", "type", "stage", "forebody",
@@ -115,8 +115,7 @@ def run_campaign(folders: Sequence[str | Path], workers: int = 2, scheduler: str
     `folders`.  With `progress`, a line on stderr counts finished and failed tests."""
     paths = [str(Path(f)) for f in folders]
     outcomes: dict[str, TestOutcome] = {}
-    done = _on_dask(paths, scheduler) if scheduler else _on_processes(paths, workers)
-    for outcome in done:
+    for _, outcome in run_tasks(reconstruct_folder, paths, workers, scheduler):
         outcomes[outcome.folder] = outcome
         if progress and sys.stderr.isatty():
             failed = sum(not o.ok for o in outcomes.values())
@@ -126,34 +125,6 @@ def run_campaign(folders: Sequence[str | Path], workers: int = 2, scheduler: str
     if progress and sys.stderr.isatty():
         sys.stderr.write("\n")
     return [outcomes[p] for p in paths]
-
-
-def _on_processes(paths: list[str], workers: int) -> Iterator[TestOutcome]:
-    if workers <= 1:
-        yield from map(reconstruct_folder, paths)
-        return
-    with ProcessPoolExecutor(max_workers=workers) as pool:
-        futures = [pool.submit(reconstruct_folder, p) for p in paths]
-        for future in as_completed(futures):
-            yield future.result()
-
-
-def _on_dask(paths: list[str], scheduler: str) -> Iterator[TestOutcome]:
-    try:
-        from distributed import Client
-        from distributed import as_completed as dask_completed
-    except ImportError:
-        raise InputError("(command line)", "--scheduler",
-                         "dask.distributed installed (pip install 'cpas-ocp[cluster]')") from None
-    try:
-        client = Client(scheduler, timeout=30)
-    except OSError as exc:
-        raise InputError("(command line)", "--scheduler",
-                         f"a reachable Dask scheduler; {scheduler}: {exc}") from None
-    with client:
-        futures = client.map(reconstruct_folder, paths, pure=False)
-        for future in dask_completed(futures):
-            yield future.result()
 
 
 def parameter_table(outcomes: Sequence[TestOutcome]) -> pd.DataFrame:

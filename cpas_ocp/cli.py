@@ -11,6 +11,8 @@
                                               fit two effect sets, test which the data prefer
     cpas-ocp campaign TESTS_DIR --out DIR     reconstruct many test folders, tabulate parameters
     cpas-ocp dispersions CAMPAIGN --out DIR   Monte Carlo cases within the grown hulls
+    cpas-ocp montecarlo TEST_DIR --cases DIR --out DIR
+                                              fly the cases through a test's fit: peak loads
     cpas-ocp demo [--out DIR]                 simulate the built-in Drogue test and reconstruct it
 
 Exit codes: 0 success, 2 bad input (one line naming file, field and
@@ -120,9 +122,7 @@ def _parser() -> argparse.ArgumentParser:
                                         "parallel, and write the parameter table")
     s.add_argument("tests_dir", type=Path)
     s.add_argument("--out", required=True, type=Path)
-    s.add_argument("--workers", type=int, default=2, help="local processes (default 2)")
-    s.add_argument("--scheduler", default=None, metavar="ADDRESS",
-                   help="run on this Dask scheduler (e.g. tcp://host:8786) instead")
+    _parallel_options(s)
     s.set_defaults(run=_campaign)
 
     s = sub.add_parser("dispersions", help="Monte Carlo cases per canopy type and stage from "
@@ -132,6 +132,17 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--cases", type=int, default=200_000, help="cases per canopy (200,000)")
     s.add_argument("--seed", type=int, required=True)
     s.set_defaults(run=_dispersions)
+
+    s = sub.add_parser("montecarlo", help="reconstruct a test folder and fly the dispersed "
+                                          "cases of its canopy stages: peak-load distributions")
+    s.add_argument("test_dir", type=Path)
+    s.add_argument("--cases", required=True, type=Path, metavar="DISPERSIONS_DIR",
+                   help="a cpas-ocp dispersions folder (cases_<type>_<stage>.parquet)")
+    s.add_argument("--out", required=True, type=Path)
+    s.add_argument("--limit", type=int, default=None, metavar="N",
+                   help="fly the first N cases of each file (default: all)")
+    _parallel_options(s)
+    s.set_defaults(run=_montecarlo)
 
     s = sub.add_parser("demo", help="simulate the built-in Drogue test and reconstruct it")
     s.add_argument("--out", type=Path, default=Path("cpas-demo"))
@@ -153,6 +164,20 @@ def _plugins(args: argparse.Namespace) -> dict[str, EffectType]:
     for path in args.plugin:
         out.update(load_plugin(path))
     return out
+
+
+def _parallel_options(s: argparse.ArgumentParser) -> None:
+    s.add_argument("--workers", type=int, default=2, help="local processes (default 2)")
+    s.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="run on this Dask scheduler (e.g. tcp://host:8786) instead")
+
+
+def _where(args: argparse.Namespace) -> str:
+    """Where --workers and --scheduler send the tasks, in words; InputError below 1 worker."""
+    if args.workers < 1:
+        raise InputError("(command line)", "--workers", f"at least 1; got {args.workers}")
+    return (f"Dask scheduler {args.scheduler}" if args.scheduler
+            else f"{args.workers} local processes")
 
 
 def _model_option(s: argparse.ArgumentParser) -> None:
@@ -291,11 +316,8 @@ def _compare(args: argparse.Namespace) -> int:
 
 def _campaign(args: argparse.Namespace) -> int:
     from .campaign import campaign_text, find_tests, run_campaign, write_campaign
-    if args.workers < 1:
-        raise InputError("(command line)", "--workers", f"at least 1; got {args.workers}")
+    where = _where(args)
     folders = find_tests(args.tests_dir)
-    where = f"Dask scheduler {args.scheduler}" if args.scheduler else \
-        f"{args.workers} local processes"
     print(f"reconstructing {len(folders)} test folders on {where} ...", flush=True)
     outcomes = run_campaign(folders, args.workers, args.scheduler, progress=True)
     out = write_campaign(outcomes, args.out)
@@ -326,6 +348,38 @@ def _dispersions(args: argparse.Namespace) -> int:
         print(f"not dispersed: {note}")
     print(f"\ndispersions written to {out} (cases_*.parquet, dispersions.json, "
           "dispersions.md, figures)")
+    return 0
+
+
+def _montecarlo(args: argparse.Namespace) -> int:
+    from .estimation import Estimator
+    from .flight_test import load_test
+    from .output_folder import atomic_folder
+    from .peak_load_study import (
+        MARKER,
+        check_columns,
+        match_cases,
+        run_monte_carlo,
+        summary_text,
+        write_monte_carlo,
+    )
+    where = _where(args)
+    if args.limit is not None and args.limit < 1:
+        raise InputError("(command line)", "--limit", f"at least 1; got {args.limit}")
+    test = load_test(args.test_dir)
+    stages = match_cases(test, args.cases, args.limit)
+    with atomic_folder(args.out, MARKER) as tmp:
+        est = Estimator(test)
+        check_columns(est.model, stages)
+        print(f"reconstructing {test.name}: {est.size_text()} ...", flush=True)
+        fit = est.solve(progress=True)
+        print(f"flying {sum(len(s.cases) for s in stages):,} cases of "
+              f"{', '.join(s.label for s in stages)} on {where} ...", flush=True)
+        results = run_monte_carlo(fit, stages, args.workers, args.scheduler, progress=True)
+        write_monte_carlo(fit, results, tmp)
+    print(summary_text(fit, results))
+    print(f"\nMonte Carlo written to {args.out} (quantiles_*.csv, peak_loads_*.parquet, "
+          f"peak_loads_*.png, {MARKER})")
     return 0
 
 

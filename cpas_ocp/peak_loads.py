@@ -70,19 +70,58 @@ def _flight_step(model: Model, step_fn: ca.Function, parachute: str) -> ca.Funct
                         q[names.index("load_factor")]])
 
 
-def stage_peak_loads(fit: Fit, parachute: str, stage: str, cases: pd.DataFrame,
-                     step: float = DEFAULT_STEP_S, duration: float = DEFAULT_DURATION_S,
-                     progress: bool = False) -> PeakLoads:
-    """Fly the stage once per row of `cases` (columns: parameter base names, SI)."""
-    model = fit.model
+@dataclass(frozen=True)
+class StageStart:
+    """Where the Monte Carlo of one canopy stage starts: the fitted state `x0` at the stage's
+    start time `t0` (s), the window end `t1` (s), and the fit's parameter and captured values
+    (SI, by name) that every case shares.  Plain numbers only, so it travels to worker
+    processes and Dask workers, which rebuild the model from the test folder."""
+
+    parachute: str
+    stage: str
+    t0: float
+    t1: float
+    x0: np.ndarray
+    parameters: dict[str, float]
+    captures: dict[str, float]
+
+
+def stage_start(fit: Fit, parachute: str, stage: str,
+                duration: float = DEFAULT_DURATION_S) -> StageStart:
+    """The fit's state at the stage's start t_i (the shooting node at or before t_i carried
+    forward by one partial RK4 step) and the window [t_i, min(next start, t_i + duration,
+    end of the fit)]."""
     chute = fit.test.parachute(parachute)
     if stage not in chute.stages:
         raise ValueError(f"{parachute} has no stage {stage!r} ({', '.join(chute.stages)})")
+    model = fit.model
     t_i = fit.parameters[param_name("t_start", parachute, stage)]
     k = chute.stages.index(stage)
     t_next = (fit.parameters[param_name("t_start", parachute, chute.stages[k + 1])]
               if k + 1 < len(chute.stages) else np.inf)
     t1 = float(min(t_next, t_i + duration, fit.t[-1]))
+    node = int(np.searchsorted(fit.t, t_i, side="right") - 1)
+    x = np.asarray(rk4_step(model)(fit.x[node], fit.t[node], t_i - fit.t[node],
+                                   model.parameter_vector(fit.parameters),
+                                   model.capture_vector(fit.captures))).ravel()
+    return StageStart(parachute, stage, float(t_i), t1, x, dict(fit.parameters),
+                      dict(fit.captures))
+
+
+def stage_peak_loads(fit: Fit, parachute: str, stage: str, cases: pd.DataFrame,
+                     step: float = DEFAULT_STEP_S, duration: float = DEFAULT_DURATION_S,
+                     progress: bool = False) -> PeakLoads:
+    """Fly the stage once per row of `cases` (columns: parameter base names, SI)."""
+    return fly_stage(fit.model, stage_start(fit, parachute, stage, duration), cases, step,
+                     progress)
+
+
+def fly_stage(model: Model, start: StageStart, cases: pd.DataFrame,
+              step: float = DEFAULT_STEP_S, progress: bool = False) -> PeakLoads:
+    """Fly every row of `cases` (columns: the stage's parameter base names, SI) from `start`
+    through `model` with RK4 steps of at most `step` s; peak tension and load factor per case.
+    ValueError names a column that is not a parameter of the stage."""
+    parachute, stage, t_i, t1 = start.parachute, start.stage, start.t0, start.t1
     names = model.parameter_names
     columns = {}
     for base in cases.columns:
@@ -91,16 +130,12 @@ def stage_peak_loads(fit: Fit, parachute: str, stage: str, cases: pd.DataFrame,
             raise ValueError(f"the model has no parameter {name}")
         columns[names.index(name)] = cases[base].to_numpy(dtype=float)
     n = len(cases)
-    p = np.repeat(model.parameter_vector(fit.parameters)[:, None], n, axis=1)
+    p = np.repeat(model.parameter_vector(start.parameters)[:, None], n, axis=1)
     for row, values in columns.items():
         p[row] = values
-    c = np.repeat(model.capture_vector(fit.captures)[:, None], n, axis=1)
-    step_fn = rk4_step(model)
-    node = int(np.searchsorted(fit.t, t_i, side="right") - 1)
-    x = np.asarray(fit.x[node], dtype=float)
-    x = np.asarray(step_fn(x, fit.t[node], t_i - fit.t[node], p[:, 0], c[:, 0])).ravel()
-    flight = _flight_step(model, step_fn, parachute).map(n, "thread", 2)
-    X = np.repeat(x[:, None], n, axis=1)
+    c = np.repeat(model.capture_vector(start.captures)[:, None], n, axis=1)
+    flight = _flight_step(model, rk4_step(model), parachute).map(n, "thread", 2)
+    X = np.repeat(np.asarray(start.x0, dtype=float)[:, None], n, axis=1)
     peak_t = np.full(n, -np.inf)
     peak_g = np.full(n, -np.inf)
     steps = max(1, int(np.ceil((t1 - t_i) / step)))

@@ -1,6 +1,7 @@
 """Figures of a fit: model against measurement per sensor (also with the phase windows
 shaded), canopy drag areas, event times, parameter correlations and profile likelihoods;
-and of a campaign's Monte Carlo dispersions (hull projections, histograms)."""
+of a campaign's Monte Carlo dispersions (hull projections, histograms); and of Monte Carlo
+peak loads."""
 
 from __future__ import annotations
 
@@ -28,6 +29,7 @@ if TYPE_CHECKING:
     import pandas as pd
 
     from .dispersion_study import DispersionModel
+    from .peak_load_study import StageLoads
 
 # Display units: the engineers' customary ones, per channel.
 DISPLAY = {
@@ -291,3 +293,27 @@ def plot_dispersion_histograms(model: DispersionModel, cases: pd.DataFrame, path
         ax.set_xlabel(name)
     axes[0][0].legend(fontsize=7)
     return _save(fig, f"{model.label}: dispersions ({model.tests} tests)", path)
+
+
+def plot_peak_loads(result: StageLoads, path: Path) -> Path:
+    """A canopy stage's Monte Carlo peak riser tension: histogram (lbf) with the fitted
+    values' peak and the 50/99/99.9 % quantiles, and the exceedance probability
+    P(peak >= x) on a log scale (down to one case in the sample)."""
+    tension = np.sort(result.loads.tension) / LBF
+    n = tension.size
+    nominal = result.nominal.tension[0] / LBF
+    fig, (left, right) = plt.subplots(1, 2, figsize=(10, 4))
+    left.hist(tension, bins=min(80, max(10, n // 20)), color="0.7")
+    right.semilogy(tension, 1.0 - np.arange(n) / n, "C0-", lw=1.2, drawstyle="steps-post")
+    for ax in (left, right):
+        ax.axvline(nominal, color="C3", lw=1.2, label=f"fitted values {nominal:,.0f} lbf")
+        for q, style in ((0.5, ":"), (0.99, "--"), (0.999, "-.")):
+            x = float(np.quantile(tension, q))
+            ax.axvline(x, color="k", ls=style, lw=0.9, label=f"{100 * q:g} %: {x:,.0f} lbf")
+        ax.set_xlabel("peak riser tension (lbf)")
+    left.set_ylabel("cases")
+    right.set_ylabel("P(peak ≥ x)")
+    right.set_ylim(0.5 / n, 1.0)
+    left.legend(fontsize=7)
+    return _save(fig, f"{result.cases.label}: Monte Carlo peak loads ({n:,} cases)", path)
+
