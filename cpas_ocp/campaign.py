@@ -25,12 +25,12 @@ import numpy as np
 import pandas as pd
 
 from .errors import InputError, SolverFailure
-from .flight_test import MANIFEST
+from .flight_test import MANIFEST, Parachute
 from .parallel import run_tasks
 from .parameters import split_name
 
 COLUMNS = ["test", "parameter", "name", "parachute", "type", "stage", "forebody",
-           "cluster_size", "value", "std", "unit"]
+           "cluster_size", "line_length", "value", "std", "unit"]
 
 
 @dataclass
@@ -101,11 +101,21 @@ def reconstruct_folder(folder: str) -> TestOutcome:
         rows.append({"test": test.name, "parameter": base, "name": pname,
                      "parachute": chute.name if chute else "", "type": chute.type if chute else "",
                      "stage": stage, "forebody": test.vehicle.name,
-                     "cluster_size": len(test.parachutes), "value": fit.parameters[pname],
+                     "cluster_size": len(test.parachutes),
+                     "line_length": _line_length(chute),
+                     "value": fit.parameters[pname],
                      "std": std.get(pname, np.nan), "unit": fit.model.parameter(pname).unit})
     return TestOutcome(folder, test.name, "ok", rows=rows, wall_s=time.perf_counter() - t0,
                        iterations=fit.solver.iterations,
                        chi_square_per_dof=fit.chi_square / fit.dof)
+
+
+def _line_length(chute: Parachute | None) -> float:
+    """The canopy's suspension-line length (m), NaN where the manifest gives none; rounded to
+    0.1 mm so that lengths given in different units group together."""
+    if chute is None or chute.line_length is None:
+        return np.nan
+    return round(chute.line_length, 4)
 
 
 def run_campaign(folders: Sequence[str | Path], workers: int = 2, scheduler: str | None = None,
@@ -142,9 +152,10 @@ def failure_table(outcomes: Sequence[TestOutcome]) -> pd.DataFrame:
 
 def write_campaign(outcomes: Sequence[TestOutcome], out: str | Path) -> Path:
     """Write parameters.csv and parameters.parquet (the table), failures.csv, the drag-area
-    ratios between configurations (ratios_forebody.csv, ratios_cluster_size.csv) and
-    campaign.md atomically."""
-    from .configuration_ratios import CONFIGURATIONS, drag_area_ratios
+    ratios between configurations (ratios_forebody.csv, ratios_cluster_size.csv; where the
+    line length varies, ratios_line_length.csv and ratios_cluster_size_by_line_length.csv)
+    and campaign.md atomically."""
+    from .configuration_ratios import campaign_ratios
     from .output_folder import atomic_folder
     out = Path(out)
     table = parameter_table(outcomes)
@@ -154,8 +165,7 @@ def write_campaign(outcomes: Sequence[TestOutcome], out: str | Path) -> Path:
         table.to_parquet(tmp / "parameters.parquet", index=False)
         failures.to_csv(tmp / "failures.csv", index=False)
         text = campaign_text(outcomes)
-        for by in CONFIGURATIONS:
-            ratios = drag_area_ratios(table, by)
+        for by, ratios in campaign_ratios(table).items():
             ratios.to_csv(tmp / f"ratios_{by}.csv", index=False)
             text += f"\n\nmean steady drag areas by {by}:\n" + ratios.to_string(index=False)
         (tmp / "campaign.md").write_text(text + "\n")

@@ -156,6 +156,8 @@ def read_parameter_table(path: str | Path) -> pd.DataFrame:
         raise InputError(str(path), "(file)", "a campaign's parameter table (cpas-ocp campaign)")
     table = pd.read_parquet(path) if path.suffix == ".parquet" else pd.read_csv(
         path, keep_default_na=False, na_values=[""])
+    if "line_length" not in table.columns:  # tables written before the column existed
+        table["line_length"] = np.nan
     missing = [c for c in COLUMNS if c not in table.columns]
     if missing:
         raise InputError(str(path), ", ".join(missing), "the columns of a campaign's table")

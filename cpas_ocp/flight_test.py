@@ -58,7 +58,9 @@ class Vehicle:
 
 @dataclass(frozen=True)
 class Parachute:
-    """One canopy: nominal diameter D_o (m), dry mass m_p (kg), its stages in order."""
+    """One canopy: nominal diameter D_o (m), dry mass m_p (kg), its stages in order, and the
+    suspension-line length L_s (m) where the manifest gives it (None otherwise; the model
+    does not use it: campaigns group drag areas by it, paper Tables 2-3)."""
 
     name: str
     type: str
@@ -67,6 +69,7 @@ class Parachute:
     inflation: str
     fill_length: str
     stages: tuple[str, ...]
+    line_length: float | None = None
 
 
 @dataclass(frozen=True)
@@ -238,7 +241,9 @@ def test_from_manifest(manifest: dict[str, Any], folder: Path,
             raise InputError(mfile, f"parachutes[{i}].stages", "stage names must be unique")
         parachutes.append(Parachute(p["name"], p["type"], _si(p["diameter"], "length"),
                                     _si(p["dry_mass"], "mass"), p["inflation"],
-                                    p.get("fill_length", "diameter"), tuple(p["stages"])))
+                                    p.get("fill_length", "diameter"), tuple(p["stages"]),
+                                    _si(p["line_length"], "length") if "line_length" in p
+                                    else None))
     _unique(mfile, "parachutes", [p.name for p in parachutes])
     by_name = {p.name: p for p in parachutes}
 

@@ -3,6 +3,7 @@ folder, on local processes and on a Dask LocalCluster."""
 
 from __future__ import annotations
 
+import json
 import shutil
 
 import pandas as pd
@@ -14,11 +15,18 @@ from cpas_ocp.cli import main
 
 @pytest.fixture(scope="module")
 def tests_root(problem_folder, tmp_path_factory):
-    """fbcp seeds 1 and 2, pilot seed 1, and fbcp seed 1 with a NaN run in its IMU series."""
+    """fbcp seeds 1 and 2 (suspension lines 14 ft and 10.5 ft: L_s/D_o 2.0 and 1.5), pilot
+    seed 1 (no line length), and fbcp seed 1 with a NaN run in its IMU series."""
     root = tmp_path_factory.mktemp("campaign")
     for name, seed in (("fbcp", 1), ("fbcp", 2), ("pilot", 1)):
         shutil.copytree(problem_folder(name, seed), root / f"{name}{seed}")
         (root / f"{name}{seed}" / "truth.json").unlink()
+    for seed, feet in ((1, 14.0), (2, 10.5)):
+        path = root / f"fbcp{seed}" / "manifest.json"
+        manifest = json.loads(path.read_text())
+        for chute in manifest["parachutes"]:
+            chute["line_length"] = {"value": feet, "unit": "ft"}
+        path.write_text(json.dumps(manifest))
     shutil.copytree(root / "fbcp1", root / "broken")
     imu = pd.read_csv(root / "broken" / "imu.csv", comment="#")
     imu.iloc[50:60, 1] = float("nan")
@@ -46,6 +54,15 @@ def test_campaign_tabulates_every_test_and_reports_the_broken_one(tests_root, tm
     assert "imu.csv" in failures.message[0] and "rows 51-60" in failures.message[0]
     ratios = pd.read_csv(out / "ratios_cluster_size.csv")
     assert set(ratios.type) == {"fbcp", "pilot"} and (ratios.ratio == 1.0).all()
+    # The manifests' line lengths, in m, on the canopies' rows; empty for the pilot test.
+    lengths = table[table.parachute.notna() & (table.parachute != "")].groupby(
+        "test").line_length.unique()
+    assert list(lengths["fbcp-seed1"]) == [round(14 * 0.3048, 4)]
+    assert list(lengths["fbcp-seed2"]) == [round(10.5 * 0.3048, 4)]
+    assert table[table.test == "pilot-seed1"].line_length.isna().all()
+    by_length = pd.read_csv(out / "ratios_line_length.csv")
+    assert set(by_length.type) == {"fbcp"} and list(by_length.tests) == [2, 2]
+    assert (out / "ratios_cluster_size_by_line_length.csv").is_file()
 
 
 def test_dask_cluster_gives_the_same_table(tests_root) -> None:
