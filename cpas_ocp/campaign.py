@@ -8,7 +8,11 @@ processes or, given a scheduler address, on a Dask cluster
 converge, anything else) is reported with its reason and does not stop the
 others.  `parameter_table` gives one row per test, canopy-indexed parameter
 and value with its standard deviation, the canopy's type and stage, the
-forebody (vehicle name) and the cluster size, in SI.
+forebody (vehicle name), the cluster size and the canopy's suspension-line
+length, in SI.  `stage_table` gives one row per test, canopy and stage with
+what redrawing the stage's drag-area curve needs besides its parameters (the
+stage's order, inflation law, fill-length form, D_o and the captured start
+airspeed V_i), which `cpas-ocp dispersions` uses for its drag-area envelopes.
 """
 
 from __future__ import annotations
@@ -27,10 +31,14 @@ import pandas as pd
 from .errors import InputError, SolverFailure
 from .flight_test import MANIFEST, Parachute
 from .parallel import run_tasks
-from .parameters import split_name
+from .parameters import param_name, split_name
 
 COLUMNS = ["test", "parameter", "name", "parachute", "type", "stage", "forebody",
            "cluster_size", "line_length", "value", "std", "unit"]
+# Per test, canopy and stage: what drawing the stage's drag-area curve needs beyond its
+# parameters (order, inflation law, fill-length form, D_o in m, start airspeed V_i in m/s).
+STAGE_COLUMNS = ["test", "parachute", "type", "stage", "stage_index", "inflation",
+                 "fill_length", "diameter", "line_length", "v_start"]
 
 
 @dataclass
@@ -39,7 +47,8 @@ class TestOutcome:
 
     `kind` is "ok", "input" (the folder breaks the test-folder contract),
     "solver" (Ipopt did not converge) or "error" (anything else, with the
-    exception's type and message).
+    exception's type and message).  `stages` holds a row per canopy stage
+    (STAGE_COLUMNS).
     """
 
     folder: str
@@ -47,6 +56,7 @@ class TestOutcome:
     kind: str
     message: str = ""
     rows: list[dict[str, Any]] = field(default_factory=list)
+    stages: list[dict[str, Any]] = field(default_factory=list)
     wall_s: float = 0.0
     iterations: int = 0
     chi_square_per_dof: float = float("nan")
@@ -105,7 +115,13 @@ def reconstruct_folder(folder: str) -> TestOutcome:
                      "line_length": _line_length(chute),
                      "value": fit.parameters[pname],
                      "std": std.get(pname, np.nan), "unit": fit.model.parameter(pname).unit})
-    return TestOutcome(folder, test.name, "ok", rows=rows, wall_s=time.perf_counter() - t0,
+    stage_rows = [{"test": test.name, "parachute": c.name, "type": c.type, "stage": s,
+                   "stage_index": k, "inflation": c.inflation, "fill_length": c.fill_length,
+                   "diameter": c.diameter, "line_length": _line_length(c),
+                   "v_start": fit.captures.get(param_name("V_start", c.name, s), np.nan)}
+                  for c in test.parachutes for k, s in enumerate(c.stages)]
+    return TestOutcome(folder, test.name, "ok", rows=rows, stages=stage_rows,
+                       wall_s=time.perf_counter() - t0,
                        iterations=fit.solver.iterations,
                        chi_square_per_dof=fit.chi_square / fit.dof)
 
@@ -143,6 +159,11 @@ def parameter_table(outcomes: Sequence[TestOutcome]) -> pd.DataFrame:
     return pd.DataFrame(rows, columns=COLUMNS)
 
 
+def stage_table(outcomes: Sequence[TestOutcome]) -> pd.DataFrame:
+    """One row per reconstructed test, canopy and stage, in the columns of STAGE_COLUMNS."""
+    return pd.DataFrame([r for o in outcomes if o.ok for r in o.stages], columns=STAGE_COLUMNS)
+
+
 def failure_table(outcomes: Sequence[TestOutcome]) -> pd.DataFrame:
     """One row per failed test: folder, name, kind of failure and its message."""
     return pd.DataFrame([{"folder": o.folder, "test": o.name, "kind": o.kind,
@@ -151,10 +172,10 @@ def failure_table(outcomes: Sequence[TestOutcome]) -> pd.DataFrame:
 
 
 def write_campaign(outcomes: Sequence[TestOutcome], out: str | Path) -> Path:
-    """Write parameters.csv and parameters.parquet (the table), failures.csv, the drag-area
-    ratios between configurations (ratios_forebody.csv, ratios_cluster_size.csv; where the
-    line length varies, ratios_line_length.csv and ratios_cluster_size_by_line_length.csv)
-    and campaign.md atomically."""
+    """Write parameters.csv and parameters.parquet (the table), stages.csv (STAGE_COLUMNS),
+    failures.csv, the drag-area ratios between configurations (ratios_forebody.csv,
+    ratios_cluster_size.csv; where the line length varies, ratios_line_length.csv and
+    ratios_cluster_size_by_line_length.csv) and campaign.md atomically."""
     from .configuration_ratios import campaign_ratios
     from .output_folder import atomic_folder
     out = Path(out)
@@ -163,6 +184,7 @@ def write_campaign(outcomes: Sequence[TestOutcome], out: str | Path) -> Path:
     with atomic_folder(out, "parameters.csv") as tmp:
         table.to_csv(tmp / "parameters.csv", index=False)
         table.to_parquet(tmp / "parameters.parquet", index=False)
+        stage_table(outcomes).to_csv(tmp / "stages.csv", index=False)
         failures.to_csv(tmp / "failures.csv", index=False)
         text = campaign_text(outcomes)
         for by, ratios in campaign_ratios(table).items():

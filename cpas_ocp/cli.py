@@ -326,26 +326,34 @@ def _campaign(args: argparse.Namespace) -> int:
     if failed:
         print(f"warning: {failed} of {len(outcomes)} tests failed (failures.csv)",
               file=sys.stderr)
-    print(f"\ncampaign written to {out} (parameters.csv, parameters.parquet, failures.csv, "
-          "campaign.md)")
+    print(f"\ncampaign written to {out} (parameters.csv, parameters.parquet, stages.csv, "
+          "failures.csv, ratios_*.csv, campaign.md)")
     return 0
 
 
 def _dispersions(args: argparse.Namespace) -> int:
-    from .dispersion_study import dispersion_models, read_parameter_table, write_dispersions
+    from .dispersion_study import (
+        dispersion_models,
+        read_parameter_table,
+        read_stage_table,
+        write_dispersions,
+    )
     if args.cases < 1:
         raise InputError("(command line)", "--cases", f"at least 1; got {args.cases}")
     table = read_parameter_table(args.campaign)
+    stages = read_stage_table(args.campaign)
     models, skipped = dispersion_models(table)
     if not models:
         raise InputError(str(args.campaign), "(table)",
                          "a canopy type and stage with enough tests to disperse; "
                          + "; ".join(skipped))
-    out = write_dispersions(models, skipped, args.cases, args.seed, args.out)
+    out = write_dispersions(models, skipped, args.cases, args.seed, args.out, table, stages)
     for model in models:
         print(model.text())
     for note in skipped:
         print(f"not dispersed: {note}")
+    if stages is None:
+        print("no stages.csv beside the campaign's table: drag-area envelopes not drawn")
     print(f"\ndispersions written to {out} (cases_*.parquet, dispersions.json, "
           "dispersions.md, figures)")
     return 0

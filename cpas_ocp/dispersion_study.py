@@ -17,6 +17,10 @@ dimension plus one, the caps alone bound the draws.
 
 Start times and the instrument factors (drag and load-cell scales, sensor
 lags and biases) belong to one test, not to the canopy, and are not dispersed.
+
+Where the campaign folder also holds its stages table (stages.csv), each
+type and stage gets the drag-area envelope of its cases against the tests'
+curves and the extreme corners (`drag_area_envelope`).
 """
 
 from __future__ import annotations
@@ -112,11 +116,15 @@ def dispersion_models(table: pd.DataFrame, min_tests: int = MIN_TESTS
 
 
 def write_dispersions(models: list[DispersionModel], skipped: list[str], cases: int, seed: int,
-                      out: str | Path) -> Path:
+                      out: str | Path, table: pd.DataFrame | None = None,
+                      stages: pd.DataFrame | None = None) -> Path:
     """Per model: cases_<type>_<stage>.parquet (`cases` draws, seed `seed` + its index),
-    its hull and histogram figures; dispersions.json and dispersions.md for all."""
+    its hull and histogram figures and, given the campaign's parameter `table` and its
+    `stages` table, the drag-area envelope (envelope_<type>_<stage>.csv and .png);
+    dispersions.json and dispersions.md for all."""
+    from .drag_area_envelope import drag_area_envelope, stage_conditions
     from .output_folder import atomic_folder
-    from .plots import plot_dispersion_histograms, plot_hull_projections
+    from .plots import plot_dispersion_histograms, plot_drag_area_envelope, plot_hull_projections
     out = Path(out)
     summary = []
     with atomic_folder(out, "dispersions.json") as tmp:
@@ -127,6 +135,13 @@ def write_dispersions(models: list[DispersionModel], skipped: list[str], cases: 
             figures = [plot_dispersion_histograms(model, draws, tmp / f"histograms_{stem}.png")]
             if model.hull is not None:
                 figures.append(plot_hull_projections(model, draws, tmp / f"hull_{stem}.png"))
+            envelope = None
+            if table is not None and stages is not None:
+                cond = stage_conditions(stages, table, model.type, model.stage)
+                envelope = cond and drag_area_envelope(model, draws, cond)
+            if envelope is not None:
+                envelope.bands.to_csv(tmp / f"envelope_{stem}.csv", index=False)
+                figures.append(plot_drag_area_envelope(envelope, tmp / f"envelope_{stem}.png"))
             summary.append({
                 "type": model.type, "stage": model.stage, "tests": model.tests,
                 "cases": cases, "seed": seed + i,
@@ -134,6 +149,12 @@ def write_dispersions(models: list[DispersionModel], skipped: list[str], cases: 
                 "hull": None if model.hull is None else {
                     "parameters": list(model.hull_names), "growth": model.hull.growth,
                     "vertices": model.hull.vertices.tolist(), "volume": model.hull.volume},
+                "envelope": None if envelope is None else {
+                    "cases": envelope.cases, "conditions": dataclasses.asdict(envelope.conditions),
+                    "flight_points_inside": envelope.flight_inside(),
+                    "corners_outside_hull": [c for c, inside in zip(
+                        envelope.corner_labels, envelope.corner_inside, strict=True)
+                        if inside is False]},
                 "figures": [f.name for f in figures]})
         (tmp / "dispersions.json").write_text(json.dumps({"models": summary, "skipped": skipped},
                                                          indent=2, default=float))
@@ -142,6 +163,23 @@ def write_dispersions(models: list[DispersionModel], skipped: list[str], cases: 
             + ("\n\nnot dispersed:\n" + "\n".join(skipped) if skipped else "") + "\n```\n\n"
             + "".join(f"![{f}]({f})\n\n" for s in summary for f in s["figures"]))
     return out
+
+
+def read_stage_table(campaign: str | Path) -> pd.DataFrame | None:
+    """The campaign's stages.csv (`campaign.STAGE_COLUMNS`) in its folder, or beside its
+    parameter table; None where there is none (campaigns written before it existed)."""
+    from .campaign import STAGE_COLUMNS
+    from .errors import InputError
+    campaign = Path(campaign)
+    path = (campaign if campaign.is_dir() else campaign.parent) / "stages.csv"
+    if not path.is_file():
+        return None
+    stages = pd.read_csv(path, keep_default_na=False, na_values=[""])
+    missing = [c for c in STAGE_COLUMNS if c not in stages.columns]
+    if missing:
+        raise InputError(str(path), ", ".join(missing), "the columns of a campaign's stages")
+    stages["stage"] = stages["stage"].astype(str)
+    return stages
 
 
 def read_parameter_table(path: str | Path) -> pd.DataFrame:

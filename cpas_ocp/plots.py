@@ -1,7 +1,7 @@
 """Figures of a fit: model against measurement per sensor (also with the phase windows
 shaded), canopy drag areas, event times, parameter correlations and profile likelihoods;
-of a campaign's Monte Carlo dispersions (hull projections, histograms); and of Monte Carlo
-peak loads."""
+of a campaign's Monte Carlo dispersions (hull projections with the caps, histograms,
+drag-area envelopes against the flight curves); and of Monte Carlo peak loads."""
 
 from __future__ import annotations
 
@@ -29,6 +29,7 @@ if TYPE_CHECKING:
     import pandas as pd
 
     from .dispersion_study import DispersionModel
+    from .drag_area_envelope import DragAreaEnvelope
     from .peak_load_study import StageLoads
 
 # Display units: the engineers' customary ones, per channel.
@@ -251,8 +252,9 @@ def _save(fig: plt.Figure, title: str, path: Path) -> Path:
 
 def plot_hull_projections(model: DispersionModel, cases: pd.DataFrame, path: Path,
                           shown: int = 5000) -> Path:
-    """Each pair of hull parameters: the test points, the outline of their hull and of the
-    grown hull (the convex hull of the projected vertices), and `shown` Monte Carlo cases."""
+    """Each pair of hull parameters (paper Figs. 22, 26): the test points, the outline of
+    their hull and of the grown hull (the convex hull of the projected vertices), the caps
+    box of the two distributions, and `shown` Monte Carlo cases."""
     names = model.hull_names
     pairs = list(itertools.combinations(range(len(names)), 2))
     fig, axes = plt.subplots(1, len(pairs), figsize=(5 * len(pairs), 4.5), squeeze=False)
@@ -263,11 +265,15 @@ def plot_hull_projections(model: DispersionModel, cases: pd.DataFrame, path: Pat
     for ax, (i, j) in zip(axes[0], pairs, strict=True):
         ax.plot(cases[names[i]].to_numpy()[:shown], cases[names[j]].to_numpy()[:shown], ".",
                 ms=1, color="0.6", label=f"Monte Carlo cases (first {shown:,})")
-        for vertices, style, label in ((own, "C0-", "tests' hull"),
-                                       (grown, "C3--", f"grown {100 * model.hull.growth:.0f} %")):
+        for vertices, style, label in ((own, "C9-", "tests' hull"),
+                                       (grown, "k--", f"grown {100 * model.hull.growth:.0f} %")):
             outline = ConvexHull(vertices[:, [i, j]])
             loop = np.append(outline.vertices, outline.vertices[0])
             ax.plot(vertices[loop, i], vertices[loop, j], style, lw=1.2, label=label)
+        (x0, x1), (y0, y1) = ((model.dispersions[names[k]].lower_cap,
+                               model.dispersions[names[k]].upper_cap) for k in (i, j))
+        ax.plot([x0, x1, x1, x0, x0], [y0, y0, y1, y1, y0], "C3-", lw=1.0,
+                label="caps (distribution bounds)")
         ax.plot(tests[:, i], tests[:, j], "ko", ms=4, label="tests")
         ax.set_xlabel(names[i])
         ax.set_ylabel(names[j])
@@ -317,3 +323,45 @@ def plot_peak_loads(result: StageLoads, path: Path) -> Path:
     left.legend(fontsize=7)
     return _save(fig, f"{result.cases.label}: Monte Carlo peak loads ({n:,} cases)", path)
 
+
+def plot_drag_area_envelope(env: DragAreaEnvelope, path: Path) -> Path:
+    """Drag area (ft^2) against time from the stage start: the Monte Carlo min-max and 5-95 %
+    bands and median (grey), the flight curves (blue), the caps-box corner curves (red: solid
+    outside the grown hull, dotted inside or without a hull, each tagged at its peak) and
+    the Monte Carlo cases with the extreme peaks and rises (black dashed); all at the
+    campaign's median conditions (paper Figs. 18, 27)."""
+    c = env.conditions
+    area = 1.0 / FT**2
+    b = env.bands
+    fig, ax = plt.subplots(figsize=(9, 5.5))
+    ax.fill_between(env.t, b["min"] * area, b["max"] * area, color="0.88",
+                    label=f"Monte Carlo min-max ({env.cases:,} cases)")
+    ax.fill_between(env.t, b["p05"] * area, b["p95"] * area, color="0.7", label="5-95 %")
+    ax.plot(env.t, b["p50"] * area, color="0.4", lw=1.0, label="median")
+    for k, curve in enumerate(env.flight):
+        ax.plot(env.t, curve * area, "C0-", lw=0.9, alpha=0.8,
+                label=f"flight tests ({len(env.flight)})" if k == 0 else None)
+    shown = set()
+    for curve, tag, inside in zip(env.corners, env.corner_labels, env.corner_inside,
+                                  strict=True):
+        kind = {None: "caps corner (no hull)", True: "caps corner inside the grown hull",
+                False: "caps corner outside the grown hull"}[inside]
+        ax.plot(env.t, curve * area, "C3" + ("-" if inside is False else ":"), lw=1.1,
+                label=None if kind in shown else kind)
+        shown.add(kind)
+        k = int(np.argmax(curve))
+        ax.annotate(tag, (env.t[k], curve[k] * area), fontsize=6, color="C3",
+                    xytext=(2, 2), textcoords="offset points")
+    for k, (name, curve) in enumerate(env.extremes.items()):
+        ax.plot(env.t, curve * area, "k--", lw=0.8,
+                label="Monte Carlo extremes (peak, rise)" if k == 0 else None)
+        j = int(np.argmax(curve))
+        ax.annotate(name, (env.t[j], curve[j] * area), fontsize=6, xytext=(2, -8),
+                    textcoords="offset points")
+    ax.set_xlabel("time from the stage start t_i (s)")
+    ax.set_ylabel("drag area CdS (ft²)")
+    ax.legend(fontsize=7, loc="lower right")
+    ax.set_title(f"{c.inflation.replace('_', ' ')}, D_o {c.diameter / FT:.1f} ft, "
+                 f"V_i {c.v_start / FT:.0f} ft/s, previous stage {c.cds_prev * area:.1f} ft² "
+                 "(campaign medians)", fontsize=8)
+    return _save(fig, f"{env.label}: drag-area growth, Monte Carlo against flight", path)

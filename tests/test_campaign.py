@@ -63,6 +63,10 @@ def test_campaign_tabulates_every_test_and_reports_the_broken_one(tests_root, tm
     by_length = pd.read_csv(out / "ratios_line_length.csv")
     assert set(by_length.type) == {"fbcp"} and list(by_length.tests) == [2, 2]
     assert (out / "ratios_cluster_size_by_line_length.csv").is_file()
+    stages = pd.read_csv(out / "stages.csv")
+    assert len(stages) == 2 + 2 + len(stages[stages.test == "pilot-seed1"])
+    assert (stages.v_start > 0).all() and set(stages.inflation) == {"infinite_mass",
+                                                                     "finite_mass"}
 
 
 def test_dask_cluster_gives_the_same_table(tests_root) -> None:
