@@ -68,10 +68,11 @@ from cpas_ocp.effects import baseline_effects
 from cpas_ocp.estimation import Estimator
 from cpas_ocp.flight_test import FlightTest, Parachute
 from cpas_ocp.inflation import fill_length, infinite_mass_cds
+from cpas_ocp.kinematic_track import kinematic_track
 from cpas_ocp.model import Model
 from cpas_ocp.parameters import param_name
 from cpas_ocp.problems import load_problem
-from cpas_ocp.reduction import gps_state, reduce_and_guess, stage_starts
+from cpas_ocp.reduction import reduce_and_guess, stage_starts
 from cpas_ocp.simulate import Trajectory, simulate, simulate_problem
 
 INFLATION_PARAMETERS = ("CdS", "Ck", "n_p", "expopen", "t_k")
@@ -159,7 +160,8 @@ def initial_state(test: FlightTest, model: Model) -> np.ndarray:
     """Simulation initial state from the first GPS sample (position and velocity)."""
     gps = test.sensors_of("gps")[0]
     t_first = float(gps.time[gps.time >= test.t_start - 1e-9][0])
-    pos, vel = gps_state(test, np.array([t_first]))
+    first = kinematic_track(test, np.array([t_first]))
+    pos, vel = first.position, first.velocity
     x0 = np.zeros(model.nx)
     x0[model.state_slice("position")] = pos[0]
     x0[model.state_slice("velocity")] = vel[0]
@@ -262,7 +264,7 @@ def legacy_reconstruction(test: FlightTest, step: float, peak_iterations: int) -
         # The last GPS sample in the stage, moved onto the simulation grid.
         t_gps = float(gps.time[gps.time <= end + 1e-9][-1])
         t_end = t_sim0 + step * round((t_gps - t_sim0) / step)
-        h_gps = float(gps_state(test, np.array([t_end]))[0][0, 2])
+        h_gps = float(kinematic_track(test, np.array([t_end])).position[0, 2])
         fitted = {c.name: params[param_name("CdS", c.name, stage)] for c in chutes
                   if stage in c.stages}
 

@@ -3,7 +3,14 @@
 Every model returns CasADi expressions so the same code serves the estimator,
 the simulator and the sensitivities; numeric evaluation goes through
 `density_at`.  Altitude is geometric height above mean sea level in metres,
-density is in kg/m^3, wind is the air-mass velocity (east, north) in m/s.
+density is in kg/m^3, pressure in Pa, wind is the air-mass velocity (east,
+north) in m/s.
+
+A barometric altimeter reports the *pressure altitude*: the altitude at which
+the standard atmosphere has the measured pressure (`pressure_altitude`).  On a
+day that is not standard it differs from the geometric altitude by tens to
+hundreds of metres; a `SiteAtmosphere` built from the launch-site pressure and
+temperature turns one into the other.
 """
 
 from __future__ import annotations
@@ -16,6 +23,26 @@ import numpy as np
 from .units import G0
 
 R_AIR = 287.05287  # specific gas constant of dry air, J/(kg K)
+# U.S. Standard Atmosphere 1976 at sea level and its tropospheric lapse rate.
+ISA_T0_K = 288.15
+ISA_P0_PA = 101325.0
+ISA_LAPSE_K_M = 0.0065
+
+
+def pressure_altitude(p: ca.SX | ca.MX | float | np.ndarray) -> ca.SX | ca.MX | np.ndarray:
+    """Altitude (m) at which the standard troposphere has pressure `p` (Pa).
+
+    h = T0/L (1 - (p/p0)^(R L/g0)); what barometric altimeters (Altus Metrum
+    among them) report as altitude.  Valid below 11 km.
+    """
+    return ISA_T0_K / ISA_LAPSE_K_M * (1.0 - (p / ISA_P0_PA) ** (R_AIR * ISA_LAPSE_K_M / G0))
+
+
+def _troposphere_pressure(h: ca.SX | ca.MX | float, h0: float, p0: float, t0: float,
+                          lapse: float) -> ca.SX | ca.MX:
+    """Hydrostatic pressure (Pa) at altitude h (m) in a layer of constant lapse rate (K/m)
+    whose base h0 has pressure p0 (Pa) and temperature t0 (K)."""
+    return p0 * ((t0 - lapse * (h - h0)) / t0) ** (G0 / (R_AIR * lapse))
 
 
 @dataclass(frozen=True)
@@ -31,13 +58,14 @@ class StandardAtmosphere:
 
     name: str = "standard"
 
-    def density(self, h: ca.SX | ca.MX | float) -> ca.SX | ca.MX:
-        t0, p0, lapse = 288.15, 101325.0, 0.0065
+    def pressure(self, h: ca.SX | ca.MX | float) -> ca.SX | ca.MX:
         h11 = 11000.0
-        t_trop = t0 - lapse * ca.fmin(h, h11)
-        p_trop = p0 * (t_trop / t0) ** (G0 / (R_AIR * lapse))
-        p_strat = p_trop * ca.exp(-G0 / (R_AIR * 216.65) * ca.fmax(h - h11, 0.0))
-        return p_strat / (R_AIR * t_trop)
+        p_trop = _troposphere_pressure(ca.fmin(h, h11), 0.0, ISA_P0_PA, ISA_T0_K, ISA_LAPSE_K_M)
+        return p_trop * ca.exp(-G0 / (R_AIR * 216.65) * ca.fmax(h - h11, 0.0))
+
+    def density(self, h: ca.SX | ca.MX | float) -> ca.SX | ca.MX:
+        t_trop = ISA_T0_K - ISA_LAPSE_K_M * ca.fmin(h, 11000.0)
+        return self.pressure(h) / (R_AIR * t_trop)
 
     def wind(self, h: ca.SX | ca.MX | float) -> ca.SX | ca.MX:
         return ca.vertcat(0.0 * h, 0.0 * h, 0.0 * h)
@@ -83,7 +111,64 @@ class TableAtmosphere:
         return self._wind(h)
 
 
-Atmosphere = StandardAtmosphere | TableAtmosphere
+@dataclass(frozen=True)
+class SiteAtmosphere:
+    """Launch-site atmosphere: one tropospheric layer through the site's measured air.
+
+    At the site elevation h0 (m) the pressure is p0 (Pa) and the temperature
+    T0 (K); temperature falls at `lapse_rate` (K/m) with height, and pressure
+    and density follow hydrostatically:
+    T = T0 - L (h - h0), p = p0 (T/T0)^(g0/(R L)), rho = p/(R T).
+    Valid within the troposphere; a sunny desert afternoon has lapse rates
+    between the standard 6.5 K/km and the dry adiabat's 9.8 K/km.  No wind.
+    """
+
+    elevation_m: float
+    pressure_pa: float
+    temperature_k: float
+    lapse_rate_k_m: float = ISA_LAPSE_K_M
+    name: str = "site"
+
+    def temperature(self, h: ca.SX | ca.MX | float) -> ca.SX | ca.MX:
+        return self.temperature_k - self.lapse_rate_k_m * (h - self.elevation_m)
+
+    def pressure(self, h: ca.SX | ca.MX | float) -> ca.SX | ca.MX:
+        return _troposphere_pressure(h, self.elevation_m, self.pressure_pa, self.temperature_k,
+                                     self.lapse_rate_k_m)
+
+    def density(self, h: ca.SX | ca.MX | float) -> ca.SX | ca.MX:
+        return self.pressure(h) / (R_AIR * self.temperature(h))
+
+    def wind(self, h: ca.SX | ca.MX | float) -> ca.SX | ca.MX:
+        return ca.vertcat(0.0 * h, 0.0 * h, 0.0 * h)
+
+    def altitude_at_pressure(self, p: np.ndarray | float) -> np.ndarray:
+        """Geometric altitude (m) at which this atmosphere has pressure `p` (Pa)."""
+        expo = R_AIR * self.lapse_rate_k_m / G0
+        return self.elevation_m + self.temperature_k / self.lapse_rate_k_m * (
+            1.0 - (np.asarray(p, dtype=float) / self.pressure_pa) ** expo)
+
+    @classmethod
+    def from_surface_density(cls, elevation_m: float, pressure_pa: float, density_kg_m3: float,
+                             lapse_rate_k_m: float = ISA_LAPSE_K_M) -> SiteAtmosphere:
+        """The site atmosphere whose surface air has this pressure and density (T = p/(R rho))."""
+        return cls(elevation_m, pressure_pa, pressure_pa / (R_AIR * density_kg_m3),
+                   lapse_rate_k_m)
+
+
+Atmosphere = StandardAtmosphere | TableAtmosphere | SiteAtmosphere
+
+
+def geometric_altitude(atmosphere: Atmosphere, p_altitude: np.ndarray) -> np.ndarray:
+    """Geometric altitude (m) from a barometric altimeter's pressure altitude (m)."""
+    p = ISA_P0_PA * (1.0 - np.asarray(p_altitude) * ISA_LAPSE_K_M / ISA_T0_K) ** (
+        G0 / (R_AIR * ISA_LAPSE_K_M))
+    if isinstance(atmosphere, SiteAtmosphere):
+        return atmosphere.altitude_at_pressure(p)
+    if isinstance(atmosphere, StandardAtmosphere):
+        return np.asarray(p_altitude, dtype=float)
+    raise TypeError("a barometric altitude needs a standard or site atmosphere (one with "
+                    "pressure)")
 
 
 def _linear_function(name: str, x: np.ndarray, y: np.ndarray) -> ca.Function:

@@ -3,7 +3,9 @@
 Decision variables (all scaled to order one):
 
 * the state at every node of a uniform grid t_k = t_0 + k h (multiple
-  shooting; the initial state is free and GPS pins it);
+  shooting; the initial state is free and GPS pins it; in a test without
+  GPS, only the altimeter, the first node's horizontal position and velocity
+  are held at zero and the motion stays vertical unless there is wind);
 * the free model parameters (inflation parameters, scale factors, inflation
   start times ...), between their bounds;
 * the captured quantities (each stage's start airspeed V_i), tied to the
@@ -36,9 +38,10 @@ from .compiled import compile_functions
 from .effects import Effect
 from .errors import SolverFailure
 from .flight_test import FlightTest
+from .kinematic_track import kinematic_track
 from .model import Model, timing_label
 from .model_spec import ModelSpec, spec_from_effects, spec_of_test
-from .reduction import gps_state, initial_guess
+from .reduction import initial_guess
 from .simulate import rk4_step, simulate
 from .uncertainty import (
     HESSIANS,
@@ -421,6 +424,12 @@ class Estimator:
             if st.pinned:
                 first_node = m.state_slice(st.name)
                 self._lbz[first_node] = self._ubz[first_node] = st.initial / st.scale
+        if not self.test.sensors_of("gps"):
+            # Nothing observes the horizontal plane (an altimeter-only log): the phase
+            # starts without horizontal motion, which then only the wind can give.
+            for name in ("position", "velocity"):
+                first = m.state_slice(name).start
+                self._lbz[first:first + 2] = self._ubz[first:first + 2] = 0.0
         # Gauss-Newton converges linearly, so Ipopt's dual infeasibility plateaus near
         # 1e-4 (scaled) long after the estimate has stopped moving; accept a point where
         # the objective no longer changes (relative 1e-9, i.e. ~1e-5 in chi-square, over
@@ -503,10 +512,12 @@ class Estimator:
         return value, jac
 
     def initial_point(self) -> np.ndarray:
-        """Shooting nodes from GPS (and the effects' own state guesses), parameters from the
-        reduction, captures from GPS speed."""
+        """Shooting nodes from the kinematic track (GPS, or the altimeter's vertical track) and
+        the effects' own state guesses, parameters from the reduction, captures from the
+        track's speed."""
         m = self.model
-        pos, vel = gps_state(self.test, self.t)
+        track = kinematic_track(self.test, self.t)
+        pos, vel = track.position, track.velocity
         x0 = np.zeros((m.nx, len(self.t)))
         x0[m.state_slice("position")] = pos.T
         x0[m.state_slice("velocity")] = vel.T

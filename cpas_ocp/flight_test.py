@@ -24,7 +24,7 @@ import numpy as np
 import pandas as pd
 import referencing
 
-from .atmosphere import Atmosphere, StandardAtmosphere, TableAtmosphere
+from .atmosphere import Atmosphere, SiteAtmosphere, StandardAtmosphere, TableAtmosphere
 from .errors import InputError
 from .units import FACTORS
 
@@ -37,6 +37,9 @@ SENSOR_COLUMNS: dict[str, dict[str, str]] = {
             "v_east": "velocity", "v_north": "velocity", "v_up": "velocity"},
     "imu_load_factor": {"time": "time", "load_factor": "load_factor"},
     "load_cell": {"time": "time", "tension": "force"},
+    "baro": {"time": "time", "altitude": "length"},
+    "gps_altitude": {"time": "time", "up": "length"},
+    "axial_accelerometer": {"time": "time", "acceleration": "acceleration"},
 }
 # Noise groups of each sensor kind: group -> (dimension, channels it covers).
 SIGMA_GROUPS: dict[str, dict[str, tuple[str, tuple[str, ...]]]] = {
@@ -44,6 +47,9 @@ SIGMA_GROUPS: dict[str, dict[str, tuple[str, tuple[str, ...]]]] = {
             "velocity": ("velocity", ("v_east", "v_north", "v_up"))},
     "imu_load_factor": {"load_factor": ("load_factor", ("load_factor",))},
     "load_cell": {"tension": ("force", ("tension",))},
+    "baro": {"altitude": ("length", ("altitude",))},
+    "gps_altitude": {"altitude": ("length", ("up",))},
+    "axial_accelerometer": {"acceleration": ("acceleration", ("acceleration",))},
 }
 
 
@@ -98,6 +104,9 @@ class Sensor:
     data: pd.DataFrame
     sigma: dict[str, float]
     sigma_relative: float = 0.0
+    # (time (s), channel -> sigma (SI)): from each time on, these channels' absolute
+    # sigma changes (an altimeter under a fast drogue is noisier than under a main).
+    sigma_changes: tuple[tuple[float, dict[str, float]], ...] = ()
 
     @property
     def channels(self) -> tuple[str, ...]:
@@ -107,9 +116,19 @@ class Sensor:
     def time(self) -> np.ndarray:
         return self.data["time"].to_numpy()
 
+    def absolute_sigma(self, channel: str) -> np.ndarray:
+        """Per-sample absolute sigma (SI), with the scheduled changes applied."""
+        out = np.full(len(self.data), self.sigma[channel])
+        t = self.time
+        for t_from, sigmas in sorted(self.sigma_changes, key=lambda c: c[0]):
+            if channel in sigmas:
+                out[t >= t_from] = sigmas[channel]
+        return out
+
     def noise_sigma(self, channel: str, values: np.ndarray) -> np.ndarray:
         """Per-sample sigma: absolute and relative parts added in quadrature."""
-        return np.sqrt(self.sigma[channel] ** 2 + (self.sigma_relative * np.abs(values)) ** 2)
+        return np.sqrt(self.absolute_sigma(channel) ** 2
+                       + (self.sigma_relative * np.abs(values)) ** 2)
 
     def weighting_sigma(self, channel: str) -> np.ndarray:
         """Per-sample sigma for fitting the measured series: the relative part at the
@@ -302,22 +321,39 @@ def _load_sensor(mfile: str, folder: Path, i: int, s: dict[str, Any],
     if kind == "load_cell" and parachute not in parachutes:
         raise InputError(mfile, f"{where}.parachute",
                          f"a load cell names its canopy, one of {sorted(parachutes)}")
-    sigma: dict[str, float] = {}
-    for group, (dim, channels) in SIGMA_GROUPS[kind].items():
-        q = s["sigma"].get(group)
-        if q is None:
-            raise InputError(mfile, f"{where}.sigma.{group}", f"noise sigma in {dim} units")
-        if q["unit"] not in FACTORS[dim]:
-            raise InputError(mfile, f"{where}.sigma.{group}.unit",
-                             f"one of {sorted(FACTORS[dim])}, got {q['unit']!r}")
-        for c in channels:
-            sigma[c] = _si(q, dim)
+    sigma = _sigmas(mfile, f"{where}.sigma", kind, s["sigma"], required=True)
+    changes = tuple((_si(c["time"], "time"),
+                     _sigmas(mfile, f"{where}.sigma_after[{j}].sigma", kind, c["sigma"],
+                             required=False))
+                    for j, c in enumerate(s.get("sigma_after", [])))
     if series is not None:
         data = series[s["name"]]
     else:
         data = read_series(folder / s["file"], s["columns"], SENSOR_COLUMNS[kind])
     return Sensor(s["name"], kind, parachute, s["file"], data, sigma,
-                  float(s.get("sigma_relative", 0.0)))
+                  float(s.get("sigma_relative", 0.0)), changes)
+
+
+def _sigmas(mfile: str, where: str, kind: str, given: dict[str, Any], required: bool
+            ) -> dict[str, float]:
+    """Channel -> sigma (SI) from a sensor's sigma groups; every group if `required`."""
+    sigma: dict[str, float] = {}
+    for key in given:
+        if key not in SIGMA_GROUPS[kind]:
+            raise InputError(mfile, f"{where}.{key}", f"a noise group of a {kind} sensor "
+                             f"({', '.join(SIGMA_GROUPS[kind])})")
+    for group, (dim, channels) in SIGMA_GROUPS[kind].items():
+        q = given.get(group)
+        if q is None:
+            if required:
+                raise InputError(mfile, f"{where}.{group}", f"noise sigma in {dim} units")
+            continue
+        if q["unit"] not in FACTORS[dim]:
+            raise InputError(mfile, f"{where}.{group}.unit",
+                             f"one of {sorted(FACTORS[dim])}, got {q['unit']!r}")
+        for c in channels:
+            sigma[c] = _si(q, dim)
+    return sigma
 
 
 def _read_columns(path: Path, units: dict[str, str], dimensions: dict[str, str],
@@ -371,6 +407,11 @@ def _runs(rows: np.ndarray) -> str:
 def _load_atmosphere(mfile: str, folder: Path, spec: dict[str, Any]) -> Atmosphere:
     if spec["model"] == "standard":
         return StandardAtmosphere()
+    if spec["model"] == "site":
+        lapse = _si(spec["lapse_rate"], "lapse_rate") if "lapse_rate" in spec else None
+        return SiteAtmosphere(_si(spec["elevation"], "length"), _si(spec["pressure"], "pressure"),
+                              _si(spec["temperature"], "temperature"),
+                              *([lapse] if lapse is not None else []))
     dims = {"altitude": "length", "density": "density"}
     dims.update({k: "velocity" for k in ("wind_east", "wind_north") if k in spec["columns"]})
     data = read_series_table(folder / spec["file"], spec["columns"], dims)

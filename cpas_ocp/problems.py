@@ -1,9 +1,11 @@
 """Ready-made test phases shipped in `problems/` (installed as `cpas_ocp.problem_data`).
 
-Each problem is one JSON file: a manifest template (vehicle, parachutes,
+A problem is one JSON file.  A synthetic one holds a manifest template (vehicle, parachutes,
 sensors and their noise), the simulation set-up (initial state, duration,
 sample rates, how observed events relate to the truth), and the synthetic
-truth, in SI, under exactly the parameter names a reconstruction reports.
+truth, in SI, under exactly the parameter names a reconstruction reports.  A
+real-flight one (``"kind": "flight_log"``) is a flight card instead
+(`flight_log.FlightCard`): the logs it reads and what they do not hold.
 """
 
 from __future__ import annotations
@@ -26,10 +28,12 @@ class Problem:
     truth: dict[str, float]
 
 
-def problem_names() -> list[str]:
+def problem_names(kind: str = "synthetic") -> list[str]:
+    """Names of the built-in problems of `kind`: 'synthetic' or 'flight_log'."""
     folder = resources.files("cpas_ocp.problem_data")
     return sorted(f.name.removesuffix(".json") for f in folder.iterdir()
-                  if f.name.endswith(".json"))
+                  if f.name.endswith(".json")
+                  and json.loads(f.read_text()).get("kind", "synthetic") == kind)
 
 
 def load_problem(name: str) -> Problem:
@@ -43,6 +47,9 @@ def load_problem(name: str) -> Problem:
     ``t_end``).
     """
     names = problem_names()
+    if name in problem_names("flight_log"):
+        raise InputError("problem", "name", f"a synthetic problem; {name!r} is a real flight "
+                         f"log (run `cpas-ocp flight {name}`)")
     if name not in names:
         raise InputError("problem", "name", f"one of {', '.join(names)}; got {name!r}")
     raw = json.loads(resources.files("cpas_ocp.problem_data").joinpath(f"{name}.json").read_text())

@@ -2,9 +2,14 @@
 
 Without any simulation, on the IMU's time base:
 
-* dynamic pressure q = rho(h) |v - w|^2 / 2 from GPS position and velocity;
-* IMU drag area, Eq. 2:      PRF*CdS_total = W_T G / q - (CdS)_V;
+* dynamic pressure q = rho(h) |v - w|^2 / 2 from the kinematic track (GPS
+  position and velocity, or a vertical altimeter track; `kinematic_track`);
+* IMU drag area, Eq. 2:      PRF*CdS_total = W_T G / q - (CdS)_V, with the load
+  factor G from the IMU, or from the track's acceleration without one;
 * riser drag area, Eq. 3:    PRF*CdS_P = (F_P + W_p,P G) / q;
+* without load cells, each canopy's drag area is the total drag area less
+  the steady drag areas of the canopies opened before it (canopies opened
+  one after another, as a rocket's drogue and main are);
 * per-stage scale factor: the time mean of the IMU drag area over the
   stage's steady window divided by that of the summed riser drag areas
   (each times the cosine of its fly-out angle in a cluster, Eq. 7).  It
@@ -26,6 +31,7 @@ import numpy as np
 
 from .atmosphere import density_at, wind_at
 from .flight_test import FlightTest, Parachute
+from .kinematic_track import kinematic_track
 from .model import Model
 from .parameters import param_name
 from .stage_curve_fit import (
@@ -41,7 +47,11 @@ SETTLE_S = 1.0  # time after a stage start before its drag area counts as steady
 
 @dataclass
 class Reduction:
-    """Offline drag areas (m^2) on the time base `t` (s)."""
+    """Offline drag areas (m^2) on the time base `t` (s).
+
+    `cds_riser` holds each canopy's drag area from its load cell (Eq. 3), or,
+    in a test without load cells, attributed from the total drag area.
+    """
 
     t: np.ndarray
     dynamic_pressure: np.ndarray
@@ -51,17 +61,6 @@ class Reduction:
     cds_riser: dict[str, np.ndarray]
     stage_scale: dict[str, float]
     stage_windows: dict[str, tuple[float, float]]
-
-
-def gps_state(test: FlightTest, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """GPS position and velocity (m, m/s) linearly interpolated to times `t`, shape (n, 3)."""
-    gps = test.sensors_of("gps")
-    if not gps:
-        raise ValueError(f"{test.name}: the reduction needs a GPS sensor")
-    d = gps[0].data
-    pos = np.column_stack([np.interp(t, d["time"], d[c]) for c in ("east", "north", "up")])
-    vel = np.column_stack([np.interp(t, d["time"], d[c]) for c in ("v_east", "v_north", "v_up")])
-    return pos, vel
 
 
 def reduce(test: FlightTest, starts: dict[tuple[str, str], float],
@@ -79,11 +78,15 @@ def reduce(test: FlightTest, starts: dict[tuple[str, str], float],
     cells = test.sensors_of("load_cell")
     base = imu[0] if imu else (cells[0] if cells else test.sensors[0])
     t = base.time[(base.time >= test.t_start) & (base.time <= test.t_end)]
-    pos, vel = gps_state(test, t)
-    v_air = vel - wind_at(test.atmosphere, pos[:, 2])
+    track = kinematic_track(test, t)
+    pos = track.position
+    v_air = track.velocity - wind_at(test.atmosphere, pos[:, 2])
     airspeed = np.linalg.norm(v_air, axis=1)
     q = 0.5 * density_at(test.atmosphere, pos[:, 2]) * airspeed**2
-    G = np.interp(t, imu[0].time, imu[0].data["load_factor"]) if imu else np.ones_like(t)
+    if imu:
+        G = np.interp(t, imu[0].time, imu[0].data["load_factor"])
+    else:  # specific force of the track: a - g, g pointing down
+        G = np.linalg.norm(track.acceleration + np.array([0.0, 0.0, G0]), axis=1) / G0
     w_total = (test.vehicle.mass + sum(p.dry_mass for p in test.parachutes)) * G0
     cds_imu = w_total * G / q - (test.vehicle.forebody_cds if forebody_cds is None
                                  else forebody_cds)
@@ -94,6 +97,8 @@ def reduce(test: FlightTest, starts: dict[tuple[str, str], float],
         cds_riser[chute.name] = (tension + chute.dry_mass * G0 * G) / q
 
     windows = _steady_windows(test, starts)
+    if not cells:
+        cds_riser = _attributed_cds(test, starts, windows, t, cds_imu)
     scale = {}
     for stage, (a, b) in windows.items():
         sel = (t >= a) & (t <= b)
@@ -104,6 +109,23 @@ def reduce(test: FlightTest, starts: dict[tuple[str, str], float],
         else:
             scale[stage] = 1.0
     return Reduction(t, q, airspeed, G, cds_imu, cds_riser, scale, windows)
+
+
+def _attributed_cds(test: FlightTest, starts: dict[tuple[str, str], float],
+                    windows: dict[str, tuple[float, float]], t: np.ndarray,
+                    cds_total: np.ndarray) -> dict[str, np.ndarray]:
+    """Each canopy's drag area (m^2) without load cells: the total drag area less the steady
+    drag areas (medians over their last stage's steady window) of the canopies opened
+    before it."""
+    out: dict[str, np.ndarray] = {}
+    opened = 0.0
+    for chute in sorted(test.parachutes, key=lambda c: starts[(c.name, c.stages[0])]):
+        out[chute.name] = cds_total - opened
+        a, b = windows[chute.stages[-1]]
+        steady = (t >= a) & (t <= b)
+        if steady.any():
+            opened += float(np.median(out[chute.name][steady]))
+    return out
 
 
 def _steady_windows(test: FlightTest, starts: dict[tuple[str, str], float]

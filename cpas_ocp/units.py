@@ -2,7 +2,8 @@
 
 Each physical dimension has a table of accepted unit spellings and the factor
 that turns a value in that unit into SI (m, kg, s, N, Pa, kg/m^3, m^2).
-Temperature-like affine units are deliberately absent: nothing here needs them.
+Temperatures are absolute (K) only: affine units such as degC are deliberately
+absent, so every conversion stays one factor.
 """
 
 from __future__ import annotations
@@ -29,6 +30,8 @@ FACTORS: dict[str, dict[str, float]] = {
     "dimensionless": {"1": 1.0, "": 1.0},
     "angle": {"rad": 1.0, "deg": math.pi / 180.0},
     "stiffness": {"N/m": 1.0, "lbf/ft": LBF / FT},
+    "temperature": {"K": 1.0},
+    "lapse_rate": {"K/m": 1.0, "K/km": 1e-3},
     "pressure": {"Pa": 1.0, "psf": LBF / FT**2, "hPa": 100.0, "kPa": 1e3,
                  "psi": LBF / (FT / 12) ** 2},
 }

@@ -50,6 +50,10 @@ MORTAR_TO_INFLATION_S = 0.5
 # Lower bound of a captured start airspeed in the estimation problem (m/s); the fill
 # time n L / V_i divides by it.
 MIN_START_AIRSPEED = 0.01
+# Upper bound of a stage's drag coefficient on the nominal area S_o = pi D_o^2 / 4.
+# Ringsails reach about 0.9 and hobby-rocket canopies are sold at Cd 1.5-2.2; a
+# fitted system drag area also carries what hangs under the canopy.
+MAX_CD = 3.0
 
 
 @dataclass(frozen=True)
@@ -71,7 +75,7 @@ class CanopyInflation(Effect):
             for k, stage in enumerate(chute.stages):
                 idx = (chute.name, stage)
                 out.append(Parameter(param_name("CdS", *idx), "m^2",
-                                     0.5 * s_o * (k + 1) / n_stages, 1e-3 * s_o, 1.5 * s_o,
+                                     0.5 * s_o * (k + 1) / n_stages, 1e-3 * s_o, MAX_CD * s_o,
                                      description="steady drag area of the stage",
                                      scale=0.5 * s_o * (k + 1) / n_stages))
                 if chute.inflation == "infinite_mass":

@@ -33,7 +33,7 @@ from .pilot_deployment import PilotDeployment
 from .rigid_riser import RigidRiser
 from .sensor_bias import SensorBias
 from .sensor_lag import SensorLag
-from .sensors import GpsSensor, ImuSensor, LoadCellSensor
+from .sensors import BaroSensor, GpsAltitudeSensor, GpsSensor, ImuSensor, LoadCellSensor
 from .wake_deficit import WakeDeficit
 
 
@@ -103,6 +103,12 @@ def _builtin() -> dict[str, EffectType]:
                     {"kind": "load_cell", "channel": "tension", "unit": "N", "bound": 1.0e4,
                      "scale": 100.0}),
         EffectType("gps_lag", SensorLag),
+        EffectType("baro", BaroSensor),
+        EffectType("gps_altitude", GpsAltitudeSensor),
+        EffectType("baro_bias", SensorBias,
+                    {"kind": "baro", "channel": "altitude", "unit": "m", "bound": 500.0,
+                     "scale": 1.0}),
+        EffectType("baro_lag", SensorLag, {"kind": "baro", "max_lag": 0.5}),
     ]
     return {e.name: e for e in entries}
 

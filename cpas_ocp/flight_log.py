@@ -1,0 +1,368 @@
+"""Real flight logs into test folders: a flight card plus a flight-computer log.
+
+A *flight card* (JSON; the built-in ones are problems with ``"kind":
+"flight_log"``) holds what the log does not: the vehicle's descent mass and
+forebody drag area, the parachutes and the flight state that deploys each,
+the launch site (elevation, surface air density, lapse rate or ``"gps"``),
+the model block to reconstruct with, and the published nominal drag areas
+to compare against.
+
+`import_flight` turns an Altus Metrum log (`altus_metrum.read_altus_log`)
+and a card into a test folder:
+
+* phase: from the first deployment to touchdown (the first altimeter sample
+  after the last deployment within `TOUCHDOWN_M` of the pad altitude), less
+  `TOUCHDOWN_MARGIN_S`;
+* events: each deployment's flight-state change as a ``mortar_fire`` of its
+  canopy, with the state machine's timing sigma `EVENT_SIGMA_S`;
+* every series runs `SERIES_MARGIN_S` beyond the phase, so that each
+  covers it;
+* ``baro.csv``: pressure altitude (m); samples from `EVENT_SIGMA_S` before to
+  `EJECTION_EXCLUDE_S` after a deployment are left out (the ejection charge's pressure pulse reads
+  as a 150 m jump in one sample);
+* ``gps_altitude.csv``: GPS altitude (m MSL) at each new fix with at least
+  four satellites;
+* ``accelerometer.csv``: axial acceleration (m/s^2, 1 g subtracted), for the
+  opening-shock comparison, not fitted (the hang attitude under a canopy is
+  unknown);
+* the site atmosphere (`atmosphere.SiteAtmosphere`): the pad pressure (median
+  before launch), the temperature from the card's surface density
+  (T = p / (R rho)), and the lapse rate from the card or, with ``"gps"``,
+  fitted to the GPS fixes of the descent (`fit_lapse_rate`; in boost the
+  receiver lags the vehicle by tens of metres);
+* noise sigmas from the data: the altimeter's per canopy phase, from its
+  scatter about the local trend (`scatter_sigma`; under a 30 m/s drogue the
+  static pressure swings by metres over seconds), the GPS altitude's from the
+  lapse-rate fit's residuals.
+
+The folder is written to a temporary sibling and moved into place only once
+it loads, so a failed import leaves nothing behind.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import tempfile
+from dataclasses import dataclass
+from importlib import resources
+from itertools import pairwise
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from scipy.optimize import minimize_scalar
+from scipy.signal import savgol_filter
+
+from .altus_metrum import AltusLog
+from .atmosphere import ISA_LAPSE_K_M, R_AIR, SiteAtmosphere, pressure_altitude
+from .errors import InputError
+from .flight_test import FORMAT, MANIFEST, load_test, validate_block
+from .problems import problem_names
+from .units import FACTORS, G0
+
+TOUCHDOWN_M = 3.0  # altimeter height above the pad that counts as landed (m)
+TOUCHDOWN_MARGIN_S = 0.5  # phase ends this long before the detected touchdown (s)
+EVENT_SIGMA_S = 0.1  # timing sigma of a flight-state change (one descent sample, s)
+EJECTION_EXCLUDE_S = 0.3  # altimeter samples left out after an ejection charge (s)
+MIN_ACCEL_SIGMA = 0.1  # floor of the accelerometer noise sigma (m/s^2)
+MIN_BARO_SIGMA_M = 0.3  # floor of the altimeter noise sigma (the pressure resolution, m)
+LAPSE_BOUNDS_K_M = (0.002, 0.0098)  # search range of a fitted lapse rate (to the dry adiabat)
+SCATTER_WINDOW_S = 8.0  # window of the local trend the altimeter's scatter is taken about (s)
+SERIES_MARGIN_S = 1.5  # series extend this far beyond the phase: a 1 Hz GPS covers it (s)
+
+
+@dataclass(frozen=True)
+class FlightCard:
+    """What a flight log does not hold; see the module docstring."""
+
+    name: str
+    title: str
+    label: str
+    data_folder: str
+    logs: tuple[str, ...]
+    vehicle: dict[str, Any]
+    parachutes: tuple[dict[str, Any], ...]
+    site: dict[str, Any]
+    model: dict[str, Any]
+    nominal: dict[str, dict[str, Any]]
+    source: str
+
+
+def card_from_dict(raw: dict[str, Any], source: str) -> FlightCard:
+    """A card from its JSON object; InputError naming the missing field."""
+    for key in ("name", "data", "vehicle", "parachutes", "site", "model"):
+        if key not in raw:
+            raise InputError(source, key, "a flight card field (see problems/prometheus.json)")
+    for i, chute in enumerate(raw["parachutes"]):
+        if "deployment" not in chute:
+            raise InputError(source, f"parachutes[{i}].deployment",
+                             "the flight state that deploys the canopy (e.g. 'drogue', 'main')")
+    return FlightCard(raw["name"], raw.get("title", raw["name"]), raw.get("label", ""),
+                      raw["data"].get("folder", ""), tuple(raw["data"].get("logs", ())),
+                      raw["vehicle"], tuple(raw["parachutes"]), raw["site"], raw["model"],
+                      raw.get("nominal", {}), source)
+
+
+def load_card(name_or_path: str) -> FlightCard:
+    """A built-in flight card by problem name, or a card file."""
+    path = Path(name_or_path)
+    if path.suffix == ".json":
+        if not path.is_file():
+            raise InputError(str(path), "(file)", "an existing flight-card JSON file")
+        try:
+            raw = json.loads(path.read_text())
+        except json.JSONDecodeError as exc:
+            raise InputError(str(path), f"line {exc.lineno}", f"valid JSON ({exc.msg})") from None
+        return card_from_dict(raw, str(path))
+    names = problem_names("flight_log")
+    if name_or_path not in names:
+        raise InputError("flight card", "name", f"a card file (.json) or one of "
+                         f"{', '.join(names)}; got {name_or_path!r}")
+    raw = json.loads(resources.files("cpas_ocp.problem_data")
+                     .joinpath(f"{name_or_path}.json").read_text())
+    return card_from_dict(raw, f"problems/{name_or_path}.json")
+
+
+def _si(q: dict[str, Any], dim: str, source: str, field: str) -> float:
+    unit = q.get("unit") if isinstance(q, dict) else None
+    if unit not in FACTORS[dim] or not isinstance(q.get("value"), int | float):
+        raise InputError(source, field, f"{{value, unit}} with a {dim} unit "
+                         f"({', '.join(sorted(FACTORS[dim]))})")
+    return float(q["value"]) * FACTORS[dim][unit]
+
+
+def fit_lapse_rate(fixes: pd.DataFrame, pressure: pd.Series, times: pd.Series,
+                   elevation: float, p0: float, t0: float) -> tuple[float, float, float]:
+    """The lapse rate (K/m) that makes the site atmosphere's altitude of the measured
+    pressure match the GPS altitudes, with a constant GPS offset.
+
+    Returns (lapse rate, GPS offset (m), residual standard deviation (m)).
+    Least squares over every fix; the offset is profiled out (its estimate is
+    the mean difference).
+    """
+    p_at = np.interp(fixes["time"], times, pressure)
+    h_gps = fixes["gps_altitude"].to_numpy()
+
+    def residual(lapse: float) -> np.ndarray:
+        site = SiteAtmosphere(elevation, p0, t0, lapse)
+        d = h_gps - site.altitude_at_pressure(p_at)
+        return d - d.mean()
+
+    best = minimize_scalar(lambda lapse: float(np.sum(residual(lapse) ** 2)),
+                           bounds=LAPSE_BOUNDS_K_M, method="bounded",
+                           options={"xatol": 1e-6})
+    lapse = float(best.x)
+    site = SiteAtmosphere(elevation, p0, t0, lapse)
+    offset = float(np.mean(h_gps - site.altitude_at_pressure(p_at)))
+    return lapse, offset, float(np.std(residual(lapse), ddof=2))
+
+
+def scatter_sigma(t: np.ndarray, values: np.ndarray) -> float:
+    """Robust sigma (1.4826 MAD) of `values` about their local quadratic trend over
+    SCATTER_WINDOW_S (a Savitzky-Golay filter on a uniform resampling).
+
+    Unlike the second differences this counts disturbances correlated over a
+    few seconds, such as the static-pressure swings of a rocket swinging under
+    a fast drogue, as noise; the descent itself (speed changing over tens of
+    seconds) stays in the trend."""
+    grid = np.arange(t[0], t[-1], 0.1)
+    window = min(int(SCATTER_WINDOW_S / 0.1) // 2 * 2 + 1, len(grid) // 2 * 2 - 1)
+    if window < 5:
+        return second_difference_sigma(values)
+    trend = np.interp(t, grid, savgol_filter(np.interp(grid, t, values), window, 2))
+    r = values - trend
+    return float(1.4826 * np.median(np.abs(r - np.median(r))))
+
+
+def second_difference_sigma(values: np.ndarray) -> float:
+    """White-noise sigma of a smooth signal's samples: 1.4826 MAD of the second
+    differences over sqrt(6) (the second difference of white noise has variance 6 s^2)."""
+    d2 = np.diff(values, 2)
+    return float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / np.sqrt(6.0))
+
+
+def touchdown_time(t: np.ndarray, height: np.ndarray, after: float) -> float:
+    """First time (s) after `after` at which `height` (m above the pad) is below TOUCHDOWN_M."""
+    low = np.flatnonzero((t > after) & (height < TOUCHDOWN_M))
+    return float(t[low[0]]) if low.size else float(t[-1])
+
+
+@dataclass(frozen=True)
+class ImportSummary:
+    """What an import did, for the import report (`import.json`)."""
+
+    recorder: str
+    phase: tuple[float, float]
+    events: dict[str, float]
+    site: SiteAtmosphere
+    lapse_fit: tuple[float, float, float] | None
+    baro_sigma_m: list[float]
+    samples: dict[str, int]
+    dropped: dict[str, int]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"recorder": self.recorder, "phase_s": list(self.phase), "events_s": self.events,
+                "site": {"elevation_m": self.site.elevation_m,
+                         "pressure_pa": self.site.pressure_pa,
+                         "temperature_k": self.site.temperature_k,
+                         "lapse_rate_k_km": 1e3 * self.site.lapse_rate_k_m},
+                "lapse_fit": None if self.lapse_fit is None else
+                {"lapse_rate_k_km": 1e3 * self.lapse_fit[0], "gps_offset_m": self.lapse_fit[1],
+                 "residual_sigma_m": self.lapse_fit[2]},
+                "baro_sigma_m": self.baro_sigma_m, "samples": self.samples,
+                "dropped": self.dropped}
+
+
+def import_flight(log: AltusLog, card: FlightCard, out: str | Path) -> ImportSummary:
+    """Write the test folder of `log` under `card` to `out` (see the module docstring)."""
+    out = Path(out)
+    d = log.data
+    src = str(log.path)
+    deploy = {}
+    for i, chute in enumerate(card.parachutes):
+        state = chute["deployment"]
+        if state not in log.events:
+            raise InputError(src, "state_name", f"a {state!r} flight state (deploys "
+                             f"{chute.get('name', f'parachutes[{i}]')}); the log has "
+                             f"{', '.join(log.events)}")
+        deploy[chute["name"]] = log.events[state]
+    pad = d[d["time"] < 0.0]
+    if pad.empty:
+        pad = d.iloc[:50]
+    p0 = float(pad["pressure"].median())
+    pad_altitude = float(pressure_altitude(p0))
+    t_begin = min(deploy.values())
+    t_last = max(deploy.values())
+    baro = d[["time", "altitude", "pressure"]].dropna()
+    t_down = touchdown_time(baro["time"].to_numpy(),
+                            baro["altitude"].to_numpy() - pad_altitude, t_last)
+    t_end = t_down - TOUCHDOWN_MARGIN_S
+    # Series run SERIES_MARGIN_S beyond the phase so that every sensor covers it (the
+    # estimator uses the samples inside the phase only).
+    lo, hi = t_begin - SERIES_MARGIN_S, t_end + SERIES_MARGIN_S
+    in_phase = (baro["time"] >= lo) & (baro["time"] <= hi)
+    near_charge = np.zeros(len(baro), dtype=bool)
+    for t_dep in deploy.values():
+        near_charge |= ((baro["time"] >= t_dep - EVENT_SIGMA_S)
+                        & (baro["time"] <= t_dep + EJECTION_EXCLUDE_S)).to_numpy()
+    baro_phase = baro[in_phase.to_numpy() & ~near_charge]
+
+    site_spec = card.site
+    elevation = _si(site_spec.get("elevation"), "length", card.source, "site.elevation")
+    rho0 = _si(site_spec.get("surface_density"), "density", card.source,
+               "site.surface_density")
+    t0 = p0 / (R_AIR * rho0)
+    lapse_spec = site_spec.get("lapse_rate", {"value": 1e3 * ISA_LAPSE_K_M, "unit": "K/km"})
+    fixes = log.gps_fixes()
+    lapse_fit = None
+    if lapse_spec == "gps":
+        descent = fixes[(fixes["time"] >= t_begin) & (fixes["time"] <= t_down)]
+        if len(descent) < 10:
+            raise InputError(card.source, "site.lapse_rate", f"a value: 'gps' needs GPS "
+                             f"fixes in the descent, and {src} has {len(descent)}")
+        lapse_fit = fit_lapse_rate(descent, baro["pressure"], baro["time"], elevation, p0, t0)
+        lapse = lapse_fit[0]
+    else:
+        lapse = _si(lapse_spec, "lapse_rate", card.source, "site.lapse_rate")
+    site = SiteAtmosphere(elevation, p0, t0, lapse)
+    # One altimeter sigma per canopy phase, from the scatter about the local trend.
+    bounds = [*sorted(deploy.values()), t_end]
+    baro_sigmas = []
+    for a, b in pairwise(bounds):
+        part = baro_phase[(baro_phase["time"] >= a) & (baro_phase["time"] <= b)]
+        baro_sigmas.append(max(MIN_BARO_SIGMA_M, scatter_sigma(part["time"].to_numpy(),
+                                                               part["altitude"].to_numpy())))
+
+    fixes_phase = fixes[(fixes["time"] >= lo) & (fixes["time"] <= hi)]
+    accel = d[["time", "acceleration"]].dropna()
+    accel = accel[(accel["time"] >= lo) & (accel["time"] <= hi)]
+    files = {"baro.csv": baro_phase[["time", "altitude"]],
+             "accelerometer.csv": accel}
+    sensors: list[dict[str, Any]] = [
+        {"name": "baro", "kind": "baro", "file": "baro.csv",
+         "columns": {"time": "s", "altitude": "m"},
+         "sigma": {"altitude": {"value": round(baro_sigmas[0], 3), "unit": "m"}},
+         "sigma_after": [{"time": {"value": round(t, 3), "unit": "s"},
+                          "sigma": {"altitude": {"value": round(sig, 3), "unit": "m"}}}
+                         for t, sig in zip(bounds[1:-1], baro_sigmas[1:], strict=True)]},
+        {"name": "accelerometer", "kind": "axial_accelerometer", "file": "accelerometer.csv",
+         "columns": {"time": "s", "acceleration": "m/s^2"},
+         "sigma": {"acceleration": {"value": round(max(MIN_ACCEL_SIGMA, second_difference_sigma(
+             accel["acceleration"].to_numpy())), 3), "unit": "m/s^2"}}},
+    ]
+    if lapse_fit is not None and len(fixes_phase) >= 2:
+        files["gps_altitude.csv"] = fixes_phase[["time", "gps_altitude"]].rename(
+            columns={"gps_altitude": "up"})
+        sensors.append({"name": "gps_altitude", "kind": "gps_altitude",
+                        "file": "gps_altitude.csv", "columns": {"time": "s", "up": "m"},
+                        "sigma": {"altitude": {"value": round(lapse_fit[2], 3), "unit": "m"}}})
+    manifest = {
+        "format": FORMAT,
+        "name": card.name,
+        "description": f"{card.title}: {log.recorder} log {log.path.name}",
+        "label": card.label,
+        "vehicle": card.vehicle,
+        "parachutes": [{k: v for k, v in c.items() if k != "deployment"}
+                       for c in card.parachutes],
+        "events": [{"name": "mortar_fire", "parachute": name,
+                    "time": {"value": round(t, 3), "unit": "s"},
+                    "sigma": {"value": EVENT_SIGMA_S, "unit": "s"}}
+                   for name, t in deploy.items()],
+        "sensors": sensors,
+        "atmosphere": {"model": "site",
+                       "elevation": {"value": elevation, "unit": "m"},
+                       "pressure": {"value": round(p0, 2), "unit": "Pa"},
+                       "temperature": {"value": round(t0, 3), "unit": "K"},
+                       "lapse_rate": {"value": round(1e3 * lapse, 4), "unit": "K/km"}},
+        "phase": {"start": {"value": t_begin, "unit": "s"},
+                  "end": {"value": round(t_end, 3), "unit": "s"}},
+        "model": card.model,
+    }
+    validate_block(manifest, "manifest.schema.json", card.source)
+    summary = ImportSummary(
+        log.recorder, (t_begin, t_end), {**deploy, "touchdown": t_down}, site, lapse_fit,
+        baro_sigmas, {name: len(frame) for name, frame in files.items()},
+        {"repeated_time_stamps": log.duplicate_times,
+         "ejection_charge_samples": int((in_phase.to_numpy() & near_charge).sum()),
+         "gps_repeats_between_fixes": int(d["time"].between(lo, hi).sum()
+                                          - len(fixes_phase)) if log.has_gps else 0})
+    _write_folder(out, manifest, files, summary)
+    return summary
+
+
+def _write_folder(out: Path, manifest: dict[str, Any], files: dict[str, pd.DataFrame],
+                  summary: ImportSummary) -> None:
+    """Write into a temporary sibling, check that it loads, then move it to `out`."""
+    if out.exists() and any(out.iterdir()):
+        raise InputError(str(out), "(folder)", "a new or empty folder for the test")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}-", dir=out.parent))
+    try:
+        for name, frame in files.items():
+            frame.to_csv(tmp / name, index=False)
+        (tmp / MANIFEST).write_text(json.dumps(manifest, indent=2) + "\n")
+        (tmp / "import.json").write_text(json.dumps(summary.to_dict(), indent=2) + "\n")
+        load_test(tmp)
+        if out.exists():
+            out.rmdir()
+        tmp.rename(out)
+    finally:
+        if tmp.exists():
+            shutil.rmtree(tmp)
+
+
+def descent_load_factor_peak(accel: pd.DataFrame, t_from: float, t_to: float
+                             ) -> tuple[float, float]:
+    """Largest axial specific force (g) between `t_from` and `t_to` (s) and its time (s).
+
+    The logger's axial acceleration has 1 g subtracted, so the specific force
+    along the axis is (a + g0) / g0; its magnitude is a lower bound on the
+    load factor (the axis need not point along the riser)."""
+    sel = accel[(accel["time"] >= t_from) & (accel["time"] <= t_to)]
+    if sel.empty:
+        raise ValueError(f"no accelerometer samples in [{t_from}, {t_to}] s")
+    f = np.abs(sel["acceleration"].to_numpy() + G0) / G0
+    k = int(np.argmax(f))
+    return float(f[k]), float(sel["time"].iloc[k])

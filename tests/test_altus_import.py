@@ -1,0 +1,214 @@
+"""Altus Metrum import, site atmosphere and barometric altimeter model.
+
+The reader is tested on a log written here in AltOS's CSV layout, quirks
+included, from a known descent; the real logs are read by
+`test_prometheus.py` when the shared data folder is present.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cpas_ocp.altus_metrum import read_altus_log
+from cpas_ocp.atmosphere import (
+    SiteAtmosphere,
+    StandardAtmosphere,
+    density_at,
+    geometric_altitude,
+    pressure_altitude,
+)
+from cpas_ocp.errors import InputError
+from cpas_ocp.flight_log import (
+    card_from_dict,
+    fit_lapse_rate,
+    import_flight,
+    load_card,
+    second_difference_sigma,
+)
+from cpas_ocp.flight_test import load_test
+
+SITE = SiteAtmosphere.from_surface_density(1401.0, 86300.0, 1.001, 0.008)
+HEADER = ("#version,serial,flight,call,time,state,state_name,acceleration,pressure,altitude,"
+          "height,speed,temperature,accel_x,accel_y,accel_z,gyro_roll,gyro_pitch,gyro_yaw,"
+          "nsat,latitude,longitude,altitude,hdop")
+
+
+def _pressure_at(h: np.ndarray) -> np.ndarray:
+    return np.array([float(SITE.pressure(float(x))) for x in np.atleast_1d(h)])
+
+
+def _write_log(path: Path, seed: int) -> dict[str, float]:
+    """An AltOS-layout log of a known descent: pad, boost/coast, 30 m/s drogue descent
+    from 3000 m above the pad, main at 400 m, 6 m/s to the ground."""
+    rng = np.random.default_rng(seed)
+    t = np.concatenate([np.arange(-0.3, 0.0, 0.01), np.arange(0.0, 20.0, 0.01),
+                        np.arange(20.0, 190.0, 0.1)])
+    h_agl = np.where(t < 0, 0.0, np.where(t < 20.0, 3000.0 * np.sin(np.pi / 40 * t), 0.0))
+    drogue, main = 20.0, 20.0 + 2600.0 / 30.0
+    h_agl = np.where(t >= drogue, 3000.0 - 30.0 * (t - drogue), h_agl)
+    h_agl = np.where(t >= main, 400.0 - 6.0 * (t - main), h_agl)
+    h_agl = np.maximum(h_agl, 0.0)
+    state = np.where(t < 4, "boost", np.where(t < drogue, "coast",
+                     np.where(t < main, "drogue", np.where(h_agl > 0, "main", "landed"))))
+    p = _pressure_at(SITE.elevation_m + h_agl) + rng.normal(0, 5.0, t.size)
+    p[np.argmin(np.abs(t - main))] += 1500.0  # the main's ejection charge
+    fix_every = 1.0
+    lines = [HEADER]
+    last_fix = -10.0
+    gps = (32.9, -106.9, SITE.elevation_m)
+    for k in range(t.size):
+        if t[k] - last_fix >= fix_every:
+            last_fix = t[k]
+            gps = (32.9 + 1e-5 * k, -106.9, SITE.elevation_m + h_agl[k] + rng.normal(0, 3.0))
+        speed = "NaN" if k < 40 else f"{-30.0:8.2f}"
+        lines.append(
+            f"6, 6583, 3,VE3LIC, {t[k]:8.2f}, 3, {state[k]:>7s}, {-9.81:7.2f}, {p[k]:9.2f}, "
+            f"{float(pressure_altitude(p[k])):8.2f}, {h_agl[k]:8.2f}, {speed}, 30.0, 0.0, 0.0, "
+            f"0.0, 0.0, 0.0, 0.0, 11, {gps[0]:12.7f},{gps[1]:12.7f}, {gps[2]:7.1f},"
+            f"2147483647.0")
+        if k % 200 == 7:  # AltOS repeats a time stamp now and then
+            lines.append(lines[-1])
+    path.write_text("\n".join(lines) + "\n")
+    return {"drogue": float(t[np.argmax(t >= drogue)]), "main": float(t[np.argmax(t >= main)])}
+
+
+CARD = {
+    "name": "synthetic_rocket", "kind": "flight_log", "title": "a known descent",
+    "data": {"folder": "", "logs": []},
+    "vehicle": {"name": "rocket", "mass": {"value": 16.0, "unit": "kg"},
+                "forebody_cds": {"value": 0.0, "unit": "m^2"}},
+    "parachutes": [
+        {"name": "drogue", "type": "drogue", "deployment": "drogue",
+         "diameter": {"value": 24, "unit": "in"}, "dry_mass": {"value": 0.1, "unit": "kg"},
+         "inflation": "finite_mass", "stages": ["stage1"]},
+        {"name": "main", "type": "main", "deployment": "main",
+         "diameter": {"value": 72, "unit": "in"}, "dry_mass": {"value": 0.5, "unit": "kg"},
+         "inflation": "finite_mass", "stages": ["stage2"]}],
+    "site": {"elevation": {"value": 1401, "unit": "m"},
+             "surface_density": {"value": 1.001, "unit": "kg/m^3"}, "lapse_rate": "gps"},
+    "model": {"effects": ["canopy_inflation", "forebody_drag", "rigid_riser", "baro"]},
+}
+
+
+def test_pressure_altitude_inverts_the_standard_atmosphere() -> None:
+    h = np.array([0.0, 1330.0, 5000.0, 10000.0])
+    p = np.array([float(StandardAtmosphere().pressure(x)) for x in h])
+    assert np.allclose(pressure_altitude(p), h, atol=1e-6)
+    # AltOS's reading on the Prometheus pad: 86,338 Pa is 1329.7 m.
+    assert float(pressure_altitude(86338.1)) == pytest.approx(1329.70, abs=0.01)
+
+
+def test_site_atmosphere_is_hydrostatic_and_invertible() -> None:
+    """dp/dh = -rho g0 (checked by finite differences) and altitude_at_pressure inverts it."""
+    for h in (1401.0, 3000.0, 5500.0):
+        dp = (float(SITE.pressure(h + 0.5)) - float(SITE.pressure(h - 0.5)))
+        assert dp == pytest.approx(-float(density_at(SITE, h)[0]) * 9.80665, rel=1e-6)
+    assert float(density_at(SITE, 1401.0)[0]) == pytest.approx(1.001, rel=1e-12)
+    h = np.array([1401.0, 2500.0, 5538.0])
+    assert np.allclose(SITE.altitude_at_pressure(_pressure_at(h)), h, atol=1e-6)
+    assert np.allclose(geometric_altitude(SITE, pressure_altitude(_pressure_at(h))), h,
+                       atol=1e-6)
+    # A hot day: the altimeter under-reads the height gained, here by about 5 %.
+    gain = float(pressure_altitude(float(SITE.pressure(4401.0)))
+                 - pressure_altitude(float(SITE.pressure(1401.0))))
+    assert 0.9 < gain / 3000.0 < 0.97
+
+
+def test_reader_survives_the_altos_quirks(tmp_path: Path) -> None:
+    events = _write_log(tmp_path / "log.csv", seed=1)
+    log = read_altus_log(tmp_path / "log.csv")
+    d = log.data
+    assert log.recorder == "TeleMega"
+    assert log.duplicate_times > 0 and d["time"].is_monotonic_increasing
+    assert not d["time"].duplicated().any()
+    assert "gps_altitude" in d.columns and d["gps_altitude"].iloc[0] > 1000.0
+    assert d["altitude"].iloc[0] == pytest.approx(float(pressure_altitude(86300.0)), abs=3.0)
+    assert d["hdop"].isna().all()  # the 2^31 - 1 sentinel
+    assert log.events["drogue"] == pytest.approx(events["drogue"])
+    assert log.events["main"] == pytest.approx(events["main"])
+    fixes = log.gps_fixes()
+    assert len(fixes) == pytest.approx(d["time"].iloc[-1] - d["time"].iloc[0], abs=3)
+
+
+def test_import_writes_a_loadable_test_folder(tmp_path: Path) -> None:
+    events = _write_log(tmp_path / "log.csv", seed=2)
+    log = read_altus_log(tmp_path / "log.csv")
+    summary = import_flight(log, card_from_dict(CARD, "card.json"), tmp_path / "test")
+    test = load_test(tmp_path / "test")
+    assert {s.kind for s in test.sensors} == {"baro", "gps_altitude", "axial_accelerometer"}
+    assert test.t_start == pytest.approx(events["drogue"])
+    # Touchdown: 400 m at 6 m/s after the main.
+    assert summary.events["touchdown"] == pytest.approx(events["main"] + 400.0 / 6.0, abs=0.6)
+    # The ejection-charge sample is gone from the altimeter series.
+    baro = test.sensors_of("baro")[0]
+    assert np.abs(baro.time - events["main"]).min() > 0.05
+    assert summary.dropped["ejection_charge_samples"] >= 1
+    # The lapse rate fitted to the GPS fixes recovers the truth: 3 m GPS noise over
+    # 3 km of height gives a sigma of a few hundredths of a K/km.
+    lapse, _, resid = summary.lapse_fit
+    assert lapse == pytest.approx(SITE.lapse_rate_k_m, abs=3e-4)
+    assert resid == pytest.approx(3.0, rel=0.3)
+    # The altimeter sigma under the main is the pressure noise, 5 Pa / (rho g) = 0.5 m.
+    assert summary.baro_sigma_m[1] == pytest.approx(5.0 / (1.0 * 9.80665), rel=0.35)
+    manifest = json.loads((tmp_path / "test" / "manifest.json").read_text())
+    assert manifest["atmosphere"]["model"] == "site"
+
+
+def test_lapse_rate_fit_is_unbiased_without_noise() -> None:
+    h = np.linspace(1500.0, 5000.0, 50)
+    t = np.arange(h.size, dtype=float)
+    fixes = {"time": t, "gps_altitude": h - 11.0}
+    import pandas as pd
+    lapse, offset, resid = fit_lapse_rate(pd.DataFrame(fixes), pd.Series(_pressure_at(h)),
+                                          pd.Series(t), SITE.elevation_m, SITE.pressure_pa,
+                                          SITE.temperature_k)
+    assert lapse == pytest.approx(SITE.lapse_rate_k_m, rel=1e-4)
+    assert offset == pytest.approx(-11.0, abs=0.05)
+    assert resid < 0.05
+
+
+def test_second_difference_sigma_recovers_white_noise() -> None:
+    rng = np.random.default_rng(3)
+    t = np.linspace(0, 100, 4000)
+    x = 1000.0 - 25.0 * t + 0.01 * t**2 + rng.normal(0, 2.0, t.size)
+    # 1.4826 MAD has a relative standard error of about 1.1/sqrt(n) = 2 %.
+    assert second_difference_sigma(x) == pytest.approx(2.0, rel=0.08)
+
+
+@pytest.mark.parametrize("text, field", [
+    ("not a log\n1,2,3\n", "line 1"),
+    ("#version,serial,time\n1,2,3\n", "state_name"),
+])
+def test_bad_logs_are_input_errors(tmp_path: Path, text: str, field: str) -> None:
+    path = tmp_path / "bad.csv"
+    path.write_text(text)
+    with pytest.raises(InputError) as err:
+        read_altus_log(path)
+    assert err.value.field == field and str(path) in str(err.value)
+
+
+def test_card_errors_name_the_field(tmp_path: Path) -> None:
+    bad = {**CARD, "parachutes": [{k: v for k, v in CARD["parachutes"][0].items()
+                                   if k != "deployment"}]}
+    with pytest.raises(InputError, match=r"parachutes\[0\]\.deployment"):
+        card_from_dict(bad, "card.json")
+    with pytest.raises(InputError, match="prometheus"):
+        load_card("no_such_flight")
+    events = _write_log(tmp_path / "log.csv", seed=4)
+    assert events
+    log = read_altus_log(tmp_path / "log.csv")
+    late = {**CARD, "parachutes": [{**CARD["parachutes"][0], "deployment": "apogee"}]}
+    with pytest.raises(InputError, match="'apogee' flight state"):
+        import_flight(log, card_from_dict(late, "card.json"), tmp_path / "t")
+    assert not (tmp_path / "t").exists()
+
+
+def test_builtin_card_names_its_data() -> None:
+    card = load_card("prometheus")
+    assert card.data_folder == "prometheus-2022" and len(card.logs) == 2
+    assert math.isclose(card.nominal["CdS[drogue,stage1]"]["value"], 0.467)
