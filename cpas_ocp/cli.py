@@ -13,6 +13,10 @@
     cpas-ocp dispersions CAMPAIGN --out DIR   Monte Carlo cases within the grown hulls
     cpas-ocp montecarlo TEST_DIR --cases DIR --out DIR
                                               fly the cases through a test's fit: peak loads
+    cpas-ocp import-altus LOG --card CARD --out DIR
+                                              an Altus Metrum flight log into a test folder
+    cpas-ocp flight NAME --out DIR            import a real flight's logs, reconstruct, compare
+                                              with the nominal drag areas and the measured descent
     cpas-ocp demo [--out DIR]                 simulate the built-in Drogue test and reconstruct it
 
 Exit codes: 0 success, 2 bad input (one line naming file, field and
@@ -143,6 +147,25 @@ def _parser() -> argparse.ArgumentParser:
                    help="fly the first N cases of each file (default: all)")
     _parallel_options(s)
     s.set_defaults(run=_montecarlo)
+
+    s = sub.add_parser("import-altus", help="an Altus Metrum (TeleMega, TeleMetrum) CSV log "
+                                            "into a test folder")
+    s.add_argument("log", type=Path)
+    s.add_argument("--card", required=True, metavar="CARD",
+                   help="a flight card: a built-in name (prometheus) or a JSON file")
+    s.add_argument("--out", required=True, type=Path)
+    s.set_defaults(run=_import_altus)
+
+    s = sub.add_parser("flight", help="import a real flight's logs, reconstruct each, and "
+                                      "compare with the nominal drag areas and the descent")
+    s.add_argument("card", metavar="CARD", help="a built-in flight card (prometheus) or a file")
+    s.add_argument("--out", required=True, type=Path)
+    s.add_argument("--data", type=Path, default=None,
+                   help="folder holding the card's logs (default ../shared/data/<card folder>)")
+    s.add_argument("--log", action="append", default=[], metavar="FILE",
+                   help="reconstruct only this log of the card (repeatable)")
+    _solver_options(s)
+    s.set_defaults(run=_flight)
 
     s = sub.add_parser("demo", help="simulate the built-in Drogue test and reconstruct it")
     s.add_argument("--out", type=Path, default=Path("cpas-demo"))
@@ -388,6 +411,50 @@ def _montecarlo(args: argparse.Namespace) -> int:
     print(summary_text(fit, results))
     print(f"\nMonte Carlo written to {args.out} (quantiles_*.csv, peak_loads_*.parquet, "
           f"peak_loads_*.png, {MARKER})")
+    return 0
+
+
+def _import_altus(args: argparse.Namespace) -> int:
+    from .altus_metrum import read_altus_log
+    from .flight_log import import_flight, load_card
+    summary = import_flight(read_altus_log(args.log), load_card(args.card), args.out)
+    print(summary.text())
+    print(f"test folder written to {args.out}")
+    return 0
+
+
+def _flight(args: argparse.Namespace) -> int:
+    from .altus_metrum import read_altus_log
+    from .flight_log import import_flight, load_card
+    from .flight_report import flight_text
+    from .flight_test import load_test
+    from .report import fit_summary, parameter_table, write_report
+    card = load_card(args.card)
+    data = args.data if args.data is not None else Path("../shared/data") / card.data_folder
+    logs = args.log or list(card.logs)
+    for name in logs:
+        if not (data / name).is_file():
+            raise InputError(str(data / name), "(file)", f"the flight log of card {card.name!r} "
+                             "(give the folder holding it with --data)")
+    for name in logs:
+        folder = args.out / Path(name).stem
+        print(f"== {name}: import", flush=True)
+        summary = import_flight(read_altus_log(data / name), card, folder / "test")
+        print(summary.text())
+        test = load_test(folder / "test")
+        est = _estimator(test, args, _spec(test, None))
+        print(f"solving: {est.size_text()} ...", flush=True)
+        fit, cov = _fit_and_covariance(est, args)
+        out = write_report(fit, cov, folder / "report")
+        text = flight_text(fit, cov, card.nominal)
+        (out / "flight.md").write_text(f"# {card.title}\n\n{card.label}\n\n{text}")
+        print()
+        print(parameter_table(fit, cov))
+        print()
+        print(fit_summary(fit))
+        print()
+        print(text)
+        print(f"report written to {out} (report.md, flight.md, result.json, figures)")
     return 0
 
 

@@ -202,6 +202,22 @@ class ImportSummary:
     samples: dict[str, int]
     dropped: dict[str, int]
 
+    def text(self) -> str:
+        """A few lines for the terminal."""
+        events = ", ".join(f"{k} {v:.2f} s" for k, v in self.events.items())
+        lines = [f"{self.recorder} log: phase {self.phase[0]:.2f}-{self.phase[1]:.2f} s; {events}",
+                 f"site: {self.site.elevation_m:.0f} m, {self.site.pressure_pa:.0f} Pa, "
+                 f"{self.site.temperature_k:.1f} K, lapse rate "
+                 f"{1e3 * self.site.lapse_rate_k_m:.2f} K/km"]
+        if self.lapse_fit is not None:
+            lines.append(f"  (lapse rate fitted to the GPS fixes: GPS offset "
+                         f"{self.lapse_fit[1]:+.1f} m, residual sigma {self.lapse_fit[2]:.1f} m)")
+        lines.append("altimeter sigma per canopy phase: "
+                     + ", ".join(f"{s:.2f} m" for s in self.baro_sigma_m))
+        lines.append("samples: " + ", ".join(f"{k} {v}" for k, v in self.samples.items())
+                     + "; dropped: " + ", ".join(f"{k} {v}" for k, v in self.dropped.items()))
+        return "\n".join(lines)
+
     def to_dict(self) -> dict[str, Any]:
         return {"recorder": self.recorder, "phase_s": list(self.phase), "events_s": self.events,
                 "site": {"elevation_m": self.site.elevation_m,

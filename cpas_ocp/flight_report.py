@@ -1,0 +1,207 @@
+"""What a real flight's reconstruction says about its parachutes, against the published
+nominal values and the measured descent.
+
+* Drag areas: each fitted steady CdS with its sigma against the card's
+  nominal value, the difference in sigmas, and the descent rate the nominal
+  value would give at the same altitude against the rate measured there.
+  A nominal drag area is a design number (Cd on the canopy's nominal area);
+  the measured rate is what the canopy did.
+* Steady descent rates: under each canopy phase, in a steady window away
+  from its deployment, the rate the fitted drag areas imply,
+  v = sqrt(2 W / (rho(h) sum CdS)), against the rate measured by the
+  altimeter (a straight-line fit to its geometric altitude).  The implied
+  rate's sigma comes from the drag areas' covariance; the measured rate's
+  from the line fit's residuals with the sample count reduced for their
+  lag-one autocorrelation (Bartlett's effective sample size).
+* Opening shock: the accelerometer's largest axial specific force after the
+  last deployment against the model's peak load factor in the same window.
+  The axial reading is a lower bound of the load factor (the axis hangs at
+  an angle to the riser) and at 10 Hz may miss the peak.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .atmosphere import density_at
+from .estimation import Fit
+from .flight_log import EJECTION_EXCLUDE_S, descent_load_factor_peak
+from .kinematic_track import altimeter_altitude
+from .parameters import param_name
+from .uncertainty import Covariance
+from .units import G0
+
+STEADY_AFTER_S = 10.0  # a canopy phase counts as steady this long after its deployment (s)
+STEADY_BEFORE_S = 2.0  # ... and until this long before the next deployment (s)
+SHOCK_WINDOW_S = 4.0  # the opening shock is looked for this long after a deployment (s)
+
+
+@dataclass(frozen=True)
+class DescentRate:
+    """Steady descent under the canopies open in [t0, t1] (s): rates in m/s (positive down)."""
+
+    canopies: tuple[str, ...]
+    t0: float
+    t1: float
+    altitude_m: float
+    measured: float
+    measured_sigma: float
+    implied: float
+    implied_sigma: float
+
+    @property
+    def z(self) -> float:
+        """Implied minus measured, in the combined sigma."""
+        return (self.implied - self.measured) / float(np.hypot(self.measured_sigma,
+                                                               self.implied_sigma))
+
+
+@dataclass(frozen=True)
+class NominalComparison:
+    """A fitted drag area (m^2) against its published nominal value."""
+
+    name: str
+    fitted: float
+    sigma: float
+    nominal: float
+    source: str
+    rate_nominal: float
+    rate_measured: DescentRate
+
+    @property
+    def z(self) -> float:
+        return (self.fitted - self.nominal) / self.sigma if self.sigma > 0 else float("inf")
+
+
+def _phases(fit: Fit) -> list[tuple[tuple[str, ...], float, float]]:
+    """(canopies open, steady start, steady end) of each canopy phase, in deployment order."""
+    test = fit.test
+    starts = sorted((fit.parameters[param_name("t_start", c.name, c.stages[0])], c.name)
+                    for c in test.parachutes)
+    out = []
+    for k, (t0, _) in enumerate(starts):
+        t1 = starts[k + 1][0] - STEADY_BEFORE_S if k + 1 < len(starts) else test.t_end
+        out.append((tuple(name for _, name in starts[:k + 1]), t0 + STEADY_AFTER_S, t1))
+    return out
+
+
+def _measured_rate(fit: Fit, t0: float, t1: float) -> tuple[float, float, float]:
+    """Measured descent rate (m/s, positive down), its sigma and the mean altitude (m)."""
+    t, h = altimeter_altitude(fit.test)
+    sel = (t >= t0) & (t <= t1)
+    if sel.sum() < 10:
+        raise ValueError(f"too few altimeter samples in [{t0:.1f}, {t1:.1f}] s")
+    tt, hh = t[sel], h[sel]
+    coef, cov = np.polyfit(tt - tt.mean(), hh, 1, cov=True)
+    r = hh - np.polyval(coef, tt - tt.mean())
+    rho1 = float(np.corrcoef(r[:-1], r[1:])[0, 1])
+    inflation = (1.0 + rho1) / (1.0 - rho1) if rho1 > 0 else 1.0
+    return -float(coef[0]), float(np.sqrt(cov[0, 0] * inflation)), float(hh.mean())
+
+
+def _implied_rate(fit: Fit, cov: Covariance, canopies: tuple[str, ...], altitude: float
+                  ) -> tuple[float, float]:
+    """Steady rate (m/s) the fitted drag areas give at `altitude` (m), and its sigma."""
+    test = fit.test
+    weight = (test.vehicle.mass + sum(c.dry_mass for c in test.parachutes)) * G0
+    names = [param_name("CdS", c, test.parachute(c).stages[-1]) for c in canopies]
+    cds = sum(fit.parameters[n] for n in names) + fit.parameters.get("CdS_V", 0.0)
+    rho = float(density_at(test.atmosphere, altitude)[0])
+    v = float(np.sqrt(2.0 * weight / (rho * cds)))
+    idx = [cov.names.index(n) for n in names if n in cov.names]
+    var = float(np.sum(cov.matrix[np.ix_(idx, idx)])) if idx else 0.0
+    return v, 0.5 * v * np.sqrt(max(var, 0.0)) / cds
+
+
+def descent_rates(fit: Fit, cov: Covariance) -> list[DescentRate]:
+    """Implied against measured steady descent rate under each canopy phase."""
+    out = []
+    for canopies, t0, t1 in _phases(fit):
+        if t1 - t0 < 5.0:
+            continue
+        measured, m_sigma, altitude = _measured_rate(fit, t0, t1)
+        implied, i_sigma = _implied_rate(fit, cov, canopies, altitude)
+        out.append(DescentRate(canopies, t0, t1, altitude, measured, m_sigma, implied, i_sigma))
+    return out
+
+
+def nominal_comparisons(fit: Fit, cov: Covariance, nominal: dict[str, dict[str, Any]],
+                        rates: list[DescentRate]) -> list[NominalComparison]:
+    """Each nominal drag area against the fit, with the descent rate it would give."""
+    from .units import FACTORS
+    out = []
+    test = fit.test
+    weight = (test.vehicle.mass + sum(c.dry_mass for c in test.parachutes)) * G0
+    for name, spec in nominal.items():
+        if name not in fit.parameters:
+            continue
+        value = float(spec["value"]) * FACTORS["area"][spec["unit"]]
+        canopy = name.split("[")[1].split(",")[0]
+        rate = next(r for r in rates if r.canopies[-1] == canopy)
+        others = sum(fit.parameters[param_name("CdS", c, test.parachute(c).stages[-1])]
+                     for c in rate.canopies if c != canopy)
+        rho = float(density_at(test.atmosphere, rate.altitude_m)[0])
+        v_nom = float(np.sqrt(2.0 * weight / (rho * (value + others))))
+        out.append(NominalComparison(name, fit.parameters[name], cov.std.get(name, 0.0), value,
+                                     spec.get("source", ""), v_nom, rate))
+    return out
+
+
+def opening_shock(fit: Fit) -> tuple[float, float, float] | None:
+    """(measured axial peak (g), its time (s), model peak load factor (g)) after the last
+    deployment, or None without an accelerometer."""
+    accel = fit.test.sensors_of("axial_accelerometer")
+    if not accel:
+        return None
+    t_last = max(e.time for e in fit.test.events)
+    lo, hi = t_last + EJECTION_EXCLUDE_S, t_last + SHOCK_WINDOW_S
+    peak, t_peak = descent_load_factor_peak(accel[0].data, lo, hi)
+    q = fit.quantities()
+    sel = (fit.t >= lo) & (fit.t <= hi)
+    return peak, t_peak, float(np.max(q["load_factor"][sel]))
+
+
+def flight_text(fit: Fit, cov: Covariance, nominal: dict[str, dict[str, Any]]) -> str:
+    """The markdown section comparing the reconstruction with nominal values and the data."""
+    rates = descent_rates(fit, cov)
+    lines = ["## Steady descent rates", "",
+             "| canopies open | window (s) | mean altitude (m MSL) | measured (m/s) | "
+             "implied by the fitted CdS (m/s) | difference (σ) |",
+             "|---|---|---|---|---|---|"]
+    for r in rates:
+        lines.append(f"| {' + '.join(r.canopies)} | {r.t0:.1f}-{r.t1:.1f} | "
+                     f"{r.altitude_m:.0f} | {r.measured:.2f} ± {r.measured_sigma:.2f} | "
+                     f"{r.implied:.2f} ± {r.implied_sigma:.2g} | {r.z:+.1f} |")
+    lines += ["", "## Drag areas against the published nominal values", "",
+              "| parameter | fitted (m²) | nominal (m²) | fitted / nominal | difference (σ) | "
+              "rate with the nominal CdS (m/s) | measured rate (m/s) |",
+              "|---|---|---|---|---|---|---|"]
+    comps = nominal_comparisons(fit, cov, nominal, rates)
+    for c in comps:
+        lines.append(f"| {c.name} | {c.fitted:.4f} ± {c.sigma:.2g} | {c.nominal:.3f} | "
+                     f"{c.fitted / c.nominal:.2f} | {c.z:+.1f} | {c.rate_nominal:.2f} | "
+                     f"{c.rate_measured.measured:.2f} ± {c.rate_measured.measured_sigma:.2f} |")
+    lines.append("")
+    for c in comps:
+        faster = "faster" if c.rate_nominal > c.rate_measured.measured else "slower"
+        lines.append(f"- {c.name}: with the nominal {c.nominal:.3f} m² ({c.source}) the rocket "
+                     f"would have come down at {c.rate_nominal:.2f} m/s near "
+                     f"{c.rate_measured.altitude_m:.0f} m, {faster} than the "
+                     f"{c.rate_measured.measured:.2f} m/s measured there; the measured rate "
+                     f"needs {c.fitted:.3f} m². A fitted drag area is the system's: it "
+                     "carries the drag of the body hanging beneath (the card fixes the "
+                     "forebody drag area at "
+                     f"{fit.parameters.get('CdS_V', 0.0):.3f} m²) and, for a later canopy, "
+                     "whatever the canopies opened before it lose or add to the wake.")
+    shock = opening_shock(fit)
+    if shock is not None:
+        peak, t_peak, model_peak = shock
+        lines += ["", "## Opening shock", "",
+                  f"- accelerometer: largest axial specific force {peak:.2f} g at "
+                  f"{t_peak:.2f} s (a lower bound of the load factor: the axis is not along "
+                  "the riser, and the log samples at about 10 Hz);",
+                  f"- model: peak load factor {model_peak:.2f} g in the same window."]
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,80 @@
+"""The Prometheus rocket's real logs: import, reconstruction and the flight comparison.
+
+The logs are read from the shared data folder and never copied; without it
+every test here skips with the reason.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cpas_ocp.altus_metrum import read_altus_log
+from cpas_ocp.estimation import Estimator
+from cpas_ocp.flight_log import import_flight, load_card
+from cpas_ocp.flight_report import descent_rates, nominal_comparisons
+from cpas_ocp.flight_test import load_test
+
+DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "prometheus-2022"
+MEGA = "telemega-serial-6583-flight-0003.csv"
+METRUM = "telemetrum-serial-5115-flight-0001.csv"
+
+pytestmark = pytest.mark.skipif(
+    not (DATA / MEGA).is_file(),
+    reason=f"the Prometheus flight logs are not at {DATA} (shared data folder absent)")
+
+
+@pytest.mark.parametrize("log_name, recorder", [(MEGA, "TeleMega"), (METRUM, "TeleMetrum")])
+def test_both_recorders_import(tmp_path: Path, log_name: str, recorder: str) -> None:
+    log = read_altus_log(DATA / log_name)
+    assert log.recorder == recorder
+    summary = import_flight(log, load_card("prometheus"), tmp_path / "test")
+    test = load_test(tmp_path / "test")
+    # Published facts: drogue at apogee (~28.5 s), main at 457 m AGL (~158 s).
+    assert summary.events["drogue"] == pytest.approx(28.5, abs=1.5)
+    assert summary.events["main"] == pytest.approx(158.0, abs=0.5)
+    # The 1401 m site on a hot June afternoon: 300 K from the published 1.001 kg/m^3, and
+    # a lapse rate between the standard 6.5 K/km and the dry adiabat.
+    assert summary.site.temperature_k == pytest.approx(300.5, abs=0.5)
+    assert 6.5e-3 < summary.site.lapse_rate_k_m < 9.8e-3
+    assert summary.lapse_fit is not None and summary.lapse_fit[2] < 10.0
+    # Under the 30 m/s drogue the altimeter scatters more than under the 7 m/s main.
+    assert summary.baro_sigma_m[0] > 2.0 * summary.baro_sigma_m[1]
+    assert test.t_end < summary.events["touchdown"]
+
+
+@pytest.fixture(scope="module")
+def mega_fit(tmp_path_factory: pytest.TempPathFactory):
+    folder = tmp_path_factory.mktemp("prometheus") / "test"
+    import_flight(read_altus_log(DATA / MEGA), load_card("prometheus"), folder)
+    est = Estimator(load_test(folder))
+    fit = est.solve()
+    return fit, est.covariance(fit)
+
+
+def test_reconstruction_matches_the_descent(mega_fit) -> None:
+    fit, cov = mega_fit
+    # Every estimated quantity the card asks for has an uncertainty.
+    for name in ("CdS[drogue,stage1]", "CdS[main,stage2]", "n[main,stage2]",
+                 "t_start[main,stage2]", "bias[baro,altitude]", "lag[baro]"):
+        assert name in fit.free
+    assert "CdS[drogue,stage1]" in cov.std and "CdS[main,stage2]" in cov.std
+    # The steady descent rates the fitted drag areas imply match the altimeter's within
+    # their combined sigma (|z| < 3).
+    rates = descent_rates(fit, cov)
+    assert [r.canopies for r in rates] == [("drogue",), ("drogue", "main")]
+    for r in rates:
+        assert abs(r.z) < 3.0, r
+
+
+def test_nominal_drag_areas_are_compared(mega_fit) -> None:
+    fit, cov = mega_fit
+    card = load_card("prometheus")
+    comps = nominal_comparisons(fit, cov, card.nominal, descent_rates(fit, cov))
+    assert {c.name for c in comps} == set(card.nominal)
+    for c in comps:
+        # The rate the nominal drag area would give differs from the measured one in the
+        # direction of the drag-area difference: more drag area, slower descent.
+        assert np.sign(c.rate_nominal - c.rate_measured.measured) == np.sign(c.fitted - c.nominal)
