@@ -194,27 +194,42 @@ def run_monte_carlo(fit: Fit, stages: list[StageCases], workers: int = 2,
                     scheduler: str | None = None, step: float = DEFAULT_STEP_S,
                     progress: bool = False) -> list[StageLoads]:
     """Fly every stage's cases (chunked over `workers` local processes, or on the Dask
-    scheduler at `scheduler`) and, in this process, the fit's own values once per stage."""
+    scheduler at `scheduler`) and, in this process, the fit's own values once per stage.
+
+    Every chunk also flies the fit's own values first: a worker whose model differs from
+    this process's (another cpas-ocp version, another copy of the test folder) gives
+    another peak for them, and the run stops with an InputError naming the folder rather
+    than return peaks of a different model."""
     if fit.test.path is None:
         raise ValueError("the Monte Carlo rebuilds the model from the test folder; this fit "
                          "has none")
     folder = str(Path(fit.test.path).resolve())
     chunks: list[Chunk] = []
     owner: list[int] = []
-    starts = []
+    starts, nominals = [], []
     for k, s in enumerate(stages):
         start = stage_start(fit, s.parachute, s.stage)
+        fitted = pd.DataFrame({c: [fit.parameters[param_name(c, s.parachute, s.stage)]]
+                               for c in s.cases.columns})
         starts.append(start)
+        nominals.append(fly_stage(fit.model, start, fitted, step))
         first = 0
         for size in chunk_sizes(len(s.cases), workers):
-            chunks.append(Chunk(folder, start, s.cases.iloc[first:first + size], step))
+            cases = pd.concat([fitted, s.cases.iloc[first:first + size]], ignore_index=True)
+            chunks.append(Chunk(folder, start, cases, step))
             owner.append(k)
             first += size
     results: list[PeakLoads | None] = [None] * len(chunks)
     total, flown = sum(len(s.cases) for s in stages), 0
     for done, (i, loads) in enumerate(run_tasks(fly_chunk, chunks, workers, scheduler), 1):
+        expected = nominals[owner[i]].tension[0]
+        if not np.isclose(loads.tension[0], expected, rtol=1e-9, atol=0.0):
+            raise InputError(folder, "(model)", f"the same model in every worker; a worker "
+                             f"flies the fitted values to {loads.tension[0]:.6g} N against "
+                             f"{expected:.6g} N here (another cpas-ocp version or another "
+                             "copy of the test folder on the workers?)")
         results[i] = loads
-        flown += len(chunks[i].cases)
+        flown += len(chunks[i].cases) - 1
         if progress and sys.stderr.isatty():
             sys.stderr.write(f"\r  {flown:,}/{total:,} cases flown ({done}/{len(chunks)} "
                              "chunks)   ")
@@ -226,11 +241,9 @@ def run_monte_carlo(fit: Fit, stages: list[StageCases], workers: int = 2,
         parts = [r for r, o in zip(results, owner, strict=True) if o == k and r is not None]
         start = starts[k]
         merged = PeakLoads(s.parachute, s.stage, start.t0, start.t1,
-                           np.concatenate([r.tension for r in parts]),
-                           np.concatenate([r.load_factor for r in parts]))
-        fitted = pd.DataFrame({c: [fit.parameters[param_name(c, s.parachute, s.stage)]]
-                               for c in s.cases.columns})
-        out.append(StageLoads(s, merged, fly_stage(fit.model, start, fitted, step)))
+                           np.concatenate([r.tension[1:] for r in parts]),
+                           np.concatenate([r.load_factor[1:] for r in parts]))
+        out.append(StageLoads(s, merged, nominals[k]))
     return out
 
 

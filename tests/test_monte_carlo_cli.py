@@ -3,6 +3,7 @@ canopy stage flown through the fit, on local processes and on a Dask LocalCluste
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import shutil
 
@@ -13,7 +14,10 @@ from scipy.stats import spearmanr
 
 from cpas_ocp.campaign import COLUMNS
 from cpas_ocp.cli import main
-from cpas_ocp.peak_load_study import QUANTILES
+from cpas_ocp.errors import InputError
+from cpas_ocp.estimation import Estimator
+from cpas_ocp.flight_test import load_test
+from cpas_ocp.peak_load_study import QUANTILES, match_cases, run_monte_carlo
 from cpas_ocp.units import LBF
 
 SEED = 7
@@ -121,3 +125,20 @@ def test_bad_input_is_one_line_exit_2_and_writes_nothing(study, tmp_path, capsys
                 str(out)], capsys)
     assert ": n: a parameter of fbcp1 stage1" in err
     assert not out.exists()
+
+
+def test_a_worker_with_another_model_is_refused(study, tmp_path) -> None:
+    """The workers rebuild the model from the folder's path: a copy that differs (here a
+    vehicle 10 % heavier) flies the fitted values to another peak, and the run stops."""
+    folder, root = study
+    other = tmp_path / "other"
+    shutil.copytree(folder, other)
+    manifest = json.loads((other / "manifest.json").read_text())
+    manifest["vehicle"]["mass"]["value"] *= 1.1
+    (other / "manifest.json").write_text(json.dumps(manifest))
+    fit = Estimator(load_test(folder)).solve()
+    stages = match_cases(fit.test, root / "dispersions", limit=4)
+    moved = dataclasses.replace(fit, test=dataclasses.replace(fit.test, path=other))
+    with pytest.raises(InputError, match="the same model in every worker"):
+        run_monte_carlo(moved, stages, workers=1)
+    assert len(run_monte_carlo(fit, stages, workers=1)[0].loads.tension) == 4
