@@ -7,9 +7,9 @@ Without any simulation, on the IMU's time base:
 * IMU drag area, Eq. 2:      PRF*CdS_total = W_T G / q - (CdS)_V, with the load
   factor G from the IMU, or from the track's acceleration without one;
 * riser drag area, Eq. 3:    PRF*CdS_P = (F_P + W_p,P G) / q;
-* without load cells, each canopy's drag area is the total drag area less
-  the steady drag areas of the canopies opened before it (canopies opened
-  one after another, as a rocket's drogue and main are);
+* with neither load cells nor an IMU, a canopy's drag area is its share of the total drag
+  area less the steady drag areas of the canopies opened before it (a
+  rocket's drogue, then its main; a cluster shares equally);
 * per-stage scale factor: the time mean of the IMU drag area over the
   stage's steady window divided by that of the summed riser drag areas
   (each times the cosine of its fly-out angle in a cluster, Eq. 7).  It
@@ -97,7 +97,7 @@ def reduce(test: FlightTest, starts: dict[tuple[str, str], float],
         cds_riser[chute.name] = (tension + chute.dry_mass * G0 * G) / q
 
     windows = _steady_windows(test, starts)
-    if not cells:
+    if not cells and not imu:  # an altimeter-only log: the track is all there is
         cds_riser = _attributed_cds(test, starts, windows, t, cds_imu)
     scale = {}
     for stage, (a, b) in windows.items():
@@ -114,17 +114,28 @@ def reduce(test: FlightTest, starts: dict[tuple[str, str], float],
 def _attributed_cds(test: FlightTest, starts: dict[tuple[str, str], float],
                     windows: dict[str, tuple[float, float]], t: np.ndarray,
                     cds_total: np.ndarray) -> dict[str, np.ndarray]:
-    """Each canopy's drag area (m^2) without load cells: the total drag area less the steady
-    drag areas (medians over their last stage's steady window) of the canopies opened
-    before it."""
+    """Each canopy's drag area (m^2) without load cells.
+
+    Canopies whose first stage has the same name open together (a cluster)
+    and share what is theirs equally; groups opened later get the total drag
+    area less the steady drag areas (medians over their last stage's steady
+    window) of the groups opened before them.
+    """
+    groups: dict[str, list[Parachute]] = {}
+    for chute in test.parachutes:
+        groups.setdefault(chute.stages[0], []).append(chute)
+    ordered = sorted(groups.values(),
+                     key=lambda g: min(starts[(c.name, c.stages[0])] for c in g))
     out: dict[str, np.ndarray] = {}
     opened = 0.0
-    for chute in sorted(test.parachutes, key=lambda c: starts[(c.name, c.stages[0])]):
-        out[chute.name] = cds_total - opened
-        a, b = windows[chute.stages[-1]]
+    for group in ordered:
+        share = (cds_total - opened) / len(group)
+        a, b = windows[group[0].stages[-1]]
         steady = (t >= a) & (t <= b)
+        for chute in group:
+            out[chute.name] = share
         if steady.any():
-            opened += float(np.median(out[chute.name][steady]))
+            opened += len(group) * float(np.median(share[steady]))
     return out
 
 
