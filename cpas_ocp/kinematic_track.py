@@ -25,7 +25,7 @@ from scipy.signal import savgol_filter
 from .atmosphere import geometric_altitude
 from .flight_test import FlightTest
 
-SMOOTH_S = 5  # Savitzky-Golay window of the vertical track (s)
+SMOOTH_S = 5.0  # Savitzky-Golay window of the vertical track (s)
 RESAMPLE_S = 0.05  # uniform grid the altitude is resampled to before smoothing (s)
 
 
