@@ -63,6 +63,10 @@ class StandardAtmosphere:
         p_trop = _troposphere_pressure(ca.fmin(h, h11), 0.0, ISA_P0_PA, ISA_T0_K, ISA_LAPSE_K_M)
         return p_trop * ca.exp(-G0 / (R_AIR * 216.65) * ca.fmax(h - h11, 0.0))
 
+    def altitude_at_pressure(self, p: np.ndarray | float) -> np.ndarray:
+        """Altitude (m) at pressure `p` (Pa): the pressure altitude (troposphere only)."""
+        return np.asarray(pressure_altitude(np.asarray(p, dtype=float)))
+
     def density(self, h: ca.SX | ca.MX | float) -> ca.SX | ca.MX:
         t_trop = ISA_T0_K - ISA_LAPSE_K_M * ca.fmin(h, 11000.0)
         return self.pressure(h) / (R_AIR * t_trop)
@@ -163,12 +167,11 @@ def geometric_altitude(atmosphere: Atmosphere, p_altitude: np.ndarray) -> np.nda
     """Geometric altitude (m) from a barometric altimeter's pressure altitude (m)."""
     p = ISA_P0_PA * (1.0 - np.asarray(p_altitude) * ISA_LAPSE_K_M / ISA_T0_K) ** (
         G0 / (R_AIR * ISA_LAPSE_K_M))
-    if isinstance(atmosphere, SiteAtmosphere):
-        return atmosphere.altitude_at_pressure(p)
-    if isinstance(atmosphere, StandardAtmosphere):
-        return np.asarray(p_altitude, dtype=float)
-    raise TypeError("a barometric altitude needs a standard or site atmosphere (one with "
-                    "pressure)")
+    invert = getattr(atmosphere, "altitude_at_pressure", None)
+    if invert is None:
+        raise TypeError("a barometric altitude needs a standard or site atmosphere (one with "
+                        "pressure)")
+    return invert(p)
 
 
 def _linear_function(name: str, x: np.ndarray, y: np.ndarray) -> ca.Function:

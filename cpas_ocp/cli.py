@@ -195,10 +195,15 @@ def _parallel_options(s: argparse.ArgumentParser) -> None:
                    help="run on this Dask scheduler (e.g. tcp://host:8786) instead")
 
 
+def _at_least_one(option: str, value: int) -> None:
+    """InputError naming the command-line option when a count is below 1."""
+    if value < 1:
+        raise InputError("(command line)", option, f"at least 1; got {value}")
+
+
 def _where(args: argparse.Namespace) -> str:
     """Where --workers and --scheduler send the tasks, in words; InputError below 1 worker."""
-    if args.workers < 1:
-        raise InputError("(command line)", "--workers", f"at least 1; got {args.workers}")
+    _at_least_one("--workers", args.workers)
     return (f"Dask scheduler {args.scheduler}" if args.scheduler
             else f"{args.workers} local processes")
 
@@ -361,8 +366,7 @@ def _dispersions(args: argparse.Namespace) -> int:
         read_stage_table,
         write_dispersions,
     )
-    if args.cases < 1:
-        raise InputError("(command line)", "--cases", f"at least 1; got {args.cases}")
+    _at_least_one("--cases", args.cases)
     table = read_parameter_table(args.campaign)
     stages = read_stage_table(args.campaign)
     models, skipped = dispersion_models(table)
@@ -395,8 +399,8 @@ def _montecarlo(args: argparse.Namespace) -> int:
         write_monte_carlo,
     )
     where = _where(args)
-    if args.limit is not None and args.limit < 1:
-        raise InputError("(command line)", "--limit", f"at least 1; got {args.limit}")
+    if args.limit is not None:
+        _at_least_one("--limit", args.limit)
     test = load_test(args.test_dir)
     stages = match_cases(test, args.cases, args.limit)
     with atomic_folder(args.out, MARKER) as tmp:
@@ -428,7 +432,6 @@ def _flight(args: argparse.Namespace) -> int:
     from .flight_log import import_flight, load_card
     from .flight_report import flight_text
     from .flight_test import load_test
-    from .report import fit_summary, parameter_table, write_report
     card = load_card(args.card)
     data = args.data if args.data is not None else Path("../shared/data") / card.data_folder
     logs = args.log or list(card.logs)
@@ -442,19 +445,12 @@ def _flight(args: argparse.Namespace) -> int:
         summary = import_flight(read_altus_log(data / name), card, folder / "test")
         print(summary.text())
         test = load_test(folder / "test")
-        est = _estimator(test, args, _spec(test, None))
-        print(f"solving: {est.size_text()} ...", flush=True)
-        fit, cov = _fit_and_covariance(est, args)
-        out = write_report(fit, cov, folder / "report")
+        fit, cov, out = _run_reconstruction(test, args, _spec(test, None), folder / "report")
         text = flight_text(fit, cov, card.nominal)
         (out / "flight.md").write_text(f"# {card.title}\n\n{card.label}\n\n{text}")
         print()
-        print(parameter_table(fit, cov))
-        print()
-        print(fit_summary(fit))
-        print()
         print(text)
-        print(f"report written to {out} (report.md, flight.md, result.json, figures)")
+        print(f"flight comparison written to {out / 'flight.md'}")
     return 0
 
 
@@ -473,7 +469,9 @@ def _demo(args: argparse.Namespace) -> int:
     return 0
 
 
-def _run_reconstruction(test: FlightTest, args: argparse.Namespace, spec: ModelSpec) -> None:
+def _run_reconstruction(test: FlightTest, args: argparse.Namespace, spec: ModelSpec,
+                        out: Path | None = None) -> tuple[Fit, Covariance, Path]:
+    """Solve, write the report folder (`out`, default --out) and print the tables."""
     from .profile_likelihood import profile, require_free
     from .report import fit_summary, parameter_table, write_report
     est = _estimator(test, args, spec)
@@ -484,7 +482,7 @@ def _run_reconstruction(test: FlightTest, args: argparse.Namespace, spec: ModelS
     fit, cov = _fit_and_covariance(est, args)
     profiles = [profile(est, fit, cov, n, args.profile_span, args.profile_points,
                         progress=not args.verbose) for n in names]
-    out = write_report(fit, cov, args.out, profiles)
+    out = write_report(fit, cov, out if out is not None else args.out, profiles)
     print()
     print(parameter_table(fit, cov))
     print()
@@ -492,6 +490,7 @@ def _run_reconstruction(test: FlightTest, args: argparse.Namespace, spec: ModelS
     for prof in profiles:
         print(f"profile likelihood, {prof.text()}")
     print(f"\nreport written to {out} (result.json, parameters.csv, report.md, figures)")
+    return fit, cov, out
 
 
 def _estimator(test: FlightTest, args: argparse.Namespace, spec: ModelSpec) -> Estimator:

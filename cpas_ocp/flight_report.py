@@ -30,9 +30,9 @@ from .atmosphere import density_at
 from .estimation import Fit
 from .flight_log import EJECTION_EXCLUDE_S, descent_load_factor_peak
 from .kinematic_track import altimeter_altitude
-from .parameters import param_name
+from .parameters import param_name, split_name
 from .uncertainty import Covariance
-from .units import G0
+from .units import FACTORS
 
 STEADY_AFTER_S = 10.0  # a canopy phase counts as steady this long after its deployment (s)
 STEADY_BEFORE_S = 2.0  # ... and until this long before the next deployment (s)
@@ -102,15 +102,24 @@ def _measured_rate(fit: Fit, t0: float, t1: float) -> tuple[float, float, float]
     return -float(coef[0]), float(np.sqrt(cov[0, 0] * inflation)), float(hh.mean())
 
 
+def steady_rate(fit: Fit, cds: float, altitude: float) -> float:
+    """Steady descent rate (m/s) with total drag area `cds` (m^2) at `altitude` (m):
+    drag equals weight, v = sqrt(2 W / (rho(h) CdS))."""
+    rho = float(density_at(fit.test.atmosphere, altitude)[0])
+    return float(np.sqrt(2.0 * fit.test.weight / (rho * cds)))
+
+
+def _steady_cds(fit: Fit, canopy: str) -> str:
+    """Name of the steady drag area of `canopy` (its last stage)."""
+    return param_name("CdS", canopy, fit.test.parachute(canopy).stages[-1])
+
+
 def _implied_rate(fit: Fit, cov: Covariance, canopies: tuple[str, ...], altitude: float
                   ) -> tuple[float, float]:
     """Steady rate (m/s) the fitted drag areas give at `altitude` (m), and its sigma."""
-    test = fit.test
-    weight = (test.vehicle.mass + sum(c.dry_mass for c in test.parachutes)) * G0
-    names = [param_name("CdS", c, test.parachute(c).stages[-1]) for c in canopies]
+    names = [_steady_cds(fit, c) for c in canopies]
     cds = sum(fit.parameters[n] for n in names) + fit.parameters.get("CdS_V", 0.0)
-    rho = float(density_at(test.atmosphere, altitude)[0])
-    v = float(np.sqrt(2.0 * weight / (rho * cds)))
+    v = steady_rate(fit, cds, altitude)
     idx = [cov.names.index(n) for n in names if n in cov.names]
     var = float(np.sum(cov.matrix[np.ix_(idx, idx)])) if idx else 0.0
     return v, 0.5 * v * np.sqrt(max(var, 0.0)) / cds
@@ -131,20 +140,16 @@ def descent_rates(fit: Fit, cov: Covariance) -> list[DescentRate]:
 def nominal_comparisons(fit: Fit, cov: Covariance, nominal: dict[str, dict[str, Any]],
                         rates: list[DescentRate]) -> list[NominalComparison]:
     """Each nominal drag area against the fit, with the descent rate it would give."""
-    from .units import FACTORS
     out = []
-    test = fit.test
-    weight = (test.vehicle.mass + sum(c.dry_mass for c in test.parachutes)) * G0
     for name, spec in nominal.items():
         if name not in fit.parameters:
             continue
         value = float(spec["value"]) * FACTORS["area"][spec["unit"]]
-        canopy = name.split("[")[1].split(",")[0]
+        canopy = split_name(name)[1][0]
         rate = next(r for r in rates if r.canopies[-1] == canopy)
-        others = sum(fit.parameters[param_name("CdS", c, test.parachute(c).stages[-1])]
-                     for c in rate.canopies if c != canopy)
-        rho = float(density_at(test.atmosphere, rate.altitude_m)[0])
-        v_nom = float(np.sqrt(2.0 * weight / (rho * (value + others))))
+        others = sum(fit.parameters[_steady_cds(fit, c)] for c in rate.canopies if c != canopy)
+        v_nom = steady_rate(fit, value + others + fit.parameters.get("CdS_V", 0.0),
+                            rate.altitude_m)
         out.append(NominalComparison(name, fit.parameters[name], cov.std.get(name, 0.0), value,
                                      spec.get("source", ""), v_nom, rate))
     return out

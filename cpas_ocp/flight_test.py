@@ -26,7 +26,7 @@ import referencing
 
 from .atmosphere import Atmosphere, SiteAtmosphere, StandardAtmosphere, TableAtmosphere
 from .errors import InputError
-from .units import FACTORS
+from .units import FACTORS, G0
 
 MANIFEST = "manifest.json"
 FORMAT = "cpas-ocp/test-folder/1"
@@ -169,6 +169,11 @@ class FlightTest:
 
     def parachute(self, name: str) -> Parachute:
         return next(p for p in self.parachutes if p.name == name)
+
+    @property
+    def weight(self) -> float:
+        """Weight of the suspended system (N): vehicle and canopies' dry mass times g0."""
+        return (self.vehicle.mass + sum(p.dry_mass for p in self.parachutes)) * G0
 
     def event(self, name: str, parachute: str, stage: str | None = None) -> Event | None:
         for e in self.events:

@@ -87,8 +87,7 @@ def reduce(test: FlightTest, starts: dict[tuple[str, str], float],
         G = np.interp(t, imu[0].time, imu[0].data["load_factor"])
     else:  # specific force of the track: a - g, g pointing down
         G = np.linalg.norm(track.acceleration + np.array([0.0, 0.0, G0]), axis=1) / G0
-    w_total = (test.vehicle.mass + sum(p.dry_mass for p in test.parachutes)) * G0
-    cds_imu = w_total * G / q - (test.vehicle.forebody_cds if forebody_cds is None
+    cds_imu = test.weight * G / q - (test.vehicle.forebody_cds if forebody_cds is None
                                  else forebody_cds)
     cds_riser = {}
     for cell in cells:

@@ -22,6 +22,7 @@ from cpas_ocp.atmosphere import (
     geometric_altitude,
     pressure_altitude,
 )
+from cpas_ocp.cli import main
 from cpas_ocp.errors import InputError
 from cpas_ocp.flight_log import (
     card_from_dict,
@@ -199,8 +200,7 @@ def test_card_errors_name_the_field(tmp_path: Path) -> None:
         card_from_dict(bad, "card.json")
     with pytest.raises(InputError, match="prometheus"):
         load_card("no_such_flight")
-    events = _write_log(tmp_path / "log.csv", seed=4)
-    assert events
+    _write_log(tmp_path / "log.csv", seed=4)
     log = read_altus_log(tmp_path / "log.csv")
     late = {**CARD, "parachutes": [{**CARD["parachutes"][0], "deployment": "apogee"}]}
     with pytest.raises(InputError, match="'apogee' flight state"):
@@ -212,3 +212,17 @@ def test_builtin_card_names_its_data() -> None:
     card = load_card("prometheus")
     assert card.data_folder == "prometheus-2022" and len(card.logs) == 2
     assert math.isclose(card.nominal["CdS[drogue,stage1]"]["value"], 0.467)
+
+
+def test_import_command_writes_the_folder_and_flight_refuses_missing_logs(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    _write_log(tmp_path / "log.csv", seed=5)
+    (tmp_path / "card.json").write_text(json.dumps(CARD))
+    assert main(["import-altus", str(tmp_path / "log.csv"), "--card",
+                 str(tmp_path / "card.json"), "--out", str(tmp_path / "test")]) == 0
+    assert load_test(tmp_path / "test").name == "synthetic_rocket"
+    code = main(["flight", "prometheus", "--out", str(tmp_path / "out"),
+                 "--data", str(tmp_path / "nowhere")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and "nowhere" in err[0] and "--data" in err[0]
+    assert not (tmp_path / "out").exists()
