@@ -429,6 +429,8 @@ def _import_altus(args: argparse.Namespace) -> int:
 
 def _flight(args: argparse.Namespace) -> int:
     from .altus_metrum import read_altus_log
+    from .diagnosis import diagnose
+    from .discrepancy_report import write_diagnosis
     from .flight_log import import_flight, load_card
     from .flight_report import flight_text
     from .flight_test import load_test
@@ -445,8 +447,12 @@ def _flight(args: argparse.Namespace) -> int:
         summary = import_flight(read_altus_log(data / name), card, folder / "test")
         print(summary.text())
         test = load_test(folder / "test")
-        fit, cov, out = _run_reconstruction(test, args, _spec(test, None), folder / "report")
-        text = flight_text(fit, cov, card.nominal)
+        spec = _spec(test, None)
+        fit, cov, out = _run_reconstruction(test, args, spec, folder / "report")
+        print("diagnosing the residuals ...", flush=True)
+        diag = diagnose(fit, spec, progress=not args.verbose)
+        write_diagnosis(diag, cov, folder / "diagnosis")
+        text = flight_text(fit, cov, card.nominal, diag)
         (out / "flight.md").write_text(f"# {card.title}\n\n{card.label}\n\n{text}")
         print()
         print(text)

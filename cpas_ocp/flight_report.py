@@ -27,7 +27,9 @@ from typing import Any
 import numpy as np
 
 from .atmosphere import density_at
-from .estimation import Fit
+from .common_residual import BLOCK_S, combined_p_value, common_residuals
+from .diagnosis import ALPHA, Diagnosis
+from .estimation import PSEUDO_SENSORS, Fit
 from .flight_log import EJECTION_EXCLUDE_S, descent_load_factor_peak
 from .kinematic_track import altimeter_altitude
 from .parameters import param_name, split_name
@@ -70,10 +72,14 @@ class NominalComparison:
     source: str
     rate_nominal: float
     rate_measured: DescentRate
+    sigma_rate: float
 
     @property
     def z(self) -> float:
-        return (self.fitted - self.nominal) / self.sigma if self.sigma > 0 else float("inf")
+        """Fitted minus nominal in the sigma the measured descent rate allows: the fit's own
+        sigma assumes white sensor noise and is far smaller than the descent's wander."""
+        sigma = max(self.sigma, self.sigma_rate)
+        return (self.fitted - self.nominal) / sigma if sigma > 0 else float("inf")
 
 
 def _phases(fit: Fit) -> list[tuple[tuple[str, ...], float, float]]:
@@ -137,10 +143,31 @@ def descent_rates(fit: Fit, cov: Covariance) -> list[DescentRate]:
     return out
 
 
+def rate_sigmas(fit: Fit, rates: list[DescentRate]) -> dict[str, float]:
+    """Sigma (m^2) of each canopy's steady drag area from the measured descent rates alone.
+
+    Drag equals weight, so a phase's total drag area is 2 W / (rho v^2) and its
+    relative sigma is twice the measured rate's (whose sigma counts the
+    residuals' autocorrelation: the descent's slow wander, which the fit's
+    white-noise sigma leaves out).  A canopy opened after others gets its
+    phase's total less theirs, so their sigmas add in quadrature.
+    """
+    out: dict[str, float] = {}
+    for r in rates:
+        canopy = r.canopies[-1]
+        total = sum(fit.parameters[_steady_cds(fit, c)] for c in r.canopies)
+        total += fit.parameters.get("CdS_V", 0.0)
+        var = (2.0 * total * r.measured_sigma / r.measured) ** 2
+        var += sum(out.get(_steady_cds(fit, c), 0.0) ** 2 for c in r.canopies[:-1])
+        out[_steady_cds(fit, canopy)] = float(np.sqrt(var))
+    return out
+
+
 def nominal_comparisons(fit: Fit, cov: Covariance, nominal: dict[str, dict[str, Any]],
                         rates: list[DescentRate]) -> list[NominalComparison]:
     """Each nominal drag area against the fit, with the descent rate it would give."""
     out = []
+    by_rate = rate_sigmas(fit, rates)
     for name, spec in nominal.items():
         if name not in fit.parameters:
             continue
@@ -151,7 +178,8 @@ def nominal_comparisons(fit: Fit, cov: Covariance, nominal: dict[str, dict[str, 
         v_nom = steady_rate(fit, value + others + fit.parameters.get("CdS_V", 0.0),
                             rate.altitude_m)
         out.append(NominalComparison(name, fit.parameters[name], cov.std.get(name, 0.0), value,
-                                     spec.get("source", ""), v_nom, rate))
+                                     spec.get("source", ""), v_nom, rate,
+                                     by_rate.get(name, 0.0)))
     return out
 
 
@@ -169,8 +197,49 @@ def opening_shock(fit: Fit) -> tuple[float, float, float] | None:
     return peak, t_peak, float(np.max(q["load_factor"][sel]))
 
 
-def flight_text(fit: Fit, cov: Covariance, nominal: dict[str, dict[str, Any]]) -> str:
-    """The markdown section comparing the reconstruction with nominal values and the data."""
+def missing_text(fit: Fit, diagnosis: Diagnosis | None) -> str:
+    """The markdown section on what the model misses: the worst-fitting window, the
+    diagnosis's verdict on the library's effects and the residual's structure, and whether
+    the altitude sensors share their residual (`common_residual`), which names the effect."""
+    rms = ", ".join(f"{r.sensor} {r.channel} {np.sqrt(np.mean(r.normalized**2)):.2f}"
+                    for r in fit.residuals if r.sensor not in PSEUDO_SENSORS)
+    lines = ["## What the model misses", "",
+             f"- chi-square per degree of freedom {fit.chi_square / fit.dof:.2f}; normalised "
+             f"RMS by channel: {rms}."]
+    alpha = diagnosis.alpha if diagnosis is not None else ALPHA
+    if diagnosis is not None:
+        verdict = diagnosis.verdict().split("\n")
+        lines += [f"- worst fit: {diagnosis.worst}.",
+                  "- the diagnosis (score tests of every library effect the model does not use, "
+                  "residual tests per channel and window; the diagnosis folder beside this "
+                  "report): " + verdict[0]]
+        lines += [f"  {line}" for line in verdict[1:]]
+        lines.append("- the altitude sensors against each other:")
+    common = common_residuals(fit)
+    p = combined_p_value(common)
+    lines += [f"  - {c.text()};" for c in common]
+    if common and p < alpha:
+        size = max(max(c.rms) for c in common)
+        lines += ["", f"The altitude sensors share their residual (Fisher's combined p = {p:.2g}, "
+                  f"below {alpha:g}): the vehicle's own altitude wanders about the model, by up "
+                  f"to {size:.0f} m RMS in {BLOCK_S:g} s means, and the two sensors see it alike. "
+                  "The effect that remains is therefore physical, not a sensor's: no bias, lag "
+                  "or scale of one sensor can remove what both see. The descent rate varies "
+                  "along the descent in a way the model lacks: vertical air motion (rising and "
+                  "sinking air of a fraction of a metre per second shifts a steady descent by "
+                  "tens of metres over a minute) or a density profile off the site "
+                  "atmosphere's constant lapse rate. Neither is in the model; the drag areas "
+                  "carry each canopy phase's mean descent rate."]
+    elif common:
+        lines += ["", f"The altitude sensors do not share their residual (Fisher's combined "
+                  f"p = {p:.2g}): what remains is each sensor's own."]
+    return "\n".join(lines) + "\n"
+
+
+def flight_text(fit: Fit, cov: Covariance, nominal: dict[str, dict[str, Any]],
+                diagnosis: Diagnosis | None = None) -> str:
+    """The markdown sections comparing the reconstruction with nominal values and the data,
+    and saying what the model misses (with `diagnosis`, its verdict too)."""
     rates = descent_rates(fit, cov)
     lines = ["## Steady descent rates", "",
              "| canopies open | window (s) | mean altitude (m MSL) | measured (m/s) | "
@@ -181,15 +250,20 @@ def flight_text(fit: Fit, cov: Covariance, nominal: dict[str, dict[str, Any]]) -
                      f"{r.altitude_m:.0f} | {r.measured:.2f} ± {r.measured_sigma:.2f} | "
                      f"{r.implied:.2f} ± {r.implied_sigma:.2g} | {r.z:+.1f} |")
     lines += ["", "## Drag areas against the published nominal values", "",
-              "| parameter | fitted (m²) | nominal (m²) | fitted / nominal | difference (σ) | "
-              "rate with the nominal CdS (m/s) | measured rate (m/s) |",
-              "|---|---|---|---|---|---|---|"]
+              "| parameter | fitted (m²) | σ from the measured rate (m²) | nominal (m²) | "
+              "fitted / nominal | difference (σ) | rate with the nominal CdS (m/s) | "
+              "measured rate (m/s) |",
+              "|---|---|---|---|---|---|---|---|"]
     comps = nominal_comparisons(fit, cov, nominal, rates)
     for c in comps:
-        lines.append(f"| {c.name} | {c.fitted:.4f} ± {c.sigma:.2g} | {c.nominal:.3f} | "
-                     f"{c.fitted / c.nominal:.2f} | {c.z:+.1f} | {c.rate_nominal:.2f} | "
+        lines.append(f"| {c.name} | {c.fitted:.4f} ± {c.sigma:.2g} | {c.sigma_rate:.2g} | "
+                     f"{c.nominal:.3f} | {c.fitted / c.nominal:.2f} | {c.z:+.1f} | "
+                     f"{c.rate_nominal:.2f} | "
                      f"{c.rate_measured.measured:.2f} ± {c.rate_measured.measured_sigma:.2f} |")
-    lines.append("")
+    lines += ["", "The fit's σ treat the sensor noise as white. The descent wanders about the "
+              "model over tens of seconds (see below), so the σ that the measured rate's "
+              "scatter allows, with the residuals' autocorrelation counted, is the honest one; "
+              "the difference from the nominal value is given in the larger of the two.", ""]
     for c in comps:
         faster = "faster" if c.rate_nominal > c.rate_measured.measured else "slower"
         lines.append(f"- {c.name}: with the nominal {c.nominal:.3f} m² ({c.source}) the rocket "
@@ -209,4 +283,16 @@ def flight_text(fit: Fit, cov: Covariance, nominal: dict[str, dict[str, Any]]) -
                   f"{t_peak:.2f} s (a lower bound of the load factor: the axis is not along "
                   "the riser, and the log samples at about 10 Hz);",
                   f"- model: peak load factor {model_peak:.2f} g in the same window."]
-    return "\n".join(lines) + "\n"
+        if model_peak < peak:
+            canopy = max(fit.test.events, key=lambda e: e.time).parachute
+            held = [n for n in fit.model.parameter_names
+                    if split_name(n)[0] in ("n", "expopen") and split_name(n)[1][:1] == (canopy,)
+                    and (n not in fit.free
+                         or fit.model.parameter(n).on_bound(fit.parameters[n]))]
+            lines.append("- the model opens more slowly than the canopy did: its peak is below "
+                         "the accelerometer's lower bound. The altimeter, sampled at about "
+                         "10 Hz, does not resolve a sub-second opening and the accelerometer is "
+                         "not fitted (its axis swings against the riser), so this log does not "
+                         "determine the opening's shape"
+                         + (f" ({', '.join(held)} on a bound or held fixed)." if held else "."))
+    return "\n".join(lines) + "\n\n" + missing_text(fit, diagnosis)

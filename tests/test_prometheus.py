@@ -12,9 +12,11 @@ import numpy as np
 import pytest
 
 from cpas_ocp.altus_metrum import read_altus_log
+from cpas_ocp.common_residual import combined_p_value, common_residuals
+from cpas_ocp.diagnosis import ALPHA
 from cpas_ocp.estimation import Estimator
 from cpas_ocp.flight_log import import_flight, load_card
-from cpas_ocp.flight_report import descent_rates, nominal_comparisons
+from cpas_ocp.flight_report import descent_rates, flight_text, nominal_comparisons
 from cpas_ocp.flight_test import load_test
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "prometheus-2022"
@@ -78,3 +80,20 @@ def test_nominal_drag_areas_are_compared(mega_fit) -> None:
         # The rate the nominal drag area would give differs from the measured one in the
         # direction of the drag-area difference: more drag area, slower descent.
         assert np.sign(c.rate_nominal - c.rate_measured.measured) == np.sign(c.fitted - c.nominal)
+
+
+def test_report_names_the_effect_that_remains(mega_fit) -> None:
+    fit, cov = mega_fit
+    # The altimeter and the GPS share the slow wander of their residuals in both canopy
+    # phases: the vehicle's altitude, not a sensor, departs from the model.
+    common = common_residuals(fit)
+    assert [c.channels for c in common] == [("baro altitude", "gps_altitude up")] * 2
+    assert all(c.r > 0.7 for c in common)
+    assert combined_p_value(common) < ALPHA
+    text = flight_text(fit, cov, load_card("prometheus").nominal)
+    assert "The altitude sensors share their residual" in text
+    assert "vertical air motion" in text
+    # The drag areas' honest sigma, from the measured rates, exceeds the fit's white-noise one.
+    for c in nominal_comparisons(fit, cov, load_card("prometheus").nominal,
+                                 descent_rates(fit, cov)):
+        assert c.sigma_rate > 10.0 * c.sigma
