@@ -214,9 +214,10 @@ def missing_text(fit: Fit, diagnosis: Diagnosis | None) -> str:
                   "residual tests per channel and window; the diagnosis folder beside this "
                   "report): " + verdict[0]]
         lines += [f"  {line}" for line in verdict[1:]]
-        lines.append("- the altitude sensors against each other:")
     common = common_residuals(fit)
     p = combined_p_value(common)
+    if common:
+        lines.append("- the altitude sensors against each other:")
     lines += [f"  - {c.text()};" for c in common]
     if common and p < alpha:
         size = max(max(c.rms) for c in common)

@@ -91,6 +91,7 @@ def test_report_names_the_effect_that_remains(mega_fit) -> None:
     assert all(c.r > 0.7 for c in common)
     assert combined_p_value(common) < ALPHA
     text = flight_text(fit, cov, load_card("prometheus").nominal)
+    assert "- the altitude sensors against each other:" in text
     assert "The altitude sensors share their residual" in text
     assert "vertical air motion" in text
     # The drag areas' honest sigma, from the measured rates, exceeds the fit's white-noise one.
