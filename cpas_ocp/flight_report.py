@@ -32,6 +32,7 @@ from .diagnosis import ALPHA, Diagnosis
 from .estimation import PSEUDO_SENSORS, Fit
 from .flight_log import EJECTION_EXCLUDE_S, descent_load_factor_peak
 from .kinematic_track import altimeter_altitude
+from .model_comparison import channel_rms
 from .parameters import param_name, split_name
 from .uncertainty import Covariance
 from .units import FACTORS
@@ -201,8 +202,8 @@ def missing_text(fit: Fit, diagnosis: Diagnosis | None) -> str:
     """The markdown section on what the model misses: the worst-fitting window, the
     diagnosis's verdict on the library's effects and the residual's structure, and whether
     the altitude sensors share their residual (`common_residual`), which names the effect."""
-    rms = ", ".join(f"{r.sensor} {r.channel} {np.sqrt(np.mean(r.normalized**2)):.2f}"
-                    for r in fit.residuals if r.sensor not in PSEUDO_SENSORS)
+    rms = ", ".join(f"{name} {value:.2f}" for name, value in channel_rms(fit).items()
+                    if name.split(".")[0] not in PSEUDO_SENSORS)
     lines = ["## What the model misses", "",
              f"- chi-square per degree of freedom {fit.chi_square / fit.dof:.2f}; normalised "
              f"RMS by channel: {rms}."]
