@@ -4,9 +4,10 @@ An AltOS CSV export has one header row that starts with ``#``, values padded
 with spaces, two columns both named ``altitude`` (the barometric one, then
 the GPS one further right), GPS columns that repeat their last fix between
 fixes, NaN runs (``speed`` before the filter converges, ``tilt`` without a
-gyro), repeated time stamps, and sampling that is fast in boost (100 Hz) and
-slow in descent (10-16 Hz).  TeleMega logs add IMU columns (``accel_x`` ...,
-``gyro_roll`` ...); TeleMetrum logs do not.
+gyro), repeated time stamps, rows of other records (GPS, companion, pyro) that
+carry the last sensor sample forward under a later time stamp, and sampling
+that is fast in boost (100 Hz) and slow in descent (10-16 Hz).  TeleMega logs
+add IMU columns (``accel_x`` ..., ``gyro_roll`` ...); TeleMetrum logs do not.
 
 Columns used, in the units AltOS writes:
 
@@ -34,6 +35,8 @@ import pandas as pd
 from .errors import InputError
 
 REQUIRED = ("time", "state_name", "pressure", "altitude", "acceleration")
+# Columns of the sensor record: a row whose values all equal the previous row's repeats it.
+SENSOR_COLUMNS = ("pressure", "acceleration")
 GPS_COLUMNS = ("latitude", "longitude", "gps_altitude", "nsat")
 IMU_COLUMNS = ("accel_x", "accel_y", "accel_z", "gyro_roll", "gyro_pitch", "gyro_yaw")
 # AltOS writes 2^31 - 1 for a quantity the receiver did not report (e.g. hdop).
@@ -51,6 +54,22 @@ class AltusLog:
     data: pd.DataFrame
     events: dict[str, float]
     duplicate_times: int
+
+    def sensor_samples(self) -> pd.DataFrame:
+        """Rows that hold a new sample of the barometer and accelerometer.
+
+        AltOS writes one row per log record; the rows of the other records (GPS,
+        companion, pyro) repeat the last sensor sample under their own, later, time
+        stamp.  On the TeleMega log of the Prometheus flight about a quarter of the
+        descent rows are such copies, 0.01-0.09 s after the sample they repeat: kept,
+        they would weigh those samples twice and look like an altimeter lag.  A row
+        is a copy when pressure (Pa, a resolution of a few centimetres of altitude)
+        and axial acceleration both equal the previous row's.
+        """
+        d = self.data
+        same = (d[list(SENSOR_COLUMNS)].diff() == 0).all(axis=1).to_numpy().copy()
+        same[0] = False
+        return d[~same].reset_index(drop=True)
 
     @property
     def has_gps(self) -> bool:

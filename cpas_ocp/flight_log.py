@@ -235,6 +235,7 @@ def import_flight(log: AltusLog, card: FlightCard, out: str | Path) -> ImportSum
     """Write the test folder of `log` under `card` to `out` (see the module docstring)."""
     out = Path(out)
     d = log.data
+    samples = log.sensor_samples()
     src = str(log.path)
     deploy = {}
     for i, chute in enumerate(card.parachutes):
@@ -251,7 +252,7 @@ def import_flight(log: AltusLog, card: FlightCard, out: str | Path) -> ImportSum
     pad_altitude = float(pressure_altitude(p0))
     t_begin = min(deploy.values())
     t_last = max(deploy.values())
-    baro = d[["time", "altitude", "pressure"]].dropna()
+    baro = samples[["time", "altitude", "pressure"]].dropna()
     t_down = touchdown_time(baro["time"].to_numpy(),
                             baro["altitude"].to_numpy() - pad_altitude, t_last)
     t_end = t_down - TOUCHDOWN_MARGIN_S
@@ -292,7 +293,7 @@ def import_flight(log: AltusLog, card: FlightCard, out: str | Path) -> ImportSum
                                                                part["altitude"].to_numpy())))
 
     fixes_phase = fixes[(fixes["time"] >= lo) & (fixes["time"] <= hi)]
-    accel = d[["time", "acceleration"]].dropna()
+    accel = samples[["time", "acceleration"]].dropna()
     accel = accel[(accel["time"] >= lo) & (accel["time"] <= hi)]
     files = {"baro.csv": baro_phase[["time", "altitude"]],
              "accelerometer.csv": accel}
@@ -341,6 +342,8 @@ def import_flight(log: AltusLog, card: FlightCard, out: str | Path) -> ImportSum
         log.recorder, (t_begin, t_end), {**deploy, "touchdown": t_down}, site, lapse_fit,
         baro_sigmas, {name: len(frame) for name, frame in files.items()},
         {"repeated_time_stamps": log.duplicate_times,
+         "repeated_sensor_rows": int(d["time"].between(lo, hi).sum()
+                                     - samples["time"].between(lo, hi).sum()),
          "ejection_charge_samples": int((in_phase.to_numpy() & near_charge).sum()),
          "gps_repeats_between_fixes": int(d["time"].between(lo, hi).sum()
                                           - len(fixes_phase)) if log.has_gps else 0})

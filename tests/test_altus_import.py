@@ -67,11 +67,14 @@ def _write_log(path: Path, seed: int) -> dict[str, float]:
             last_fix = t[k]
             gps = (32.9 + 1e-5 * k, -106.9, SITE.elevation_m + h_agl[k] + rng.normal(0, 3.0))
         speed = "NaN" if k < 40 else f"{-30.0:8.2f}"
-        lines.append(
-            f"6, 6583, 3,VE3LIC, {t[k]:8.2f}, 3, {state[k]:>7s}, {-9.81:7.2f}, {p[k]:9.2f}, "
-            f"{float(pressure_altitude(p[k])):8.2f}, {h_agl[k]:8.2f}, {speed}, 30.0, 0.0, 0.0, "
-            f"0.0, 0.0, 0.0, 0.0, 11, {gps[0]:12.7f},{gps[1]:12.7f}, {gps[2]:7.1f},"
-            f"2147483647.0")
+        for stamp in (t[k], t[k] + 0.04) if k % 7 == 3 and t[k] > drogue else (t[k],):
+            # A second stamp (in the 10 Hz descent) is another record's row repeating the
+            # sensor sample.
+            lines.append(
+                f"6, 6583, 3,VE3LIC, {stamp:8.2f}, 3, {state[k]:>7s}, {-9.81:7.2f}, "
+                f"{p[k]:9.2f}, {float(pressure_altitude(p[k])):8.2f}, {h_agl[k]:8.2f}, {speed}, "
+                f"30.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 11, {gps[0]:12.7f},{gps[1]:12.7f}, "
+                f"{gps[2]:7.1f},2147483647.0")
         if k % 200 == 7:  # AltOS repeats a time stamp now and then
             lines.append(lines[-1])
     path.write_text("\n".join(lines) + "\n")
@@ -134,6 +137,12 @@ def test_reader_survives_the_altos_quirks(tmp_path: Path) -> None:
     assert log.events["main"] == pytest.approx(events["main"])
     fixes = log.gps_fixes()
     assert len(fixes) == pytest.approx(d["time"].iloc[-1] - d["time"].iloc[0], abs=3)
+    # Every seventh descent sample is repeated 40 ms later by another record's row: those
+    # rows go.
+    fresh = log.sensor_samples()
+    n_descent = int(np.sum(d["time"].to_numpy() > events["drogue"] + 0.05))
+    assert len(d) - len(fresh) == pytest.approx(n_descent / 8, abs=2)
+    assert not np.any(np.diff(fresh["pressure"].to_numpy()) == 0.0)
 
 
 def test_import_writes_a_loadable_test_folder(tmp_path: Path) -> None:
@@ -149,6 +158,9 @@ def test_import_writes_a_loadable_test_folder(tmp_path: Path) -> None:
     baro = test.sensors_of("baro")[0]
     assert np.abs(baro.time - events["main"]).min() > 0.05
     assert summary.dropped["ejection_charge_samples"] >= 1
+    assert summary.dropped["repeated_sensor_rows"] > 0
+    late = np.isclose(np.round(baro.time * 100.0) % 10, 4)  # the copies' stamps, 40 ms late
+    assert not np.any(late & (baro.time > events["drogue"]))
     # The lapse rate fitted to the GPS fixes recovers the truth: 3 m GPS noise over
     # 3 km of height gives a sigma of a few hundredths of a K/km.
     lapse, _, resid = summary.lapse_fit
