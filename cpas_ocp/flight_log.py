@@ -33,7 +33,10 @@ and a card into a test folder:
 * noise sigmas from the data: the altimeter's per canopy phase, from its
   scatter about the local trend (`scatter_sigma`; under a 30 m/s drogue the
   static pressure swings by metres over seconds), the GPS altitude's from the
-  lapse-rate fit's residuals.
+  lapse-rate fit's residuals.  A later canopy's altimeter sigma applies from
+  the time its descent has settled (`settled_time`), not from its deployment:
+  until then the vehicle still falls fast and is jerked about by the opening,
+  and the static port errs as it did under the canopy before.
 
 The folder is written to a temporary sibling and moved into place only once
 it loads, so a failed import leaves nothing behind.
@@ -71,6 +74,8 @@ MIN_BARO_SIGMA_M = 0.3  # floor of the altimeter noise sigma (the pressure resol
 LAPSE_BOUNDS_K_M = (0.002, 0.0098)  # search range of a fitted lapse rate (to the dry adiabat)
 SCATTER_WINDOW_S = 8.0  # window of the local trend the altimeter's scatter is taken about (s)
 SERIES_MARGIN_S = 1.5  # series extend this far beyond the phase: a 1 Hz GPS covers it (s)
+RATE_WINDOW_S = 2.0  # window of the local descent rate that tells when a canopy has settled (s)
+SETTLED_RATE_FACTOR = 1.25  # settled: the local rate within this factor of the steady one
 
 
 @dataclass(frozen=True)
@@ -183,6 +188,29 @@ def second_difference_sigma(values: np.ndarray) -> float:
     return float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / np.sqrt(6.0))
 
 
+def settled_time(t: np.ndarray, altitude: np.ndarray, t_from: float, t_to: float) -> float:
+    """When the descent after a deployment at `t_from` has settled (s): the first time from
+    which the local descent rate (slope of a line through `RATE_WINDOW_S` of altitude
+    samples, m/s) stays within `SETTLED_RATE_FACTOR` of the steady rate (the median local
+    rate over the second half of [`t_from`, `t_to`]) for a further window.  `t_from`
+    where the samples are too few to tell."""
+    centres = np.arange(t_from + RATE_WINDOW_S / 2, t_to - RATE_WINDOW_S / 2, RATE_WINDOW_S / 2)
+    rates = np.full(centres.size, np.nan)
+    for i, c in enumerate(centres):
+        m = np.abs(t - c) <= RATE_WINDOW_S / 2
+        if m.sum() >= 4:
+            rates[i] = np.polyfit(t[m] - c, altitude[m], 1)[0]
+    late = centres >= 0.5 * (t_from + t_to)
+    if not np.isfinite(rates[late]).any():
+        return t_from
+    steady = abs(float(np.nanmedian(rates[late])))
+    ok = np.abs(rates) <= SETTLED_RATE_FACTOR * steady
+    for i in range(centres.size - 2):
+        if ok[i] and ok[i + 1] and ok[i + 2]:
+            return float(centres[i] - RATE_WINDOW_S / 2)
+    return t_from
+
+
 def touchdown_time(t: np.ndarray, height: np.ndarray, after: float) -> float:
     """First time (s) after `after` at which `height` (m above the pad) is below TOUCHDOWN_M."""
     low = np.flatnonzero((t > after) & (height < TOUCHDOWN_M))
@@ -284,8 +312,12 @@ def import_flight(log: AltusLog, card: FlightCard, out: str | Path) -> ImportSum
     else:
         lapse = _si(lapse_spec, "lapse_rate", card.source, "site.lapse_rate")
     site = SiteAtmosphere(elevation, p0, t0, lapse)
-    # One altimeter sigma per canopy phase, from the scatter about the local trend.
-    bounds = [*sorted(deploy.values()), t_end]
+    # One altimeter sigma per canopy phase, from the scatter about the local trend; a later
+    # phase's from the time its descent has settled.
+    t_baro, h_baro = baro_phase["time"].to_numpy(), baro_phase["altitude"].to_numpy()
+    starts = sorted(deploy.values())
+    bounds = [starts[0], *(settled_time(t_baro, h_baro, a, b) for a, b in
+                           pairwise([*starts, t_end]) if a > starts[0]), t_end]
     baro_sigmas = []
     for a, b in pairwise(bounds):
         part = baro_phase[(baro_phase["time"] >= a) & (baro_phase["time"] <= b)]

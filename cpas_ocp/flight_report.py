@@ -13,10 +13,13 @@ nominal values and the measured descent.
   rate's sigma comes from the drag areas' covariance; the measured rate's
   from the line fit's residuals with the sample count reduced for their
   lag-one autocorrelation (Bartlett's effective sample size).
-* Opening shock: the accelerometer's largest axial specific force after the
-  last deployment against the model's peak load factor in the same window.
-  The axial reading is a lower bound of the load factor (the axis hangs at
-  an angle to the riser) and at 10 Hz may miss the peak.
+* Opening of the last canopy: its inflation parameters with the fit's sigma
+  and that sigma times sqrt(chi2/dof) (the residuals wander, so the white-noise
+  sigma is too small by about that factor), held and bounded ones named; the
+  fill time; and the accelerometer's largest axial specific force after the
+  deployment against the model's peak load factor in the same window.  The
+  axial reading is a lower bound of the load factor (the axis hangs at an
+  angle to the riser) and at 10 Hz may miss the peak.
 """
 
 from __future__ import annotations
@@ -35,7 +38,7 @@ from .kinematic_track import altimeter_altitude
 from .model_comparison import channel_rms
 from .parameters import param_name, split_name
 from .uncertainty import Covariance
-from .units import FACTORS
+from .units import FACTORS, G0
 
 STEADY_AFTER_S = 10.0  # a canopy phase counts as steady this long after its deployment (s)
 STEADY_BEFORE_S = 2.0  # ... and until this long before the next deployment (s)
@@ -198,6 +201,58 @@ def opening_shock(fit: Fit) -> tuple[float, float, float] | None:
     return peak, t_peak, float(np.max(q["load_factor"][sel]))
 
 
+def opening_lines(fit: Fit, cov: Covariance) -> list[str]:
+    """The markdown section on the last canopy's opening: its inflation parameters as fitted
+    (each with the fit's sigma and that sigma times sqrt(chi2/dof), the honest one while
+    the residuals are not white; held and bounded ones said so), the fill time, and the
+    accelerometer's axial peak against the model's."""
+    last = max(fit.test.events, key=lambda e: e.time)
+    chute = fit.test.parachute(last.parachute)
+    stage = chute.stages[0]
+    inflation = [param_name(k, chute.name, stage) for k in ("n", "expopen", "t_start")]
+    excess = float(np.sqrt(max(1.0, fit.chi_square / fit.dof)))
+    lines = ["", "## Opening of the " + chute.name, "",
+             f"| parameter | fitted | fit's σ | σ × √(χ²/dof) = σ × {excess:.2f} | |",
+             "|---|---|---|---|---|"]
+    for name in inflation:
+        value = fit.parameters[name]
+        if name not in fit.free:
+            lines.append(f"| {name} | {value:.4g} | | | held by the card |")
+        elif name in cov.at_bound:
+            par = fit.model.parameter(name)
+            side = "lower" if abs(value - par.lower) <= abs(value - par.upper) else "upper"
+            lines.append(f"| {name} | {value:.4g} | | | on its {side} bound |")
+        else:
+            sd = cov.std[name]
+            lines.append(f"| {name} | {value:.4g} | {sd:.2g} | {excess * sd:.2g} | |")
+    start = inflation[2]
+    v_start = fit.captures[param_name("V_start", chute.name, stage)]
+    rise = float(fit.quantities()[param_name("rise_end", chute.name, stage)][0])
+    lines += ["", f"- fill time {rise - fit.parameters[start]:.2f} s, from "
+              f"{fit.parameters[start]:.2f} s at {v_start:.1f} m/s."]
+    if start in cov.at_bound:
+        lines.append(f"- the start sits on its lower bound, the {chute.name}'s deployment "
+                     f"({last.time:.2f} s, less its {last.sigma:.2f} s timing sigma): the "
+                     "altimeter would have the descent slow earlier still, so the fill time "
+                     "counts the deployment and line stretch as well as the inflation.")
+    shock = opening_shock(fit)
+    if shock is not None:
+        peak, t_peak, model_peak = shock
+        lines += [f"- accelerometer: largest axial specific force {peak:.2f} g at "
+                  f"{t_peak:.2f} s (a lower bound of the load factor: the axis is not along "
+                  "the riser, and the log samples at about 10 Hz);",
+                  f"- model: peak load factor {model_peak:.2f} g in the same window."]
+        if model_peak < peak:
+            lines.append("- the model's peak is below the accelerometer's lower bound. The "
+                         "altimeter, which the fit follows, sees the descent slow over the "
+                         "whole fill time; a spike that one 10 Hz sample catches carries little "
+                         f"momentum ({peak:.0f} g for 20 ms is {peak * G0 * 0.02:.0f} m/s), as a "
+                         "snatch of the riser at line stretch would. The accelerometer is not "
+                         "fitted: its axis swings against the riser, and a rigid riser cannot "
+                         "make such a spike.")
+    return lines
+
+
 def missing_text(fit: Fit, diagnosis: Diagnosis | None) -> str:
     """The markdown section on what the model misses: the worst-fitting window, the
     diagnosis's verdict on the library's effects and the residual's structure, and whether
@@ -277,24 +332,5 @@ def flight_text(fit: Fit, cov: Covariance, nominal: dict[str, dict[str, Any]],
                      "forebody drag area at "
                      f"{fit.parameters.get('CdS_V', 0.0):.3f} m²) and, for a later canopy, "
                      "whatever the canopies opened before it lose or add to the wake.")
-    shock = opening_shock(fit)
-    if shock is not None:
-        peak, t_peak, model_peak = shock
-        lines += ["", "## Opening shock", "",
-                  f"- accelerometer: largest axial specific force {peak:.2f} g at "
-                  f"{t_peak:.2f} s (a lower bound of the load factor: the axis is not along "
-                  "the riser, and the log samples at about 10 Hz);",
-                  f"- model: peak load factor {model_peak:.2f} g in the same window."]
-        if model_peak < peak:
-            canopy = max(fit.test.events, key=lambda e: e.time).parachute
-            held = [n for n in fit.model.parameter_names
-                    if split_name(n)[0] in ("n", "expopen") and split_name(n)[1][:1] == (canopy,)
-                    and (n not in fit.free
-                         or fit.model.parameter(n).on_bound(fit.parameters[n]))]
-            lines.append("- the model opens more slowly than the canopy did: its peak is below "
-                         "the accelerometer's lower bound. The altimeter, sampled at about "
-                         "10 Hz, does not resolve a sub-second opening and the accelerometer is "
-                         "not fitted (its axis swings against the riser), so this log does not "
-                         "determine the opening's shape"
-                         + (f" ({', '.join(held)} on a bound or held fixed)." if held else "."))
+    lines += opening_lines(fit, cov)
     return "\n".join(lines) + "\n\n" + missing_text(fit, diagnosis)

@@ -23,6 +23,7 @@ from cpas_ocp.atmosphere import (
     pressure_altitude,
 )
 from cpas_ocp.cli import main
+from cpas_ocp.effects.canopy_inflation import CanopyInflation
 from cpas_ocp.errors import InputError
 from cpas_ocp.flight_log import (
     card_from_dict,
@@ -30,6 +31,7 @@ from cpas_ocp.flight_log import (
     import_flight,
     load_card,
     second_difference_sigma,
+    settled_time,
 )
 from cpas_ocp.flight_test import load_test
 
@@ -170,6 +172,12 @@ def test_import_writes_a_loadable_test_folder(tmp_path: Path) -> None:
     assert summary.baro_sigma_m[1] == pytest.approx(5.0 / (1.0 * 9.80665), rel=0.35)
     manifest = json.loads((tmp_path / "test" / "manifest.json").read_text())
     assert manifest["atmosphere"]["model"] == "site"
+    # The main does not start to inflate before its ejection charge (less the event's sigma),
+    # however wide the start window.
+    charge = test.event("mortar_fire", "main")
+    starts = {p.name: p for p in CanopyInflation(start_window=5.0).parameters(test)}
+    assert starts["t_start[main,stage2]"].lower == pytest.approx(charge.time - charge.sigma)
+    assert starts["t_start[main,stage2]"].upper == pytest.approx(charge.time + 0.5 + 5.0)
 
 
 def test_lapse_rate_fit_is_unbiased_without_noise() -> None:
@@ -183,6 +191,22 @@ def test_lapse_rate_fit_is_unbiased_without_noise() -> None:
     assert lapse == pytest.approx(SITE.lapse_rate_k_m, rel=1e-4)
     assert offset == pytest.approx(-11.0, abs=0.05)
     assert resid < 0.05
+
+
+def test_settled_time_waits_for_the_opening_to_end() -> None:
+    """A 30 m/s descent slowing to 6 m/s with a 1 s time constant from t0 = 10 s: the rate
+    is within 1.25 x 6 m/s from t0 + ln(24 / 1.5) = t0 + 2.8 s on; a 2 s window reaches it
+    up to one window earlier.  0.5 m altimeter noise at 10 Hz (seeded)."""
+    rng = np.random.default_rng(4)
+    t = np.arange(0.0, 60.0, 0.1)
+    x = np.clip(t - 10.0, 0.0, None)
+    h = 3000.0 - 30.0 * np.minimum(t, 10.0) - 6.0 * x - 24.0 * (1.0 - np.exp(-x))
+    h = h + rng.normal(0.0, 0.5, t.size)
+    settled = settled_time(t, h, 10.0, 60.0)
+    assert 10.0 + 1.5 <= settled <= 10.0 + 3.0
+    # An instant change of rate has settled at once.
+    step = 3000.0 - 30.0 * np.minimum(t, 10.0) - 6.0 * x + rng.normal(0.0, 0.5, t.size)
+    assert settled_time(t, step, 10.0, 60.0) == pytest.approx(10.0, abs=0.6)
 
 
 def test_second_difference_sigma_recovers_white_noise() -> None:

@@ -69,6 +69,15 @@ def test_reconstruction_matches_the_descent(mega_fit) -> None:
     assert [r.canopies for r in rates] == [("drogue",), ("drogue", "main")]
     for r in rates:
         assert abs(r.z) < 3.0, r
+    # The main starts no earlier than its ejection charge (Ipopt relaxes a bound by 1e-8 of
+    # it), and the altimeter fixes its fill constant (expopen held at 1) inside the law's
+    # bounds, with a sigma.
+    charge = fit.test.event("mortar_fire", "main")
+    assert fit.parameters["t_start[main,stage2]"] >= charge.time - charge.sigma - 1e-5
+    n = fit.model.parameter("n[main,stage2]")
+    assert "n[main,stage2]" not in cov.at_bound
+    assert n.lower < fit.parameters["n[main,stage2]"] < n.upper
+    assert 0.0 < cov.std["n[main,stage2]"] < 0.2 * fit.parameters["n[main,stage2]"]
 
 
 def test_nominal_drag_areas_are_compared(mega_fit) -> None:
@@ -91,6 +100,7 @@ def test_report_names_the_effect_that_remains(mega_fit) -> None:
     assert all(c.r > 0.7 for c in common)
     assert combined_p_value(common) < ALPHA
     text = flight_text(fit, cov, load_card("prometheus").nominal)
+    assert "## Opening of the main" in text and "fill time" in text
     assert "- the altitude sensors against each other:" in text
     assert "The altitude sensors share their residual" in text
     assert "vertical air motion" in text
