@@ -61,8 +61,9 @@ class CanopyInflation(Effect):
     """Drag-area growth of every canopy and the drag it produces.
 
     `start_window` (s): how far each inflation start time may move from its
-    observed event (bag strip or disreef) when estimated; a first stage never
-    starts before its canopy's mortar fire (less that event's sigma).
+    observed event (bag strip or disreef) when estimated; a first stage seeded
+    from its canopy's mortar fire alone (no bag strip or line stretch observed)
+    never starts before that fire (less the event's sigma).
     """
 
     start_window: float = 1.0
@@ -100,9 +101,9 @@ class CanopyInflation(Effect):
                 t0 = self.observed_start(test, chute, k)
                 lo = max(test.t_start, t0 - self.start_window)
                 mortar = test.event("mortar_fire", chute.name) if k == 0 else None
-                if mortar is not None:
-                    # A canopy does not start to inflate before its mortar (or ejection
-                    # charge) fires; the event's own timing sigma is allowed.
+                if mortar is not None and t0 == mortar.time + MORTAR_TO_INFLATION_S:
+                    # Seeded from the mortar (or ejection charge) alone: the canopy does not
+                    # start to inflate before it fires; the event's timing sigma is allowed.
                     lo = max(lo, mortar.time - mortar.sigma)
                 hi = min(test.t_end, t0 + self.start_window)
                 out.append(Parameter(param_name("t_start", *idx), "s", t0, lo, hi,
