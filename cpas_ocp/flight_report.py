@@ -288,8 +288,10 @@ def missing_text(fit: Fit, diagnosis: Diagnosis | None) -> str:
                   "atmosphere's constant lapse rate. Neither is in the model; the drag areas "
                   "carry each canopy phase's mean descent rate."]
     elif common:
-        lines += ["", f"The altitude sensors do not share their residual (Fisher's combined "
-                  f"p = {p:.2g}): what remains is each sensor's own."]
+        lines += ["", f"The test does not show the altitude sensors sharing their residual at "
+                  f"the {alpha:g} level (Fisher's combined p = {p:.2g}). That is no evidence "
+                  "that they do not: short stretches give few effective samples. Whether "
+                  "what remains is physical or each sensor's own is left open."]
     return "\n".join(lines) + "\n"
 
 

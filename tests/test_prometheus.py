@@ -56,6 +56,32 @@ def mega_fit(tmp_path_factory: pytest.TempPathFactory):
     return fit, est.covariance(fit)
 
 
+@pytest.fixture(scope="module")
+def metrum_fit(tmp_path_factory: pytest.TempPathFactory):
+    folder = tmp_path_factory.mktemp("prometheus-metrum") / "test"
+    import_flight(read_altus_log(DATA / METRUM), load_card("prometheus"), folder)
+    est = Estimator(load_test(folder))
+    fit = est.solve()
+    return fit, est.covariance(fit)
+
+
+def test_two_recorders_agree(mega_fit, metrum_fit) -> None:
+    """The rocket carried both recorders: their altimeters, reconstructed apart, give the same
+    canopies within the honest sigmas (drag areas: the measured rates'; the fill constant:
+    the fit's times sqrt(chi2/dof)), combined in quadrature."""
+    card = load_card("prometheus")
+    comps = []
+    for fit, cov in (mega_fit, metrum_fit):
+        comps.append({c.name: c for c in nominal_comparisons(fit, cov, card.nominal,
+                                                             descent_rates(fit, cov))})
+    for name in card.nominal:
+        a, b = comps[0][name], comps[1][name]
+        assert abs(a.fitted - b.fitted) < 3.0 * np.hypot(a.sigma_rate, b.sigma_rate), name
+    n = "n[main,stage2]"
+    honest = [cov.std[n] * np.sqrt(fit.chi_square / fit.dof) for fit, cov in (mega_fit, metrum_fit)]
+    assert abs(mega_fit[0].parameters[n] - metrum_fit[0].parameters[n]) < 3.0 * np.hypot(*honest)
+
+
 def test_reconstruction_matches_the_descent(mega_fit) -> None:
     fit, cov = mega_fit
     # Every estimated quantity the card asks for has an uncertainty.
