@@ -209,7 +209,11 @@ def opening_lines(fit: Fit, cov: Covariance) -> list[str]:
     last = max(fit.test.events, key=lambda e: e.time)
     chute = fit.test.parachute(last.parachute)
     stage = chute.stages[0]
-    inflation = [param_name(k, chute.name, stage) for k in ("n", "expopen", "t_start")]
+    # The first stage's inflation parameters (n and expopen, or n_p, Ck, expopen and t_k),
+    # then its start.
+    start = param_name("t_start", chute.name, stage)
+    inflation = [n for n in fit.model.parameter_names if split_name(n)[1] == (chute.name, stage)
+                 and split_name(n)[0] not in ("CdS", "t_start")] + [start]
     excess = float(np.sqrt(max(1.0, fit.chi_square / fit.dof)))
     lines = ["", "## Opening of the " + chute.name, "",
              f"| parameter | fitted | fit's σ | σ × √(χ²/dof) = σ × {excess:.2f} | |",
@@ -217,20 +221,19 @@ def opening_lines(fit: Fit, cov: Covariance) -> list[str]:
     for name in inflation:
         value = fit.parameters[name]
         if name not in fit.free:
-            lines.append(f"| {name} | {value:.4g} | | | held by the card |")
+            lines.append(f"| {name} | {value:.5g} | | | held fixed |")
         elif name in cov.at_bound:
             par = fit.model.parameter(name)
             side = "lower" if abs(value - par.lower) <= abs(value - par.upper) else "upper"
-            lines.append(f"| {name} | {value:.4g} | | | on its {side} bound |")
+            lines.append(f"| {name} | {value:.5g} | | | on its {side} bound |")
         else:
             sd = cov.std[name]
-            lines.append(f"| {name} | {value:.4g} | {sd:.2g} | {excess * sd:.2g} | |")
-    start = inflation[2]
+            lines.append(f"| {name} | {value:.5g} | {sd:.2g} | {excess * sd:.2g} | |")
     v_start = fit.captures[param_name("V_start", chute.name, stage)]
     rise = float(fit.quantities()[param_name("rise_end", chute.name, stage)][0])
     lines += ["", f"- fill time {rise - fit.parameters[start]:.2f} s, from "
               f"{fit.parameters[start]:.2f} s at {v_start:.1f} m/s."]
-    if start in cov.at_bound:
+    if start in cov.at_bound and fit.parameters[start] <= last.time - last.sigma + 1e-6:
         lines.append(f"- the start sits on its lower bound, the {chute.name}'s deployment "
                      f"({last.time:.2f} s, less its {last.sigma:.2f} s timing sigma): the "
                      "altimeter would have the descent slow earlier still, so the fill time "
@@ -245,9 +248,10 @@ def opening_lines(fit: Fit, cov: Covariance) -> list[str]:
         if model_peak < peak:
             lines.append("- the model's peak is below the accelerometer's lower bound. The "
                          "altimeter, which the fit follows, sees the descent slow over the "
-                         "whole fill time; a spike that one 10 Hz sample catches carries little "
-                         f"momentum ({peak:.0f} g for 20 ms is {peak * G0 * 0.02:.0f} m/s), as a "
-                         "snatch of the riser at line stretch would. The accelerometer is not "
+                         "whole fill time; a spike that one 10 Hz sample catches may be far "
+                         f"shorter than the sample interval ({peak:.0f} g held for 20 ms would "
+                         f"take only {peak * G0 * 0.02:.0f} m/s), as a snatch of the riser at "
+                         "line stretch would be. The accelerometer is not "
                          "fitted: its axis swings against the riser, and a rigid riser cannot "
                          "make such a spike.")
     return lines
