@@ -316,8 +316,8 @@ def import_flight(log: AltusLog, card: FlightCard, out: str | Path) -> ImportSum
     # phase's from the time its descent has settled.
     t_baro, h_baro = baro_phase["time"].to_numpy(), baro_phase["altitude"].to_numpy()
     starts = sorted(deploy.values())
-    bounds = [starts[0], *(settled_time(t_baro, h_baro, a, b) for a, b in
-                           pairwise([*starts, t_end]) if a > starts[0]), t_end]
+    bounds = [starts[0], *(settled_time(t_baro, h_baro, a, b)
+                           for a, b in pairwise([*starts[1:], t_end])), t_end]
     baro_sigmas = []
     for a, b in pairwise(bounds):
         part = baro_phase[(baro_phase["time"] >= a) & (baro_phase["time"] <= b)]

@@ -187,18 +187,18 @@ def nominal_comparisons(fit: Fit, cov: Covariance, nominal: dict[str, dict[str, 
     return out
 
 
-def opening_shock(fit: Fit) -> tuple[float, float, float] | None:
-    """(measured axial peak (g), its time (s), model peak load factor (g)) after the last
-    deployment, or None without an accelerometer."""
+def opening_shock(fit: Fit, t_deploy: float, load_factor: np.ndarray
+                  ) -> tuple[float, float, float] | None:
+    """(measured axial peak (g), its time (s), model peak load factor (g)) after the
+    deployment at `t_deploy` (s), the model's `load_factor` (g) given on the fit's grid; None
+    without an accelerometer."""
     accel = fit.test.sensors_of("axial_accelerometer")
     if not accel:
         return None
-    t_last = max(e.time for e in fit.test.events)
-    lo, hi = t_last + EJECTION_EXCLUDE_S, t_last + SHOCK_WINDOW_S
+    lo, hi = t_deploy + EJECTION_EXCLUDE_S, t_deploy + SHOCK_WINDOW_S
     peak, t_peak = descent_load_factor_peak(accel[0].data, lo, hi)
-    q = fit.quantities()
     sel = (fit.t >= lo) & (fit.t <= hi)
-    return peak, t_peak, float(np.max(q["load_factor"][sel]))
+    return peak, t_peak, float(np.max(load_factor[sel]))
 
 
 def opening_lines(fit: Fit, cov: Covariance) -> list[str]:
@@ -230,7 +230,8 @@ def opening_lines(fit: Fit, cov: Covariance) -> list[str]:
             sd = cov.std[name]
             lines.append(f"| {name} | {value:.5g} | {sd:.2g} | {excess * sd:.2g} | |")
     v_start = fit.captures[param_name("V_start", chute.name, stage)]
-    rise = float(fit.quantities()[param_name("rise_end", chute.name, stage)][0])
+    q = fit.quantities()
+    rise = float(q[param_name("rise_end", chute.name, stage)][0])
     lines += ["", f"- fill time {rise - fit.parameters[start]:.2f} s, from "
               f"{fit.parameters[start]:.2f} s at {v_start:.1f} m/s."]
     if start in cov.at_bound and fit.parameters[start] <= last.time - last.sigma + 1e-6:
@@ -238,7 +239,7 @@ def opening_lines(fit: Fit, cov: Covariance) -> list[str]:
                      f"({last.time:.2f} s, less its {last.sigma:.2f} s timing sigma): the "
                      "altimeter would have the descent slow earlier still, so the fill time "
                      "counts the deployment and line stretch as well as the inflation.")
-    shock = opening_shock(fit)
+    shock = opening_shock(fit, last.time, q["load_factor"])
     if shock is not None:
         peak, t_peak, model_peak = shock
         lines += [f"- accelerometer: largest axial specific force {peak:.2f} g at "

@@ -47,22 +47,23 @@ def test_both_recorders_import(tmp_path: Path, log_name: str, recorder: str) -> 
     assert test.t_end < summary.events["touchdown"]
 
 
-@pytest.fixture(scope="module")
-def mega_fit(tmp_path_factory: pytest.TempPathFactory):
-    folder = tmp_path_factory.mktemp("prometheus") / "test"
-    import_flight(read_altus_log(DATA / MEGA), load_card("prometheus"), folder)
+def _reconstruct(tmp_path_factory: pytest.TempPathFactory, log_name: str):
+    """(fit, covariance) of one log imported under the Prometheus card."""
+    folder = tmp_path_factory.mktemp(Path(log_name).stem) / "test"
+    import_flight(read_altus_log(DATA / log_name), load_card("prometheus"), folder)
     est = Estimator(load_test(folder))
     fit = est.solve()
     return fit, est.covariance(fit)
+
+
+@pytest.fixture(scope="module")
+def mega_fit(tmp_path_factory: pytest.TempPathFactory):
+    return _reconstruct(tmp_path_factory, MEGA)
 
 
 @pytest.fixture(scope="module")
 def metrum_fit(tmp_path_factory: pytest.TempPathFactory):
-    folder = tmp_path_factory.mktemp("prometheus-metrum") / "test"
-    import_flight(read_altus_log(DATA / METRUM), load_card("prometheus"), folder)
-    est = Estimator(load_test(folder))
-    fit = est.solve()
-    return fit, est.covariance(fit)
+    return _reconstruct(tmp_path_factory, METRUM)
 
 
 def test_two_recorders_agree(mega_fit, metrum_fit) -> None:
