@@ -25,6 +25,15 @@ and a card into a test folder:
 * ``accelerometer.csv``: axial acceleration (m/s^2, 1 g subtracted), for the
   opening-shock comparison, not fitted (the hang attitude under a canopy is
   unknown);
+* a ``full_open`` event for each later canopy whose opening the
+  accelerometer shows (`opening_peak`): the time of the largest axial
+  specific force in the `OPENING_WINDOW_S` after the charge, with one
+  accelerometer sample interval as its sigma.  On a hobby rocket that peak
+  is the snatch of the elastic shock cord, which comes when the canopy, full,
+  has stopped ahead of the vehicle: the peak marks full open to within a
+  sample (it lies anywhere between two) and needs no attitude (the axis
+  swinging against the riser scales the reading, not its timing).  The first
+  canopy's is not taken: it opens near apogee, where the load barely rises;
 * the site atmosphere (`atmosphere.SiteAtmosphere`): the pad pressure (median
   before launch), the temperature from the card's surface density
   (T = p / (R rho)), and the lapse rate from the card or, with ``"gps"``,
@@ -76,6 +85,9 @@ SCATTER_WINDOW_S = 8.0  # window of the local trend the altimeter's scatter is t
 SERIES_MARGIN_S = 1.5  # series extend this far beyond the phase: a 1 Hz GPS covers it (s)
 RATE_WINDOW_S = 2.0  # window of the local descent rate that tells when a canopy has settled (s)
 SETTLED_RATE_FACTOR = 1.25  # settled: the local rate within this factor of the steady one
+OPENING_WINDOW_S = 3.0  # an opening-load peak is looked for this long after the charge (s)
+OPENING_BASELINE_S = 5.0  # the steady reading before a charge is taken over this long (s)
+OPENING_PEAK_SIGMAS = 5.0  # a peak counts when this many scatter sigmas off the steady reading
 
 
 @dataclass(frozen=True)
@@ -327,6 +339,8 @@ def import_flight(log: AltusLog, card: FlightCard, out: str | Path) -> ImportSum
     fixes_phase = fixes[(fixes["time"] >= lo) & (fixes["time"] <= hi)]
     accel = samples[["time", "acceleration"]].dropna()
     accel = accel[(accel["time"] >= lo) & (accel["time"] <= hi)]
+    full_open = {name: peak for name, t in deploy.items() if t > t_begin
+                 and (peak := opening_peak(accel, t)) is not None}
     files = {"baro.csv": baro_phase[["time", "altitude"]],
              "accelerometer.csv": accel}
     sensors: list[dict[str, Any]] = [
@@ -358,7 +372,11 @@ def import_flight(log: AltusLog, card: FlightCard, out: str | Path) -> ImportSum
         "events": [{"name": "mortar_fire", "parachute": name,
                     "time": {"value": round(t, 3), "unit": "s"},
                     "sigma": {"value": EVENT_SIGMA_S, "unit": "s"}}
-                   for name, t in deploy.items()],
+                   for name, t in deploy.items()]
+                  + [{"name": "full_open", "parachute": name,
+                      "time": {"value": round(t, 3), "unit": "s"},
+                      "sigma": {"value": round(sigma, 3), "unit": "s"}}
+                     for name, (t, sigma) in full_open.items()],
         "sensors": sensors,
         "atmosphere": {"model": "site",
                        "elevation": {"value": elevation, "unit": "m"},
@@ -371,7 +389,9 @@ def import_flight(log: AltusLog, card: FlightCard, out: str | Path) -> ImportSum
     }
     validate_block(manifest, "manifest.schema.json", card.source)
     summary = ImportSummary(
-        log.recorder, (t_begin, t_end), {**deploy, "touchdown": t_down}, site, lapse_fit,
+        log.recorder, (t_begin, t_end),
+        {**deploy, **{f"{name} full open": t for name, (t, _) in full_open.items()},
+         "touchdown": t_down}, site, lapse_fit,
         baro_sigmas, {name: len(frame) for name, frame in files.items()},
         {"repeated_time_stamps": log.duplicate_times,
          "repeated_sensor_rows": int(d["time"].between(lo, hi).sum()
@@ -417,3 +437,25 @@ def descent_load_factor_peak(accel: pd.DataFrame, t_from: float, t_to: float
     f = np.abs(sel["acceleration"].to_numpy() + G0) / G0
     k = int(np.argmax(f))
     return float(f[k]), float(sel["time"].iloc[k])
+
+
+def opening_peak(accel: pd.DataFrame, t_charge: float) -> tuple[float, float] | None:
+    """(time, sigma) in s of the opening-load peak after the charge at `t_charge` (s): the
+    largest axial specific force from `EJECTION_EXCLUDE_S` to `OPENING_WINDOW_S` after it
+    (`descent_load_factor_peak`; the charge's own jolt comes first), sigma the median
+    sample interval.  None where the peak stands fewer than `OPENING_PEAK_SIGMAS` scatter
+    sigmas (1.4826 MAD) off the median reading of the `OPENING_BASELINE_S` before the
+    charge, or where the accelerometer has too few samples there to tell."""
+    before = accel[(accel["time"] >= t_charge - OPENING_BASELINE_S)
+                   & (accel["time"] < t_charge - EVENT_SIGMA_S)]["acceleration"].to_numpy()
+    after = accel[(accel["time"] >= t_charge + EJECTION_EXCLUDE_S)
+                  & (accel["time"] <= t_charge + OPENING_WINDOW_S)]
+    if before.size < 10 or len(after) < 3:
+        return None
+    peak, t_peak = descent_load_factor_peak(after, t_charge + EJECTION_EXCLUDE_S,
+                                            t_charge + OPENING_WINDOW_S)
+    steady = float(np.median(before))
+    scatter = max(MIN_ACCEL_SIGMA, 1.4826 * float(np.median(np.abs(before - steady))))
+    if abs(peak * G0 - abs(steady + G0)) < OPENING_PEAK_SIGMAS * scatter:
+        return None
+    return t_peak, float(np.median(np.diff(after["time"].to_numpy())))

@@ -33,16 +33,16 @@ from .atmosphere import density_at
 from .common_residual import BLOCK_S, combined_p_value, common_residuals
 from .diagnosis import ALPHA, Diagnosis
 from .estimation import PSEUDO_SENSORS, Fit
-from .flight_log import EJECTION_EXCLUDE_S, descent_load_factor_peak
+from .flight_log import EJECTION_EXCLUDE_S, OPENING_WINDOW_S, descent_load_factor_peak
 from .kinematic_track import altimeter_altitude
 from .model_comparison import channel_rms
 from .parameters import param_name, split_name
+from .phase_windows import DEPLOYMENT_EVENTS
 from .uncertainty import Covariance
 from .units import FACTORS, G0
 
 STEADY_AFTER_S = 10.0  # a canopy phase counts as steady this long after its deployment (s)
 STEADY_BEFORE_S = 2.0  # ... and until this long before the next deployment (s)
-SHOCK_WINDOW_S = 4.0  # the opening shock is looked for this long after a deployment (s)
 
 
 @dataclass(frozen=True)
@@ -195,7 +195,7 @@ def opening_shock(fit: Fit, t_deploy: float, load_factor: np.ndarray
     accel = fit.test.sensors_of("axial_accelerometer")
     if not accel:
         return None
-    lo, hi = t_deploy + EJECTION_EXCLUDE_S, t_deploy + SHOCK_WINDOW_S
+    lo, hi = t_deploy + EJECTION_EXCLUDE_S, t_deploy + OPENING_WINDOW_S
     peak, t_peak = descent_load_factor_peak(accel[0].data, lo, hi)
     sel = (fit.t >= lo) & (fit.t <= hi)
     return peak, t_peak, float(np.max(load_factor[sel]))
@@ -206,9 +206,10 @@ def opening_lines(fit: Fit, cov: Covariance) -> list[str]:
     (each with the fit's sigma and that sigma times sqrt(chi2/dof), the honest one while
     the residuals are not white; held and bounded ones said so), the fill time, and the
     accelerometer's axial peak against the model's."""
-    last = max(fit.test.events, key=lambda e: e.time)
+    last = max((e for e in fit.test.events if e.name in DEPLOYMENT_EVENTS), key=lambda e: e.time)
     chute = fit.test.parachute(last.parachute)
     stage = chute.stages[0]
+    cds_name = param_name("CdS", chute.name, chute.stages[-1])
     # The first stage's inflation parameters (n and expopen, or n_p, Ck, expopen and t_k),
     # then its start.
     start = param_name("t_start", chute.name, stage)
@@ -231,10 +232,17 @@ def opening_lines(fit: Fit, cov: Covariance) -> list[str]:
             lines.append(f"| {name} | {value:.5g} | {sd:.2g} | {excess * sd:.2g} | |")
     v_start = fit.captures[param_name("V_start", chute.name, stage)]
     q = fit.quantities()
+    t_start = fit.parameters[start]
     rise = float(q[param_name("rise_end", chute.name, stage)][0])
-    lines += ["", f"- fill time {rise - fit.parameters[start]:.2f} s, from "
-              f"{fit.parameters[start]:.2f} s at {v_start:.1f} m/s."]
-    if start in cov.at_bound and fit.parameters[start] <= last.time - last.sigma + 1e-6:
+    lines += ["", f"- fill time {rise - t_start:.2f} s, from {t_start:.2f} s at "
+              f"{v_start:.1f} m/s."]
+    full = fit.test.event("full_open", chute.name, stage)
+    if full is not None:
+        lines.append(f"- full open observed at {full.time:.2f} ± {full.sigma:.2f} s (the "
+                     "accelerometer's opening peak, `full_open`), the model's at "
+                     f"{rise:.2f} s ({(rise - full.time) / full.sigma:+.1f} σ); with the "
+                     "altimeter it fixes the start and the fill constant together.")
+    if start in cov.at_bound and t_start <= last.time - last.sigma + 1e-6:
         lines.append(f"- the start sits on its lower bound, the {chute.name}'s deployment "
                      f"({last.time:.2f} s, less its {last.sigma:.2f} s timing sigma): the "
                      "altimeter would have the descent slow earlier still, so the fill time "
@@ -242,19 +250,23 @@ def opening_lines(fit: Fit, cov: Covariance) -> list[str]:
     shock = opening_shock(fit, last.time, q["load_factor"])
     if shock is not None:
         peak, t_peak, model_peak = shock
+        # The most the canopy's drag can pull: full area at the start speed (g).
+        at_start = {k: float(np.interp(t_start, fit.t, q[k])) for k in ("density", "mass")}
+        ceiling = (0.5 * at_start["density"] * v_start**2 * fit.parameters[cds_name]
+                   / (at_start["mass"] * G0))
         lines += [f"- accelerometer: largest axial specific force {peak:.2f} g at "
                   f"{t_peak:.2f} s (a lower bound of the load factor: the axis is not along "
                   "the riser, and the log samples at about 10 Hz);",
-                  f"- model: peak load factor {model_peak:.2f} g in the same window."]
-        if model_peak < peak:
-            lines.append("- the model's peak is below the accelerometer's lower bound. The "
-                         "altimeter, which the fit follows, sees the descent slow over the "
-                         "whole fill time; a spike that one 10 Hz sample catches may be far "
-                         f"shorter than the sample interval ({peak:.0f} g held for 20 ms would "
-                         f"take only {peak * G0 * 0.02:.0f} m/s), as a snatch of the riser at "
-                         "line stretch would be. The accelerometer is not "
-                         "fitted: its axis swings against the riser, and a rigid riser cannot "
-                         "make such a spike.")
+                  f"- model: peak load factor {model_peak:.2f} g in the same window; the "
+                  f"{chute.name}'s full drag area at the start speed would pull "
+                  f"{ceiling:.1f} g."]
+        if peak > ceiling:
+            lines.append(f"- the accelerometer's peak exceeds what the {chute.name}'s drag can "
+                         "pull at any time of the opening, so it is not the drag: it is the "
+                         "riser's snatch (an elastic shock cord stretched by the canopy "
+                         "stopping ahead of the vehicle, then recoiling), which a rigid "
+                         "riser cannot make. The accelerometer is therefore not fitted; "
+                         "only the time of its peak is used.")
     return lines
 
 

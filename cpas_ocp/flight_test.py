@@ -296,6 +296,8 @@ def test_from_manifest(manifest: dict[str, Any], folder: Path,
         if e["name"] == "disreef" and stage is None:
             raise InputError(mfile, f"{where}.stage",
                              "a disreef event names the stage it opens into")
+        if e["name"] == "full_open" and stage is None:
+            stage = by_name[e["parachute"]].stages[0]
         t = _si(e["time"], "time")
         if not (t_start <= t <= t_end):
             raise InputError(mfile, f"{where}.time", f"{t:.3f} s lies outside the data "

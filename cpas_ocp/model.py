@@ -154,7 +154,7 @@ class Model:
         for f in ctx.forces:
             total += f
         ctx.mass = ctx.mass + test.vehicle.mass
-        ctx.q["mass"] = ctx.mass
+        ctx.q["mass"] = ca.SX(ctx.mass)  # a quantity even where it is constant
         ctx.q["specific_force"] = total / ctx.mass
         ctx.q["load_factor"] = ca.norm_2(ctx.q["specific_force"]) / G0
         ctx.xdot["position"] = xs["velocity"]

@@ -188,12 +188,13 @@ def _on_grid(t: np.ndarray, t0: float, step: float) -> np.ndarray:
 
 def _observed_events(spec: list[dict], truth: dict[str, float], noise: np.ndarray,
                      skip: set[str] | None = None,
-                     model_times: dict[tuple[str, str], float] | None = None) -> list[dict]:
+                     model_times: dict[tuple[str, str, str | None], float] | None = None
+                     ) -> list[dict]:
     """Events as a video or pyro log would report them: true times plus timing noise.
 
     A true time is given (``time``), follows a truth parameter (``from_parameter``
     plus ``offset``), or is the model's own event (``from_model``: a Pilot's
-    Main bag lift), taken from `model_times` by (event, parachute).  Events that
+    Main bag lift), taken from `model_times` by (event, parachute, stage).  Events that
     depend on parameters in `skip`, or on the model while `model_times` is not
     yet known, are left out.  `noise` holds one standard normal draw per
     listed event.
@@ -207,7 +208,7 @@ def _observed_events(spec: list[dict], truth: dict[str, float], noise: np.ndarra
         elif e.get("from_model"):
             if model_times is None:
                 continue
-            base = model_times[(e["name"], e["parachute"])]
+            base = model_times[(e["name"], e["parachute"], e.get("stage"))]
         else:
             base = e["time"]
         t = base + e["sigma"] * draw
@@ -232,13 +233,14 @@ def first_crossing(model: Model, traj: Trajectory, params: dict[str, float],
 
 
 def _true_event_times(model: Model, traj: Trajectory,
-                      params: dict[str, float]) -> dict[tuple[str, str], float]:
-    """The true time of every event the model's effects predict, by (event, parachute)."""
+                      params: dict[str, float]) -> dict[tuple[str, str, str | None], float]:
+    """The true time of every event the model's effects predict, by (event, parachute,
+    stage)."""
     out = {}
     at_end = model.quantities_along(traj.t[-1:], traj.x[-1:], params, traj.captures)
     for effect in model.effects:
         for timing in effect.event_timings(model.test):
-            key = (timing.event, timing.parachute)
+            key = (timing.event, timing.parachute, timing.stage)
             out[key] = (float(at_end[timing.time][0]) if timing.time is not None
                         else first_crossing(model, traj, params, timing.crossing))
     return out

@@ -12,6 +12,7 @@ import math
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from cpas_ocp.altus_metrum import read_altus_log
@@ -25,11 +26,13 @@ from cpas_ocp.atmosphere import (
 from cpas_ocp.cli import main
 from cpas_ocp.effects.canopy_inflation import CanopyInflation
 from cpas_ocp.errors import InputError
+from cpas_ocp.estimation import Estimator
 from cpas_ocp.flight_log import (
     card_from_dict,
     fit_lapse_rate,
     import_flight,
     load_card,
+    opening_peak,
     second_difference_sigma,
     settled_time,
 )
@@ -47,7 +50,10 @@ def _pressure_at(h: np.ndarray) -> np.ndarray:
 
 def _write_log(path: Path, seed: int) -> dict[str, float]:
     """An AltOS-layout log of a known descent: pad, boost/coast, 30 m/s drogue descent
-    from 3000 m above the pad, main at 400 m, 6 m/s to the ground."""
+    from 3000 m above the pad, main at 400 m, 6 m/s to the ground.  The axial
+    accelerometer reads 1 g less than the specific force with 2 m/s^2 noise; the main's
+    charge jolts it by -50 m/s^2 and its opening pulls a 150 m/s^2 peak one second later
+    (returned as ``main_open``)."""
     rng = np.random.default_rng(seed)
     t = np.concatenate([np.arange(-0.3, 0.0, 0.01), np.arange(0.0, 20.0, 0.01),
                         np.arange(20.0, 190.0, 0.1)])
@@ -59,7 +65,12 @@ def _write_log(path: Path, seed: int) -> dict[str, float]:
     state = np.where(t < 4, "boost", np.where(t < drogue, "coast",
                      np.where(t < main, "drogue", np.where(h_agl > 0, "main", "landed"))))
     p = _pressure_at(SITE.elevation_m + h_agl) + rng.normal(0, 5.0, t.size)
-    p[np.argmin(np.abs(t - main))] += 1500.0  # the main's ejection charge
+    k_main = int(np.argmin(np.abs(t - main)))
+    p[k_main] += 1500.0  # the main's ejection charge
+    accel = -9.81 + np.random.default_rng(seed + 1).normal(0.0, 2.0, t.size)
+    accel[k_main] -= 50.0
+    k_open = int(np.argmin(np.abs(t - t[k_main] - 1.0)))
+    accel[k_open] += 150.0
     fix_every = 1.0
     lines = [HEADER]
     last_fix = -10.0
@@ -73,14 +84,15 @@ def _write_log(path: Path, seed: int) -> dict[str, float]:
             # A second stamp (in the 10 Hz descent) is another record's row repeating the
             # sensor sample.
             lines.append(
-                f"6, 6583, 3,VE3LIC, {stamp:8.2f}, 3, {state[k]:>7s}, {-9.81:7.2f}, "
+                f"6, 6583, 3,VE3LIC, {stamp:8.2f}, 3, {state[k]:>7s}, {accel[k]:7.2f}, "
                 f"{p[k]:9.2f}, {float(pressure_altitude(p[k])):8.2f}, {h_agl[k]:8.2f}, {speed}, "
                 f"30.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 11, {gps[0]:12.7f},{gps[1]:12.7f}, "
                 f"{gps[2]:7.1f},2147483647.0")
         if k % 200 == 7:  # AltOS repeats a time stamp now and then
             lines.append(lines[-1])
     path.write_text("\n".join(lines) + "\n")
-    return {"drogue": float(t[np.argmax(t >= drogue)]), "main": float(t[np.argmax(t >= main)])}
+    return {"drogue": float(t[np.argmax(t >= drogue)]), "main": float(t[np.argmax(t >= main)]),
+            "main_open": float(t[k_open])}
 
 
 CARD = {
@@ -144,7 +156,8 @@ def test_reader_survives_the_altos_quirks(tmp_path: Path) -> None:
     fresh = log.sensor_samples()
     n_descent = int(np.sum(d["time"].to_numpy() > events["drogue"] + 0.05))
     assert len(d) - len(fresh) == pytest.approx(n_descent / 8, abs=2)
-    assert not np.any(np.diff(fresh["pressure"].to_numpy()) == 0.0)
+    copies = (fresh[["pressure", "acceleration"]].diff() == 0.0).all(axis=1)
+    assert not copies.iloc[1:].any()
 
 
 def test_import_writes_a_loadable_test_folder(tmp_path: Path) -> None:
@@ -178,13 +191,44 @@ def test_import_writes_a_loadable_test_folder(tmp_path: Path) -> None:
     starts = {p.name: p for p in CanopyInflation(start_window=5.0).parameters(test)}
     assert starts["t_start[main,stage2]"].lower == pytest.approx(charge.time - charge.sigma)
     assert starts["t_start[main,stage2]"].upper == pytest.approx(charge.time + 0.5 + 5.0)
+    # The main's opening peak, not the charge's jolt, is its full-open time, one 10 Hz
+    # sample its sigma; the drogue, opened near apogee, has none.
+    full = test.event("full_open", "main")
+    assert full is not None and full.stage == "stage2"
+    assert full.time == pytest.approx(events["main_open"]) and full.sigma == pytest.approx(0.1)
+    assert test.event("full_open", "drogue") is None
+    assert summary.events["main full open"] == pytest.approx(events["main_open"])
+    # The model predicts that event at the end of the main's fill, t_i + n D / V_i.
+    model = Estimator(test).model
+    values = {p.name: p.default for p in model.parameters}
+    v_start = 27.0
+    captured = {c.name: v_start for c in model.captures}
+    [predicted] = np.asarray(model.event_times(model.parameter_vector(values),
+                                               model.capture_vector(captured))).ravel()
+    fill = values["n[main,stage2]"] * test.parachute("main").diameter / v_start
+    assert predicted == pytest.approx(values["t_start[main,stage2]"] + fill, rel=1e-12)
+
+
+def test_opening_peak_stands_off_the_steady_reading() -> None:
+    """Under a swinging drogue the axial reading scatters by 5 m/s^2 (seeded) about
+    -16 m/s^2; the charge at 10 s jolts it.  A 200 m/s^2 pulse a second later is the
+    opening; one of 15 m/s^2 (three scatter sigmas) is not told from the swinging."""
+    rng = np.random.default_rng(5)
+    t = np.round(np.arange(0.0, 20.0, 0.1), 2)
+    a = -16.0 + rng.normal(0.0, 5.0, t.size)
+    a[t == 10.0] -= 50.0
+    for pulse, expected in ((200.0, (11.0, 0.1)), (15.0, None)):
+        reading = a + pulse * (t == 11.0)
+        found = opening_peak(pd.DataFrame({"time": t, "acceleration": reading}), 10.0)
+        assert found == (None if expected is None else pytest.approx(expected))
+    # Too few samples before the charge to know the steady reading.
+    assert opening_peak(pd.DataFrame({"time": t[95:], "acceleration": a[95:]}), 10.0) is None
 
 
 def test_lapse_rate_fit_is_unbiased_without_noise() -> None:
     h = np.linspace(1500.0, 5000.0, 50)
     t = np.arange(h.size, dtype=float)
     fixes = {"time": t, "gps_altitude": h - 11.0}
-    import pandas as pd
     lapse, offset, resid = fit_lapse_rate(pd.DataFrame(fixes), pd.Series(_pressure_at(h)),
                                           pd.Series(t), SITE.elevation_m, SITE.pressure_pa,
                                           SITE.temperature_k)

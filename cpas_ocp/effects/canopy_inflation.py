@@ -38,7 +38,7 @@ from ..inflation import (
     stage_started,
 )
 from ..parameters import Parameter, param_name
-from .base import Capture, Effect
+from .base import Capture, Effect, EventTiming
 
 if TYPE_CHECKING:
     from ..flight_test import FlightTest, Parachute
@@ -113,6 +113,13 @@ class CanopyInflation(Effect):
     def captures(self, test: FlightTest) -> list[Capture]:
         return [Capture(param_name("V_start", c.name, s), param_name("t_start", c.name, s),
                         "airspeed", "m/s", lower=MIN_START_AIRSPEED)
+                for c in test.parachutes for s in c.stages]
+
+    def event_timings(self, test: FlightTest) -> list[EventTiming]:
+        """A stage is full open (finite mass) or at its peak area (infinite mass) at
+        ``rise_end`` = t_i + t_f: an observed ``full_open`` measures the start time and
+        fill constant together."""
+        return [EventTiming("full_open", c.name, s, time=param_name("rise_end", c.name, s))
                 for c in test.parachutes for s in c.stages]
 
     @staticmethod
