@@ -78,21 +78,22 @@ class LikelihoodRatio:
 
 
 def refit(fit: Fit, spec: ModelSpec, free: list[str] | None = None,
-          values: dict[str, float] | None = None, progress: bool = False
-          ) -> tuple[Estimator, Fit]:
+          values: dict[str, float] | None = None, progress: bool = False,
+          max_iter: int | None = None) -> tuple[Estimator, Fit]:
     """Fit `spec` to `fit`'s test on the same grid, starting from `fit`; the estimator (for
     the covariance) and the new fit.
 
     `free`: the parameters to estimate (default: the spec's choice); their
     start values are the fit's where it has them, else `values` (SI), else the
-    new model's defaults.  Raises SolverFailure when the solve fails.
+    new model's defaults.  `max_iter`: Ipopt's iteration limit (default: the fit's).
+    Raises SolverFailure when the solve fails.
     """
     model = spec.model(fit.test)
     names = free if free is not None else spec.free_names(model)
     start = {n: fit.parameters[n] for n in names if n in fit.parameters}
     start.update({n: v for n, v in (values or {}).items() if n in names})
     settings = dataclasses.replace(fit.settings, free=list(names), guess=start, limits={},
-                                   fixed={})
+                                   fixed={}, max_iter=max_iter or fit.settings.max_iter)
     est = Estimator(fit.test, spec, settings)
     z0 = est.point_from(fit, start)
     return est, est.solve(progress=progress, start=z0)

@@ -220,6 +220,13 @@ def score_test(fit: Fit, spec: ModelSpec, entry: EffectType) -> ScoreTest:
     return result
 
 
+# Ipopt iterations a confirming refit gets.  It starts from the fit and the score test's
+# step, so a refit the data support converges in tens; one that has not converged by then
+# is reported as such rather than left to run to the fit's own limit (500 iterations,
+# minutes on a long real flight).
+CONFIRM_MAX_ITER = 150
+
+
 def confirm(fit: Fit, result: ScoreTest, progress: bool = False) -> None:
     """Refit the model with `result`'s effect, starting from `fit`, and record the
     likelihood-ratio test against `fit` (in place).
@@ -240,7 +247,7 @@ def confirm(fit: Fit, result: ScoreTest, progress: bool = False) -> None:
         start[n] = guess
     try:
         est, refitted = refit(fit, result.spec, [*fit.free, *result.parameters], start,
-                              progress)
+                              progress, CONFIRM_MAX_ITER)
     except SolverFailure as exc:
         result.refit_note = f"the refit did not converge: {exc}"
         return
