@@ -76,7 +76,10 @@ class WindowStatistic:
     normalized_rms: that of (measured - model) / sigma (1 for a model that
     explains the data to the noise); chi_square: the window's sum of squared
     normalised residuals; fraction: its share of the fit's total chi-square.
-    t0, t1 (s): the window's bounds (for OUTSIDE, the first and last sample).
+    t0, t1 (s): the first and last of the channel's samples counted in the
+    window.  Not the window's own bounds: windows of different canopies overlap
+    (an earlier canopy's steady window runs to the end of the phase), and a
+    sample counts in only one of them.
     """
 
     sensor: str
@@ -117,11 +120,10 @@ def window_statistics(fit: Fit, windows: Sequence[PhaseWindow]) -> list[WindowSt
             sel = index == i
             if not sel.any():
                 continue
-            t0, t1 = ((applicable[i].t0, applicable[i].t1) if i >= 0
-                      else (float(r.t[sel][0]), float(r.t[sel][-1])))
             chi2 = float(np.sum(z2[sel]))
             out.append(WindowStatistic(
-                r.sensor, r.channel, applicable[i].name if i >= 0 else OUTSIDE, t0, t1,
+                r.sensor, r.channel, applicable[i].name if i >= 0 else OUTSIDE,
+                float(r.t[sel][0]), float(r.t[sel][-1]),
                 int(sel.sum()), float(np.sqrt(np.mean(d2[sel]))),
                 float(np.sqrt(np.mean(z2[sel]))), chi2, chi2 / total if total > 0 else 0.0))
     return out

@@ -152,8 +152,13 @@ def test_window_chi_squares_add_up_to_each_channel(problem_fit, problem: str) ->
         chi2 = float(np.sum(r.normalized**2))
         assert sum(s.chi_square for s in mine) == pytest.approx(chi2, rel=1e-12)
         assert sum(s.fraction for s in mine) == pytest.approx(chi2 / fit.chi_square, rel=1e-12)
+        by_name = {w.name: w for w in windows}
         for s in mine:
             assert s.normalized_rms == pytest.approx(np.sqrt(s.chi_square / s.samples))
+            # The statistic spans the samples it counts, inside its window's bounds.
+            assert s.t0 <= s.t1 and {s.t0, s.t1} <= set(r.t)
+            if s.window != OUTSIDE:
+                assert by_name[s.window].t0 <= s.t0 and s.t1 <= by_name[s.window].t1
     # A load cell sees its own canopy's windows only.
     own = {w.name for w in windows if w.parachute == "fbcp1" or w.parachute == "drogue1"}
     riser = [s for s in stats if s.sensor.startswith("riser_") and s.sensor.endswith("1")]
