@@ -432,7 +432,7 @@ def _flight(args: argparse.Namespace) -> int:
     from .diagnosis import diagnose
     from .discrepancy_report import write_diagnosis
     from .flight_log import import_flight, load_card
-    from .flight_report import flight_text
+    from .flight_report import flight_text, held_opening_profiles
     from .flight_test import load_test
     card = load_card(args.card)
     data = args.data if args.data is not None else Path("../shared/data") / card.data_folder
@@ -452,7 +452,9 @@ def _flight(args: argparse.Namespace) -> int:
         print("diagnosing the residuals ...", flush=True)
         diag = diagnose(fit, spec, progress=not args.verbose)
         write_diagnosis(diag, cov, folder / "diagnosis")
-        text = flight_text(fit, cov, card.nominal, diag)
+        print("profiling the opening's held parameters ...", flush=True)
+        held = held_opening_profiles(fit, spec, progress=not args.verbose)
+        text = flight_text(fit, cov, card.nominal, diag, held)
         (out / "flight.md").write_text(f"# {card.title}\n\n{card.label}\n\n{text}")
         print()
         print(text)

@@ -34,15 +34,21 @@ from .common_residual import BLOCK_S, combined_p_value, common_residuals
 from .diagnosis import ALPHA, Diagnosis
 from .estimation import PSEUDO_SENSORS, Fit
 from .flight_log import EJECTION_EXCLUDE_S, OPENING_WINDOW_S, descent_load_factor_peak
+from .flight_test import Event, Parachute
 from .kinematic_track import altimeter_altitude
 from .model_comparison import channel_rms
+from .model_spec import ModelSpec
 from .parameters import param_name, split_name
 from .phase_windows import DEPLOYMENT_EVENTS
+from .profile_likelihood import THRESHOLD, Profile, held_profile
 from .uncertainty import Covariance
 from .units import FACTORS, G0
 
 STEADY_AFTER_S = 10.0  # a canopy phase counts as steady this long after its deployment (s)
 STEADY_BEFORE_S = 2.0  # ... and until this long before the next deployment (s)
+# A held inflation parameter is profiled at these multiples of its held value (expopen held
+# at 1: from a slow start to a late, sudden growth).
+HELD_PROFILE_FACTORS = (0.5, 0.75, 1.5, 2.0, 3.0, 4.0, 6.0)
 
 
 @dataclass(frozen=True)
@@ -201,20 +207,81 @@ def opening_shock(fit: Fit, t_deploy: float, load_factor: np.ndarray
     return peak, t_peak, float(np.max(load_factor[sel]))
 
 
-def opening_lines(fit: Fit, cov: Covariance) -> list[str]:
-    """The markdown section on the last canopy's opening: its inflation parameters as fitted
-    (each with the fit's sigma and that sigma times sqrt(chi2/dof), the honest one while
-    the residuals are not white; held and bounded ones said so), the fill time, and the
-    accelerometer's axial peak against the model's."""
+def last_opening(fit: Fit) -> tuple[Event, Parachute, list[str]]:
+    """The last canopy to deploy: its deployment event, the canopy, and its first stage's
+    inflation parameters (n and expopen, or n_p, Ck, expopen and t_k), then its start."""
     last = max((e for e in fit.test.events if e.name in DEPLOYMENT_EVENTS), key=lambda e: e.time)
     chute = fit.test.parachute(last.parachute)
     stage = chute.stages[0]
-    cds_name = param_name("CdS", chute.name, chute.stages[-1])
-    # The first stage's inflation parameters (n and expopen, or n_p, Ck, expopen and t_k),
-    # then its start.
-    start = param_name("t_start", chute.name, stage)
     inflation = [n for n in fit.model.parameter_names if split_name(n)[1] == (chute.name, stage)
-                 and split_name(n)[0] not in ("CdS", "t_start")] + [start]
+                 and split_name(n)[0] not in ("CdS", "t_start")]
+    return last, chute, [*inflation, param_name("t_start", chute.name, stage)]
+
+
+def held_opening_profiles(fit: Fit, spec: ModelSpec, progress: bool = False
+                          ) -> dict[str, Profile]:
+    """The profile (`held_profile`) of each inflation parameter of the last canopy's opening
+    that the model holds fixed, over HELD_PROFILE_FACTORS times its held value (within its
+    bounds)."""
+    out = {}
+    for name in last_opening(fit)[2]:
+        if name in fit.free:
+            continue
+        prm = fit.model.parameter(name)
+        grid = np.clip(fit.parameters[name] * np.asarray(HELD_PROFILE_FACTORS), prm.lower,
+                       prm.upper)
+        out[name] = held_profile(fit, spec, name, grid, progress)
+    return out
+
+
+def held_lines(profile: Profile, scale: float, related: list[str]) -> list[str]:
+    """What the profile of a held parameter says, its chi-square changes divided by `scale`
+    (chi2/dof where the residuals are not white): the values within the 95 % level of the
+    best one studied (chi2_1 quantile 3.84), whether that is all of them, and the range the
+    `related` parameters run through over those values (what holding it hides from their
+    sigmas)."""
+    delta = profile.delta_chi_square
+    scaled = (delta - delta.min()) / scale
+    inside = profile.values[scaled <= THRESHOLD]
+    studied = ", ".join(f"{v:g}" for v in profile.values)
+    line = (f"- {profile.name} is held at {profile.estimate:g}. Held instead at each of "
+            f"{studied} with everything else refitted, χ² changes by {delta.min():+.1f} to "
+            f"{delta.max():+.1f} ({delta.min() / scale:+.2f} to {delta.max() / scale:+.2f} "
+            f"after dividing by χ²/dof = {scale:.2f}); ")
+    if inside.size == profile.values.size:
+        line += ("every value studied lies within the 95 % level of the best (3.84): these "
+                 "data do not determine it, and holding it costs nothing.")
+    else:
+        line += (f"the values within the 95 % level of the best (3.84) run from "
+                 f"{inside.min():g} to {inside.max():g}.")
+    ranges = []
+    for name in related:
+        along = [p[name] for p, ok in zip(profile.parameters, scaled <= THRESHOLD, strict=True)
+                 if ok and name in p]
+        if along:
+            ranges.append(f"{name} from {min(along):.5g} to {max(along):.5g}")
+    if ranges:
+        line += (" Over those values " + ", ".join(ranges) + ": the spread that holding "
+                 f"{profile.name} keeps out of their σ.")
+    out = [line]
+    if profile.failures:
+        out.append("  Points that failed: " + ", ".join(f"{v:g} ({status})"
+                                                        for v, status in profile.failures))
+    return out
+
+
+def opening_lines(fit: Fit, cov: Covariance, held: dict[str, Profile] | None = None
+                  ) -> list[str]:
+    """The markdown section on the last canopy's opening: its inflation parameters as fitted
+    (each with the fit's sigma and that sigma times sqrt(chi2/dof), the honest one while
+    the residuals are not white; held and bounded ones said so, with the profiles `held` of
+    held ones where given), the fill time, the observed full-open time, and the
+    accelerometer's axial peak against the model's and against the most the drag can
+    pull."""
+    last, chute, inflation = last_opening(fit)
+    stage = chute.stages[0]
+    start = inflation[-1]
+    cds_name = param_name("CdS", chute.name, chute.stages[-1])
     excess = float(np.sqrt(max(1.0, fit.chi_square / fit.dof)))
     lines = ["", "## Opening of the " + chute.name, "",
              f"| parameter | fitted | fit's σ | σ × √(χ²/dof) = σ × {excess:.2f} | |",
@@ -230,6 +297,9 @@ def opening_lines(fit: Fit, cov: Covariance) -> list[str]:
         else:
             sd = cov.std[name]
             lines.append(f"| {name} | {value:.5g} | {sd:.2g} | {excess * sd:.2g} | |")
+    scale = max(1.0, fit.chi_square / fit.dof)
+    for prof in (held or {}).values():
+        lines += ["", *held_lines(prof, scale, [n for n in inflation if n in fit.free])]
     v_start = fit.captures[param_name("V_start", chute.name, stage)]
     q = fit.quantities()
     t_start = fit.parameters[start]
@@ -313,9 +383,11 @@ def missing_text(fit: Fit, diagnosis: Diagnosis | None) -> str:
 
 
 def flight_text(fit: Fit, cov: Covariance, nominal: dict[str, dict[str, Any]],
-                diagnosis: Diagnosis | None = None) -> str:
+                diagnosis: Diagnosis | None = None,
+                held: dict[str, Profile] | None = None) -> str:
     """The markdown sections comparing the reconstruction with nominal values and the data,
-    and saying what the model misses (with `diagnosis`, its verdict too)."""
+    and saying what the model misses (with `diagnosis`, its verdict too; with `held`, the
+    profiles of the opening's held parameters, `held_opening_profiles`)."""
     rates = descent_rates(fit, cov)
     lines = ["## Steady descent rates", "",
              "| canopies open | window (s) | mean altitude (m MSL) | measured (m/s) | "
@@ -351,5 +423,5 @@ def flight_text(fit: Fit, cov: Covariance, nominal: dict[str, dict[str, Any]],
                      "forebody drag area at "
                      f"{fit.parameters.get('CdS_V', 0.0):.3f} m²) and, for a later canopy, "
                      "whatever the canopies opened before it lose or add to the wake.")
-    lines += opening_lines(fit, cov)
+    lines += opening_lines(fit, cov, held)
     return "\n".join(lines) + "\n\n" + missing_text(fit, diagnosis)

@@ -21,13 +21,14 @@ status and left out of the curve and the interval.
 from __future__ import annotations
 
 import sys
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.stats import chi2
 
 from .errors import InputError, SolverFailure
 from .estimation import Estimator, Fit
+from .model_spec import ModelSpec
 from .uncertainty import Covariance
 
 LEVEL = 0.95
@@ -45,6 +46,8 @@ class Profile:
     values: np.ndarray
     delta_chi_square: np.ndarray
     failures: list[tuple[float, str]] = field(default_factory=list)
+    # Every parameter's value (SI) at each point, in the order of `values`.
+    parameters: list[dict[str, float]] = field(default_factory=list)
 
     @property
     def quadratic(self) -> np.ndarray:
@@ -114,23 +117,52 @@ def profile(est: Estimator, fit: Fit, cov: Covariance, name: str, span: float = 
     theta = fit.parameters[name]
     offsets = np.linspace(-span, span, points) * std
     grid = np.unique(np.clip(theta + offsets[offsets != 0.0], prm.lower, prm.upper))
-    values, deltas, failures = [theta], [0.0], []
+    return Profile(name, prm.unit, theta, std,
+                   *_continue_outwards(est, fit, fit, name, grid, progress))
+
+
+def held_profile(fit: Fit, spec: ModelSpec, name: str, grid: np.ndarray,
+                 progress: bool = False) -> Profile:
+    """The profile of `name`, a parameter `fit` (of model `spec`) holds fixed: the model
+    refitted with `name` freed and held at each value of `grid` (SI), delta chi-square
+    against `fit`.  Its std is NaN: a held parameter has no covariance."""
+    fixed = {k: v for k, v in fit.settings.fixed.items() if k != name}
+    est = Estimator(fit.test, spec, replace(fit.settings, free=[*fit.free, name], fixed=fixed))
+    theta = fit.parameters[name]
+    grid = np.unique(np.asarray(grid, dtype=float))
+    return Profile(name, est.model.parameter(name).unit, theta, float("nan"),
+                   *_continue_outwards(est, fit, est.point_from(fit), name,
+                                       grid[grid != theta], progress))
+
+
+def _continue_outwards(est: Estimator, fit: Fit, start: Fit | np.ndarray, name: str,
+                       grid: np.ndarray, progress: bool
+                       ) -> tuple[np.ndarray, np.ndarray, list[tuple[float, str]],
+                                  list[dict[str, float]]]:
+    """Solve `est` with `name` held at each value of `grid`, walking out from the fit's value
+    on each side, each solve starting from its inner neighbour's (the first from
+    `start`): the values solved (the fit's own included, delta 0), sorted, their chi-square
+    above `fit`'s, the values whose solve failed with its status, and every parameter at
+    each value solved."""
+    theta = fit.parameters[name]
+    values, deltas, failures, params = [theta], [0.0], [], [dict(fit.parameters)]
     for side in (grid[grid > theta], grid[grid < theta][::-1]):
-        start = fit
+        inner = start
         for v in side:
             if progress:
                 print(f"\rprofile {name}: {len(values) + len(failures)}/{grid.size + 1} "
                       f"points", end="", file=sys.stderr, flush=True)
             try:
-                held = est.solve(start=start, bounds={name: (float(v), float(v))})
+                held = est.solve(start=inner, bounds={name: (float(v), float(v))})
             except SolverFailure as exc:
                 failures.append((float(v), f"{exc.status} after {exc.iterations} iterations"))
                 continue
             values.append(float(v))
             deltas.append(held.chi_square - fit.chi_square)
-            start = held
+            params.append(dict(held.parameters))
+            inner = held
     if progress:
         print(file=sys.stderr)
     order = np.argsort(values)
-    return Profile(name, prm.unit, theta, std, np.asarray(values)[order],
-                   np.asarray(deltas)[order], failures)
+    return (np.asarray(values)[order], np.asarray(deltas)[order], failures,
+            [params[i] for i in order])

@@ -6,6 +6,11 @@ linearly over its 95 % interval: the profile's interval ends lie within
 0.1 sigma of estimate -+ 1.96 sigma.  The check allows 0.3 sigma.  The fill
 constant n is visibly asymmetric (its profile rises faster on the low side);
 the check there is only that the interval brackets the estimate.
+
+The pilot's expopen, which the problem holds at its true value 1, is
+profiled by refitting with it freed and held at other values: the data
+determine it, so its profile keeps the truth within the 95 % level of its
+best point and rules out half and twice the truth.
 """
 
 from __future__ import annotations
@@ -18,7 +23,8 @@ import pytest
 from cpas_ocp.cli import main
 from cpas_ocp.estimation import Estimator
 from cpas_ocp.flight_test import load_test
-from cpas_ocp.profile_likelihood import THRESHOLD, profile
+from cpas_ocp.model_spec import spec_of_test
+from cpas_ocp.profile_likelihood import THRESHOLD, held_profile, profile
 
 # The fit stops once the Gauss-Newton step would gain less than 0.01 in chi-square
 # (`Settings.chi2_step_tol`), so a profile point may lie that much below the fit.
@@ -51,6 +57,24 @@ def test_profile_has_its_minimum_at_the_fit_and_rises_on_both_sides(pilot, base)
     if base == "CdS":
         wlo, whi = prof.wald_interval()
         assert abs(lo - wlo) < 0.3 * prof.std and abs(hi - whi) < 0.3 * prof.std
+
+
+def test_held_parameter_profile_keeps_the_truth_and_rules_out_the_far_values(pilot) -> None:
+    _, fit, _ = pilot
+    name = "expopen[pilot1,stage1]"
+    assert name not in fit.free and fit.parameters[name] == 1.0
+    grid = np.array([0.5, 0.9, 1.1, 1.5, 2.0])
+    prof = held_profile(fit, spec_of_test(fit.test), name, grid)
+    assert not prof.failures
+    assert list(prof.values) == [0.5, 0.9, 1.0, 1.1, 1.5, 2.0]
+    assert np.isnan(prof.std)
+    # The held value is the fit itself; every point holds the parameter at its value.
+    assert prof.delta_chi_square[2] == 0.0
+    assert [p[name] for p in prof.parameters] == pytest.approx(list(prof.values), abs=1e-9)
+    best = prof.delta_chi_square.min()
+    assert prof.delta_chi_square[2] - best <= THRESHOLD
+    assert prof.delta_chi_square[0] - best > THRESHOLD
+    assert prof.delta_chi_square[-1] - best > THRESHOLD
 
 
 def test_reconstruct_writes_profiles_and_refuses_an_unknown_name(problem_folder, tmp_path,

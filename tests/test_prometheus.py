@@ -16,8 +16,15 @@ from cpas_ocp.common_residual import combined_p_value, common_residuals
 from cpas_ocp.diagnosis import ALPHA
 from cpas_ocp.estimation import Estimator
 from cpas_ocp.flight_log import import_flight, load_card
-from cpas_ocp.flight_report import descent_rates, flight_text, nominal_comparisons
+from cpas_ocp.flight_report import (
+    descent_rates,
+    flight_text,
+    held_opening_profiles,
+    nominal_comparisons,
+)
 from cpas_ocp.flight_test import load_test
+from cpas_ocp.model_spec import spec_of_test
+from cpas_ocp.profile_likelihood import THRESHOLD
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "prometheus-2022"
 MEGA = "telemega-serial-6583-flight-0003.csv"
@@ -113,6 +120,21 @@ def test_reconstruction_matches_the_descent(mega_fit) -> None:
     # The model is full open when the accelerometer says, within 3 of the event's sigma.
     rise = fit.quantities()["rise_end[main,stage2]"][0]
     assert abs(rise - full.time) < 3.0 * full.sigma
+
+
+def test_report_profiles_the_held_expopen(mega_fit) -> None:
+    """The card holds the main's expopen at 1: refitted with it held anywhere from 0.5 to 6,
+    chi-square moves by less than the 95 % level once divided by chi2/dof, and the report
+    says so, with the spread of n that holding it hides."""
+    fit, cov = mega_fit
+    held = held_opening_profiles(fit, spec_of_test(fit.test))
+    prof = held["expopen[main,stage2]"]
+    assert not prof.failures and prof.values.min() == 0.5 and prof.values.max() == 6.0
+    scaled = (prof.delta_chi_square - prof.delta_chi_square.min()) / (fit.chi_square / fit.dof)
+    assert np.all(scaled <= THRESHOLD)
+    text = flight_text(fit, cov, load_card("prometheus").nominal, held=held)
+    assert "expopen[main,stage2] is held at 1" in text
+    assert "these data do not determine it" in text and "Over those values n[main,stage2]" in text
 
 
 def test_nominal_drag_areas_are_compared(mega_fit) -> None:
