@@ -335,8 +335,9 @@ def opening_lines(fit: Fit, cov: Covariance, held: dict[str, Profile] | None = N
                          "pull at any time of the opening, so it is not the drag: it is the "
                          "riser's snatch (an elastic shock cord stretched by the canopy "
                          "stopping ahead of the vehicle, then recoiling), which a rigid "
-                         "riser cannot make. The accelerometer is therefore not fitted; "
-                         "only the time of its peak is used.")
+                         "riser cannot make. The accelerometer is therefore not fitted"
+                         + ("; only the time of its peak is used." if full is not None
+                            else "."))
     return lines
 
 
