@@ -35,6 +35,7 @@ from .errors import InputError, SolverFailure
 if TYPE_CHECKING:
     from .effects.registry import EffectType
     from .estimation import Estimator, Fit
+    from .flight_log import FlightCard
     from .flight_test import FlightTest
     from .model_spec import ModelSpec
     from .uncertainty import Covariance
@@ -428,12 +429,7 @@ def _import_altus(args: argparse.Namespace) -> int:
 
 
 def _flight(args: argparse.Namespace) -> int:
-    from .altus_metrum import read_altus_log
-    from .diagnosis import diagnose
-    from .discrepancy_report import write_diagnosis
-    from .flight_log import import_flight, load_card
-    from .flight_report import flight_text, held_opening_profiles
-    from .flight_test import load_test
+    from .flight_log import load_card
     card = load_card(args.card)
     data = args.data if args.data is not None else Path("../shared/data") / card.data_folder
     logs = args.log or list(card.logs)
@@ -442,24 +438,36 @@ def _flight(args: argparse.Namespace) -> int:
             raise InputError(str(data / name), "(file)", f"the flight log of card {card.name!r} "
                              "(give the folder holding it with --data)")
     for name in logs:
-        folder = args.out / Path(name).stem
-        print(f"== {name}: import", flush=True)
-        summary = import_flight(read_altus_log(data / name), card, folder / "test")
-        print(summary.text())
-        test = load_test(folder / "test")
-        spec = _spec(test, None)
-        fit, cov, out = _run_reconstruction(test, args, spec, folder / "report")
-        print("diagnosing the residuals ...", flush=True)
-        diag = diagnose(fit, spec, progress=not args.verbose)
-        write_diagnosis(diag, cov, folder / "diagnosis")
-        print("profiling the opening's held parameters ...", flush=True)
-        held = held_opening_profiles(fit, spec, progress=not args.verbose)
-        text = flight_text(fit, cov, card.nominal, diag, held)
-        (out / "flight.md").write_text(f"# {card.title}\n\n{card.label}\n\n{text}")
-        print()
-        print(text)
-        print(f"flight comparison written to {out / 'flight.md'}")
+        _flight_log(args, card, data / name)
     return 0
+
+
+def _flight_log(args: argparse.Namespace, card: FlightCard, log: Path) -> None:
+    """Import, reconstruct, diagnose and compare one log of the `flight` command (a function
+    of its own so that one log's fits and refits are freed before the next log's)."""
+    from .altus_metrum import read_altus_log
+    from .diagnosis import diagnose
+    from .discrepancy_report import write_diagnosis
+    from .flight_log import import_flight
+    from .flight_report import flight_text, held_opening_profiles
+    from .flight_test import load_test
+    folder = args.out / log.stem
+    print(f"== {log.name}: import", flush=True)
+    summary = import_flight(read_altus_log(log), card, folder / "test")
+    print(summary.text())
+    test = load_test(folder / "test")
+    spec = _spec(test, None)
+    fit, cov, out = _run_reconstruction(test, args, spec, folder / "report")
+    print("diagnosing the residuals ...", flush=True)
+    diag = diagnose(fit, spec, progress=not args.verbose)
+    write_diagnosis(diag, cov, folder / "diagnosis")
+    print("profiling the opening's held parameters ...", flush=True)
+    held = held_opening_profiles(fit, spec, progress=not args.verbose)
+    text = flight_text(fit, cov, card.nominal, diag, held)
+    (out / "flight.md").write_text(f"# {card.title}\n\n{card.label}\n\n{text}")
+    print()
+    print(text)
+    print(f"flight comparison written to {out / 'flight.md'}")
 
 
 def _demo(args: argparse.Namespace) -> int:
