@@ -222,7 +222,7 @@ def held_opening_profiles(fit: Fit, spec: ModelSpec, progress: bool = False
                           ) -> dict[str, Profile]:
     """The profile (`held_profile`) of each inflation parameter of the last canopy's opening
     that the model holds fixed, over HELD_PROFILE_FACTORS times its held value (within its
-    bounds)."""
+    bounds; none for a parameter held at 0)."""
     out = {}
     for name in last_opening(fit)[2]:
         if name in fit.free:
@@ -230,6 +230,8 @@ def held_opening_profiles(fit: Fit, spec: ModelSpec, progress: bool = False
         prm = fit.model.parameter(name)
         grid = np.clip(fit.parameters[name] * np.asarray(HELD_PROFILE_FACTORS), prm.lower,
                        prm.upper)
+        if np.all(grid == fit.parameters[name]):
+            continue  # held at 0 (no multiple differs): nothing to profile
         out[name] = held_profile(fit, spec, name, grid, progress)
     return out
 
