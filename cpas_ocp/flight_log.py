@@ -446,16 +446,15 @@ def opening_peak(accel: pd.DataFrame, t_charge: float) -> tuple[float, float] | 
     sample interval.  None where the peak stands fewer than `OPENING_PEAK_SIGMAS` scatter
     sigmas (1.4826 MAD) off the median reading of the `OPENING_BASELINE_S` before the
     charge, or where the accelerometer has too few samples there to tell."""
+    lo, hi = t_charge + EJECTION_EXCLUDE_S, t_charge + OPENING_WINDOW_S
     before = accel[(accel["time"] >= t_charge - OPENING_BASELINE_S)
                    & (accel["time"] < t_charge - EVENT_SIGMA_S)]["acceleration"].to_numpy()
-    after = accel[(accel["time"] >= t_charge + EJECTION_EXCLUDE_S)
-                  & (accel["time"] <= t_charge + OPENING_WINDOW_S)]
-    if before.size < 10 or len(after) < 3:
+    after = accel["time"][(accel["time"] >= lo) & (accel["time"] <= hi)].to_numpy()
+    if before.size < 10 or after.size < 3:
         return None
-    peak, t_peak = descent_load_factor_peak(after, t_charge + EJECTION_EXCLUDE_S,
-                                            t_charge + OPENING_WINDOW_S)
+    peak, t_peak = descent_load_factor_peak(accel, lo, hi)
     steady = float(np.median(before))
     scatter = max(MIN_ACCEL_SIGMA, 1.4826 * float(np.median(np.abs(before - steady))))
     if abs(peak * G0 - abs(steady + G0)) < OPENING_PEAK_SIGMAS * scatter:
         return None
-    return t_peak, float(np.median(np.diff(after["time"].to_numpy())))
+    return t_peak, float(np.median(np.diff(after)))

@@ -243,8 +243,8 @@ def held_lines(profile: Profile, scale: float, related: list[str]) -> list[str]:
     `related` parameters run through over those values (what holding it hides from their
     sigmas)."""
     delta = profile.delta_chi_square
-    scaled = (delta - delta.min()) / scale
-    inside = profile.values[scaled <= THRESHOLD]
+    within = (delta - delta.min()) / scale <= THRESHOLD
+    inside = profile.values[within]
     studied = ", ".join(f"{v:g}" for v in profile.values)
     line = (f"- {profile.name} is held at {profile.estimate:g}. Held instead at each of "
             f"{studied} with everything else refitted, χ² changes by {delta.min():+.1f} to "
@@ -258,8 +258,7 @@ def held_lines(profile: Profile, scale: float, related: list[str]) -> list[str]:
                  f"{inside.min():g} to {inside.max():g}.")
     ranges = []
     for name in related:
-        along = [p[name] for p, ok in zip(profile.parameters, scaled <= THRESHOLD, strict=True)
-                 if ok and name in p]
+        along = [p[name] for p, ok in zip(profile.parameters, within, strict=True) if ok]
         if along:
             ranges.append(f"{name} from {min(along):.5g} to {max(along):.5g}")
     if ranges:
@@ -284,7 +283,8 @@ def opening_lines(fit: Fit, cov: Covariance, held: dict[str, Profile] | None = N
     stage = chute.stages[0]
     start = inflation[-1]
     cds_name = param_name("CdS", chute.name, chute.stages[-1])
-    excess = float(np.sqrt(max(1.0, fit.chi_square / fit.dof)))
+    scale = max(1.0, fit.chi_square / fit.dof)
+    excess = float(np.sqrt(scale))
     lines = ["", "## Opening of the " + chute.name, "",
              f"| parameter | fitted | fit's σ | σ × √(χ²/dof) = σ × {excess:.2f} | |",
              "|---|---|---|---|---|"]
@@ -299,7 +299,6 @@ def opening_lines(fit: Fit, cov: Covariance, held: dict[str, Profile] | None = N
         else:
             sd = cov.std[name]
             lines.append(f"| {name} | {value:.5g} | {sd:.2g} | {excess * sd:.2g} | |")
-    scale = max(1.0, fit.chi_square / fit.dof)
     for prof in (held or {}).values():
         lines += ["", *held_lines(prof, scale, [n for n in inflation if n in fit.free])]
     v_start = fit.captures[param_name("V_start", chute.name, stage)]
