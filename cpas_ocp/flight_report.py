@@ -293,8 +293,7 @@ def opening_lines(fit: Fit, cov: Covariance, held: dict[str, Profile] | None = N
         if name not in fit.free:
             lines.append(f"| {name} | {value:.5g} | | | held fixed |")
         elif name in cov.at_bound:
-            par = fit.model.parameter(name)
-            side = "lower" if abs(value - par.lower) <= abs(value - par.upper) else "upper"
+            side = fit.model.parameter(name).nearer_bound(value)
             lines.append(f"| {name} | {value:.5g} | | | on its {side} bound |")
         else:
             sd = cov.std[name]

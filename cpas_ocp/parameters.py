@@ -40,6 +40,11 @@ class Parameter:
         admits alternatives on one side only (chi-bar-squared tests)."""
         return value <= self.lower or value >= self.upper
 
+    def nearer_bound(self, value: float) -> str:
+        """"lower" or "upper": the bound `value` lies nearer to (for a parameter a fit left on
+        a bound)."""
+        return "lower" if abs(value - self.lower) <= abs(value - self.upper) else "upper"
+
 
 def param_name(base: str, *index: str) -> str:
     """`param_name("CdS", "drogue1", "stage1")` -> ``"CdS[drogue1,stage1]"``."""

@@ -64,7 +64,8 @@ def result_dict(fit: Fit, cov: Covariance | None,
         entry = {"value": fit.parameters[name], "unit": prm.unit,
                  "initial": fit.guess.get(name, prm.default)}
         if cov is not None and name in cov.at_bound:
-            entry["at_bound"] = True
+            entry["at_bound"] = prm.nearer_bound(fit.parameters[name])
+            entry["bounds"] = [prm.lower, prm.upper]
         elif cov is not None and name in cov.undetermined:
             entry["undetermined"] = True
         elif name in std:
@@ -126,7 +127,7 @@ def parameter_table(fit: Fit, cov: Covariance | None) -> str:
         extra = f"   ({v / FT**2:7.2f} ft²)" if prm.unit == "m^2" else ""
         flag = ""
         if cov is not None and name in cov.at_bound:
-            flag = "  at bound"
+            flag = f"  on its {prm.nearer_bound(v)} bound"
         elif cov is not None and name in cov.undetermined:
             flag = "  undetermined"
         lines.append(f"{name:30s} {v:11.5g} {s} {ci:>25s}  {prm.unit:5s} "
@@ -141,13 +142,23 @@ def parameter_table(fit: Fit, cov: Covariance | None) -> str:
 
 
 def identifiability_text(cov: Covariance) -> str:
-    """One line when the data determine every parameter combination; else one per weak one."""
+    """One line when the data determine every parameter combination off the bounds; else
+    one per weak combination, and one naming the parameters the fit left on a bound."""
+    interior = len(cov.names) - len(cov.at_bound)
     if not cov.weak:
-        return (f"identifiability: every combination of the {len(cov.names)} parameters is "
-                f"determined (none worse than ±{POORLY_DETERMINED:g} parameter scales)")
-    return "\n".join([f"identifiability: {len(cov.weak)} combination"
-                      f"{'s' if len(cov.weak) > 1 else ''} the data do not fix:"]
-                     + [f"  {w.text()}" for w in cov.weak])
+        lines = [f"identifiability: every combination of the {interior} parameters off their "
+                 f"bounds is determined (none worse than ±{POORLY_DETERMINED:g} parameter "
+                 "scales)"]
+    else:
+        lines = [f"identifiability: {len(cov.weak)} combination"
+                 f"{'s' if len(cov.weak) > 1 else ''} the data do not fix:"]
+        lines += [f"  {w.text()}" for w in cov.weak]
+    if cov.at_bound:
+        lines.append(f"  on a bound, so not determined by the data and given no σ "
+                     f"({len(cov.at_bound)}): {', '.join(cov.at_bound)}; the optimum lies "
+                     "at or beyond the bound: widen it if it is not a physical limit, or "
+                     "profile the parameter")
+    return "\n".join(lines)
 
 
 def fit_summary(fit: Fit) -> str:

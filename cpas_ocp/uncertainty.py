@@ -49,7 +49,6 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 import scipy.sparse as sp
-from scipy.linalg import qr
 from scipy.sparse.linalg import splu
 
 
@@ -107,9 +106,14 @@ class Covariance:
 
     @property
     def std(self) -> dict[str, float]:
-        """Standard deviation (SI) of every parameter the data determine."""
+        """Standard deviation (SI) of every parameter the data determine.
+
+        A parameter on an active bound has none: the optimum lies on the bound,
+        the fit holds it there, and its zero row in `matrix` says only that; a
+        sigma of 0 would read as a perfectly determined value.
+        """
         return {n: float(np.sqrt(max(self.matrix[i, i], 0.0))) for i, n in enumerate(self.names)
-                if n not in self.undetermined}
+                if n not in self.undetermined and n not in self.at_bound}
 
     def describe(self) -> str:
         """How the covariance was obtained, for reports."""
@@ -347,8 +351,10 @@ def _weak_combinations(ns: _NullSpace, rows: list[int], at: list[int], names: li
     The undetermined directions span a subspace in which any basis is as good
     as another; it is rotated so that each direction leads with its own
     parameter and has none of the other directions' leading parameters (a
-    pivoted QR picks them): two canopies the data cannot tell apart then read
-    CdS[a] - CdS[b], stage by stage, rather than an arbitrary mixture.
+    pivoted Gram-Schmidt picks them): two canopies the data cannot tell apart
+    then read CdS[a] - CdS[b], stage by stage, rather than an arbitrary mixture.
+    Signs and orders follow the weights, with ties broken by name, so the
+    report is the same whatever the BLAS kernel's rounding.
     """
     top = ns.largest
     undetermined_w = ns.N @ ns.H_eigenvectors[:, ~ns.determined]
@@ -359,8 +365,7 @@ def _weak_combinations(ns: _NullSpace, rows: list[int], at: list[int], names: li
     if undetermined_w.shape[1]:
         P = undetermined_w[at]
         k = undetermined_w.shape[1]
-        _, _, pivots = qr(P.T, pivoting=True)
-        lead = P[pivots[:k]]
+        lead = P[_leading_rows(P, [names[i] for i in rows])[:k]]
         if np.linalg.matrix_rank(lead) == k:
             undetermined_w = undetermined_w @ np.linalg.inv(lead)
         for j in range(k):
@@ -374,13 +379,56 @@ def _weak_combinations(ns: _NullSpace, rows: list[int], at: list[int], names: li
                                float(ns.H_eigenvalues[j] / top)))
     weak = []
     for d, std, ratio in directions:
-        comp = {names[i]: float(d[a]) for i, a in zip(rows, at, strict=True)}
-        sign = np.sign(max(comp.values(), key=abs, default=1.0)) or 1.0
-        shown = {n: sign * c for n, c in sorted(comp.items(), key=lambda kv: -abs(kv[1]))
-                 if abs(c) >= WEIGHT_SHOWN}
+        comp = _oriented({names[i]: float(d[a]) for i, a in zip(rows, at, strict=True)})
+        shown = {n: comp[n] for n in _by_weight(comp) if abs(comp[n]) >= WEIGHT_SHOWN}
         other = float(np.sqrt(max(1.0 - sum(c * c for c in comp.values()), 0.0)))
         weak.append(WeakCombination(shown, other, std, ratio))
     return weak, [n for i, n in enumerate(names) if loading[i] > UNDETERMINED_LOADING]
+
+
+TIE = 1e-6  # relative difference below which two weights or row norms count as equal
+
+
+def _by_weight(comp: dict[str, float]) -> list[str]:
+    """Names by decreasing |weight|; weights equal to within TIE in order of name.
+
+    Equal weights (CdS[a] - CdS[b]) are common, and which of two equal numbers
+    comes out larger depends on the BLAS kernel's rounding: the order must not.
+    """
+    top = max((abs(c) for c in comp.values()), default=0.0)
+    if top == 0.0:
+        return sorted(comp)
+    return sorted(comp, key=lambda n: (-round(abs(comp[n]) / top / TIE), n))
+
+
+def _oriented(comp: dict[str, float]) -> dict[str, float]:
+    """The combination with its sign fixed: the leading parameter (largest |weight|,
+    ties to within TIE broken by name) counts positive."""
+    order = _by_weight(comp)
+    if not order or comp[order[0]] >= 0.0:
+        return comp
+    return {n: -c for n, c in comp.items()}
+
+
+def _leading_rows(P: np.ndarray, names: list[str]) -> list[int]:
+    """Rows of P (parameters x directions) in the order a pivoted Gram-Schmidt picks
+    them: each time the row with the largest norm after projecting out the rows
+    already picked, rows equal to within TIE taken in order of name.  It is the
+    column pivoting of a QR of P', made deterministic where norms tie."""
+    R = np.array(P, dtype=float)
+    picked: list[int] = []
+    for _ in range(min(R.shape)):
+        norms = np.linalg.norm(R, axis=1)
+        norms[picked] = -1.0
+        top = norms.max()
+        if top <= 0.0:
+            break
+        tied = [i for i in range(len(names)) if norms[i] >= top * (1.0 - TIE)]
+        i = min(tied, key=lambda j: names[j])
+        picked.append(i)
+        q = R[i] / np.linalg.norm(R[i])
+        R = R - np.outer(R @ q, q)
+    return picked + [i for i in range(len(names)) if i not in picked]
 
 
 def gauss_newton_decrement(lin: Linearization) -> float:

@@ -7,9 +7,13 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
+from cpas_ocp.report import identifiability_text
 from cpas_ocp.uncertainty import (
     POORLY_DETERMINED,
     Linearization,
+    _by_weight,
+    _leading_rows,
+    _oriented,
     gauss_newton_decrement,
     kkt_covariance,
 )
@@ -77,6 +81,11 @@ def test_a_parameter_on_its_bound_is_held() -> None:
     cov = kkt_covariance(lin, params, np.ones(2), ["p1", "p2"])
     assert cov.at_bound == ["p2"]
     assert cov.matrix[1, 1] == 0.0 and cov.matrix[0, 0] > 0.0
+    # Held on its bound, p2 has no sigma (never 0) and is not counted as determined.
+    assert set(cov.std) == {"p1"} and cov.std["p1"] > 0.0
+    verdict = identifiability_text(cov)
+    assert "every combination of the 1 parameters off their bounds" in verdict
+    assert "on a bound" in verdict and "p2" in verdict
     # Holding p2 is a constraint dp2 = 0 on the full system.
     K = _dense_kkt(lin)
     row = np.zeros((1, K.shape[0]))
@@ -125,3 +134,18 @@ def test_exact_hessian_of_a_linear_problem_is_the_gauss_newton_one() -> None:
     bent = kkt_covariance(lin, params, np.ones(2), ["p1", "p2"],
                           hessian_product=lambda Z: 2.0 * JtJ @ Z)
     np.testing.assert_allclose(bent.matrix, 0.5 * gn.matrix, rtol=1e-9)
+
+
+@pytest.mark.parametrize("ulp", [-1e-13, 0.0, 1e-13])
+def test_a_tied_combination_reads_the_same_whatever_the_rounding(ulp: float) -> None:
+    # Two BLAS kernels return CdS[a] - CdS[b] with either weight the larger by a few
+    # units in the last place, and with either overall sign: the report must not move.
+    a = np.sqrt(0.5)
+    for sign in (1.0, -1.0):
+        comp = {"CdS[b]": sign * -a * (1.0 + ulp), "CdS[a]": sign * a}
+        oriented = _oriented(comp)
+        assert _by_weight(oriented) == ["CdS[a]", "CdS[b]"]
+        assert oriented["CdS[a]"] > 0.0 > oriented["CdS[b]"]
+    # The pivot row of a tied subspace is the first by name, not the one rounding favours.
+    P = np.array([[a * (1.0 + ulp)], [-a], [0.1]])
+    assert _leading_rows(P, ["p2", "p1", "p3"])[0] == 1

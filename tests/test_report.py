@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -56,3 +57,21 @@ def test_report_folder_carries_values_uncertainties_and_fit_statistics(drogue_fi
     assert result["identifiability"] == [] and "every combination" in table
     assert (out / "correlation.png").exists()
     assert "Correlations with |ρ| ≥" in (out / "report.md").read_text()
+
+
+def test_a_parameter_on_a_bound_is_flagged_and_given_no_sigma(drogue_fit, tmp_path) -> None:
+    fit, cov, _ = drogue_fit(1)
+    name = next(n for n in fit.free if n.startswith("t_start"))
+    held = dataclasses.replace(cov, at_bound=[name])
+    assert name not in held.std and name in cov.std
+    table = parameter_table(fit, held)
+    row = next(line for line in table.splitlines() if line.startswith(name))
+    side = fit.model.parameter(name).nearer_bound(fit.parameters[name])
+    assert f"on its {side} bound" in row and "—" in row
+    assert "on a bound, so not determined by the data" in table and name in table.split(
+        "identifiability:")[1]
+    out = write_report(fit, held, tmp_path / "report")
+    entry = json.loads((out / "result.json").read_text())["parameters"][name]
+    assert entry["at_bound"] == side and "std" not in entry and "ci95" not in entry
+    prm = fit.model.parameter(name)
+    assert entry["bounds"] == [prm.lower, prm.upper]
