@@ -225,6 +225,9 @@ def _solver_options(s: argparse.ArgumentParser) -> None:
     s.add_argument("--grid-step", type=float, default=None,
                    help="shooting interval [s] (default: the fastest sensor's sampling interval)")
     s.add_argument("--verbose", action="store_true", help="show Ipopt's iteration log")
+    s.add_argument("--max-iter", type=int, default=500, metavar="N",
+                   help="stop the solver after N iterations (default 500); a run stopped "
+                        "there writes a NOT CONVERGED failure report, not a result")
     s.add_argument("--hessian", choices=HESSIANS, default="gauss-newton",
                    help="curvature the covariance inverts (exact: the Lagrangian's, slower)")
     s.add_argument("--rescale-sigmas", action="store_true",
@@ -495,10 +498,17 @@ def _run_reconstruction(test: FlightTest, args: argparse.Namespace, spec: ModelS
     for name in names:
         require_free(est, name)
     print(f"solving: {est.size_text()} ...", flush=True)
-    fit, cov = _fit_and_covariance(est, args)
+    target = out if out is not None else args.out
+    try:
+        fit, cov = _fit_and_covariance(est, args)
+    except SolverFailure as exc:
+        from .failure_report import write_failure_report
+        folder = write_failure_report(exc, target)
+        print(f"NOT CONVERGED: why is in {folder / 'failure.md'}", file=sys.stderr)
+        raise
     profiles = [profile(est, fit, cov, n, args.profile_span, args.profile_points,
                         progress=not args.verbose) for n in names]
-    out = write_report(fit, cov, out if out is not None else args.out, profiles)
+    out = write_report(fit, cov, target, profiles)
     print()
     print(parameter_table(fit, cov))
     print()
@@ -515,7 +525,10 @@ def _estimator(test: FlightTest, args: argparse.Namespace, spec: ModelSpec) -> E
     step = args.grid_step if args.grid_step is not None else default_grid_step(test)
     print(f"building the multiple-shooting NLP of {test.name} "
           f"({test.t_end - test.t_start:.1f} s at {step * 1e3:g} ms) ...", flush=True)
-    return Estimator(test, spec, settings=Settings(grid_step=step, verbose=args.verbose))
+    if args.max_iter < 1:
+        raise InputError("(command line)", "--max-iter", f"at least 1; got {args.max_iter}")
+    return Estimator(test, spec, settings=Settings(grid_step=step, verbose=args.verbose,
+                                                   max_iter=args.max_iter))
 
 
 def _fit_and_covariance(est: Estimator, args: argparse.Namespace) -> tuple[Fit, Covariance]:

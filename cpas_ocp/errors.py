@@ -9,6 +9,8 @@ a result.
 
 from __future__ import annotations
 
+from typing import Any
+
 
 class InputError(ValueError):
     """A user's input does not meet the test-folder contract."""
@@ -24,11 +26,13 @@ class SolverFailure(RuntimeError):
     """Ipopt ended without a converged, feasible solution."""
 
     def __init__(self, status: str, iterations: int, worst_constraint: str = "",
-                 chi_square: float | None = None) -> None:
+                 chi_square: float | None = None, last_iterate: Any = None) -> None:
         self.status = status
         self.iterations = iterations
         self.worst_constraint = worst_constraint
         self.chi_square = chi_square  # at the last iterate: a diagnostic, not a result
+        # The estimator's Fit at the last iterate, for a failure report (never a result).
+        self.last_iterate = last_iterate
         detail = f"; worst constraint {worst_constraint}" if worst_constraint else ""
         if chi_square is not None:
             detail += f"; chi-square {chi_square:.6g} at the last iterate"

@@ -632,13 +632,24 @@ class Estimator:
         stats = SolverStats(status, success, int(st["iter_count"]), wall, float(sol["f"]), worst,
                             self._monitor.decrement if self._monitor.stopped else None)
         if not stats.success:
-            raise SolverFailure(stats.status, stats.iterations, worst, 2.0 * stats.objective)
+            raise SolverFailure(stats.status, stats.iterations, worst, 2.0 * stats.objective,
+                                self._last_iterate(z, stats))
         fit = self._fit(z, stats)
         fit.multipliers = np.asarray(sol["lam_g"]).ravel()
         if bounds:
             fit.sensitivities = self._bound_sensitivities(z, np.asarray(sol["lam_g"]).ravel(),
                                                           list(bounds))
         return fit
+
+    def _last_iterate(self, z: np.ndarray, stats: SolverStats) -> Fit | None:
+        """The Fit at an unconverged solve's last iterate, for its failure report only
+        (None where the iterate cannot even be evaluated)."""
+        if not np.all(np.isfinite(z)):
+            return None
+        try:
+            return self._fit(z, stats)
+        except (RuntimeError, ValueError):
+            return None
 
     def _bound_sensitivities(self, z: np.ndarray, lam_g: np.ndarray,
                              names: list[str]) -> dict[str, float]:

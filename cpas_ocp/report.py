@@ -13,6 +13,7 @@ from scipy.stats import norm
 
 from .diagnostics import sensor_summary, worst_windows
 from .estimation import EVENTS, PRIORS, Fit
+from .failure_report import RESULT_MARKERS
 from .model_comparison import Criteria
 from .output_folder import atomic_folder
 from .plots import plot_correlation, plot_drag_areas, plot_events, plot_profile, plot_sensors
@@ -191,7 +192,7 @@ def write_report(fit: Fit, cov: Covariance | None, out: str | Path,
                  profiles: Sequence[Profile] = ()) -> Path:
     """Write the report folder atomically: all of it or nothing."""
     out = Path(out)
-    with atomic_folder(out, "result.json") as tmp:
+    with atomic_folder(out, RESULT_MARKERS) as tmp:
         (tmp / "result.json").write_text(json.dumps(result_dict(fit, cov, profiles), indent=2))
         std = cov.std if cov is not None else {}
         rows = [{"parameter": n, "value": fit.parameters[n], "std": std.get(n, np.nan),
