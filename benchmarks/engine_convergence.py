@@ -1,0 +1,69 @@
+"""Benchmark: iterations, wall time and chi-square of a fit from the reduction, old path
+against new, in the same process.
+
+Each built-in problem named is simulated (seed 1 unless `--seed`) and
+reconstructed from the offline reduction twice per configuration, on the
+same Estimator settings but for the solver path:
+
+* ``before``: Ipopt's default watchdog (a full step tried on trust after 10
+  shortened line searches) and the statistical stop only at an iterate that
+  is itself feasible (`Settings(watchdog_trigger=10, polish=False)`);
+* ``after``: the defaults (watchdog after 3, and the statistical stop may end
+  a nearly feasible run with one Gauss-Newton step of its own).
+
+Each NLP is built once per configuration before timing (compiled functions
+cached); the solve alone is timed.  Printed per problem: iterations, solve
+wall time, chi-square of each, and the ratios after/before.  Chi-square must
+agree to the stopping rule's 0.01 (plus the second-order rest of a step).
+
+    python benchmarks/engine_convergence.py [--problems drogue drogue_full ...] [--seed N]
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+from pathlib import Path
+
+from cpas_ocp.errors import SolverFailure
+from cpas_ocp.estimation import Estimator, Settings
+from cpas_ocp.flight_test import load_test
+from cpas_ocp.problems import load_problem
+from cpas_ocp.simulate import simulate_problem
+
+PATHS = {"before": Settings(watchdog_trigger=10, polish=False), "after": Settings()}
+
+
+def solve(folder: Path, settings: Settings) -> tuple[int, float, float, str]:
+    """(iterations, solve wall s, chi-square, status) of one fit from the reduction."""
+    est = Estimator(load_test(folder), settings=settings)
+    try:
+        fit = est.solve()
+    except SolverFailure as exc:
+        return exc.iterations, float("nan"), float("nan"), exc.status
+    return fit.solver.iterations, fit.solver.wall_s, fit.chi_square, fit.solver.status
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--problems", nargs="+", default=["drogue", "drogue_full"])
+    parser.add_argument("--seed", type=int, default=1)
+    args = parser.parse_args()
+    print(f"{'problem':12s} {'path':7s} {'iter':>5s} {'solve s':>8s} {'chi-square':>12s}  status")
+    with tempfile.TemporaryDirectory() as tmp:
+        for name in args.problems:
+            folder = Path(tmp) / name
+            simulate_problem(load_problem(name), folder, args.seed)
+            runs = {}
+            for label, settings in PATHS.items():
+                runs[label] = solve(folder, settings)
+                it, wall, chi2, status = runs[label]
+                print(f"{name:12s} {label:7s} {it:5d} {wall:8.1f} {chi2:12.3f}  {status}",
+                      flush=True)
+            (ib, wb, cb, _), (ia, wa, ca_, _) = runs["before"], runs["after"]
+            print(f"{name:12s} after/before: iterations {ia / ib:.2f}, solve time "
+                  f"{wa / wb:.2f}, chi-square difference {ca_ - cb:+.4f}", flush=True)
+
+
+if __name__ == "__main__":
+    main()

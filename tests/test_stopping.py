@@ -1,0 +1,37 @@
+"""The statistical stop's finishing step: a nearly feasible iterate is finished by one
+Gauss-Newton step, and the answer is the one the solver would have reached."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cpas_ocp.estimation import (
+    STATISTICALLY_CONVERGED,
+    STOP_CONSTRAINT_TOL,
+    Estimator,
+    Settings,
+)
+from cpas_ocp.flight_test import load_test
+
+
+def test_the_finishing_step_gives_the_same_estimate_feasibly(problem_folder) -> None:
+    test = load_test(problem_folder("fbcp", 1))
+    before_est = Estimator(test, settings=Settings(polish=False, watchdog_trigger=10))
+    before = before_est.solve()
+    est = Estimator(test, settings=Settings())
+    after = est.solve()
+    assert after.solver.status == STATISTICALLY_CONVERGED
+    assert after.solver.iterations <= before.solver.iterations
+    # Where it stopped is feasible (the shooting gaps closed), and the reported objective
+    # is that point's own.
+    chi2, violation = est.evaluate(after.z)
+    assert violation <= STOP_CONSTRAINT_TOL
+    assert chi2 == pytest.approx(after.chi_square, rel=1e-12)
+    assert 2.0 * after.solver.objective == pytest.approx(chi2, rel=1e-12)
+    # Both stops claim every parameter within 0.1 sigma of the optimum: they agree to that.
+    cov = est.covariance(after)
+    shift = np.array([(after.parameters[n] - before.parameters[n]) / cov.std[n]
+                      for n in after.free])
+    assert np.max(np.abs(shift)) < 0.2
+    assert abs(after.chi_square - before.chi_square) < 0.02
