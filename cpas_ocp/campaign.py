@@ -81,6 +81,7 @@ def find_tests(root: str | Path) -> list[Path]:
 def reconstruct_folder(folder: str) -> TestOutcome:
     """Reconstruct one test folder with its manifest's model; never raises (a picklable
     top-level function, run in a worker process)."""
+    from .continuation import solve
     from .estimation import Estimator
     from .flight_test import load_test
     t0 = time.perf_counter()
@@ -89,7 +90,7 @@ def reconstruct_folder(folder: str) -> TestOutcome:
         test = load_test(folder)
         name = test.name
         est = Estimator(test)
-        fit = est.solve()
+        fit = solve(est)
         cov = est.covariance(fit)
     except InputError as exc:
         return TestOutcome(folder, name, "input", str(exc), wall_s=time.perf_counter() - t0)

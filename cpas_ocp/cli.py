@@ -391,6 +391,7 @@ def _dispersions(args: argparse.Namespace) -> int:
 
 
 def _montecarlo(args: argparse.Namespace) -> int:
+    from .continuation import solve
     from .estimation import Estimator
     from .flight_test import load_test
     from .output_folder import atomic_folder
@@ -411,7 +412,7 @@ def _montecarlo(args: argparse.Namespace) -> int:
         est = Estimator(test)
         check_columns(est.model, stages)
         print(f"reconstructing {test.name}: {est.size_text()} ...", flush=True)
-        fit = est.solve(progress=True)
+        fit = solve(est, progress=True)
         print(f"flying {sum(len(s.cases) for s in stages):,} cases of "
               f"{', '.join(s.label for s in stages)} on {where} ...", flush=True)
         results = run_monte_carlo(fit, stages, args.workers, args.scheduler, progress=True)
@@ -534,7 +535,8 @@ def _estimator(test: FlightTest, args: argparse.Namespace, spec: ModelSpec) -> E
 def _fit_and_covariance(est: Estimator, args: argparse.Namespace) -> tuple[Fit, Covariance]:
     """Solve, and the covariance the command line asks for (a warning where the data leave
     a parameter combination undetermined)."""
-    fit = est.solve(progress=not args.verbose)
+    from .continuation import solve
+    fit = solve(est, progress=not args.verbose)
     if args.hessian == "exact":
         print("exact-Hessian covariance ...", flush=True)
     cov = est.covariance(fit, args.rescale_sigmas, args.hessian)

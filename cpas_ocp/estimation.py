@@ -155,6 +155,7 @@ class SolverStats:
     objective: float
     worst_constraint: str = ""
     chi2_decrement: float | None = None
+    start: str = "the offline reduction"  # where the solve started from
 
 
 @dataclass
@@ -611,7 +612,8 @@ class Estimator:
                 f"{sum(len(s_[2]) * len(s_[1]) for s_ in self._samples)} residuals")
 
     def solve(self, progress: bool = False, start: Fit | np.ndarray | None = None,
-              bounds: dict[str, tuple[float, float]] | None = None) -> Fit:
+              bounds: dict[str, tuple[float, float]] | None = None,
+              max_iter: int | None = None) -> Fit:
         """Solve the NLP; raise SolverFailure if it fails.
 
         It starts from the reduction's initial point, from the solution of
@@ -622,6 +624,7 @@ class Estimator:
         optimal chi-square to the bound, d(chi^2)/d(value) (its Lagrange
         multiplier, times 2, per SI unit).
         With `progress`, a one-line iteration counter with chi-square is shown on stderr.
+        `max_iter` stops this solve after fewer iterations than the settings' limit.
         """
         z0 = (self.initial_point() if start is None
               else start.z if isinstance(start, Fit) else np.asarray(start, dtype=float))
@@ -632,7 +635,7 @@ class Estimator:
             lbz[n_states + i], ubz[n_states + i] = lo / self.pscale[i], hi / self.pscale[i]
         z0 = np.clip(z0, lbz, ubz)
         t0 = time.perf_counter()
-        self._monitor.reset(progress, (lbz, ubz))
+        self._monitor.reset(progress, (lbz, ubz), max_iter)
         sol = self._solver(x0=z0, lbx=lbz, ubx=ubz, lbg=self._lbg, ubg=self._ubg)
         self._monitor.finish()
         st = self._solver.stats()
@@ -652,8 +655,12 @@ class Estimator:
         status, success = st["return_status"], bool(st["success"])
         if status == "User_Requested_Stop" and self._monitor.stopped:
             status, success = STATISTICALLY_CONVERGED, True
+        elif status == "User_Requested_Stop" and self._monitor.capped:
+            status = "Maximum_Iterations_Exceeded"
         stats = SolverStats(status, success, int(st["iter_count"]), wall, objective, worst,
-                            self._monitor.decrement if self._monitor.stopped else None)
+                            self._monitor.decrement if self._monitor.stopped else None,
+                            "the offline reduction" if start is None else
+                            "a fit" if isinstance(start, Fit) else "a given point")
         if not stats.success:
             raise SolverFailure(stats.status, stats.iterations, worst, 2.0 * stats.objective,
                                 self._last_iterate(z, stats))
@@ -828,10 +835,13 @@ class _Monitor(ca.Callback):
         self.reset(False, (np.full(nx, -np.inf), np.full(nx, np.inf)))
         self.construct("monitor", {})
 
-    def reset(self, progress: bool, bounds: tuple[np.ndarray, np.ndarray]) -> None:
-        """Start a run within `bounds` (the scaled decision vector's lower and upper)."""
+    def reset(self, progress: bool, bounds: tuple[np.ndarray, np.ndarray],
+              max_iter: int | None = None) -> None:
+        """Start a run within `bounds` (the scaled decision vector's lower and upper),
+        stopped after `max_iter` iterations if given."""
         self._k, self._last_test, self._gap, self._chi2 = 0, -100, 3, np.inf
         self.stopped, self.decrement = False, None
+        self.max_iter, self.capped = max_iter, False
         self.point: np.ndarray | None = None  # where the statistical test ended the run
         self.bounds = bounds
         self.progress = progress and sys.stderr.isatty()
@@ -860,6 +870,9 @@ class _Monitor(ca.Callback):
 
     def eval(self, arg: list) -> list:
         self._k += 1
+        if self.max_iter is not None and self._k > self.max_iter:
+            self.capped = True  # called at iterations 0, 1, ...: this is iteration max_iter
+            return [1]
         chi2 = 2.0 * float(arg[1])
         if self.progress:
             sys.stderr.write(f"\r  iteration {self._k:4d}   chi-square {chi2:14.6g}")

@@ -25,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .continuation import solve
 from .errors import SolverFailure
 from .estimation import Estimator, Fit
 from .hypothesis_tests import chi_bar_square_sf
@@ -188,7 +189,7 @@ def compare(fit_a: Fit, cov_a: Covariance, spec_a: ModelSpec, spec_b: ModelSpec,
     except SolverFailure:
         settings = dataclasses.replace(fit_a.settings, free=None, guess={}, fixed={}, limits={})
         est_b = Estimator(fit_a.test, spec_b, settings)
-        fit_b = est_b.solve(progress=progress)
+        fit_b = solve(est_b, progress=progress)
     lr, note = None, "neither model is nested in the other; compare AIC and BIC"
     fits = (fit_a, fit_b)
     for small, large, s_spec, l_spec in ((0, 1, spec_a, spec_b), (1, 0, spec_b, spec_a)):

@@ -91,7 +91,7 @@ def result_dict(fit: Fit, cov: Covariance | None,
         "captures": fit.captures,
         "solver": {"status": fit.solver.status, "success": fit.solver.success,
                    "iterations": fit.solver.iterations, "wall_s": fit.solver.wall_s,
-                   "chi2_decrement": fit.solver.chi2_decrement},
+                   "chi2_decrement": fit.solver.chi2_decrement, "start": fit.solver.start},
         "residuals": residuals,
         "fit": {"chi_square": fit.chi_square, "samples": n, "free_parameters": len(fit.free),
                 "chi_square_per_dof": fit.chi_square / fit.dof, **information_criteria(fit),
@@ -166,8 +166,9 @@ def fit_summary(fit: Fit) -> str:
     """Solver outcome, residuals per sensor and where the model fits worst."""
     ic = information_criteria(fit)
     out = [f"solver: {fit.solver.status}, {fit.solver.iterations} iterations, "
-           f"{fit.solver.wall_s:.1f} s;  chi²/dof = {fit.chi_square:.1f}/{fit.dof}"
-           f" = {fit.chi_square / fit.dof:.3f};  AIC {ic['aic']:.1f}, BIC {ic['bic']:.1f}"]
+           f"{fit.solver.wall_s:.1f} s, from {fit.solver.start};  "
+           f"chi²/dof = {fit.chi_square:.1f}/{fit.dof} = {fit.chi_square / fit.dof:.3f};  "
+           f"AIC {ic['aic']:.1f}, BIC {ic['bic']:.1f}"]
     for s, e in sensor_summary(fit).items():
         rms = ", ".join(f"{c} {v:.4g} {channel_unit(fit, s, c)}" for c, v in e["rms"].items())
         out.append(f"  {s:16s} normalised RMS {e['normalized_rms']:.3f}   (RMS {rms})")

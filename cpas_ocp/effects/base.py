@@ -110,10 +110,15 @@ class Effect:
 
     `replaces` names the effect this one stands in for when it is added to a
     model that has that one (an elastic riser replaces the rigid riser).
+    `continuation`: the effect changes the dynamics so much that a fit from
+    the offline reduction rarely converges with it; the model is then first
+    fitted without it (with the effect it replaces, if any), and the effect
+    brought in from that fit (`cpas_ocp.continuation`).
     """
 
     name: str = "effect"
     replaces: ClassVar[str | None] = None
+    continuation: ClassVar[bool] = False
 
     def parameters(self, test: FlightTest) -> list[Parameter]:
         return []

@@ -70,6 +70,7 @@ class ElasticRiser(Effect):
     damping_ratio: float = 0.3
     name: str = "elastic_riser"
     replaces: ClassVar[str | None] = "rigid_riser"
+    continuation: ClassVar[bool] = True
 
     def __post_init__(self) -> None:
         for label, value, (lo, hi) in (("frequency", self.frequency, FREQUENCY_BOUNDS_HZ),
