@@ -179,10 +179,8 @@ def linearize(residual_jacobian: ca.Function, constraints: ca.Function, z: np.nd
     """Linearise at `z`: `constraints(z)` gives (g, dg/dz); `param_index` locates the free
     parameters in z, `lower`/`upper` are their scaled bounds; the first `chain_rows`
     constraints determine the `dependent` columns; `pinned` columns are fixed."""
-    r, J = residual_jacobian(z)
-    g, A = constraints(z)
-    g = np.asarray(g).ravel()
-    A = _csc(A)
+    r, J = evaluate(residual_jacobian, z)
+    g, A = evaluate(constraints, z)
     holding = (ubg - lbg <= 0) | (g - lbg < 1e-8) | (ubg - g < 1e-8)
     if not holding[:chain_rows].all():
         raise ValueError("the chain constraints must be equalities")
@@ -193,7 +191,7 @@ def linearize(residual_jacobian: ca.Function, constraints: ca.Function, z: np.nd
     on_bound = (zp - lower < 1e-6 * bspan) | (upper - zp < 1e-6 * bspan)
     held = np.concatenate([np.asarray(pinned if pinned is not None else [], dtype=int),
                            param_index[on_bound]])
-    return Linearization(z, np.asarray(r).ravel(), _csc(J), A.tocsc(), c, on_bound, chain_rows,
+    return Linearization(z, r, J, A.tocsc(), c, on_bound, chain_rows,
                          np.asarray(dependent if dependent is not None else [], dtype=int),
                          np.sort(held))
 
@@ -466,9 +464,64 @@ def _gauss_newton(lin: Linearization) -> tuple[np.ndarray, np.ndarray]:
     return dz, base + red.JZ @ (ns.N @ y)
 
 
-def _csc(m: ca.DM) -> sp.csc_matrix:
-    m = ca.DM(m)
-    sparsity = m.sparsity()
-    colind = np.asarray(sparsity.colind())
-    row = np.asarray(sparsity.row())
-    return sp.csc_matrix((np.asarray(m.nonzeros()), row, colind), shape=m.shape)
+class _Evaluator:
+    """Evaluates a CasADi function of one dense vector straight into NumPy arrays.
+
+    The estimator linearises the same functions again and again.  Through
+    CasADi's function buffer the outputs land in preallocated arrays (a dense
+    output as a vector, a sparse one as a SciPy CSC matrix on its fixed
+    pattern, whose index arrays are converted once); through DM objects,
+    copying the values out of Python lists took as long as evaluating them
+    (the `drogue` constraint Jacobian: 68 ms of 150).
+    """
+
+    def __init__(self, fn: ca.Function) -> None:
+        self.fn = fn
+        self.buffer, self.run = fn.buffer()
+        self.arg = np.zeros(fn.nnz_in(0))
+        self.buffer.set_arg(0, memoryview(self.arg))
+        self.out = [np.zeros(fn.nnz_out(i)) for i in range(fn.n_out())]
+        self.patterns = []
+        for i, out in enumerate(self.out):
+            self.buffer.set_res(i, memoryview(out))
+            sparsity = fn.sparsity_out(i)
+            self.patterns.append((np.asarray(sparsity.row(), dtype=np.int32),
+                                  np.asarray(sparsity.colind(), dtype=np.int32),
+                                  sparsity.shape))
+
+    def __call__(self, z: np.ndarray) -> list[np.ndarray | sp.csc_matrix]:
+        self.arg[:] = z
+        self.run()
+        out: list[np.ndarray | sp.csc_matrix] = []
+        for values, (row, colind, shape) in zip(self.out, self.patterns, strict=True):
+            if shape[1] == 1:  # a vector, dense whatever its pattern
+                vector = np.zeros(shape[0])
+                vector[row] = values
+                out.append(vector)
+            else:
+                out.append(sp.csc_matrix((values.copy(), row, colind), shape=shape))
+        return out
+
+
+_EVALUATORS: dict[int, _Evaluator] = {}
+EVALUATORS_KEPT = 4  # functions whose buffers are kept (the current estimator's two)
+
+
+def evaluate(fn: ca.Function, z: np.ndarray,
+             via_dm: bool = False) -> list[np.ndarray | sp.csc_matrix]:
+    """`fn(z)` as NumPy vectors (vector outputs) and SciPy CSC matrices (matrix ones).
+
+    `via_dm`: through CasADi's DM objects instead of the function buffer (the
+    earlier path, for benchmarks).
+    """
+    if via_dm:
+        return [np.asarray(ca.DM(out)).ravel() if out.shape[1] == 1 else
+                sp.csc_matrix((np.asarray(out.nonzeros()), np.asarray(out.sparsity().row()),
+                               np.asarray(out.sparsity().colind())), shape=out.shape)
+                for out in fn(z)]
+    evaluator = _EVALUATORS.get(id(fn))
+    if evaluator is None or evaluator.fn is not fn:
+        if len(_EVALUATORS) >= EVALUATORS_KEPT:
+            _EVALUATORS.clear()
+        evaluator = _EVALUATORS[id(fn)] = _Evaluator(fn)
+    return evaluator(np.asarray(z, dtype=float).ravel())
