@@ -398,29 +398,18 @@ class Estimator:
         constraint_jac = ca.vertcat(*g_jac)
         self._constraints = ca.Function("constraints", [self._z], [self._g, constraint_jac])
         obj = 0.5 * ca.sumsqr(residual)
-        empty = ca.MX.sym("p", 0, 1)
-        jac_g = ca.Function("jac_g", [self._z, empty], [self._g, constraint_jac],
-                            ["x", "p"], ["g", "jac_g_x"])
-        # Objective gradient J'r from the (compiled) residual Jacobian blocks, dense as
-        # Ipopt's interface copies it.
-        gradient = ca.densify(ca.mtimes(jac.T, residual))
-        grad_f = ca.Function("grad_f", [self._z, empty], [obj, gradient], ["x", "p"],
-                             ["f", "grad_f_x"])
-        # Gauss-Newton Hessian of the Lagrangian: J'J of the weighted residuals plus the
-        # exact curvature of the few capture and effect constraints (a capture at a free
-        # time bends in that time; without it a Pilot's bag-strip constraint made the
-        # steps cycle); the curvature of the continuity constraints is neglected
-        # (small-residual problems).
-        sigma_f = ca.MX.sym("sigma_f")
-        lam_g = ca.MX.sym("lam_g", self._g.numel())
-        n_gaps = nx * n
+        # The exact curvature of the few capture and effect constraints (a capture at a
+        # free time bends in that time; without it a Pilot's bag-strip constraint made the
+        # steps cycle); the curvature of the continuity constraints is neglected.
         small = ca.vertcat(*g[1:n_small])
-        lam_small = lam_g[n_gaps:n_gaps + small.numel()]
-        curvature = (ca.hessian(ca.dot(lam_small, small), z_all)[0] if small.numel()
-                     else ca.MX(z_all.numel(), z_all.numel()))
-        hess = ca.Function("gauss_newton", [self._z, empty, sigma_f, lam_g],
-                           [ca.triu(sigma_f * ca.mtimes(jac.T, jac) + curvature)],
-                           ["x", "p", "lam_f", "lam_g"], ["hess_gamma_x_x"])
+        lam_small = ca.MX.sym("lam_small", small.numel())
+        curvature = ca.Function("curvature", [z_all, lam_small], [
+            ca.hessian(ca.dot(lam_small, small), z_all)[0] if small.numel()
+            else ca.MX(z_all.numel(), z_all.numel())])
+        small_rows = slice(nx * n, nx * n + small.numel())
+        self._residual_value = ca.Function("residual_value", [self._z], [residual])
+        nlp, derivatives = self._plain_nlp(residual, jac, constraint_jac, curvature,
+                                           small_rows)
         self._unpack = ca.Function("unpack", [self._z], [Xp, pfull, Cp])
         self._residuals = ca.Function("residuals", [self._z], residual_blocks)
         self._lbg = np.concatenate([np.ravel(a) for a in lbg])
@@ -458,14 +447,36 @@ class Estimator:
             "ipopt.acceptable_constr_viol_tol": 1e-8,
             "ipopt.watchdog_shortened_iter_trigger": s.watchdog_trigger,
             "ipopt.print_level": 5 if s.verbose else 0, "print_time": False,
-            "ipopt.sb": "yes", "hess_lag": hess, "jac_g": jac_g, "grad_f": grad_f,
+            "ipopt.sb": "yes", **derivatives,
         }
-        nlp = {"x": self._z, "f": self._obj, "g": self._g}
         self._hessian_product: ca.Function | None = None
         self._monitor = _Monitor(self._z.numel(), self._g.numel(), self._stop_test,
                                  s.chi2_step_tol)  # the solver keeps only a reference
         opts["iteration_callback"] = self._monitor
         self._solver = ca.nlpsol("reconstruction", "ipopt", nlp, opts)
+
+    def _plain_nlp(self, residual: ca.MX, jac: ca.MX, constraint_jac: ca.MX,
+                   curvature: ca.Function, small_rows: slice) -> tuple[dict, dict]:
+        """The NLP in the decision vector z, objective 0.5 |r(z)|^2, and Ipopt's derivatives.
+
+        Gradient J'r and the Gauss-Newton Hessian J'J from the (compiled)
+        residual Jacobian blocks, plus the small constraints' curvature.
+        """
+        z, empty = self._z, ca.MX.sym("p", 0, 1)
+        obj = 0.5 * ca.sumsqr(residual)
+        sigma_f = ca.MX.sym("sigma_f")
+        lam_g = ca.MX.sym("lam_g", self._g.numel())
+        hessian = sigma_f * ca.mtimes(jac.T, jac) + curvature(z, lam_g[small_rows])
+        return {"x": z, "f": obj, "g": self._g}, {
+            "jac_g": ca.Function("jac_g", [z, empty], [self._g, constraint_jac],
+                                 ["x", "p"], ["g", "jac_g_x"]),
+            # dense, as Ipopt's interface copies it
+            "grad_f": ca.Function("grad_f", [z, empty], [obj, ca.densify(ca.mtimes(jac.T,
+                                                                                   residual))],
+                                  ["x", "p"], ["f", "grad_f_x"]),
+            "hess_lag": ca.Function("gauss_newton", [z, empty, sigma_f, lam_g],
+                                    [ca.triu(hessian)], ["x", "p", "lam_f", "lam_g"],
+                                    ["hess_gamma_x_x"])}
 
     def _local_jacobian(self, fn: ca.Function, n_states: int) -> ca.Function:
         """Jacobian of one instance of `fn` w.r.t. its scaled states, free parameters, captures.
@@ -641,12 +652,13 @@ class Estimator:
         st = self._solver.stats()
         z = np.asarray(sol["x"]).ravel()
         g = np.asarray(sol["g"]).ravel()
+        multipliers = np.asarray(sol["lam_g"]).ravel()
         objective = float(sol["f"])
         if self._monitor.stopped and self._monitor.point is not None:
             # The statistical test ended the run at its own Gauss-Newton step's end.
             z = self._monitor.point
-            r, _ = self._residual_jacobian(z)
-            objective = 0.5 * float(ca.sumsqr(r))
+            r = np.asarray(self._residual_value(z)).ravel()
+            objective = 0.5 * float(r @ r)
             g = np.asarray(self._constraints(z)[0]).ravel()
         wall = time.perf_counter() - t0
         viol = np.maximum(self._lbg - g, 0) + np.maximum(g - self._ubg, 0)
@@ -665,10 +677,9 @@ class Estimator:
             raise SolverFailure(stats.status, stats.iterations, worst, 2.0 * stats.objective,
                                 self._last_iterate(z, stats))
         fit = self._fit(z, stats)
-        fit.multipliers = np.asarray(sol["lam_g"]).ravel()
+        fit.multipliers = multipliers
         if bounds:
-            fit.sensitivities = self._bound_sensitivities(z, np.asarray(sol["lam_g"]).ravel(),
-                                                          list(bounds))
+            fit.sensitivities = self._bound_sensitivities(z, multipliers, list(bounds))
         return fit
 
     def _last_iterate(self, z: np.ndarray, stats: SolverStats) -> Fit | None:
