@@ -106,6 +106,29 @@ class TableAtmosphere:
                 self, "_wind", ca.Function("wind", [hs], [ca.vertcat(we(hs), wn(hs), 0.0)])
             )
 
+    def within(self, lower: float, upper: float) -> TableAtmosphere:
+        """The table cut to the rows that interpolate altitudes in [lower, upper] (m): the
+        last row at or below `lower` to the first at or above `upper`.
+
+        Inside that band the profile is the same; outside it the end segments are
+        extrapolated.  Each row costs a branch in every density and wind evaluation
+        of the model (four per RK4 step), so a 111-row sounding of which a test
+        flies through 31 made the fit 7 times slower and 10 times larger.
+        """
+        h = np.asarray(self.altitude_m, dtype=float)
+        first = max(int(np.searchsorted(h, lower, side="right")) - 1, 0)
+        last = min(int(np.searchsorted(h, upper, side="left")), len(h) - 1)
+        if last - first < 1:
+            first, last = max(min(first, len(h) - 2), 0), min(max(last, 1), len(h) - 1)
+        rows = slice(first, last + 1)
+        if rows == slice(0, len(h)):
+            return self
+        return TableAtmosphere(
+            h[rows], np.asarray(self.density_kg_m3)[rows],
+            None if self.wind_east_m_s is None else np.asarray(self.wind_east_m_s)[rows],
+            None if self.wind_north_m_s is None else np.asarray(self.wind_north_m_s)[rows],
+            self.name)
+
     def density(self, h: ca.SX | ca.MX | float) -> ca.SX | ca.MX:
         return ca.exp(self._log_rho(h))
 
