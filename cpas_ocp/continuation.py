@@ -14,6 +14,8 @@ fails, in two steps:
    shared states and parameters from it, the effect's own states from its
    `state_guess` and its parameters at their defaults).
 
+Where the relaxed fit fails too, the direct start's failure is reported.
+
 Continuation is not tried first because it is not free: on `drogue_full`
 (elastic risers and added mass, seed 1) the direct start converges in 28
 iterations, while the rigid-riser fit takes 31 and the full fit from it 33
@@ -77,11 +79,15 @@ def solve(est: Estimator, progress: bool = False) -> Fit:
     try:
         return est.solve(progress=progress, max_iter=min(DIRECT_ITERATIONS,
                                                          est.settings.max_iter))
-    except SolverFailure as direct:
-        failed = f"{direct.status} after {direct.iterations} iterations"
+    except SolverFailure as exc:
+        direct = exc
+    failed = f"{direct.status} after {direct.iterations} iterations"
     names = set(relaxed.model(est.test).parameter_names)
-    first = Estimator(est.test, relaxed, relaxed_settings(est.settings, names)).solve(
-        progress=progress)
+    try:
+        first = Estimator(est.test, relaxed, relaxed_settings(est.settings, names)).solve(
+            progress=progress)
+    except SolverFailure:
+        raise direct from None  # the user's model's own failure, not the relaxed one's
     fit = est.solve(progress=progress, start=est.point_from(first))
     fit.solver.start = (f"a fit with {relaxation_text(est.spec)} ({first.solver.iterations} "
                         f"iterations), after a start from the offline reduction failed "
