@@ -414,6 +414,7 @@ class Estimator:
         self._residuals = ca.Function("residuals", [self._z], residual_blocks)
         self._lbg = np.concatenate([np.ravel(a) for a in lbg])
         self._ubg = np.concatenate([np.ravel(a) for a in ubg])
+        self._has_inequalities = bool(np.any(self._lbg != self._ubg))  # what-if limits
         self._obj = obj
         self._nz = (X.numel(), P.numel(), C.numel())
         self._xscale = xscale
@@ -719,10 +720,11 @@ class Estimator:
         its steps, several iterations for what one step does.
         """
         lin = self._linearize(z)
-        if _violation(lin) <= STOP_CONSTRAINT_TOL:
+        violation = _violation(lin)
+        if violation <= STOP_CONSTRAINT_TOL:
             return gauss_newton_decrement(lin), z
-        if (not self.settings.polish or _violation(lin) > POLISH_CONSTRAINT_TOL
-                or np.any(self._lbg != self._ubg)):
+        if (not self.settings.polish or violation > POLISH_CONSTRAINT_TOL
+                or self._has_inequalities):
             # An inequality (a what-if limit) inactive at z might be crossed by the step
             # unseen: the linearisation holds only the active ones.
             return None
@@ -833,9 +835,10 @@ class _Monitor(ca.Callback):
     iteration lowers chi-square by less than `tol`, the monitor asks
     `test(z)` for a feasible point at or one Gauss-Newton step from the
     iterate and the chi-square decrease the full Gauss-Newton step predicts
-    there, and stops the run at that point (`point`) once it is below `tol`.  Each test costs a KKT
-    factorisation (about two iterations' time), so tests are at least 3
-    iterations apart, and 6 then 12 while the decrement stays above 10 tol.
+    there, and stops the run at that point (`point`) once it is below `tol`.
+    Each test costs a KKT factorisation (about two iterations' time), so
+    tests are at least 3 iterations apart, and 6 then 12 while the decrement
+    stays above 10 tol.
     """
 
     def __init__(self, nx: int, ng: int,
