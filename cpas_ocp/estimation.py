@@ -41,13 +41,19 @@ from .flight_test import FlightTest
 from .kinematic_track import kinematic_track
 from .model import Model, timing_label
 from .model_spec import ModelSpec, spec_from_effects, spec_of_test
+from .nlp_functions import (
+    MarquardtDamping,
+    PointEvaluations,
+    gauss_newton_hessian,
+    ipopt_functions,
+)
 from .reduction import initial_guess
 from .simulate import rk4_step, simulate
 from .uncertainty import (
     HESSIANS,
     Covariance,
     Linearization,
-    gauss_newton_decrement,
+    gauss_newton,
     gauss_newton_step,
     kkt_covariance,
     linearize,
@@ -80,6 +86,12 @@ class Settings:
     polish: let the statistical test finish a nearly feasible run with one
     Gauss-Newton step of its own (`Estimator._stop_test`; False: the earlier
     path, for benchmarks).
+    point_cache: give Ipopt functions that share one native evaluation of the
+    residuals, constraints and their Jacobians per point (`nlp_functions`;
+    False: CasADi expressions, each evaluating what it needs in turn, the
+    earlier path, for benchmarks).
+    damping: Levenberg-Marquardt damping of the Gauss-Newton Hessian where its
+    steps fail to deliver (`nlp_functions.MarquardtDamping`; needs point_cache).
     """
 
     grid_step: float | None = None
@@ -95,6 +107,8 @@ class Settings:
     limits: dict[str, tuple[float, float]] = field(default_factory=dict)
     watchdog_trigger: int = 3
     polish: bool = True
+    point_cache: bool = True
+    damping: bool = True
 
 
 MIN_GRID_STEP_S = 0.001
@@ -144,6 +158,7 @@ STOP_CONSTRAINT_TOL = 1e-6
 # finish the run (`Estimator._stop_test`): Ipopt's Gauss-Newton iterations close the last
 # shooting gaps only as fast as the steps shrink, linearly.
 POLISH_CONSTRAINT_TOL = 1e-3
+DECREMENT_FLOOR = 1e-4  # chi-square: below it the decrement is taken as the model gives it
 
 
 @dataclass
@@ -301,18 +316,17 @@ class Estimator:
                                              [(ym - y_at) / sg]),
                                  [k], self.t[k], [*extra, meas, sig]))
             self._samples.append((sensor.name, channels, tsamp, meas, sig))
-        # The Jacobians dominate the cost and are compiled; the values stay in CasADi's
-        # VM so that CasADi can still differentiate the NLP functions it builds.
-        jacobians = [self._local_jacobian(b.fn, len(b.nodes)) for b in blocks]
+        # Each block's values (the line search's trial points) and its values with the
+        # Jacobian (accepted points) run as native code; the functions themselves stay
+        # in CasADi's VM as well, for the differentiable graph (`_obj`, `_g`).
+        local = [self._local_jacobian(b.fn, len(b.nodes)) for b in blocks]
+        native = [b.fn for b in blocks] + local
         if s.compile:
-            jacobians = compile_functions(jacobians)
-        mapped = [self._mapped_block(b.fn, jac_fn, b.nodes, b.times, b.data)
-                  for b, jac_fn in zip(blocks, jacobians, strict=True)]
-        gap_value, gap_jac = mapped[0]
-        residual_blocks = [v for v, _ in mapped[1:]]
-        residual_jacs = [j for _, j in mapped[1:]]
-        g = [gap_value]
-        g_jac = [gap_jac]
+            native = compile_functions(native)
+        mapped = [self._mapped_block(b, value_fn, jac_fn) for b, value_fn, jac_fn
+                  in zip(blocks, native[:len(blocks)], native[len(blocks):], strict=True)]
+        residual_pieces = mapped[1:]
+        g = [mapped[0]]
         lbg = [np.zeros(nx * n)]
         ubg = [np.zeros(nx * n)]
 
@@ -335,8 +349,7 @@ class Estimator:
             node_vals = qfn(Xp[:, kw], ca.DM(self.t[kw]).T, pfull, Cp)
             w = cubic_bspline((t_event - ca.DM(self.t[kw]).T) / h)
             con = (Cp[i] - ca.dot(w, node_vals)) / cscale
-            g.append(con)
-            g_jac.append(ca.jacobian(con, z_all))
+            g.append(_Piece.of(con, z_all))
             lbg.append([0.0])
             ubg.append([0.0])
 
@@ -345,8 +358,7 @@ class Estimator:
         c_sx = ca.vertcat(ca.SX(0, 1), *[m.ctx.c[c.name] for c in m.captures])
         for con in m.constraints:
             fn = ca.Function("con", [p_sx, c_sx], [con.expr])
-            g.append(fn(pfull, Cp))
-            g_jac.append(ca.jacobian(g[-1], z_all))
+            g.append(_Piece.of(fn(pfull, Cp), z_all))
             lbg.append([con.lower])
             ubg.append([con.upper])
 
@@ -362,10 +374,8 @@ class Estimator:
             qscale = max(finite) if finite else 1.0
             qi = m.quantity_names.index(qname)
             fn = ca.Function("limit", [xs, ts, ps, cs], [m.quantities(xs, ts, ps, cs)[qi] / qscale])
-            value, jac = self._mapped_block(fn, self._local_jacobian(fn, 1),
-                                            [np.arange(n + 1)], self.t, [])
-            g.append(value)
-            g_jac.append(jac)
+            block = _Block(fn, [np.arange(n + 1)], self.t, [])
+            g.append(self._mapped_block(block, fn, self._local_jacobian(fn, 1)))
             lbg.append(np.full(n + 1, lo / qscale))
             ubg.append(np.full(n + 1, hi / qscale))
             self.limit_rows[qname] = (slice(offset, offset + n + 1), qscale)
@@ -375,8 +385,7 @@ class Estimator:
         predicted = m.event_times(pfull, Cp)
         for j, (timing, event) in enumerate(m.timings):
             r = (event.time - predicted[j]) / event.sigma
-            residual_blocks.append(r)
-            residual_jacs.append(ca.jacobian(r, z_all))
+            residual_pieces.append(_Piece.of(r, z_all))
             self._samples.append((EVENTS, (timing_label(timing),), np.array([event.time]),
                                   np.array([[event.time]]), np.array([[event.sigma]])))
 
@@ -385,35 +394,49 @@ class Estimator:
             if name not in free_index:
                 raise ValueError(f"a prior on {name}, which this estimator holds fixed")
             r = (value - pfull[m.parameter_names.index(name)]) / sigma
-            residual_blocks.append(r)
-            residual_jacs.append(ca.jacobian(r, z_all))
+            residual_pieces.append(_Piece.of(r, z_all))
             self._samples.append((PRIORS, (name,), np.array([self.t[0]]),
                                   np.array([[value]]), np.array([[sigma]])))
 
         self._z = z_all
-        residual = ca.vertcat(*residual_blocks)
-        jac = ca.vertcat(*residual_jacs)
-        self._g = ca.vertcat(*g)
-        self._residual_jacobian = ca.Function("residual_jacobian", [self._z], [residual, jac])
-        constraint_jac = ca.vertcat(*g_jac)
-        self._constraints = ca.Function("constraints", [self._z], [self._g, constraint_jac])
+        residual = _stack(residual_pieces, "symbolic")
+        jac = _stack(residual_pieces, "jacobian")
+        self._g = _stack(g, "symbolic")
+        constraint_jac = _stack(g, "jacobian")
+        self._residual_value = ca.Function("residual_value", [z_all],
+                                           [_stack(residual_pieces, "value")])
+        self._residual_jacobian = ca.Function("residual_jacobian", [z_all],
+                                              [_stack(residual_pieces, "with_jacobian"), jac])
+        self._constraint_value = ca.Function("constraint_value", [z_all], [_stack(g, "value")])
+        self._constraints = ca.Function("constraints", [z_all],
+                                        [_stack(g, "with_jacobian"), constraint_jac])
+        self._points = PointEvaluations(self._residual_value, self._residual_jacobian,
+                                        self._constraint_value, self._constraints)
         obj = 0.5 * ca.sumsqr(residual)
         # The exact curvature of the few capture and effect constraints (a capture at a
         # free time bends in that time; without it a Pilot's bag-strip constraint made the
         # steps cycle); the curvature of the continuity constraints is neglected.
-        small = ca.vertcat(*g[1:n_small])
+        small = _stack(g[1:n_small], "symbolic")
         lam_small = ca.MX.sym("lam_small", small.numel())
         curvature = ca.Function("curvature", [z_all, lam_small], [
             ca.hessian(ca.dot(lam_small, small), z_all)[0] if small.numel()
             else ca.MX(z_all.numel(), z_all.numel())])
         small_rows = slice(nx * n, nx * n + small.numel())
-        self._residual_value = ca.Function("residual_value", [self._z], [residual])
-        nlp, derivatives = self._plain_nlp(residual, jac, constraint_jac, curvature,
-                                           small_rows)
-        self._unpack = ca.Function("unpack", [self._z], [Xp, pfull, Cp])
-        self._residuals = ca.Function("residuals", [self._z], residual_blocks)
-        self._lbg = np.concatenate([np.ravel(a) for a in lbg])
-        self._ubg = np.concatenate([np.ravel(a) for a in ubg])
+        lbg_all = np.concatenate([np.ravel(a) for a in lbg])
+        ubg_all = np.concatenate([np.ravel(a) for a in ubg])
+        self._damping = (MarquardtDamping(self._points, lbg_all, ubg_all)
+                         if s.point_cache and s.damping else None)
+        if s.point_cache:
+            self._ipopt = ipopt_functions(self._points,
+                                          gauss_newton_hessian(jac.sparsity(), curvature),
+                                          small_rows, self._damping)
+            nlp, derivatives = self._ipopt.nlp, self._ipopt.options
+        else:
+            nlp, derivatives = self._plain_nlp(residual, jac, constraint_jac, curvature,
+                                               small_rows)
+        self._unpack = ca.Function("unpack", [z_all], [Xp, pfull, Cp])
+        self._residuals = ca.Function("residuals", [z_all], [p.value for p in residual_pieces])
+        self._lbg, self._ubg = lbg_all, ubg_all
         self._has_inequalities = bool(np.any(self._lbg != self._ubg))  # what-if limits
         self._obj = obj
         self._nz = (X.numel(), P.numel(), C.numel())
@@ -451,8 +474,9 @@ class Estimator:
             "ipopt.sb": "yes", **derivatives,
         }
         self._hessian_product: ca.Function | None = None
+        # the solver keeps only a reference to its callbacks
         self._monitor = _Monitor(self._z.numel(), self._g.numel(), self._stop_test,
-                                 s.chi2_step_tol)  # the solver keeps only a reference
+                                 s.chi2_step_tol, self._damping)
         opts["iteration_callback"] = self._monitor
         self._solver = ca.nlpsol("reconstruction", "ipopt", nlp, opts)
 
@@ -480,11 +504,12 @@ class Estimator:
                                     ["hess_gamma_x_x"])}
 
     def _local_jacobian(self, fn: ca.Function, n_states: int) -> ca.Function:
-        """Jacobian of one instance of `fn` w.r.t. its scaled states, free parameters, captures.
+        """Values and Jacobian of one instance of `fn` w.r.t. its scaled states, free
+        parameters and captures.
 
-        Same inputs as `fn`; the output is the column-major m x (nx*n_states +
-        free parameters + captures) block, formed at SX level (CasADi picks
-        forward or reverse mode for this small function).
+        Same inputs as `fn`; the outputs are its m values and the column-major
+        m x (nx*n_states + free parameters + captures) block, formed at SX
+        level (CasADi picks forward or reverse mode for this small function).
         """
         _, _, _, _, xscale, cscale = self._ctx
         m = self.model
@@ -496,33 +521,40 @@ class Estimator:
         jblocks = [ca.jacobian(out, a) * ca.repmat(ca.DM(xscale).T, mrows, 1) for a in xs_args]
         jp = ca.jacobian(out, p_arg)[:, free_cols] * ca.repmat(ca.DM(self.pscale).T, mrows, 1)
         jc = ca.jacobian(out, c_arg) * cscale
-        return ca.Function(f"{fn.name()}_jac", args, [ca.vec(ca.horzcat(*jblocks, jp, jc))])
+        return ca.Function(f"{fn.name()}_jac", args,
+                           [out, ca.vec(ca.horzcat(*jblocks, jp, jc))])
 
-    def _mapped_block(self, fn: ca.Function, local: ca.Function, nodes: list[np.ndarray],
-                      times: np.ndarray, data: list[np.ndarray]) -> tuple[ca.MX, ca.MX]:
-        """Value and Jacobian (w.r.t. the scaled decision vector) of `fn` mapped over instances.
+    def _mapped_block(self, block: _Block, value_fn: ca.Function,
+                      local: ca.Function) -> _Piece:
+        """Values and Jacobian (w.r.t. the scaled decision vector) of `block` over its instances.
 
-        `fn(x_a, x_b, ..., t, *data, p, c)` takes one state per entry of `nodes`
-        (node indices per instance), a time, per-instance data columns, and the
-        full parameter and capture vectors; it returns a vector of m values.
-        `local` is its single-instance Jacobian (`_local_jacobian`); both are
-        mapped over all instances, and the Jacobian values are scattered into
-        the global sparse Jacobian.  Differentiating the mapped graph directly
-        would take one sweep per colour of the whole Jacobian, about as many as
-        there are parameters.
+        `block.fn(x_a, x_b, ..., t, *data, p, c)` takes one state per entry of
+        `block.nodes` (node indices per instance), a time, per-instance data
+        columns, and the full parameter and capture vectors; it returns a
+        vector of m values.  `value_fn` computes the same (native code, or
+        `block.fn` itself), `local` its values and single-instance Jacobian
+        (`_local_jacobian`); all are mapped over the instances, and the
+        Jacobian values are scattered into the global sparse Jacobian.
+        Differentiating the mapped graph directly would take one sweep per
+        colour of the whole Jacobian, about as many as there are parameters.
         """
         X, Xp, pfull, Cp, _, _ = self._ctx
         m = self.model
         nx = m.nx
+        nodes, times = block.nodes, block.times
         n_inst = len(times)
         n_states = len(nodes)
-        mrows = fn.numel_out(0)
+        mrows = block.fn.numel_out(0)
         nfree = len(self.free)
         ncap = len(m.captures)
         call = [*(Xp[:, k] for k in nodes), ca.DM(times).T,
-                *(ca.DM(d) if np.ndim(d) == 2 else ca.DM(d).T for d in data), pfull, Cp]
-        value = ca.vec(fn.map(n_inst, "thread", 2)(*call))
-        nz = ca.vec(local.map(n_inst, "thread", 2)(*call))
+                *(ca.DM(d) if np.ndim(d) == 2 else ca.DM(d).T for d in block.data), pfull, Cp]
+
+        def mapped(fn: ca.Function) -> list[ca.MX]:
+            out = fn.map(n_inst, "thread", 2)(*call)
+            return [ca.vec(o) for o in (out if isinstance(out, tuple | list) else [out])]
+
+        with_jacobian, nz = mapped(local)
         # Column (z index) of every entry of one instance's block, column-major.
         ncols = nx * n_states + nfree + ncap
         zcols = np.empty((n_inst, ncols), dtype=np.int64)
@@ -537,8 +569,8 @@ class Estimator:
         order = np.lexsort((r_full, c_full))
         sp = ca.Sparsity.triplet(n_inst * mrows, X.numel() + nfree + ncap,
                                  r_full[order].tolist(), c_full[order].tolist())
-        jac = ca.MX(sp, nz[order.tolist()])
-        return value, jac
+        return _Piece(mapped(block.fn)[0], mapped(value_fn)[0], with_jacobian,
+                      ca.MX(sp, nz[order.tolist()]))
 
     def initial_point(self) -> np.ndarray:
         """Shooting nodes from the kinematic track (GPS, or the altimeter's vertical track) and
@@ -658,9 +690,9 @@ class Estimator:
         if self._monitor.stopped and self._monitor.point is not None:
             # The statistical test ended the run at its own Gauss-Newton step's end.
             z = self._monitor.point
-            r = np.asarray(self._residual_value(z)).ravel()
+            r = self._points.residual_value(z)
             objective = 0.5 * float(r @ r)
-            g = np.asarray(self._constraints(z)[0]).ravel()
+            g = self._points.constraint_value(z)
         wall = time.perf_counter() - t0
         viol = np.maximum(self._lbg - g, 0) + np.maximum(g - self._ubg, 0)
         worst = f"index {int(np.argmax(viol))}, violation {float(np.max(viol)):.3g}" \
@@ -697,10 +729,9 @@ class Estimator:
                              names: list[str]) -> dict[str, float]:
         """d(chi^2)/d(value) of each bounded parameter at a solution: twice the gradient of
         the Lagrangian of the other constraints in that parameter (SI units)."""
-        r, jac = self._residual_jacobian(z)
-        grad = jac.sparse().T @ np.asarray(r).ravel()
-        _, jac_g = self._constraints(z)
-        grad = grad + jac_g.sparse().T @ lam_g
+        r, jac = self._points.residual_jacobian(z)
+        _, jac_g = self._points.constraints(z)
+        grad = jac.T @ r + jac_g.T @ lam_g
         n_states = self._nz[0]
         return {n: float(2.0 * grad[n_states + self.free.index(n)]
                          / self.pscale[self.free.index(n)]) for n in names}
@@ -722,7 +753,7 @@ class Estimator:
         lin = self._linearize(z)
         violation = _violation(lin)
         if violation <= STOP_CONSTRAINT_TOL:
-            return gauss_newton_decrement(lin), z
+            return self._measured_decrement(lin), z
         if (not self.settings.polish or violation > POLISH_CONSTRAINT_TOL
                 or self._has_inequalities):
             # An inequality (a what-if limit) inactive at z might be crossed by the step
@@ -735,7 +766,29 @@ class Estimator:
         lin1 = self._linearize(z1)
         if _violation(lin1) > STOP_CONSTRAINT_TOL:
             return None
-        return gauss_newton_decrement(lin1), z1
+        return self._measured_decrement(lin1), z1
+
+    def _measured_decrement(self, lin: Linearization) -> float:
+        """The chi-square decrease still to be had along the Gauss-Newton step from `lin.z`,
+        with the step's curvature measured rather than taken from the Gauss-Newton model.
+
+        Along the step d, chi^2(z + a d) - chi^2(z) = -2 D a + c a^2 + O(a^3), D the
+        Gauss-Newton decrement, and Gauss-Newton takes c = D: it leaves out the
+        curvature of the residuals themselves, which a misspecified model's large
+        residuals make large (on `drogue` with added mass left out, c = 5 D: the full
+        step raised chi-square by 0.15 where the model promised a fall of 0.047, and
+        Ipopt cut every step for hundreds of iterations).  One evaluation of the
+        residuals at the step's end measures c; the minimum along the step then
+        lies D^2 / c below chi^2(z).  A step along which chi-square is not convex
+        (c <= 0) gives infinity: no statistical stop there.  Where D is already below
+        DECREMENT_FLOOR the measurement is lost in rounding and D is returned.
+        """
+        step, decrement = gauss_newton(lin)
+        if decrement < DECREMENT_FLOOR:
+            return decrement
+        r1 = self._points.residual_value(lin.z + step)
+        curvature = float(r1 @ r1 - lin.r @ lin.r) + 2.0 * decrement
+        return decrement**2 / curvature if curvature > 0.0 else np.inf
 
     def covariance(self, fit: Fit, scale_by_residual: bool = False,
                    hessian: str = "gauss-newton") -> Covariance:
@@ -804,7 +857,8 @@ class Estimator:
         for name in release:
             i = self.free.index(name)
             lower[i], upper[i] = -np.inf, np.inf
-        return linearize(self._residual_jacobian, self._constraints, z, self._lbg, self._ubg,
+        points = self._points
+        return linearize(points.residual_jacobian, points.constraints, z, self._lbg, self._ubg,
                          idx, lower, upper, chain_rows=n_states - nx,
                          dependent=np.arange(nx, n_states), pinned=pinned)
 
@@ -843,9 +897,10 @@ class _Monitor(ca.Callback):
 
     def __init__(self, nx: int, ng: int,
                  test: Callable[[np.ndarray], tuple[float, np.ndarray] | None],
-                 tol: float | None) -> None:
+                 tol: float | None, damping: MarquardtDamping | None = None) -> None:
         ca.Callback.__init__(self)
         self._nx, self._ng, self._test, self._tol = nx, ng, test, tol
+        self._damping = damping
         self.reset(False, (np.full(nx, -np.inf), np.full(nx, np.inf)))
         self.construct("monitor", {})
 
@@ -859,6 +914,8 @@ class _Monitor(ca.Callback):
         self.point: np.ndarray | None = None  # where the statistical test ended the run
         self.bounds = bounds
         self.progress = progress and sys.stderr.isatty()
+        if self._damping is not None:
+            self._damping.reset()
 
     def finish(self) -> None:
         if self.progress and self._k:
@@ -888,6 +945,8 @@ class _Monitor(ca.Callback):
             self.capped = True  # called at iterations 0, 1, ...: this is iteration max_iter
             return [1]
         chi2 = 2.0 * float(arg[1])
+        if self._damping is not None:
+            self._damping.observe(np.asarray(arg[0]).ravel())
         if self.progress:
             sys.stderr.write(f"\r  iteration {self._k:4d}   chi-square {chi2:14.6g}")
             sys.stderr.flush()
@@ -924,6 +983,29 @@ class _Block:
     nodes: list[np.ndarray]
     times: np.ndarray
     data: list[np.ndarray]
+
+
+@dataclass
+class _Piece:
+    """A stretch of the residual or constraint vector, four ways: `symbolic` through CasADi's
+    VM (differentiable: the exact Hessian's graph), `value` for trial points (native
+    code where compiled), `with_jacobian` the same values from the Jacobian function,
+    and `jacobian` w.r.t. the scaled decision vector."""
+
+    symbolic: ca.MX
+    value: ca.MX
+    with_jacobian: ca.MX
+    jacobian: ca.MX
+
+    @classmethod
+    def of(cls, expr: ca.MX, z: ca.MX) -> _Piece:
+        """A small expression: one graph for its values, CasADi's Jacobian for the rest."""
+        return cls(expr, expr, expr, ca.jacobian(expr, z))
+
+
+def _stack(pieces: Sequence[_Piece], field_name: str) -> ca.MX:
+    """One field of every piece, stacked."""
+    return ca.vertcat(*[getattr(p, field_name) for p in pieces])
 
 
 def cubic_bspline(u: ca.MX) -> ca.MX:

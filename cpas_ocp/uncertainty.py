@@ -51,6 +51,8 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
+from .nlp_functions import FunctionBuffer
+
 
 @dataclass(frozen=True)
 class WeakCombination:
@@ -171,16 +173,20 @@ class Linearization:
     held: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
 
 
-def linearize(residual_jacobian: ca.Function, constraints: ca.Function, z: np.ndarray,
+Evaluation = Callable[[np.ndarray], tuple[np.ndarray, sp.csc_matrix]]
+
+
+def linearize(residual_jacobian: Evaluation, constraints: Evaluation, z: np.ndarray,
               lbg: np.ndarray, ubg: np.ndarray, param_index: np.ndarray, lower: np.ndarray,
               upper: np.ndarray, chain_rows: int = 0,
               dependent: np.ndarray | None = None,
               pinned: np.ndarray | None = None) -> Linearization:
-    """Linearise at `z`: `constraints(z)` gives (g, dg/dz); `param_index` locates the free
+    """Linearise at `z`: `residual_jacobian(z)` gives (r, dr/dz), `constraints(z)` gives
+    (g, dg/dz) (`nlp_functions.PointEvaluations`); `param_index` locates the free
     parameters in z, `lower`/`upper` are their scaled bounds; the first `chain_rows`
     constraints determine the `dependent` columns; `pinned` columns are fixed."""
-    r, J = evaluate(residual_jacobian, z)
-    g, A = evaluate(constraints, z)
+    r, J = residual_jacobian(z)
+    g, A = constraints(z)
     holding = (ubg - lbg <= 0) | (g - lbg < 1e-8) | (ubg - g < 1e-8)
     if not holding[:chain_rows].all():
         raise ValueError("the chain constraints must be equalities")
@@ -439,8 +445,14 @@ def gauss_newton_decrement(lin: Linearization) -> float:
     0.1 standard deviation of where the fit is heading.  Directions the data
     do not determine take no step.
     """
-    _, after = _gauss_newton(lin)
-    return max(float(lin.r @ lin.r - after @ after), 0.0)
+    return gauss_newton(lin)[1]
+
+
+def gauss_newton(lin: Linearization) -> tuple[np.ndarray, float]:
+    """The Gauss-Newton step (`gauss_newton_step`) and its decrement
+    (`gauss_newton_decrement`), from one factorisation."""
+    dz, after = _gauss_newton(lin)
+    return dz, max(float(lin.r @ lin.r - after @ after), 0.0)
 
 
 def gauss_newton_step(lin: Linearization) -> np.ndarray:
@@ -464,47 +476,8 @@ def _gauss_newton(lin: Linearization) -> tuple[np.ndarray, np.ndarray]:
     return dz, base + red.JZ @ (ns.N @ y)
 
 
-class _Evaluator:
-    """Evaluates a CasADi function of one dense vector straight into NumPy arrays.
-
-    The estimator linearises the same functions again and again.  Through
-    CasADi's function buffer the outputs land in preallocated arrays (a dense
-    output as a vector, a sparse one as a SciPy CSC matrix on its fixed
-    pattern, whose index arrays are converted once); through DM objects,
-    copying the values out of Python lists took as long as evaluating them
-    (the `drogue` constraint Jacobian: 68 ms of 150).
-    """
-
-    def __init__(self, fn: ca.Function) -> None:
-        self.fn = fn
-        self.buffer, self.run = fn.buffer()
-        self.arg = np.zeros(fn.nnz_in(0))
-        self.buffer.set_arg(0, memoryview(self.arg))
-        self.out = [np.zeros(fn.nnz_out(i)) for i in range(fn.n_out())]
-        self.patterns = []
-        for i, out in enumerate(self.out):
-            self.buffer.set_res(i, memoryview(out))
-            sparsity = fn.sparsity_out(i)
-            self.patterns.append((np.asarray(sparsity.row(), dtype=np.int32),
-                                  np.asarray(sparsity.colind(), dtype=np.int32),
-                                  sparsity.shape))
-
-    def __call__(self, z: np.ndarray) -> list[np.ndarray | sp.csc_matrix]:
-        self.arg[:] = z
-        self.run()
-        out: list[np.ndarray | sp.csc_matrix] = []
-        for values, (row, colind, shape) in zip(self.out, self.patterns, strict=True):
-            if shape[1] == 1:  # a vector, dense whatever its pattern
-                vector = np.zeros(shape[0])
-                vector[row] = values
-                out.append(vector)
-            else:
-                out.append(sp.csc_matrix((values.copy(), row, colind), shape=shape))
-        return out
-
-
-_EVALUATORS: dict[int, _Evaluator] = {}
-EVALUATORS_KEPT = 4  # functions whose buffers are kept (the current estimator's two)
+_BUFFERS: dict[int, FunctionBuffer] = {}
+BUFFERS_KEPT = 4  # functions whose buffers are kept (the current estimator's two)
 
 
 def evaluate(fn: ca.Function, z: np.ndarray,
@@ -519,9 +492,9 @@ def evaluate(fn: ca.Function, z: np.ndarray,
                 sp.csc_matrix((np.asarray(out.nonzeros()), np.asarray(out.sparsity().row()),
                                np.asarray(out.sparsity().colind())), shape=out.shape)
                 for out in fn(z)]
-    evaluator = _EVALUATORS.get(id(fn))
-    if evaluator is None or evaluator.fn is not fn:
-        if len(_EVALUATORS) >= EVALUATORS_KEPT:
-            _EVALUATORS.clear()
-        evaluator = _EVALUATORS[id(fn)] = _Evaluator(fn)
-    return evaluator(np.asarray(z, dtype=float).ravel())
+    buffer = _BUFFERS.get(id(fn))
+    if buffer is None or buffer.fn is not fn:
+        if len(_BUFFERS) >= BUFFERS_KEPT:
+            _BUFFERS.clear()
+        buffer = _BUFFERS[id(fn)] = FunctionBuffer(fn)
+    return buffer(np.asarray(z, dtype=float).ravel())

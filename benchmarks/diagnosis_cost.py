@@ -1,0 +1,120 @@
+"""Benchmark: the diagnosis of a `drogue` test with one effect hidden, step by step.
+
+The `drogue` problem (20 s, two Drogues, three stages, GPS + IMU + two load
+cells) is simulated (seed 1 unless `--seed`) with one library effect the
+baseline model lacks, fitted with the baseline model from the offline
+reduction, and diagnosed.  Printed: the baseline fit's iterations and time,
+then per candidate effect its score test (wall time, whether its null point
+needed a solve and whether that converged) and per confirming refit its
+iterations, status and time; the verdict; the total wall time and the peak
+resident memory of the process.
+
+    python benchmarks/diagnosis_cost.py [--hidden added_mass elastic_riser ...] [--seed N]
+
+Hidden effects: added_mass (factor 1.4 on both Drogues), elastic_riser
+(6 Hz, damping 0.3), loadcell_friction (15 % loss), gps_lag (0.1 s), none.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import resource
+import tempfile
+import time
+from pathlib import Path
+
+from cpas_ocp import diagnosis as diagnosis_module
+from cpas_ocp import score_test as score_module
+from cpas_ocp.continuation import solve as solve_with_continuation
+from cpas_ocp.effects import (
+    AddedMass,
+    Effect,
+    LoadCellFriction,
+    SensorLag,
+    baseline_effects,
+    with_elastic_risers,
+)
+from cpas_ocp.estimation import Estimator
+from cpas_ocp.flight_test import load_test
+from cpas_ocp.model_spec import baseline_spec
+from cpas_ocp.problems import load_problem
+from cpas_ocp.simulate import simulate_problem
+
+DROGUES = ("drogue1", "drogue2")
+
+
+def hidden_cases() -> dict[str, tuple[list[Effect], dict[str, float]]]:
+    """Truth model and the hidden effect's true values, per case."""
+    base = baseline_effects()
+    return {
+        "none": (base, {}),
+        "added_mass": ([*base, AddedMass()], {f"added_mass_factor[{c}]": 1.4 for c in DROGUES}),
+        "elastic_riser": (with_elastic_risers(base),
+                          {**{f"riser_frequency[{c}]": 6.0 for c in DROGUES},
+                           **{f"riser_damping_ratio[{c}]": 0.3 for c in DROGUES}}),
+        "loadcell_friction": ([*base, LoadCellFriction()],
+                              {f"friction_loss[{c}]": 0.15 for c in DROGUES}),
+        "gps_lag": ([*base, SensorLag.gps()], {"lag[gps]": 0.1}),
+    }
+
+
+def _timed(fn, log: list[tuple[str, float]], label):
+    def wrapper(*args, **kwargs):
+        t0 = time.perf_counter()
+        out = fn(*args, **kwargs)
+        log.append((label(args, out), time.perf_counter() - t0))
+        return out
+    return wrapper
+
+
+def run(case: str, seed: int, root: Path) -> None:
+    effects, values = hidden_cases()[case]
+    problem = load_problem("drogue")
+    folder = root / case
+    simulate_problem(dataclasses.replace(problem, truth={**problem.truth, **values}),
+                     folder, seed, effects=effects)
+    (folder / "truth.json").unlink()
+    t_start = time.perf_counter()
+    spec = baseline_spec()
+    fit = solve_with_continuation(Estimator(load_test(folder), spec))
+    t_fit = time.perf_counter() - t_start
+    print(f"[{case}] baseline fit: {fit.solver.iterations} iterations, {t_fit:.1f} s, "
+          f"chi-square {fit.chi_square:.1f} ({fit.dof} dof)", flush=True)
+    log: list[tuple[str, float]] = []
+    original_test, original_confirm = score_module.score_test, score_module.confirm
+    score_module.score_test = _timed(
+        original_test, log,
+        lambda a, out: f"score {out.effect:18s} {out.note or 'null point reproduced'}")
+    score_module.confirm = _timed(
+        original_confirm, log,
+        lambda a, out: f"refit {a[1].effect:18s} {a[1].refit_note}")
+    diagnosis_module.confirm = score_module.confirm
+    try:
+        t0 = time.perf_counter()
+        diag = diagnosis_module.diagnose(fit, spec)
+        t_diag = time.perf_counter() - t0
+    finally:
+        score_module.score_test, score_module.confirm = original_test, original_confirm
+        diagnosis_module.confirm = original_confirm
+    for label, wall in log:
+        print(f"[{case}]   {wall:7.1f} s  {label}", flush=True)
+    peak_gb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6
+    print(f"[{case}] verdict: {diag.verdict()}")
+    print(f"[{case}] diagnosis {t_diag:.1f} s, fit + diagnosis {t_fit + t_diag:.1f} s, "
+          f"peak memory of the process so far {peak_gb:.2f} GB", flush=True)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--hidden", nargs="+", default=["added_mass"],
+                        choices=list(hidden_cases()))
+    parser.add_argument("--seed", type=int, default=1)
+    args = parser.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        for case in args.hidden:
+            run(case, args.seed, Path(tmp))
+
+
+if __name__ == "__main__":
+    main()

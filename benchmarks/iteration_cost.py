@@ -1,0 +1,98 @@
+"""Benchmark: Ipopt's functions as CasADi expressions against one evaluation per point, and
+Gauss-Newton against Marquardt-damped Gauss-Newton, in the same process.
+
+Per problem (simulated with seed 1 unless `--seed`) the fit from the offline
+reduction is solved three ways:
+
+* ``expressions``: the earlier path, Ipopt's objective, gradient, constraint
+  Jacobian and Gauss-Newton Hessian as CasADi expressions, each evaluating
+  the residuals or the Jacobians it needs (`Settings(point_cache=False)`);
+* ``cached``: the same iterations, every model evaluation made once per
+  point in native code and shared (`Settings(damping=False)`);
+* ``damped``: the defaults, the cached functions with Levenberg-Marquardt
+  damping where Gauss-Newton steps fail to deliver.
+
+``drogue+added_mass`` is the `drogue` problem simulated with added mass
+(factor 1.4 on both Drogues) and fitted without it: a misspecified model, the
+case of every diagnosis and comparison.  Runs are capped at `--max-iter`
+(150) iterations.  Printed: iterations, solve wall time, time per iteration,
+chi-square, status, and the ratios to ``expressions``.
+
+    python benchmarks/iteration_cost.py [--problems drogue drogue_full drogue+added_mass]
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import tempfile
+import time
+from pathlib import Path
+
+from diagnosis_cost import hidden_cases
+
+from cpas_ocp.errors import SolverFailure
+from cpas_ocp.estimation import Estimator, Settings
+from cpas_ocp.flight_test import FlightTest, load_test
+from cpas_ocp.model_spec import baseline_spec
+from cpas_ocp.problems import load_problem
+from cpas_ocp.simulate import simulate_problem
+
+PATHS = {"expressions": {"point_cache": False, "damping": False},
+         "cached": {"damping": False}, "damped": {}}
+
+
+def make_test(name: str, seed: int, root: Path) -> FlightTest:
+    """The test folder of a built-in problem, or of `drogue` with an effect hidden."""
+    problem_name, _, hidden = name.partition("+")
+    problem = load_problem(problem_name)
+    effects = None
+    if hidden:
+        effects, values = hidden_cases()[hidden]
+        problem = dataclasses.replace(problem, truth={**problem.truth, **values})
+    simulate_problem(problem, root / name, seed, effects=effects)
+    return load_test(root / name)
+
+
+def run(test: FlightTest, misspecified: bool, max_iter: int, options: dict
+        ) -> tuple[int, float, float, str]:
+    """(iterations, solve wall s, chi-square, status) of one fit from the reduction (the
+    chi-square is NaN where the solve failed)."""
+    est = Estimator(test, baseline_spec() if misspecified else None,
+                    Settings(max_iter=max_iter, **options))
+    t0 = time.perf_counter()
+    try:
+        fit = est.solve()
+    except SolverFailure as exc:  # timed all the same: the cost of not converging
+        return exc.iterations, time.perf_counter() - t0, float("nan"), exc.status
+    return fit.solver.iterations, time.perf_counter() - t0, fit.chi_square, fit.solver.status
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--problems", nargs="+",
+                        default=["drogue", "drogue_full", "drogue+added_mass"])
+    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--max-iter", type=int, default=150)
+    args = parser.parse_args()
+    print(f"{'problem':18s} {'path':11s} {'iter':>5s} {'solve s':>8s} {'s/iter':>7s} "
+          f"{'chi-square':>12s}  status")
+    with tempfile.TemporaryDirectory() as tmp:
+        for name in args.problems:
+            test = make_test(name, args.seed, Path(tmp))
+            runs = {}
+            for label, options in PATHS.items():
+                it, wall, chi2, status = runs[label] = run(test, "+" in name, args.max_iter,
+                                                           options)
+                print(f"{name:18s} {label:11s} {it:5d} {wall:8.1f} {wall / max(it, 1):7.3f} "
+                      f"{chi2:12.3f}  {status}", flush=True)
+            it0, wall0, chi0, _ = runs["expressions"]
+            for label in ("cached", "damped"):
+                it, wall, chi2, _ = runs[label]
+                print(f"{name:18s} {label}/expressions: iterations {it / it0:.2f}, solve time "
+                      f"{wall / wall0:.2f}, time per iteration {(wall / it) / (wall0 / it0):.2f}"
+                      f", chi-square difference {chi2 - chi0:+.4f}", flush=True)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,134 @@
+"""Ipopt's functions from one evaluation per point give what CasADi's expressions gave, and
+the Marquardt damping reacts to the progress the steps make."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import casadi as ca
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+from cpas_ocp.effects import AddedMass, baseline_effects
+from cpas_ocp.estimation import STATISTICALLY_CONVERGED, Estimator, Settings
+from cpas_ocp.flight_test import load_test
+from cpas_ocp.model_spec import baseline_spec
+from cpas_ocp.nlp_functions import MarquardtDamping
+from cpas_ocp.problems import load_problem
+from cpas_ocp.simulate import simulate_problem
+
+FUNCTIONS = ("nlp_f", "nlp_g", "nlp_grad_f", "nlp_jac_g", "nlp_hess_l")
+
+
+@pytest.fixture(scope="module")
+def estimators(drogue_folder):
+    test = load_test(drogue_folder(1))
+    return (Estimator(test, settings=Settings(point_cache=False)),
+            Estimator(test, settings=Settings()))
+
+
+def _outputs(est: Estimator, name: str, z: np.ndarray, lam: np.ndarray) -> list[ca.DM]:
+    fn = est._solver.get_function(name)
+    args = [z, np.zeros(0)] + ([0.7, lam] if name == "nlp_hess_l" else [])
+    out = fn(*args)
+    return list(out) if isinstance(out, tuple | list) else [out]
+
+
+def test_cached_functions_equal_the_expressions(estimators) -> None:
+    old, new = estimators
+    z = new.initial_point()
+    z = z * (1.0 + 1e-3 * np.random.default_rng(3).standard_normal(z.size))  # off the guess
+    lam = np.random.default_rng(4).standard_normal(new._g.numel())
+    for name in FUNCTIONS:
+        expected, got = _outputs(old, name, z, lam), _outputs(new, name, z, lam)
+        for a, b in zip(expected, got, strict=True):
+            # The same pattern (the one promised to Ipopt), the same nonzeros.
+            assert a.sparsity() == b.sparsity(), name
+            x, y = np.asarray(a.nonzeros()), np.asarray(b.nonzeros())
+            np.testing.assert_allclose(y, x, rtol=1e-10, atol=1e-10 * max(np.abs(x).max(), 1.0),
+                                       err_msg=name)
+
+
+def test_each_point_is_evaluated_once(estimators) -> None:
+    _, est = estimators
+    z = est.initial_point() + 1e-4
+    before = dict(est._points.evaluations)
+    lam = np.zeros(est._g.numel())
+    for name in FUNCTIONS:
+        _outputs(est, name, z, lam)
+    est.evaluate(z)  # the statistical test's linearisation of the same point
+    made = {k: est._points.evaluations[k] - before[k] for k in before}
+    # Values come from the Jacobian evaluation once one exists; nlp_f and nlp_g ran first.
+    assert made == {"r": 1, "rJ": 1, "g": 1, "gA": 1}
+
+
+class _Points:
+    """One residual r(z) = 1 - z^2 of one variable, with its Jacobian: Gauss-Newton leaves
+    out its curvature, -2 r.  One constraint, z itself, held within [-10, 10]."""
+
+    def constraint_value(self, z: np.ndarray) -> np.ndarray:
+        return z
+
+    def residual_jacobian(self, z: np.ndarray) -> tuple[np.ndarray, sp.csc_matrix]:
+        return np.array([1.0 - z[0] ** 2]), sp.csc_matrix(np.array([[-2.0 * z[0]]]))
+
+
+def test_damping_rises_on_failed_steps_and_falls_on_good_ones() -> None:
+    damping = MarquardtDamping(_Points(), np.array([-10.0]), np.array([10.0]))  # type: ignore[arg-type]
+    mu0 = MarquardtDamping.MU_START
+    damping.observe(np.array([0.5]))
+    assert damping.mu == 0.0
+    # 0.5 -> 1.5: the linear model predicts chi-square 0.5625 -> 0.0625, it rises to 1.5625.
+    damping.observe(np.array([1.5]))
+    assert damping.mu == mu0
+    # 1.5 -> 0.5: the model predicts a rise; nothing is learnt.  0.5 -> 1.5 fails again.
+    damping.observe(np.array([0.5]))
+    damping.observe(np.array([1.5]))
+    assert damping.mu == 4.0 * mu0
+    # 1.5 -> 1.0: predicted 1.5625 -> 0.0625, got 0: the model holds, the damping falls.
+    damping.observe(np.array([1.0]))
+    assert damping.mu == pytest.approx(4.0 * mu0 / 3.0)
+    # Steps to or from an infeasible point are not judged: 1.0 -> 12 -> 0.5 -> 1.5 fails
+    # only once, the step from 12 is not counted.
+    damping.observe(np.array([12.0]))
+    damping.observe(np.array([0.5]))
+    damping.observe(np.array([1.5]))
+    assert damping.mu == pytest.approx(4.0 * 4.0 * mu0 / 3.0)
+    damping.reset()
+    assert damping.mu == 0.0
+
+
+def test_damping_adds_to_the_hessians_diagonal(estimators) -> None:
+    _, est = estimators
+    z = est.initial_point()
+    lam = np.zeros(est._g.numel())
+    plain = _outputs(est, "nlp_hess_l", z, lam)[0].sparse()
+    est._damping.mu = 0.5
+    try:
+        damped = _outputs(est, "nlp_hess_l", z, lam)[0].sparse()
+    finally:
+        est._damping.reset()
+    _, J = est._points.residual_jacobian(z)
+    column_squares = np.asarray(J.multiply(J).sum(axis=0)).ravel()
+    added = (damped - plain).tocsr()
+    np.testing.assert_allclose(added.diagonal(), 0.7 * 0.5 * column_squares,
+                               rtol=1e-12, atol=1e-9 * column_squares.max())
+    added.setdiag(0.0)
+    assert abs(added).max() <= 1e-9 * column_squares.max()  # nothing off the diagonal
+
+
+def test_a_misspecified_fit_converges(tmp_path) -> None:
+    """`drogue` flown with added mass and fitted without it: undamped, Gauss-Newton steps
+    overshoot along weakly determined directions and the fit crawls to its iteration
+    limit (500 iterations, 24 minutes); damped, it ends at the statistical stop."""
+    problem = load_problem("drogue")
+    values = {f"added_mass_factor[{c}]": 1.4 for c in ("drogue1", "drogue2")}
+    simulate_problem(dataclasses.replace(problem, truth={**problem.truth, **values}),
+                     tmp_path / "test", 1, effects=[*baseline_effects(), AddedMass()])
+    est = Estimator(load_test(tmp_path / "test"), baseline_spec(), Settings(max_iter=60))
+    fit = est.solve()
+    assert fit.solver.status == STATISTICALLY_CONVERGED
+    assert fit.solver.chi2_decrement is not None and fit.solver.chi2_decrement < 0.01
+    # The misspecification shows: chi-square well above its degrees of freedom.
+    assert fit.chi_square > fit.dof + 5.0 * np.sqrt(2.0 * fit.dof)
