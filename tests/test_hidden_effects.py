@@ -146,3 +146,22 @@ def test_no_effect_is_flagged_on_data_from_the_fitted_model(null_diagnoses) -> N
     assert low <= flagged <= high, (flagged, len(p_values))
     assert all(d.structure == [] for d in null_diagnoses), [d.structure for d in null_diagnoses]
 
+
+
+def test_an_effects_states_integrated_through_the_fit_close_their_gaps(hidden) -> None:
+    """The null point of elastic risers starts from the rigid fit with the stretch states
+    integrated through the fitted motion: their shooting gaps close, and the start is
+    nearer feasible than the stretch guessed from the measured tension."""
+    diag, _ = hidden("elastic_riser")
+    fit = diag.fit
+    est = Estimator(fit.test, with_elastic_risers(baseline_effects()))
+    null = {n: v for e in est.model.effects if e.name == "elastic_riser"
+            for n, v in e.null_values(fit.test).items()}
+    z = est.point_from(fit, null)
+    names = [st.name for st in est.model.states if st.name.startswith("stretch")]
+    swept = est.swept(z, names)
+    nx, n = est.model.nx, len(est.t) - 1
+    rows = np.concatenate([np.arange(nx)[est.model.state_slice(s)] for s in names])
+    gaps = est._points.constraint_value(swept)[:nx * n].reshape(n, nx)[:, rows]
+    assert np.max(np.abs(gaps)) < 1e-9
+    assert est.evaluate(swept)[1] < 0.1 * est.evaluate(z)[1]
