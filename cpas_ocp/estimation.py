@@ -808,12 +808,15 @@ class Estimator:
         residuals at the step's end measures c; the minimum along the step then
         lies D^2 / c below chi^2(z).  A step along which chi-square is not convex
         (c <= 0) gives infinity: no statistical stop there.  Where D is already below
-        DECREMENT_FLOOR the measurement is lost in rounding and D is returned.
+        DECREMENT_FLOOR the measurement is lost in rounding, and where the step's end
+        cannot be evaluated there is none: D is returned.
         """
         step, decrement = gauss_newton(lin)
         if decrement < DECREMENT_FLOOR:
             return decrement
         r1 = self._points.residual_value(lin.z + step)
+        if not np.all(np.isfinite(r1)):  # the step left the model's domain: no measurement
+            return decrement
         curvature = float(r1 @ r1 - lin.r @ lin.r) + 2.0 * decrement
         return decrement**2 / curvature if curvature > 0.0 else np.inf
 
