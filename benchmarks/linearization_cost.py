@@ -7,9 +7,9 @@ the values into NumPy/SciPy are timed in this process on the same estimator
 and point (the reduction's start), best of `--repeat`:
 
 * ``dm``: the function called with a vector, its DM outputs copied out of
-  Python lists (the earlier path, `evaluate(..., via_dm=True)`);
+  Python lists (the earlier path, `via_dm` below);
 * ``buffer``: CasADi's function buffer writing into preallocated arrays on
-  a pattern converted once (the default).
+  a pattern converted once (`nlp_functions.FunctionBuffer`, the default).
 
     python benchmarks/linearization_cost.py [--problems drogue drogue_full ...] [--repeat 5]
 """
@@ -21,22 +21,32 @@ import tempfile
 import time
 from pathlib import Path
 
+import casadi as ca
 import numpy as np
+import scipy.sparse as sp
 
 from cpas_ocp.estimation import Estimator
 from cpas_ocp.flight_test import load_test
+from cpas_ocp.nlp_functions import FunctionBuffer
 from cpas_ocp.problems import load_problem
 from cpas_ocp.simulate import simulate_problem
-from cpas_ocp.uncertainty import evaluate
 
 
-def best(functions: tuple, z: np.ndarray, via_dm: bool, repeat: int) -> float:
-    """Fastest of `repeat` evaluations of every function in `functions` at `z` (s)."""
+def via_dm(fn: ca.Function, z: np.ndarray) -> list[np.ndarray | sp.csc_matrix]:
+    """`fn(z)` through CasADi's DM objects: vectors as NumPy, matrices as SciPy CSC."""
+    return [np.asarray(ca.DM(out)).ravel() if out.shape[1] == 1 else
+            sp.csc_matrix((np.asarray(out.nonzeros()), np.asarray(out.sparsity().row()),
+                           np.asarray(out.sparsity().colind())), shape=out.shape)
+            for out in fn(z)]
+
+
+def best(evaluations: list, z: np.ndarray, repeat: int) -> float:
+    """Fastest of `repeat` calls of every evaluation in `evaluations` at `z` (s)."""
     times = []
     for _ in range(repeat):
         t0 = time.perf_counter()
-        for f in functions:
-            evaluate(f, z, via_dm=via_dm)
+        for evaluation in evaluations:
+            evaluation(z)
         times.append(time.perf_counter() - t0)
     return min(times)
 
@@ -54,13 +64,15 @@ def main() -> None:
             est = Estimator(load_test(folder))
             z = est.initial_point()
             functions = (est._residual_jacobian, est._constraints)
-            old = [evaluate(f, z, via_dm=True) for f in functions]
-            new = [evaluate(f, z) for f in functions]
+            dm = [lambda z, f=f: via_dm(f, z) for f in functions]
+            buffers = [FunctionBuffer(f) for f in functions]
+            old = [evaluation(z) for evaluation in dm]
+            new = [buffer(z) for buffer in buffers]
             for a, b in zip(old, new, strict=True):  # the same numbers either way
                 assert np.array_equal(a[0], b[0]) and (a[1] != b[1]).nnz == 0
             nnz = sum(out[1].nnz for out in new)
-            t_dm = best(functions, z, True, args.repeat)
-            t_buf = best(functions, z, False, args.repeat)
+            t_dm = best(dm, z, args.repeat)
+            t_buf = best(buffers, z, args.repeat)
             print(f"{name:12s} {nnz:18,d} {t_dm:8.3f} {t_buf:9.3f} {t_buf / t_dm:6.2f}",
                   flush=True)
 

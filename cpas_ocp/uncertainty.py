@@ -46,12 +46,9 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import splu
-
-from .nlp_functions import FunctionBuffer
 
 
 @dataclass(frozen=True)
@@ -474,27 +471,3 @@ def _gauss_newton(lin: Linearization) -> tuple[np.ndarray, np.ndarray]:
     y = -(ns.inverse() @ gradient)
     dz = red.dz_p + red.Z @ (ns.dw0 + ns.N @ y)
     return dz, base + red.JZ @ (ns.N @ y)
-
-
-_BUFFERS: dict[int, FunctionBuffer] = {}
-BUFFERS_KEPT = 4  # functions whose buffers are kept (the current estimator's two)
-
-
-def evaluate(fn: ca.Function, z: np.ndarray,
-             via_dm: bool = False) -> list[np.ndarray | sp.csc_matrix]:
-    """`fn(z)` as NumPy vectors (vector outputs) and SciPy CSC matrices (matrix ones).
-
-    `via_dm`: through CasADi's DM objects instead of the function buffer (the
-    earlier path, for benchmarks).
-    """
-    if via_dm:
-        return [np.asarray(ca.DM(out)).ravel() if out.shape[1] == 1 else
-                sp.csc_matrix((np.asarray(out.nonzeros()), np.asarray(out.sparsity().row()),
-                               np.asarray(out.sparsity().colind())), shape=out.shape)
-                for out in fn(z)]
-    buffer = _BUFFERS.get(id(fn))
-    if buffer is None or buffer.fn is not fn:
-        if len(_BUFFERS) >= BUFFERS_KEPT:
-            _BUFFERS.clear()
-        buffer = _BUFFERS[id(fn)] = FunctionBuffer(fn)
-    return buffer(np.asarray(z, dtype=float).ravel())
