@@ -52,6 +52,7 @@ from .simulate import rk4_step, simulate
 from .uncertainty import (
     HESSIANS,
     Covariance,
+    GaussNewtonStep,
     Linearization,
     gauss_newton,
     gauss_newton_step,
@@ -767,37 +768,45 @@ class Estimator:
         """The point at which the statistical test may end the run, near the Ipopt iterate
         `z`, and the Gauss-Newton chi-square decrement there; None if there is none.
 
-        The point must be feasible: every scaled constraint within
-        STOP_CONSTRAINT_TOL (the shooting gaps then below 1 mm and 0.1 mm/s),
-        evaluated here rather than taken from Ipopt, whose reported values may
-        be scaled.  An iterate that misses that by at most POLISH_CONSTRAINT_TOL
-        is offered one full Gauss-Newton step (the linearised constraints hold
-        after it, so what remains of the gaps is second order in the step); the
-        step's end is the point if it is feasible and within the bounds.  Near
-        the optimum Ipopt shrinks the gaps only linearly, by the same factor as
-        its steps, several iterations for what one step does.
+        The point must be feasible, in two senses: every scaled constraint
+        within STOP_CONSTRAINT_TOL (the shooting gaps then below 1 mm and
+        0.1 mm/s), evaluated here rather than taken from Ipopt, whose reported
+        values may be scaled; and closing what gaps remain, with the
+        parameters held, changes chi-square by less than the test's own
+        tolerance (`GaussNewtonStep.restoration`: tiny gaps on many intervals
+        add up).  An iterate that misses either but whose gaps are within
+        POLISH_CONSTRAINT_TOL is offered one full Gauss-Newton step (the
+        linearised constraints hold after it, so what remains of the gaps is
+        second order in the step); the step's end is the point if it is
+        feasible and within the bounds.  Near the optimum Ipopt shrinks the
+        gaps only linearly, by the same factor as its steps, several
+        iterations for what one step does.
         """
+        tol = self.settings.chi2_step_tol or 0.0
         lin = self._linearize(z)
+        gn = gauss_newton(lin)
         violation = _violation(lin)
-        if violation <= STOP_CONSTRAINT_TOL:
-            return self._measured_decrement(lin), z
+        if violation <= STOP_CONSTRAINT_TOL and abs(gn.restoration) <= tol:
+            return self._measured_decrement(lin, gn), z
         if (not self.settings.polish or violation > POLISH_CONSTRAINT_TOL
                 or self._has_inequalities):
             # An inequality (a what-if limit) inactive at z might be crossed by the step
             # unseen: the linearisation holds only the active ones.
             return None
-        z1 = z + gauss_newton_step(lin)
+        z1 = z + gn.step
         lower, upper = self._monitor.bounds
         if np.any(z1 < lower) or np.any(z1 > upper):
             return None
         lin1 = self._linearize(z1)
-        if _violation(lin1) > STOP_CONSTRAINT_TOL:
+        gn1 = gauss_newton(lin1)
+        if _violation(lin1) > STOP_CONSTRAINT_TOL or abs(gn1.restoration) > tol:
             return None
-        return self._measured_decrement(lin1), z1
+        return self._measured_decrement(lin1, gn1), z1
 
-    def _measured_decrement(self, lin: Linearization) -> float:
-        """The chi-square decrease still to be had along the Gauss-Newton step from `lin.z`,
-        with the step's curvature measured rather than taken from the Gauss-Newton model.
+    def _measured_decrement(self, lin: Linearization, gn: GaussNewtonStep) -> float:
+        """The chi-square decrease still to be had along the Gauss-Newton step `gn` from
+        `lin.z`, with the step's curvature measured rather than taken from the
+        Gauss-Newton model.
 
         Along the step d, chi^2(z + a d) - chi^2(z) = -2 D a + c a^2 + O(a^3), D the
         Gauss-Newton decrement, and Gauss-Newton takes c = D: it leaves out the
@@ -811,10 +820,10 @@ class Estimator:
         DECREMENT_FLOOR the measurement is lost in rounding, and where the step's end
         cannot be evaluated there is none: D is returned.
         """
-        step, decrement = gauss_newton(lin)
+        decrement = gn.decrement
         if decrement < DECREMENT_FLOOR:
             return decrement
-        r1 = self._points.residual_value(lin.z + step)
+        r1 = self._points.residual_value(lin.z + gn.step)
         if not np.all(np.isfinite(r1)):  # the step left the model's domain: no measurement
             return decrement
         curvature = float(r1 @ r1 - lin.r @ lin.r) + 2.0 * decrement

@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 import scipy.sparse as sp
@@ -14,6 +16,7 @@ from cpas_ocp.uncertainty import (
     _by_weight,
     _leading_rows,
     _oriented,
+    gauss_newton,
     gauss_newton_decrement,
     kkt_covariance,
 )
@@ -70,8 +73,28 @@ def test_reduced_covariance_and_step_equal_the_full_kkt_solution() -> None:
     rhs = np.concatenate([-(lin.J.T @ lin.r), -lin.c])
     dz = np.linalg.solve(K, rhs)[:nz]
     after = lin.r + lin.J @ dz
-    expected = float(lin.r @ lin.r - after @ after)
-    assert gauss_newton_decrement(lin) == pytest.approx(expected, rel=1e-9)
+    # The step's whole predicted fall, the gaps' closing included, is the full KKT step's.
+    step = gauss_newton(lin)
+    np.testing.assert_allclose(step.step, dz, atol=1e-10)
+    assert step.decrement - step.restoration == pytest.approx(
+        float(lin.r @ lin.r - after @ after), rel=1e-9)
+
+
+def test_the_decrement_is_counted_from_the_feasible_projection() -> None:
+    """Closing the shooting gaps with the free coordinates held (the states following)
+    changes chi-square by `restoration`; the decrement from an infeasible point is the one
+    from that projection."""
+    lin, _ = _chain_problem(17)
+    chain = lin.chain_rows
+    lin = replace(lin, A=lin.A[:chain], c=lin.c[:chain])  # the shooting gaps only
+    dz_p = np.zeros(lin.z.size)
+    dz_p[lin.dependent] = np.linalg.solve(lin.A[:, lin.dependent].toarray(), -lin.c)
+    r_p = lin.r + lin.J @ dz_p
+    projected = replace(lin, z=lin.z + dz_p, r=r_p, c=np.zeros(chain))
+    step = gauss_newton(lin)
+    assert step.restoration == pytest.approx(float(r_p @ r_p - lin.r @ lin.r), rel=1e-9)
+    assert step.decrement == pytest.approx(gauss_newton_decrement(projected), rel=1e-9)
+    assert gauss_newton(projected).restoration == pytest.approx(0.0, abs=1e-9)
 
 
 def test_a_parameter_on_its_bound_is_held() -> None:
