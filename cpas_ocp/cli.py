@@ -223,7 +223,9 @@ def _spec(test: FlightTest, model_file: Path | None) -> ModelSpec:
 def _solver_options(s: argparse.ArgumentParser) -> None:
     from .uncertainty import HESSIANS
     s.add_argument("--grid-step", type=float, default=None,
-                   help="shooting interval [s] (default: the fastest sensor's sampling interval)")
+                   help="force a uniform shooting interval [s] (default: chosen from the "
+                        "dynamics, the fastest sensor's sampling interval where the motion "
+                        "changes fast)")
     s.add_argument("--verbose", action="store_true", help="show Ipopt's iteration log")
     s.add_argument("--max-iter", type=int, default=500, metavar="N",
                    help="stop the solver after N iterations (default 500); a run stopped "
@@ -522,14 +524,20 @@ def _run_reconstruction(test: FlightTest, args: argparse.Namespace, spec: ModelS
 
 def _estimator(test: FlightTest, args: argparse.Namespace, spec: ModelSpec) -> Estimator:
     """The NLP of a test phase with the command line's solver options (built and announced)."""
-    from .estimation import Estimator, Settings, default_grid_step
-    step = args.grid_step if args.grid_step is not None else default_grid_step(test)
-    print(f"building the multiple-shooting NLP of {test.name} "
-          f"({test.t_end - test.t_start:.1f} s at {step * 1e3:g} ms) ...", flush=True)
+    from .estimation import Estimator, Settings
+    from .shooting_grid import grid_text
     if args.max_iter < 1:
         raise InputError("(command line)", "--max-iter", f"at least 1; got {args.max_iter}")
-    return Estimator(test, spec, settings=Settings(grid_step=step, verbose=args.verbose,
-                                                   max_iter=args.max_iter))
+    if args.grid_step is not None and not 0.0 < args.grid_step < test.t_end - test.t_start:
+        raise InputError("(command line)", "--grid-step",
+                         f"a step in seconds, positive and shorter than the phase; "
+                         f"got {args.grid_step}")
+    print(f"building the multiple-shooting NLP of {test.name} "
+          f"({test.t_end - test.t_start:.1f} s) ...", flush=True)
+    est = Estimator(test, spec, settings=Settings(grid_step=args.grid_step,
+                                                  verbose=args.verbose, max_iter=args.max_iter))
+    print(f"  {grid_text(est.t)}", flush=True)
+    return est
 
 
 def _fit_and_covariance(est: Estimator, args: argparse.Namespace) -> tuple[Fit, Covariance]:

@@ -2,8 +2,9 @@
 
 Decision variables (all scaled to order one):
 
-* the state at every node of a uniform grid t_k = t_0 + k h (multiple
-  shooting; the initial state is free and GPS pins it; in a test without
+* the state at every node t_k of the shooting grid (multiple shooting; the
+  grid is fine where the motion changes fast and coarse in steady descent,
+  `shooting_grid`; the initial state is free and GPS pins it; in a test without
   GPS, only the altimeter, the first node's horizontal position and velocity
   are held at zero and the motion stays vertical unless there is wind);
 * the free model parameters (inflation parameters, scale factors, inflation
@@ -11,7 +12,8 @@ Decision variables (all scaled to order one):
 * the captured quantities (each stage's start airspeed V_i), tied to the
   trajectory by V_i = sum_k B((t_i - t_k)/h) |v_air(x_k)|, the cubic
   B-spline smoothing of node airspeeds at the free start time t_i (C2 in t_i,
-  error h^2/6 |V''|, below 1e-4 m/s here).
+  error h^2/6 |V''|, below 1e-4 m/s here; the grid is uniform, of the finest
+  step h, over the window t_i may take).
 
 Constraints: continuity x_{k+1} = RK4^M(x_k, t_k, p, c) on every interval,
 the capture relations, and the effects' parameter constraints.
@@ -39,7 +41,7 @@ from .effects import Effect
 from .errors import SolverFailure
 from .flight_test import FlightTest
 from .kinematic_track import kinematic_track
-from .model import Model, timing_label
+from .model import CORE_STATES, Model, timing_label
 from .model_spec import ModelSpec, spec_from_effects, spec_of_test
 from .nlp_functions import (
     MarquardtDamping,
@@ -48,6 +50,7 @@ from .nlp_functions import (
     ipopt_functions,
 )
 from .reduction import initial_guess
+from .shooting_grid import TimeWindow, dynamics_grid, stable_refinement
 from .simulate import rk4_step, simulate
 from .uncertainty import (
     HESSIANS,
@@ -65,8 +68,13 @@ from .uncertainty import (
 class Settings:
     """Transcription and solver settings.
 
-    grid_step (s): shooting interval (None: the finest sampling interval of
-    the test's sensors, see `default_grid_step`); substeps: RK4 steps per interval;
+    grid_step (s): a uniform shooting interval, forced (None: a grid chosen
+    from the dynamics, `shooting_grid`, on the lattice of the finest sampling
+    interval of the test's sensors, `default_grid_step`);
+    nodes: the grid's nodes (s) as given; an estimator records its grid here,
+    so that a model built from its settings (a nested or extended fit, a
+    profile) shares it;
+    substeps: RK4 steps per interval;
     chi2_step_tol: stop once the Gauss-Newton step would lower chi-square by
     less than this (0.01: every parameter within 0.1 sigma of the optimum the
     fit is heading for; None: only Ipopt's own tests end the run);
@@ -96,6 +104,7 @@ class Settings:
     """
 
     grid_step: float | None = None
+    nodes: tuple[float, ...] | None = None
     substeps: int = 1
     max_iter: int = 500
     tol: float = 1e-6
@@ -224,8 +233,6 @@ class Estimator:
         """
         self.test = test
         self.settings = settings or Settings()
-        if self.settings.grid_step is None:
-            self.settings = replace(self.settings, grid_step=default_grid_step(test))
         if effects is None:
             self.spec = spec_of_test(test)
         elif isinstance(effects, ModelSpec):
@@ -247,13 +254,46 @@ class Estimator:
         self.guess.update(s.guess)
         self.values = {**self.guess, **fixed}
 
-        h = float(s.grid_step)
-        n = int(np.floor((test.t_end - test.t_start) / h + 1e-9))
-        self.t = test.t_start + h * np.arange(n + 1)
-        self._build(n, h)
+        if s.nodes is not None:
+            self.t = np.asarray(s.nodes, dtype=float)
+            if len(m.states) > len(CORE_STATES):  # an effect's states: maybe a fast mode
+                self.t = self._stable_grid(self.t)
+        elif s.grid_step is not None:
+            n = int(np.floor((test.t_end - test.t_start) / s.grid_step + 1e-9))
+            self.t = test.t_start + s.grid_step * np.arange(n + 1)
+        else:
+            self.t = self._dynamics_grid(default_grid_step(test))
+        self.settings = replace(s, nodes=tuple(self.t))
+        # The finest interval, rounded to the microsecond: the B-spline's spacing.
+        self.fine_step = float(np.round(np.min(np.diff(self.t)), 6))
+        self._build(len(self.t) - 1, self.fine_step)
+
+    def _stable_grid(self, nodes: np.ndarray) -> np.ndarray:
+        """Given nodes, refined where this model's own states need finer steps for RK4 to
+        stay stable (`shooting_grid.stable_refinement`)."""
+        fine_step = float(np.round(np.min(np.diff(nodes)), 6))
+        x0 = self._guessed_states(nodes[:2])[0][:, 0]
+        return stable_refinement(nodes, self.model, self.values, x0, fine_step)
+
+    def _dynamics_grid(self, fine_step: float) -> np.ndarray:
+        """The nodes chosen from the model's dynamics at the first guesses (`shooting_grid`)."""
+        m, test = self.model, self.test
+        lattice = test.t_start + fine_step * np.arange(
+            int(np.floor((test.t_end - test.t_start) / fine_step + 1e-9)) + 1)
+        windows = []
+        for cap in m.captures:
+            if cap.at_time is not None:
+                windows.append(TimeWindow(cap.at_time, cap.at_time, cap.at_time))
+                continue
+            prm, value = m.parameter(cap.time_parameter), self.values[cap.time_parameter]
+            windows.append(TimeWindow(prm.lower, prm.upper, value) if prm.name in self.free
+                           else TimeWindow(value, value, value))
+        x0 = self._guessed_states(lattice[:2])[0][:, 0]
+        return dynamics_grid(m, self.values, x0, test.t_start, test.t_end, fine_step, windows)
 
     # ------------------------------------------------------------------ transcription
     def _build(self, n: int, h: float) -> None:
+        """The NLP on the grid `self.t` of n intervals, the finest h long (s)."""
         m, s = self.model, self.settings
         nx, ncap = m.nx, len(m.captures)
         xscale = m.state_scales()
@@ -278,7 +318,7 @@ class Estimator:
         cs = ca.SX.sym("c", ncap)
         xe = xs
         for j in range(s.substeps):
-            xe = step(xe, ts + j * h / s.substeps, h / s.substeps, ps, cs)
+            xe = step(xe, ts + j * dts / s.substeps, dts / s.substeps, ps, cs)
         self._ctx = (X, Xp, pfull, Cp, xscale, cscale)
 
         # Per-instance functions, each mapped over its instances with its Jacobian:
@@ -286,8 +326,8 @@ class Estimator:
         # every sample of every sensor (sensors sampled between nodes are predicted one
         # partial RK4 step after the node before the sample).
         ks = np.arange(n)
-        blocks = [_Block(ca.Function("gap", [xs, xs1, ts, ps, cs], [(xs1 - xe) / xscale]),
-                         [ks, ks + 1], self.t[:n], [])]
+        blocks = [_Block(ca.Function("gap", [xs, xs1, ts, dts, ps, cs], [(xs1 - xe) / xscale]),
+                         [ks, ks + 1], self.t[:n], [np.diff(self.t)])]
         self._samples = []
         for sensor in self.test.sensors:
             if sensor.name not in m.outputs:
@@ -295,7 +335,7 @@ class Estimator:
             ts_all = sensor.time
             keep = (ts_all >= self.t[0] - 1e-9) & (ts_all <= self.t[-1] + 1e-9)
             tsamp = ts_all[keep]
-            k = np.clip(np.floor((tsamp - self.t[0]) / h + 1e-7).astype(int), 0, n - 1)
+            k = np.clip(np.searchsorted(self.t, tsamp + 1e-7 * h, side="right") - 1, 0, n - 1)
             dt = tsamp - self.t[k]
             dt[np.abs(dt) < 1e-7] = 0.0
             channels = m.sensor_channels[sensor.name]
@@ -343,9 +383,10 @@ class Estimator:
                 lo = self.values.get(prm.name, prm.default) if fixed else prm.lower
                 hi = self.values.get(prm.name, prm.default) if fixed else prm.upper
                 t_event = pfull[m.parameter_names.index(prm.name)]
-            k0 = max(int(np.floor((lo - self.t[0]) / h)) - 2, 0)
-            k1 = min(int(np.ceil((hi - self.t[0]) / h)) + 2, n)
-            kw = np.arange(k0, k1 + 1)
+            kw = np.flatnonzero((self.t >= lo - 2.5 * h) & (self.t <= hi + 2.5 * h))
+            if np.any(np.abs(np.diff(self.t[kw]) - h) > 1e-6 * h):
+                raise ValueError(f"the shooting grid is not uniform (step {h:g} s) over "
+                                 f"[{lo:g}, {hi:g}] s, where {cap.name} may be captured")
             qfn = m.capture_function(cap.name).map(len(kw), "serial")
             node_vals = qfn(Xp[:, kw], ca.DM(self.t[kw]).T, pfull, Cp)
             w = cubic_bspline((t_event - ca.DM(self.t[kw]).T) / h)
@@ -525,6 +566,24 @@ class Estimator:
         return ca.Function(f"{fn.name()}_jac", args,
                            [out, ca.vec(ca.horzcat(*jblocks, jp, jc))])
 
+    def _instance_arguments(self, block: _Block) -> list:
+        """The arguments of `block.fn` for all its instances at once (one column each)."""
+        _, Xp, pfull, Cp, _, _ = self._ctx
+        return [*(Xp[:, k] for k in block.nodes), ca.DM(block.times).T,
+                *(ca.DM(d) if np.ndim(d) == 2 else ca.DM(d).T for d in block.data), pfull, Cp]
+
+    def _instance_columns(self, block: _Block) -> np.ndarray:
+        """Per instance of `block`, the decision-vector index of each local column (its
+        states, then the free parameters and captures; as in `_local_jacobian`)."""
+        nx, nX = self.model.nx, self._ctx[0].numel()
+        nfree, ncap = len(self.free), len(self.model.captures)
+        n_states = len(block.nodes)
+        zcols = np.empty((len(block.times), nx * n_states + nfree + ncap), dtype=np.int64)
+        for j, k in enumerate(block.nodes):
+            zcols[:, j * nx:(j + 1) * nx] = (np.asarray(k)[:, None] * nx + np.arange(nx))
+        zcols[:, nx * n_states:] = nX + np.arange(nfree + ncap)
+        return zcols
+
     def _mapped_block(self, block: _Block, value_fn: ca.Function,
                       local: ca.Function) -> _Piece:
         """Values and Jacobian (w.r.t. the scaled decision vector) of `block` over its instances.
@@ -539,37 +598,24 @@ class Estimator:
         Differentiating the mapped graph directly would take one sweep per
         colour of the whole Jacobian, about as many as there are parameters.
         """
-        X, Xp, pfull, Cp, _, _ = self._ctx
-        m = self.model
-        nx = m.nx
-        nodes, times = block.nodes, block.times
-        n_inst = len(times)
-        n_states = len(nodes)
+        n_inst = len(block.times)
         mrows = block.fn.numel_out(0)
-        nfree = len(self.free)
-        ncap = len(m.captures)
-        call = [*(Xp[:, k] for k in nodes), ca.DM(times).T,
-                *(ca.DM(d) if np.ndim(d) == 2 else ca.DM(d).T for d in block.data), pfull, Cp]
+        call = self._instance_arguments(block)
 
         def mapped(fn: ca.Function) -> list[ca.MX]:
             out = fn.map(n_inst, "thread", 2)(*call)
             return [ca.vec(o) for o in (out if isinstance(out, tuple | list) else [out])]
 
         with_jacobian, nz = mapped(local)
-        # Column (z index) of every entry of one instance's block, column-major.
-        ncols = nx * n_states + nfree + ncap
-        zcols = np.empty((n_inst, ncols), dtype=np.int64)
-        for j, k in enumerate(nodes):
-            zcols[:, j * nx:(j + 1) * nx] = (np.asarray(k)[:, None] * nx + np.arange(nx))
-        nX = X.numel()
-        zcols[:, nx * n_states:nx * n_states + nfree] = nX + np.arange(nfree)
-        zcols[:, nx * n_states + nfree:] = nX + nfree + np.arange(ncap)
+        zcols = self._instance_columns(block)
+        ncols = zcols.shape[1]
         rows = (np.arange(n_inst)[:, None] * mrows + np.arange(mrows)[None, :])
         r_full = np.repeat(rows[:, None, :], ncols, axis=1).reshape(-1)
         c_full = np.repeat(zcols[:, :, None], mrows, axis=2).reshape(-1)
         order = np.lexsort((r_full, c_full))
-        sp = ca.Sparsity.triplet(n_inst * mrows, X.numel() + nfree + ncap,
-                                 r_full[order].tolist(), c_full[order].tolist())
+        n_z = self._ctx[0].numel() + len(self.free) + len(self.model.captures)
+        sp = ca.Sparsity.triplet(n_inst * mrows, n_z, r_full[order].tolist(),
+                                 c_full[order].tolist())
         return _Piece(mapped(block.fn)[0], mapped(value_fn)[0], with_jacobian,
                       ca.MX(sp, nz[order.tolist()]))
 
@@ -578,24 +624,14 @@ class Estimator:
         the effects' own state guesses, parameters from the reduction, captures from the
         track's speed."""
         m = self.model
-        track = kinematic_track(self.test, self.t)
-        pos, vel = track.position, track.velocity
-        x0 = np.zeros((m.nx, len(self.t)))
-        x0[m.state_slice("position")] = pos.T
-        x0[m.state_slice("velocity")] = vel.T
-        guessed = {"position", "velocity"}
-        for name, value in self._state_guesses(self.values).items():
-            x0[m.state_slice(name)] = value
-            guessed.add(name)
-        for st in m.states:
-            if st.pinned:
-                x0[m.state_slice(st.name), 0] = st.initial
+        x0, guessed = self._guessed_states(self.t)
+        vel = x0[m.state_slice("velocity")].T
         unguessed = [st for st in m.states if st.name not in guessed]
         if unguessed:
             # States no effect guesses from the data (a Pilot's separation): a forward
             # simulation from the first node with the initial parameter values.
-            h = self.t[1] - self.t[0]
-            traj = simulate(m, self.values, x0[:, 0], self.t[0], self.t[-1], step=h)
+            traj = simulate(m, self.values, x0[:, 0], self.t[0], self.t[-1],
+                            step=self.fine_step)
             for st in unguessed:
                 rows = m.state_slice(st.name)
                 x0[rows] = np.array([np.interp(self.t, traj.t, col) for col in traj.x[:, rows].T])
@@ -614,32 +650,71 @@ class Estimator:
         c0 = np.maximum(c0, [c.lower for c in m.captures]) / self._cscale
         return np.concatenate([(x0 / self._xscale[:, None]).ravel(order="F"), p0, c0])
 
+    def _guessed_states(self, t: np.ndarray) -> tuple[np.ndarray, set[str]]:
+        """States at times `t` (nx x len(t)) from the kinematic track (GPS, or the altimeter's
+        vertical track) and the effects' own guesses, pinned states at their start values,
+        and the names of the states so guessed (the others are zero)."""
+        m = self.model
+        track = kinematic_track(self.test, t)
+        x0 = np.zeros((m.nx, len(t)))
+        x0[m.state_slice("position")] = track.position.T
+        x0[m.state_slice("velocity")] = track.velocity.T
+        guessed = {"position", "velocity"}
+        for name, value in self._state_guesses(self.values, t).items():
+            x0[m.state_slice(name)] = value
+            guessed.add(name)
+        for st in m.states:
+            if st.pinned:
+                x0[m.state_slice(st.name), 0] = st.initial
+        return x0, guessed
+
     def point_from(self, fit: Fit, values: dict[str, float] | None = None) -> np.ndarray:
         """This NLP's decision vector at `fit`, a fit of another model of the same test on
-        the same grid: states, parameters and captured values by name.
+        this grid or a coarser one within it (`_fit_states`): states, parameters and
+        captured values by name.
 
         States the fit's model lacks come from this model's effects' guesses
         (`Effect.state_guess`), else zero; parameters it lacks take this
         estimator's values; `values` (SI) override both.
         """
-        if fit.t.shape != self.t.shape or not np.allclose(fit.t, self.t):
-            raise ValueError("the fit was made on another shooting grid")
+        fit_x = self._fit_states(fit)
         m = self.model
         known = {**self.values, **{k: v for k, v in fit.parameters.items()
                                    if k in m.parameter_names}, **(values or {})}
         x0 = np.zeros((m.nx, len(self.t)))
         theirs = {st.name for st in fit.model.states}
-        for name, guess in self._state_guesses(known).items():
+        for name, guess in self._state_guesses(known, self.t).items():
             if name not in theirs:
                 x0[m.state_slice(name)] = guess
         for st in m.states:
             if st.name in theirs:
-                x0[m.state_slice(st.name)] = fit.x[:, fit.model.state_slice(st.name)].T
+                x0[m.state_slice(st.name)] = fit_x[:, fit.model.state_slice(st.name)].T
             elif st.pinned:
                 x0[m.state_slice(st.name), 0] = st.initial
         p0 = np.array([known[f] for f in self.free]) / self.pscale
         c0 = np.array([fit.captures[c.name] for c in m.captures]) / self._cscale
         return np.concatenate([(x0 / self._xscale[:, None]).ravel(order="F"), p0, c0])
+
+    def _fit_states(self, fit: Fit) -> np.ndarray:
+        """The fit's states at this grid's nodes (len(t) x the fit's nx): its own nodes, and
+        between them (this grid refined, `_stable_grid`) one RK4 step of the fit's model
+        from the node before, as its shooting intervals predict."""
+        if fit.t.shape == self.t.shape and np.allclose(fit.t, self.t):
+            return fit.x
+        k = np.clip(np.searchsorted(fit.t, self.t + 1e-9, side="right") - 1, 0, len(fit.t) - 1)
+        dt = self.t - fit.t[k]
+        inside = np.isin(np.round(fit.t, 6), np.round(self.t, 6))
+        if not (np.all(inside) and abs(fit.t[-1] - self.t[-1]) < 1e-6):
+            raise ValueError("the fit was made on a shooting grid this one does not refine")
+        between = dt > 1e-9
+        x = fit.x[k].copy()
+        if np.any(between):
+            step = rk4_step(fit.model).map(int(between.sum()))
+            x[between] = np.asarray(step(
+                fit.x[k[between]].T, fit.t[k[between]], dt[between],
+                fit.model.parameter_vector(fit.parameters),
+                fit.model.capture_vector(fit.captures))).T
+        return x
 
     def swept(self, z: np.ndarray, states: Sequence[str]) -> np.ndarray:
         """`z` with the named states integrated forward along the grid from their first node,
@@ -658,9 +733,9 @@ class Estimator:
         _, pfull, Cp = self._unpack(z)
         rows = np.concatenate([np.arange(nx)[m.state_slice(name)] for name in states])
         sub = self.settings.substeps
-        dt = (self.t[1] - self.t[0]) / sub
         for k in range(n):
             x = X[:, k]
+            dt = (self.t[k + 1] - self.t[k]) / sub
             for j in range(sub):
                 x = np.asarray(self._step(x, self.t[k] + j * dt, dt, pfull, Cp)).ravel()
             X[rows, k + 1] = x[rows]
@@ -668,11 +743,12 @@ class Estimator:
         out[:nx * (n + 1)] = (X / self._xscale[:, None]).ravel(order="F")
         return out
 
-    def _state_guesses(self, values: dict[str, float]) -> dict[str, np.ndarray]:
-        """The effects' own guesses of their states on the grid (`Effect.state_guess`)."""
+    def _state_guesses(self, values: dict[str, float], t: np.ndarray
+                       ) -> dict[str, np.ndarray]:
+        """The effects' own guesses of their states at times `t` (`Effect.state_guess`)."""
         out: dict[str, np.ndarray] = {}
         for effect in self.model.effects:
-            out.update(effect.state_guess(self.test, self.t, values))
+            out.update(effect.state_guess(self.test, t, values))
         return out
 
     # ------------------------------------------------------------------ solve

@@ -106,7 +106,8 @@ def result_dict(fit: Fit, cov: Covariance | None,
              "curvature_ratio": w.curvature_ratio, "text": w.text()} for w in cov.weak],
         "profiles": {p.name: p.as_dict() for p in profiles},
         "model": {"effects": [e.name for e in fit.model.effects],
-                  "grid_step_s": fit.settings.grid_step,
+                  "grid": {"nodes": len(fit.t), "finest_step_s": float(np.min(np.diff(fit.t))),
+                           "longest_step_s": float(np.max(np.diff(fit.t)))},
                   "fill_length": {c.name: c.fill_length for c in fit.test.parachutes}},
     }
 
