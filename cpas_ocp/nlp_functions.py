@@ -196,32 +196,24 @@ class MarquardtDamping:
     """Levenberg-Marquardt damping of the Gauss-Newton Hessian, adapted to the progress made.
 
     Gauss-Newton takes the curvature of chi-square to be J'J's, leaving out
-    that of the residuals themselves (sum r_i H_i) and that of the shooting
-    gaps (sum lam_k d2 gap_k).  With a misspecified model the residuals and
-    the multipliers are large, and these curvatures are not small along the
-    directions the data hardly determine: the Gauss-Newton step overshoots
-    there, and Ipopt's line search cuts it again and again (`drogue` with
-    added mass left out: 500 iterations) or accepts steps that reopen the
-    gaps they were meant to keep closed (an elastic riser's null point on that
-    fit: the violation went from 1e-5 to 0.1 and stayed there).  After every
-    iteration the step just taken is judged against its linear model:
-
-    * between nearly feasible iterates (every constraint within FEASIBLE of
-      its bounds, scaled), by chi-square: the change it made against the
-      Gauss-Newton prediction (a step that also closes shooting gaps trades
-      chi-square for feasibility, and its chi-square change says nothing of
-      the model: with elastic risers, judging those held the damping up and
-      a refit that had converged in 60 iterations stopped at 150);
-    * else by feasibility: the largest violation it left against the one
-      the linearised constraints predicted, measured on the violation it
-      set out to remove.
-
-    Where less than a quarter of what was predicted came true, the Hessian
-    Ipopt is given becomes J'J + mu diag(J'J) with mu raised fourfold (from
-    MU_START), which shortens the step most along the weakly determined
-    directions; where more than three quarters came true, mu falls
-    threefold, to zero below MU_FLOOR.  A model that fits its data, started
-    where the linearisation holds, keeps mu = 0: Ipopt's steps are unchanged.
+    that of the residuals themselves (sum r_i H_i).  With a misspecified
+    model the residuals are large and that curvature is not small along
+    the directions the data hardly determine: the Gauss-Newton step
+    overshoots there, Ipopt's line search cuts it again and again, and the
+    run crawls (`drogue` with added mass left out: 500 iterations).  After
+    every iteration the chi-square change of the step just taken is
+    compared with what the Gauss-Newton model predicted for it; where less
+    than a quarter of it came true, the Hessian Ipopt is given becomes
+    J'J + mu diag(J'J) with mu raised fourfold (from MU_START), which shortens
+    the step most along the weakly determined directions; where more than
+    three quarters came true, mu falls threefold, to zero below MU_FLOOR.  A
+    model that fits its data keeps mu = 0: Ipopt's steps are unchanged.
+    Only steps between nearly feasible iterates (every constraint within
+    FEASIBLE of its bounds, scaled) are judged: a step that also closes
+    shooting gaps trades chi-square for feasibility, and its chi-square
+    change says nothing of the model (with elastic risers, judging those
+    held the damping up and a refit that had converged in 60 iterations
+    stopped at 150).
     """
 
     MU_START = 0.01
@@ -236,37 +228,27 @@ class MarquardtDamping:
     def reset(self) -> None:
         """Start a run undamped."""
         self.mu = 0.0
-        self._last: tuple | None = None
-
-    def _violation(self, g: np.ndarray) -> float:
-        """The largest violation of the constraints' bounds by `g` (0 within them)."""
-        return float(np.max(np.maximum(self._lbg - g, g - self._ubg), initial=0.0))
+        self._last: tuple[np.ndarray, np.ndarray, sp.csc_matrix] | None = None
 
     def observe(self, z: np.ndarray) -> None:
         """Account for the step that ended at the accepted iterate `z`."""
-        g, A = self.points.constraints(z)
+        g = self.points.constraint_value(z)
+        if np.any(g < self._lbg - self.FEASIBLE) or np.any(g > self._ubg + self.FEASIBLE):
+            self._last = None
+            return
         r, J = self.points.residual_jacobian(z)
-        violation = self._violation(g)
         if self._last is not None:
-            z0, r0, J0, g0, A0, violation0 = self._last
-            step = z - z0
-            if max(violation, violation0) > self.FEASIBLE:
-                predicted = self._violation(g0 + A0 @ step)
-                intended = max(violation0 - predicted, self.FEASIBLE)
-                self._update(1.0 - (violation - predicted) / intended)
-            else:
-                predicted_r = r0 + J0 @ step
-                predicted_change = float(predicted_r @ predicted_r - r0 @ r0)
-                if predicted_change < 0.0:  # a step the model expected to lower chi-square
-                    self._update(float(r @ r - r0 @ r0) / predicted_change)
-        self._last = (np.array(z, dtype=float), r, J, g, A, violation)
-
-    def _update(self, ratio: float) -> None:
-        """mu after a step that delivered `ratio` of what its linear model predicted."""
-        if ratio < 0.25:
-            self.mu = max(4.0 * self.mu, self.MU_START)
-        elif ratio > 0.75:
-            self.mu = self.mu / 3.0 if self.mu / 3.0 >= self.MU_FLOOR else 0.0
+            z0, r0, J0 = self._last
+            predicted_r = r0 + J0 @ (z - z0)
+            predicted = float(predicted_r @ predicted_r - r0 @ r0)
+            actual = float(r @ r - r0 @ r0)
+            if predicted < 0.0:  # a step the model expected to lower chi-square
+                ratio = actual / predicted
+                if ratio < 0.25:
+                    self.mu = max(4.0 * self.mu, self.MU_START)
+                elif ratio > 0.75:
+                    self.mu = self.mu / 3.0 if self.mu / 3.0 >= self.MU_FLOOR else 0.0
+        self._last = (np.array(z, dtype=float), r, J)
 
 
 def ipopt_functions(points: PointEvaluations, hessian: ca.Function,
