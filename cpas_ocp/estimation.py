@@ -125,7 +125,8 @@ MIN_GRID_STEP_S = 0.001
 
 
 def default_grid_step(test: FlightTest) -> float:
-    """One shooting interval per sample of the fastest sensor, rounded down to whole ms (s).
+    """The finest shooting interval: one per sample of the fastest sensor, rounded down to
+    whole ms (s); the grid from the dynamics (`shooting_grid`) lies on its lattice.
 
     A sensor sampled every dt sees the dynamics on that scale; the one RK4
     step per interval is then accurate to well below the noise for the Eq. 5/6
