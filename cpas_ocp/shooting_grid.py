@@ -127,7 +127,8 @@ def _accuracy_levels(model: Model, values: dict[str, float], x: np.ndarray, t: n
             coarse = np.asarray(step.map(starts.size)(x[starts].T, t[starts], span * fine_step,
                                                       p, c))
             error = np.max(np.abs(coarse - x[starts + span].T) / scale[:, None], axis=0)
-            for i in starts[error > ERROR_PER_SECOND * span * fine_step]:
+            # Where the simulation from the first guesses blew up, nothing is known: fine.
+            for i in starts[~(error <= ERROR_PER_SECOND * span * fine_step)]:
                 levels[i:i + span] = np.minimum(levels[i:i + span], j - 1)
         uncovered = starts.size * span  # the tail no whole step of this length covers
         levels[uncovered:] = np.minimum(levels[uncovered:], j - 1)
@@ -146,9 +147,13 @@ def _stability_levels(model: Model, values: dict[str, float], x: np.ndarray, t: 
     a = np.asarray(jac.map(len(t))(x.T, t, model.parameter_vector(values),
                                    model.capture_vector(captures)))
     blocks = a.reshape(model.nx, len(t), model.nx).transpose(1, 0, 2)
-    rho = np.max(np.abs(np.linalg.eigvals(blocks)), axis=1)
+    finite = np.all(np.isfinite(blocks), axis=(1, 2))
+    rho = np.full(len(t), np.inf)  # a blown-up simulation knows no time scale: fine there
+    if np.any(finite):
+        rho[finite] = np.max(np.abs(np.linalg.eigvals(blocks[finite])), axis=1)
     with np.errstate(divide="ignore"):
         node = np.floor(np.log2(STABILITY / (np.maximum(rho, 1e-12) * fine_step)))
+    node[~np.isfinite(node)] = 0
     node = np.clip(node, 0, _max_level(fine_step)).astype(int)
     return np.minimum(node[:-1], node[1:])
 

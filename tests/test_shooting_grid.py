@@ -13,7 +13,7 @@ from cpas_ocp.effects.registry import BUILTIN
 from cpas_ocp.estimation import Estimator, Settings, default_grid_step
 from cpas_ocp.flight_test import load_test
 from cpas_ocp.model_spec import spec_of_test
-from cpas_ocp.shooting_grid import _nodes
+from cpas_ocp.shooting_grid import _accuracy_levels, _nodes, _stability_levels
 
 
 def test_nodes_take_the_longest_aligned_step_every_interval_allows() -> None:
@@ -77,3 +77,24 @@ def test_a_stiffer_model_refines_the_fits_grid_and_starts_on_its_motion(drogue_f
     chi2, violation = rigid.evaluate(rigid.point_from(fit))
     assert violation < 1e-6
     assert chi2 == pytest.approx(fit.chi_square, abs=0.05)
+
+
+def test_where_the_first_guess_simulation_blows_up_the_grid_stays_fine(problem_folder) -> None:
+    """A candidate effect's first guesses may make the simulation diverge (NaN states, as an
+    extension of a rocket-log fit did in `flight`): there the grid knows no time scale and
+    keeps every lattice node, rather than failing or coarsening on NaN comparisons."""
+    test = load_test(problem_folder("fbcp", 1))
+    model = spec_of_test(test).model(test)
+    values = {p.name: p.default for p in model.parameters}
+    captures = {c.name: 50.0 for c in model.captures}
+    h, n = 0.005, 64
+    t = test.t_start + h * np.arange(n + 1)
+    x = np.zeros((n + 1, model.nx))
+    x[:, model.state_slice("position")] = [0.0, 0.0, 3000.0]
+    x[:, model.state_slice("velocity")] = [0.0, 0.0, -50.0]
+    x[n // 2:] = np.nan
+    stability = _stability_levels(model, values, x, t, captures, h)
+    accuracy = _accuracy_levels(model, values, x, t, captures, h)
+    assert np.all(stability[n // 2:] == 0) and np.all(accuracy[n // 2:] == 0)
+    nodes = _nodes(np.minimum(stability, accuracy))
+    assert set(range(n // 2, n + 1)) <= set(nodes.tolist())
