@@ -273,14 +273,12 @@ class Estimator:
         """Given nodes, refined where this model's own states need finer steps for RK4 to
         stay stable (`shooting_grid.stable_refinement`)."""
         fine_step = float(np.round(np.min(np.diff(nodes)), 6))
-        x0 = self._guessed_states(nodes[:2])[0][:, 0]
-        return stable_refinement(nodes, self.model, self.values, x0, fine_step)
+        return stable_refinement(nodes, self.model, self.values, self._first_state(fine_step),
+                                 fine_step)
 
     def _dynamics_grid(self, fine_step: float) -> np.ndarray:
         """The nodes chosen from the model's dynamics at the first guesses (`shooting_grid`)."""
         m, test = self.model, self.test
-        lattice = test.t_start + fine_step * np.arange(
-            int(np.floor((test.t_end - test.t_start) / fine_step + 1e-9)) + 1)
         windows = []
         for cap in m.captures:
             if cap.at_time is not None:
@@ -289,8 +287,14 @@ class Estimator:
             prm, value = m.parameter(cap.time_parameter), self.values[cap.time_parameter]
             windows.append(TimeWindow(prm.lower, prm.upper, value) if prm.name in self.free
                            else TimeWindow(value, value, value))
-        x0 = self._guessed_states(lattice[:2])[0][:, 0]
-        return dynamics_grid(m, self.values, x0, test.t_start, test.t_end, fine_step, windows)
+        return dynamics_grid(m, self.values, self._first_state(fine_step), test.t_start,
+                             test.t_end, fine_step, windows)
+
+    def _first_state(self, fine_step: float) -> np.ndarray:
+        """The guessed state at the phase's start (`_guessed_states`; the effects' guesses
+        take a rate from the first two lattice points)."""
+        t0 = self.test.t_start
+        return self._guessed_states(np.array([t0, t0 + fine_step]))[0][:, 0]
 
     # ------------------------------------------------------------------ transcription
     def _build(self, n: int, h: float) -> None:
@@ -861,22 +865,27 @@ class Estimator:
         """
         tol = self.settings.chi2_step_tol or 0.0
         lin = self._linearize(z)
-        gn = gauss_newton(lin)
         violation = _violation(lin)
+        # An inequality (a what-if limit) inactive at z might be crossed by the finishing
+        # step unseen: the linearisation holds only the active ones.
+        may_polish = (self.settings.polish and violation <= POLISH_CONSTRAINT_TOL
+                      and not self._has_inequalities)
+        if violation > STOP_CONSTRAINT_TOL and not may_polish:
+            return None  # no Gauss-Newton solve for an iterate that cannot end the run
+        gn = gauss_newton(lin)
         if violation <= STOP_CONSTRAINT_TOL and abs(gn.restoration) <= tol:
             return self._measured_decrement(lin, gn), z
-        if (not self.settings.polish or violation > POLISH_CONSTRAINT_TOL
-                or self._has_inequalities):
-            # An inequality (a what-if limit) inactive at z might be crossed by the step
-            # unseen: the linearisation holds only the active ones.
+        if not may_polish:
             return None
         z1 = z + gn.step
         lower, upper = self._monitor.bounds
         if np.any(z1 < lower) or np.any(z1 > upper):
             return None
         lin1 = self._linearize(z1)
+        if _violation(lin1) > STOP_CONSTRAINT_TOL:
+            return None
         gn1 = gauss_newton(lin1)
-        if _violation(lin1) > STOP_CONSTRAINT_TOL or abs(gn1.restoration) > tol:
+        if abs(gn1.restoration) > tol:
             return None
         return self._measured_decrement(lin1, gn1), z1
 
