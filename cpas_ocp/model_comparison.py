@@ -96,7 +96,7 @@ def refit(fit: Fit, spec: ModelSpec, free: list[str] | None = None,
     settings = dataclasses.replace(fit.settings, free=list(names), guess=start, limits={},
                                    fixed={}, max_iter=max_iter or fit.settings.max_iter)
     est = Estimator(fit.test, spec, settings)
-    z0 = est.point_from(fit, start)
+    z0, _ = est.extension_start(fit, start)
     return est, est.solve(progress=progress, start=z0)
 
 

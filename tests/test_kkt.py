@@ -97,6 +97,40 @@ def test_the_decrement_is_counted_from_the_feasible_projection() -> None:
     assert gauss_newton(projected).restoration == pytest.approx(0.0, abs=1e-9)
 
 
+def test_the_score_step_from_any_nuisance_point_gives_the_likelihood_ratio() -> None:
+    """Neyman's C(alpha) test, which the score test of an effect with states takes from
+    the fit instead of re-solving its null point: one Gauss-Newton step from a point
+    where the nuisance coordinates are not at their optimum (nor the gaps closed) gives
+    the tested parameter's estimate and, with the covariance, a statistic equal to the
+    one from the null point itself and, the problem being linear, to the likelihood
+    ratio."""
+    lin, params = _chain_problem(23)
+    theta = params[1]
+    K = _dense_kkt(lin)
+    nz = lin.z.size
+    rhs = np.concatenate([-(lin.J.T @ lin.r), -lin.c])
+    full = lin.r + lin.J @ np.linalg.solve(K, rhs)[:nz]
+    held = np.zeros((1, nz))
+    held[0, theta] = 1.0  # the null: theta stays at 0 (lin.z is 0)
+    A0 = np.vstack([lin.A.toarray(), held])
+    J = lin.J.toarray()
+    K0 = np.block([[J.T @ J, A0.T], [A0, np.zeros((A0.shape[0],) * 2)]])
+    dz0 = np.linalg.solve(K0, np.concatenate([rhs, [0.0]]))[:nz]
+    null = lin.r + lin.J @ dz0
+    ratio = float(null @ null - full @ full)
+    cov = kkt_covariance(lin, params, np.ones(2), ["p1", "p2"])
+    var = cov.matrix[1, 1]
+    at_null = replace(lin, z=dz0, r=null, c=np.zeros_like(lin.c))
+    rng = np.random.default_rng(5)
+    moved = rng.standard_normal(nz)
+    moved[theta] = 0.0
+    elsewhere = replace(lin, z=moved, r=lin.r + lin.J @ moved,
+                        c=lin.c + lin.A @ moved)
+    for start in (at_null, elsewhere):
+        estimate = start.z[theta] + gauss_newton(start).step[theta]
+        assert estimate**2 / var == pytest.approx(ratio, rel=1e-8)
+
+
 def test_a_parameter_on_its_bound_is_held() -> None:
     lin, params = _chain_problem(13)
     lin.on_bound = np.array([False, True])
