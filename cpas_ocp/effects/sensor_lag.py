@@ -1,17 +1,27 @@
 """Sensor time lag: a sensor reports at t what the model says for t - tau.
 
 GPS receivers report position and velocity with a filter and processing
-delay of typically 0.05-0.2 s; a logger's clock may also sit a few tens of ms
+delay of typically 0.05-0.3 s; a logger's clock may also sit a few tens of ms
 off the others.  The parameter ``lag[<sensor>]`` (s, default 0) may take
 either sign (negative: the sensor's clock runs behind).  The state at t - tau
-comes from RK4 steps of the dynamics backwards from the state at t
-(`ModelContext.at_time_offset`), at most `STEP_S` long, so the model stays a
-function of the node state and is smooth in tau.
+comes from STEPS RK4 steps of tau / STEPS of the dynamics backwards from the
+state at t (`ModelContext.at_time_offset`), so the model stays a function of
+the node state and is smooth in tau.
+
+The number of steps is fixed, not set by the bound: the steps shorten with
+the lag the data show, and a wide bound costs nothing.  Against the exact
+lagged output of the `drogue` truth trajectory (1 ms steps), the largest
+error over a whole phase, inflations included, is 0.007 sigma (GPS vertical
+velocity, sigma 0.1 m/s) at tau = 0.1 s, 0.034 sigma at 0.2 s, 0.078 sigma at
+0.3 s and 0.23 sigma at 0.5 s (one sample at the drogue's peak load);
+positions are ten times better.  When the number of steps grew with the
+bound (50 ms each), memory grew with it: 3.2 GB at +-0.2 s, 14.7 GB at
++-0.5 s, and a bound tight enough to be cheap bound real lags (0.25 s
+reported as 0.2 s).
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -24,7 +34,7 @@ if TYPE_CHECKING:
     from ..flight_test import FlightTest
     from ..model import ModelContext
 
-STEP_S = 0.05  # longest RK4 step of the backward integration (s)
+STEPS = 4  # RK4 steps of the backward integration, each tau / STEPS long
 
 
 @dataclass(frozen=True)
@@ -32,12 +42,12 @@ class SensorLag(Effect):
     """Time lag of every sensor of `kind`, |tau| <= `max_lag` (s).  Put it after the sensors."""
 
     kind: str = "gps"
-    max_lag: float = 0.2
+    max_lag: float = 0.5
     name: str = "gps_lag"
 
     @classmethod
     def gps(cls) -> SensorLag:
-        """GPS position and velocity lag, up to 0.2 s (four backward RK4 steps)."""
+        """GPS position and velocity lag, up to 0.5 s either way."""
         return cls()
 
     def parameters(self, test: FlightTest) -> list[Parameter]:
@@ -50,9 +60,8 @@ class SensorLag(Effect):
         return {param_name("lag", s.name): 0.0 for s in test.sensors_of(self.kind)}
 
     def observations(self, ctx: ModelContext) -> None:
-        steps = max(1, math.ceil(self.max_lag / STEP_S))
         for s in ctx.test.sensors_of(self.kind):
             channels = list(ctx.y[s.name])
             now = ca.vertcat(*(ctx.y[s.name][ch] for ch in channels))
-            then = ctx.at_time_offset(now, -ctx.p[param_name("lag", s.name)], steps)
+            then = ctx.at_time_offset(now, -ctx.p[param_name("lag", s.name)], STEPS)
             ctx.y[s.name] = {ch: then[i] for i, ch in enumerate(channels)}

@@ -1,0 +1,103 @@
+"""Benchmark: what the bound of a GPS lag costs, with the steps fixed and with steps set by it.
+
+The `drogue` problem is simulated (seed 1) with a 0.25 s GPS lag and fitted
+with the baseline model plus `SensorLag(max_lag=B)` for each bound B, each
+fit in a fresh process with an empty compile cache, so that its peak memory
+(the process's and the compiler's) and its build and solve times are its
+own.  Each bound is run with this tree's code and, given `--baseline REV`,
+with the code of that git revision (checked out in a temporary worktree),
+and the ratios printed against the current code at the smallest bound.
+
+    python benchmarks/lag_bound_cost.py [--bounds 0.2 0.3 0.5] [--baseline REV]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+CHILD = r"""
+import dataclasses, json, resource, sys, time
+from pathlib import Path
+import cpas_ocp
+from cpas_ocp.effects import SensorLag, baseline_effects
+from cpas_ocp.errors import SolverFailure
+from cpas_ocp.estimation import Estimator
+from cpas_ocp.flight_test import load_test
+from cpas_ocp.problems import load_problem
+from cpas_ocp.simulate import simulate_problem
+
+folder, bound = Path(sys.argv[1]), float(sys.argv[2])
+if not folder.exists():
+    problem = load_problem("drogue")
+    simulate_problem(dataclasses.replace(problem, truth={**problem.truth, "lag[gps]": 0.25}),
+                     folder, 1, effects=[*baseline_effects(), SensorLag(max_lag=0.5)])
+t0 = time.perf_counter()
+est = Estimator(load_test(folder), [*baseline_effects(), SensorLag(max_lag=bound)])
+build = time.perf_counter() - t0
+t0 = time.perf_counter()
+try:
+    fit = est.solve()
+    outcome = {"chi2": fit.chi_square, "iterations": fit.solver.iterations,
+               "lag": fit.parameters["lag[gps]"]}
+except SolverFailure as exc:
+    outcome = {"failed": str(exc)}
+solve = time.perf_counter() - t0
+own = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6
+compiler = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1e6
+print(json.dumps({"code": str(Path(cpas_ocp.__file__).parent), "build_s": build,
+                  "solve_s": solve, "peak_gb": own, "compiler_peak_gb": compiler, **outcome}))
+"""
+
+
+def run(code_root: Path, folder: Path, bound: float) -> dict:
+    """One fit in a fresh process importing cpas_ocp from `code_root`, with an empty cache."""
+    with tempfile.TemporaryDirectory() as cache:
+        env = {**os.environ, "PYTHONPATH": str(code_root), "CPAS_OCP_CACHE": cache}
+        out = subprocess.run([sys.executable, "-c", CHILD, str(folder), str(bound)], env=env,
+                             capture_output=True, text=True, check=True)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--bounds", type=float, nargs="+", default=[0.2, 0.3, 0.5])
+    parser.add_argument("--baseline", help="git revision whose code is run as well")
+    args = parser.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        roots = {"current": ROOT}
+        if args.baseline:
+            worktree = Path(tmp) / "baseline"
+            subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach",
+                            str(worktree), args.baseline], check=True, capture_output=True)
+            roots[args.baseline] = worktree
+        folder = Path(tmp) / "drogue-lag"
+        try:
+            reference = None
+            for label, root in roots.items():
+                for bound in sorted(args.bounds):
+                    r = run(root, folder, bound)
+                    reference = reference or r
+                    fit = (f"failed: {r['failed']}" if "failed" in r else
+                           f"{r['iterations']} it, chi-square {r['chi2']:.2f}, "
+                           f"lag {r['lag']:.4f} s")
+                    print(f"{label:>10s} +-{bound:.2f} s: build {r['build_s']:6.1f} s, solve "
+                          f"{r['solve_s']:6.1f} s, peak {r['peak_gb']:.2f} GB (compiler "
+                          f"{r['compiler_peak_gb']:.2f} GB); memory ratio "
+                          f"{r['peak_gb'] / reference['peak_gb']:.2f}, build ratio "
+                          f"{r['build_s'] / reference['build_s']:.2f}; {fit}", flush=True)
+        finally:
+            if args.baseline:
+                subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force",
+                                str(worktree)], check=False, capture_output=True)
+
+
+if __name__ == "__main__":
+    main()
