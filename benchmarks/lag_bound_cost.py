@@ -26,7 +26,16 @@ ROOT = Path(__file__).resolve().parents[1]
 CHILD = r"""
 import dataclasses, json, resource, sys, time
 from pathlib import Path
-import cpas_ocp
+
+# The project is installed in development mode: point its import mapping at the code to run.
+code = Path(sys.argv[3])
+for module in list(sys.modules.values()):
+    if type(getattr(module, "MAPPING", None)) is dict and "cpas_ocp" in module.MAPPING:
+        module.MAPPING.update({"cpas_ocp": str(code / "cpas_ocp"),
+                               "cpas_ocp.problem_data": str(code / "problems"),
+                               "cpas_ocp.schemas": str(code / "data_schemas")})
+        module.NAMESPACES.update({"cpas_ocp": [str(code / "cpas_ocp")]})
+from cpas_ocp import estimation
 from cpas_ocp.effects import SensorLag, baseline_effects
 from cpas_ocp.errors import SolverFailure
 from cpas_ocp.estimation import Estimator
@@ -52,7 +61,7 @@ except SolverFailure as exc:
 solve = time.perf_counter() - t0
 own = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6
 compiler = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1e6
-print(json.dumps({"code": str(Path(cpas_ocp.__file__).parent), "build_s": build,
+print(json.dumps({"code": str(Path(estimation.__file__).parent), "build_s": build,
                   "solve_s": solve, "peak_gb": own, "compiler_peak_gb": compiler, **outcome}))
 """
 
@@ -60,10 +69,19 @@ print(json.dumps({"code": str(Path(cpas_ocp.__file__).parent), "build_s": build,
 def run(code_root: Path, folder: Path, bound: float) -> dict:
     """One fit in a fresh process importing cpas_ocp from `code_root`, with an empty cache."""
     with tempfile.TemporaryDirectory() as cache:
-        env = {**os.environ, "PYTHONPATH": str(code_root), "CPAS_OCP_CACHE": cache}
-        out = subprocess.run([sys.executable, "-c", CHILD, str(folder), str(bound)], env=env,
-                             capture_output=True, text=True, check=True)
+        env = {**os.environ, "CPAS_OCP_CACHE": cache}
+        out = subprocess.run([sys.executable, "-c", CHILD, str(folder), str(bound),
+                              str(code_root)],
+                             env=env, cwd=cache, capture_output=True, text=True,
+                             check=False)
+    if out.returncode:
+        raise RuntimeError(f"the fit at +-{bound} s with {code_root} failed:\n{out.stderr}")
     return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def _peak(result: dict) -> float:
+    """The larger of the fit's and the compiler's peak resident memory (GB)."""
+    return max(result["peak_gb"], result["compiler_peak_gb"])
 
 
 def main() -> None:
@@ -91,8 +109,9 @@ def main() -> None:
                     print(f"{label:>10s} +-{bound:.2f} s: build {r['build_s']:6.1f} s, solve "
                           f"{r['solve_s']:6.1f} s, peak {r['peak_gb']:.2f} GB (compiler "
                           f"{r['compiler_peak_gb']:.2f} GB); memory ratio "
-                          f"{r['peak_gb'] / reference['peak_gb']:.2f}, build ratio "
-                          f"{r['build_s'] / reference['build_s']:.2f}; {fit}", flush=True)
+                          f"{_peak(r) / _peak(reference):.2f}, build ratio "
+                          f"{r['build_s'] / reference['build_s']:.2f}; {fit} [{r['code']}]",
+                          flush=True)
         finally:
             if args.baseline:
                 subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force",

@@ -15,9 +15,11 @@ error over a whole phase, inflations included, is 0.007 sigma (GPS vertical
 velocity, sigma 0.1 m/s) at tau = 0.1 s, 0.034 sigma at 0.2 s, 0.078 sigma at
 0.3 s and 0.23 sigma at 0.5 s (one sample at the drogue's peak load);
 positions are ten times better.  When the number of steps grew with the
-bound (50 ms each), memory grew with it: 3.2 GB at +-0.2 s, 14.7 GB at
-+-0.5 s, and a bound tight enough to be cheap bound real lags (0.25 s
-reported as 0.2 s).
+bound (50 ms each), so did the model's generated code: compiling a `drogue`
+fit took 3.1 GB at +-0.2 s, 5.9 GB at +-0.3 s and 14.1 GB at +-0.5 s (build
+30, 59 and 141 s), while +-0.2 s bound a true 0.25 s lag (reported as 0.2 s,
+chi-square 173 higher).  Now every bound takes 3.1 GB and 40 s
+(`benchmarks/lag_bound_cost.py`).
 """
 
 from __future__ import annotations
