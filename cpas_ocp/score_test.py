@@ -235,7 +235,7 @@ def score_test(fit: Fit, spec: ModelSpec, entry: EffectType,
         z = restricted.z
         result.note = (f"null point re-solved ({restricted.solver.iterations} iterations, "
                        f"chi-square {fit.chi_square:.1f} -> {restricted.chi_square:.1f})")
-    elif violation > POLISH_CONSTRAINT_TOL:
+    elif not violation <= POLISH_CONSTRAINT_TOL:  # NaN too: the start blew up
         # A linearisation so far from feasible says nothing about the effect.
         result.note = (f"its null point is not near the fit (largest scaled shooting gap "
                        f"{violation:.2g}); compare by refitting (cpas-ocp compare)")

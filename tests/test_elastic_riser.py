@@ -144,3 +144,18 @@ def test_full_effect_set_beats_rigid_risers_on_the_drogue(drogue_full_physics) -
     for name in (n for n in full.free if n.startswith(("riser_", "added_mass"))):
         z = (full.parameters[name] - truth[name]) / cov.std[name]
         assert abs(z) < 4.0, f"{name}: {z:.2f} sigma"
+
+
+def test_a_riser_too_stiff_for_the_grid_is_not_scored(problem_folder) -> None:
+    """On a grid whose steps RK4 cannot hold a 25 Hz riser on (100 ms, as on a 10 Hz rocket
+    log), the start of the elastic riser's null point blows up: the score test says why it
+    was not tested rather than linearising there."""
+    from cpas_ocp.estimation import Settings
+    from cpas_ocp.model_spec import baseline_spec
+    from cpas_ocp.score_test import candidate_effects, score_test
+
+    test = load_test(problem_folder("fbcp", 1))
+    fit = Estimator(test, baseline_spec(), Settings(grid_step=0.1, compile=False)).solve()
+    result = score_test(fit, baseline_spec(), candidate_effects()["elastic_riser"])
+    assert not result.tested
+    assert "not near the fit" in result.note, result.note
