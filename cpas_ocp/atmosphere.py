@@ -106,29 +106,6 @@ class TableAtmosphere:
                 self, "_wind", ca.Function("wind", [hs], [ca.vertcat(we(hs), wn(hs), 0.0)])
             )
 
-    def within(self, lower: float, upper: float) -> TableAtmosphere:
-        """The table cut to the rows that interpolate altitudes in [lower, upper] (m): the
-        last row at or below `lower` to the first at or above `upper`.
-
-        Inside that band the profile is the same; outside it the end segments are
-        extrapolated.  Each row costs a branch in every density and wind evaluation
-        of the model (four per RK4 step), so a 111-row sounding of which a test
-        flies through 31 made the fit 7 times slower and 10 times larger.
-        """
-        h = np.asarray(self.altitude_m, dtype=float)
-        first = max(int(np.searchsorted(h, lower, side="right")) - 1, 0)
-        last = min(int(np.searchsorted(h, upper, side="left")), len(h) - 1)
-        if last - first < 1:
-            first, last = max(min(first, len(h) - 2), 0), min(max(last, 1), len(h) - 1)
-        rows = slice(first, last + 1)
-        if rows == slice(0, len(h)):
-            return self
-        return TableAtmosphere(
-            h[rows], np.asarray(self.density_kg_m3)[rows],
-            None if self.wind_east_m_s is None else np.asarray(self.wind_east_m_s)[rows],
-            None if self.wind_north_m_s is None else np.asarray(self.wind_north_m_s)[rows],
-            self.name)
-
     def density(self, h: ca.SX | ca.MX | float) -> ca.SX | ca.MX:
         return ca.exp(self._log_rho(h))
 
@@ -198,17 +175,16 @@ def geometric_altitude(atmosphere: Atmosphere, p_altitude: np.ndarray) -> np.nda
 
 
 def _linear_function(name: str, x: np.ndarray, y: np.ndarray) -> ca.Function:
-    """Piecewise-linear y(x) with linear extrapolation, as a CasADi SX Function.
+    """Piecewise-linear y(x) with linear extrapolation, as a CasADi Function.
 
-    Written with `if_else` rather than a lookup so that it is differentiable to
-    any order and inlines into SX graphs.
+    A lookup (CasADi's linear interpolant, a call node in SX graphs, with its
+    derivatives and generated code): its cost is one binary search, whatever
+    the table's length.  Written as a chain of `if_else` branches, each row
+    cost a branch in every density and wind evaluation of the model (four per
+    RK4 step), and a 111-row sounding exhausted the compiler's memory.
     """
-    xs = ca.SX.sym("x")
-    slopes = np.diff(y) / np.diff(x)
-    expr = y[0] + slopes[0] * (xs - x[0])
-    for k in range(1, len(x) - 1):
-        expr = ca.if_else(xs >= x[k], y[k] + slopes[k] * (xs - x[k]), expr)
-    return ca.Function(name, [xs], [expr])
+    return ca.interpolant(name, "linear", [np.asarray(x, dtype=float)],
+                          np.asarray(y, dtype=float))
 
 
 def density_at(atmosphere: Atmosphere, h: np.ndarray | float) -> np.ndarray:

@@ -307,31 +307,10 @@ def test_from_manifest(manifest: dict[str, Any], folder: Path,
     return FlightTest(
         name=manifest["name"], path=folder, vehicle=vehicle, parachutes=tuple(parachutes),
         events=tuple(events), sensors=tuple(sensors),
-        atmosphere=_flown_part(_load_atmosphere(mfile, folder, manifest["atmosphere"]),
-                               sensors),
+        atmosphere=_load_atmosphere(mfile, folder, manifest["atmosphere"]),
         t_start=t_start, t_end=t_end, description=manifest.get("description", ""),
         label=manifest.get("label", ""), manifest=manifest,
     )
-
-
-# Altitude beyond the measured range (m) that a table atmosphere keeps on either side: a
-# fitted or Monte Carlo trajectory stays within tens of metres of the measured one.
-ATMOSPHERE_MARGIN_M = 1000.0
-# Sensor channels that measure altitude.
-ALTITUDE_CHANNELS = {"gps": "up", "gps_altitude": "up", "baro": "altitude"}
-
-
-def _flown_part(atmosphere: Atmosphere, sensors: list[Sensor]) -> Atmosphere:
-    """A table atmosphere cut to the measured altitudes plus ATMOSPHERE_MARGIN_M (the
-    rest costs time and memory in every model evaluation; `TableAtmosphere.within`);
-    any other atmosphere, or a test with no altitude sensor, as it is."""
-    heights = [s.data[ALTITUDE_CHANNELS[s.kind]].to_numpy(dtype=float) for s in sensors
-               if ALTITUDE_CHANNELS.get(s.kind) in s.data]  # (a simulation's frame has none)
-    flown = np.concatenate([*heights, []])
-    if not isinstance(atmosphere, TableAtmosphere) or not np.isfinite(flown).any():
-        return atmosphere
-    return atmosphere.within(float(np.nanmin(flown)) - ATMOSPHERE_MARGIN_M,
-                             float(np.nanmax(flown)) + ATMOSPHERE_MARGIN_M)
 
 
 def _unique(file: str, field_name: str, names: list[str]) -> None:

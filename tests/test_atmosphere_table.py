@@ -1,4 +1,5 @@
-"""A day-of-flight table atmosphere: a long sounding costs the fit only the rows it flies."""
+"""A day-of-flight table atmosphere: read whole, interpolated as stated, and a long sounding
+costs the model no more than a short one."""
 
 from __future__ import annotations
 
@@ -7,10 +8,11 @@ import shutil
 
 import numpy as np
 import pandas as pd
-import pytest
 
 from cpas_ocp.atmosphere import StandardAtmosphere, TableAtmosphere, density_at, wind_at
-from cpas_ocp.flight_test import ATMOSPHERE_MARGIN_M, load_test
+from cpas_ocp.effects import baseline_effects
+from cpas_ocp.flight_test import load_test
+from cpas_ocp.model import Model
 
 
 def _sounding(step_m: float = 300.0) -> pd.DataFrame:
@@ -26,38 +28,43 @@ def _table(d: pd.DataFrame) -> TableAtmosphere:
                            d["wind_east"].to_numpy(), d["wind_north"].to_numpy())
 
 
-def test_a_table_cut_to_a_band_is_the_same_profile_inside_it() -> None:
-    full = _table(_sounding())
-    cut = full.within(6_950.0, 8_020.0)
-    # The last row at or below the band's floor to the first at or above its top.
-    np.testing.assert_array_equal(cut.altitude_m, np.arange(6_900.0, 8_100.0 + 1, 300.0))
-    h = np.linspace(6_950.0, 8_020.0, 57)
-    np.testing.assert_allclose(density_at(cut, h), density_at(full, h), rtol=1e-12)
-    np.testing.assert_allclose(wind_at(cut, h), wind_at(full, h), rtol=1e-12, atol=1e-12)
-    assert full.within(-1e4, 1e5) is full
+def test_a_table_interpolates_log_density_and_wind_linearly() -> None:
+    """At the rows the table's values; between them log(rho) and the wind linear; beyond the
+    ends the end segments extended."""
+    d = _sounding()
+    table = _table(d)
+    rows = d["altitude"].to_numpy()
+    np.testing.assert_allclose(density_at(table, rows), d["density"], rtol=1e-12)
+    middle = 0.5 * (rows[:-1] + rows[1:])
+    np.testing.assert_allclose(np.log(density_at(table, middle)),
+                               0.5 * (np.log(d["density"][:-1].to_numpy())
+                                      + np.log(d["density"][1:].to_numpy())), rtol=1e-12)
+    np.testing.assert_allclose(wind_at(table, middle)[:, :2],
+                               np.column_stack([5.0 + 1e-3 * middle, -2.0 + 5e-4 * middle]),
+                               rtol=1e-12)
+    below, above = np.array([-600.0]), np.array([33_600.0])
+    slope = np.diff(np.log(d["density"].to_numpy()[:2]))[0] / 300.0
+    np.testing.assert_allclose(np.log(density_at(table, below)),
+                               np.log(d["density"][0]) - 600.0 * slope, rtol=1e-12)
+    np.testing.assert_allclose(wind_at(table, above)[0, 0], 5.0 + 1e-3 * 33_600.0, rtol=1e-12)
 
 
-def test_a_test_folder_keeps_the_rows_its_sensors_fly_through(drogue_folder, tmp_path) -> None:
-    folder = tmp_path / "test"
-    shutil.copytree(drogue_folder(1), folder)
-    sounding = _sounding()
-    sounding.to_csv(folder / "sounding.csv", index=False)
-    manifest = json.loads((folder / "manifest.json").read_text())
-    manifest["atmosphere"] = {"model": "table", "file": "sounding.csv", "columns": {
-        "altitude": "m", "density": "kg/m^3", "wind_east": "m/s", "wind_north": "m/s"}}
-    (folder / "manifest.json").write_text(json.dumps(manifest))
-    test = load_test(folder)
-    up = np.concatenate([s.data["up"].to_numpy() for s in test.sensors if s.kind == "gps"])
-    lo, hi = up.min() - ATMOSPHERE_MARGIN_M, up.max() + ATMOSPHERE_MARGIN_M
-    kept = test.atmosphere.altitude_m
-    assert kept[0] <= lo < kept[1] and kept[-2] < hi <= kept[-1]
-    assert len(kept) < len(sounding) / 2
-    h = np.linspace(up.min(), up.max(), 101)
-    np.testing.assert_allclose(density_at(test.atmosphere, h),
-                               density_at(_table(sounding), h), rtol=1e-12)
-
-
-@pytest.mark.parametrize("band", [(-500.0, 100.0), (32_900.0, 40_000.0)])
-def test_a_band_at_the_table_s_end_keeps_a_segment(band) -> None:
-    cut = _table(_sounding()).within(*band)
-    assert len(cut.altitude_m) >= 2
+def test_a_long_sounding_costs_the_model_what_a_short_one_does(drogue_folder, tmp_path
+                                                               ) -> None:
+    """The table is a lookup in the model, not a branch per row: the model's dynamics hold
+    as many operations with 441 rows as with 12, and the test folder keeps every row."""
+    counts = {}
+    for step_m in (3_000.0, 75.0):
+        folder = tmp_path / f"test{step_m:g}"
+        shutil.copytree(drogue_folder(1), folder)
+        sounding = _sounding(step_m)
+        sounding.to_csv(folder / "sounding.csv", index=False)
+        manifest = json.loads((folder / "manifest.json").read_text())
+        manifest["atmosphere"] = {"model": "table", "file": "sounding.csv", "columns": {
+            "altitude": "m", "density": "kg/m^3", "wind_east": "m/s", "wind_north": "m/s"}}
+        (folder / "manifest.json").write_text(json.dumps(manifest))
+        test = load_test(folder)
+        assert len(test.atmosphere.altitude_m) == len(sounding)
+        counts[len(sounding)] = Model(test, baseline_effects()).rhs.n_instructions()
+    assert set(counts) == {12, 441}
+    assert counts[441] == counts[12]
