@@ -251,8 +251,14 @@ class Estimator:
                 raise ValueError(f"cannot estimate unknown parameters {unknown}")
             self.free = list(s.free)
         fixed = {**self.spec.fixed_values(m), **s.fixed}
-        self.guess = initial_guess(test, m, fixed)
-        self.guess.update(s.guess)
+        given = {**s.guess, **fixed}
+        if set(names) <= set(given):
+            # Every value given (a model started from another's fit): no reduction, which
+            # took 1.3 s of each 4 s score test on `drogue`.
+            self.guess = {n: given[n] for n in names}
+        else:
+            self.guess = initial_guess(test, m, fixed)
+            self.guess.update(s.guess)
         self.values = {**self.guess, **fixed}
 
         if s.nodes is not None:
