@@ -10,6 +10,10 @@ iterations, status and time; the verdict; the total wall time and the peak
 resident memory of the process.
 
     python benchmarks/diagnosis_cost.py [--hidden added_mass elastic_riser ...] [--seed N]
+                                        [--null-point score|solve]
+
+`--null-point solve` re-solves the null point of an effect with states before
+its score test (the earlier path) instead of taking the C(alpha) step.
 
 Hidden effects: added_mass (factor 1.4 on both Drogues), elastic_riser
 (6 Hz, damping 0.3), loadcell_friction (15 % loss), gps_lag (0.1 s), none.
@@ -19,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import functools
 import resource
 import tempfile
 import time
@@ -68,7 +73,7 @@ def _timed(fn, log: list[tuple[str, float]], label):
     return wrapper
 
 
-def run(case: str, seed: int, root: Path) -> None:
+def run(case: str, seed: int, root: Path, null_point: str = "score") -> None:
     effects, values = hidden_cases()[case]
     problem = load_problem("drogue")
     folder = root / case
@@ -84,7 +89,7 @@ def run(case: str, seed: int, root: Path) -> None:
     log: list[tuple[str, float]] = []
     original_test, original_confirm = score_module.score_test, score_module.confirm
     score_module.score_test = _timed(
-        original_test, log,
+        functools.partial(original_test, null_point=null_point), log,
         lambda a, out: f"score {out.effect:18s} {out.note or 'null point reproduced'}")
     score_module.confirm = _timed(
         original_confirm, log,
@@ -110,10 +115,11 @@ def main() -> None:
     parser.add_argument("--hidden", nargs="+", default=["added_mass"],
                         choices=list(hidden_cases()))
     parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--null-point", choices=["score", "solve"], default="score")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         for case in args.hidden:
-            run(case, args.seed, Path(tmp))
+            run(case, args.seed, Path(tmp), args.null_point)
 
 
 if __name__ == "__main__":
