@@ -830,6 +830,12 @@ class Estimator:
             r = self._points.residual_value(z)
             objective = 0.5 * float(r @ r)
             g = self._points.constraint_value(z)
+        elif not st["success"]:
+            # Ipopt's own values of a failed run can be placeholders (zeros after an
+            # invalid number): the failure is described at the point it returns.
+            r = self._points.residual_value(z)
+            objective = 0.5 * float(r @ r)
+            g = self._points.constraint_value(z)
         wall = time.perf_counter() - t0
         viol = np.maximum(self._lbg - g, 0) + np.maximum(g - self._ubg, 0)
         worst = f"index {int(np.argmax(viol))}, violation {float(np.max(viol)):.3g}" \
