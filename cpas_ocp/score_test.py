@@ -223,26 +223,25 @@ def score_test(fit: Fit, spec: ModelSpec, entry: EffectType,
                                    limits={}, verbose=False)
     est = Estimator(fit.test, extended, settings)
     z, (chi2, violation) = est.extension_start(fit, null)
-    if _reproduces(chi2, violation, fit):
-        result.note = ""
-    elif null_point == "solve":
-        bounds = {n: (v, v) for n, v in null.items()}
-        try:
-            restricted = est.solve(start=z, bounds=bounds, max_iter=NULL_POINT_MAX_ITER)
-        except SolverFailure as exc:
-            result.note = f"its null point did not converge: {exc}"
+    if not _reproduces(chi2, violation, fit):
+        if null_point == "solve":
+            bounds = {n: (v, v) for n, v in null.items()}
+            try:
+                restricted = est.solve(start=z, bounds=bounds, max_iter=NULL_POINT_MAX_ITER)
+            except SolverFailure as exc:
+                result.note = f"its null point did not converge: {exc}"
+                return result
+            z = restricted.z
+            result.note = (f"null point re-solved ({restricted.solver.iterations} iterations, "
+                           f"chi-square {fit.chi_square:.1f} -> {restricted.chi_square:.1f})")
+        elif not violation <= POLISH_CONSTRAINT_TOL:  # NaN too: the start blew up
+            # A linearisation so far from feasible says nothing about the effect.
+            result.note = (f"its null point is not near the fit (largest scaled shooting gap "
+                           f"{violation:.2g}); compare by refitting (cpas-ocp compare)")
             return result
-        z = restricted.z
-        result.note = (f"null point re-solved ({restricted.solver.iterations} iterations, "
-                       f"chi-square {fit.chi_square:.1f} -> {restricted.chi_square:.1f})")
-    elif not violation <= POLISH_CONSTRAINT_TOL:  # NaN too: the start blew up
-        # A linearisation so far from feasible says nothing about the effect.
-        result.note = (f"its null point is not near the fit (largest scaled shooting gap "
-                       f"{violation:.2g}); compare by refitting (cpas-ocp compare)")
-        return result
-    else:
-        result.note = (f"C(alpha) score from the fit with the effect's states added "
-                       f"(chi-square {fit.chi_square:.1f} -> {chi2:.1f})")
+        else:
+            result.note = (f"C(alpha) score from the fit with the effect's states added "
+                           f"(chi-square {fit.chi_square:.1f} -> {chi2:.1f})")
     values, cov = est.gauss_newton_estimate(z, release=tested)
     _statistic(result, model, values, cov)
     result.spec = extended
