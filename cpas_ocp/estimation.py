@@ -824,15 +824,13 @@ class Estimator:
         g = np.asarray(sol["g"]).ravel()
         multipliers = np.asarray(sol["lam_g"]).ravel()
         objective = float(sol["f"])
-        if self._monitor.stopped and self._monitor.point is not None:
+        own_point = self._monitor.stopped and self._monitor.point is not None
+        if own_point:
             # The statistical test ended the run at its own Gauss-Newton step's end.
             z = self._monitor.point
-            r = self._points.residual_value(z)
-            objective = 0.5 * float(r @ r)
-            g = self._points.constraint_value(z)
-        elif not st["success"]:
-            # Ipopt's own values of a failed run can be placeholders (zeros after an
-            # invalid number): the failure is described at the point it returns.
+        if own_point or not st["success"]:
+            # Evaluated here: Ipopt's values describe its last iterate, and after a failure
+            # can be placeholders (zeros after an invalid number).
             r = self._points.residual_value(z)
             objective = 0.5 * float(r @ r)
             g = self._points.constraint_value(z)
