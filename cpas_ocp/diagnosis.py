@@ -56,9 +56,14 @@ class Diagnosis:
         return sum(t.tested for t in self.effects)
 
     @property
+    def family(self) -> int:
+        """The number of tests the Bonferroni level alpha / m divides by (at least 1)."""
+        return max(self.tests_made, 1)
+
+    @property
     def explanation(self) -> ScoreTest | None:
         """The confirmed effect that explains the residual best, if any is significant."""
-        m = max(self.tests_made, 1)
+        m = self.family
         for t in self.effects:
             if t.refit is not None and t.refit.p_value < self.alpha / m:
                 return t
@@ -77,6 +82,16 @@ class Diagnosis:
                     f" p = {best.refit.p_value:.2g}; refit estimates "
                     + ", ".join(f"{n} = {v:.4g}" for n, v in best.refit_estimate.items())
                     + ")")
+        m = self.family
+        unconfirmed = [t.effect for t in self.effects
+                       if t.significant(self.alpha, m) and t.refit is None and t.refit_note]
+        if unconfirmed:
+            signature = ("; the residual's signature:\n" + signature_text(self.structure)
+                         if self.structure else "")
+            return ("undecided: the score tests of " + ", ".join(unconfirmed) + " are "
+                    f"significant at the family-wise level {self.alpha:g}, but their refits "
+                    "did not converge, so nothing is confirmed and nothing ruled out (see the "
+                    "refits above)" + signature)
         if self.structure:
             return ("no effect in the library explains the residual; its signature:\n"
                     + signature_text(self.structure))
@@ -85,7 +100,7 @@ class Diagnosis:
 
     def text(self) -> str:
         """The diagnosis as the command line prints it."""
-        m = max(self.tests_made, 1)
+        m = self.family
         lines = [f"worst fit: {self.worst}", "",
                  f"score tests of the effects the model does not use (significant: p < "
                  f"{self.alpha:g}/{m}):"]

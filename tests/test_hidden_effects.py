@@ -165,3 +165,23 @@ def test_an_effects_states_integrated_through_the_fit_close_their_gaps(hidden) -
     gaps = est._points.constraint_value(swept)[:nx * n].reshape(n, nx)[:, rows]
     assert np.max(np.abs(gaps)) < 1e-9
     assert est.evaluate(swept)[1] < 0.1 * est.evaluate(z)[1]
+
+
+def test_a_significant_effect_whose_refit_failed_leaves_the_verdict_undecided() -> None:
+    """A score test that is significant but whose confirming refit did not converge (elastic
+    risers on `drogue` with elastic risers hidden) must not read as noise."""
+    from cpas_ocp.diagnosis import Diagnosis
+    from cpas_ocp.score_test import ScoreTest
+
+    failed = ScoreTest("elastic_riser", "library", ("riser_frequency[d]",), statistic=145.0,
+                       dof=4, p_value=2e-31,
+                       refit_note="the refit did not converge: solver failed: status "
+                                  "Maximum_Iterations_Exceeded after 150 iterations")
+    quiet = ScoreTest("gps_lag", "library", ("lag[gps]",), statistic=0.4, dof=1, p_value=0.5)
+    verdict = Diagnosis(None, [], [], [failed, quiet], []).verdict()  # type: ignore[arg-type]
+    assert verdict.startswith("undecided") and "elastic_riser" in verdict, verdict
+    assert "consistent with the sensor noise" not in verdict
+    failed.refit_note = ""  # not significant enough to be refitted: no claim either way
+    failed.p_value = 0.5
+    assert "consistent with the sensor noise" in Diagnosis(
+        None, [], [], [failed, quiet], []).verdict()  # type: ignore[arg-type]
