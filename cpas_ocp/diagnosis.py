@@ -74,24 +74,38 @@ class Diagnosis:
         """The residual findings that are significant after the multiple-test correction."""
         return [f for f in self.findings if f.significant]
 
+    def _unresolved(self, best: ScoreTest | None) -> list[ScoreTest]:
+        """Significant score tests, other than `best`, whose refits did not converge: their
+        likelihood ratio is unknown or only bounded below."""
+        m = self.family
+        return [t for t in self.effects if t is not best and t.significant(self.alpha, m)
+                and t.refit_note and (t.refit is None or t.refit.lower_bound)]
+
     def verdict(self) -> str:
         """One paragraph: the effect that is missing, or the signature nobody explains."""
         best = self.explanation
+        unresolved = self._unresolved(best)
         if best is not None:
-            return (f"missing effect: {best.effect} (likelihood ratio {best.refit.statistic:.1f},"
-                    f" p = {best.refit.p_value:.2g}; refit estimates "
-                    + ", ".join(f"{n} = {v:.4g}" for n, v in best.refit_estimate.items())
-                    + ")")
-        m = self.family
-        unconfirmed = [t.effect for t in self.effects
-                       if t.significant(self.alpha, m) and t.refit is None and t.refit_note]
-        if unconfirmed:
+            lr = best.refit
+            estimates = ", ".join(f"{n} = {v:.4g}" for n, v in best.refit_estimate.items())
+            if lr.lower_bound:
+                found = (f"likelihood ratio >= {lr.statistic:.1f}, p <= {lr.p_value:.2g}: its "
+                         f"refit did not converge, and its last iterate made feasible has "
+                         f"{estimates}")
+            else:
+                found = (f"likelihood ratio {lr.statistic:.1f}, p = {lr.p_value:.2g}; refit "
+                         f"estimates {estimates}")
+            rivals = ("; the refits of " + ", ".join(t.effect for t in unresolved)
+                      + " did not converge, so they may explain more (see the refits above)"
+                      if unresolved else "")
+            return f"missing effect: {best.effect} ({found}){rivals}"
+        if unresolved:
             signature = ("; the residual's signature:\n" + signature_text(self.structure)
                          if self.structure else "")
-            return ("undecided: the score tests of " + ", ".join(unconfirmed) + " are "
-                    f"significant at the family-wise level {self.alpha:g}, but their refits "
-                    "did not converge, so nothing is confirmed and nothing ruled out (see the "
-                    "refits above)" + signature)
+            return ("undecided: the score tests of " + ", ".join(t.effect for t in unresolved)
+                    + f" are significant at the family-wise level {self.alpha:g}, but their "
+                    "refits did not converge, so nothing is confirmed and nothing ruled out "
+                    "(see the refits above)" + signature)
         if self.structure:
             return ("no effect in the library explains the residual; its signature:\n"
                     + signature_text(self.structure))

@@ -170,6 +170,9 @@ STOP_CONSTRAINT_TOL = 1e-6
 # shooting gaps only as fast as the steps shrink, linearly.
 POLISH_CONSTRAINT_TOL = 1e-3
 DECREMENT_FLOOR = 1e-4  # chi-square: below it the decrement is taken as the model gives it
+# Alternations of integrating the trajectory and meeting the other constraints that
+# `Estimator.feasible_point` makes (each correction moves the trajectory only slightly).
+FEASIBILITY_SWEEPS = 5
 
 
 @dataclass
@@ -776,6 +779,49 @@ class Estimator:
         out[:nx * (n + 1)] = (X / self._xscale[:, None]).ravel(order="F")
         return out
 
+    def feasible_point(self, z: np.ndarray) -> tuple[np.ndarray, float] | None:
+        """A feasible point near `z` and its chi-square; None where none is found.
+
+        Every state is integrated forward from the first node with the
+        parameters at `z` (`swept`), which closes the shooting gaps.  The other
+        constraints are then met by alternating with that integration: each
+        captured value is set to what the trajectory gives at its event, and
+        the parameters take the least-norm (scaled) step that meets the
+        effects' own constraints to first order.  None where, after
+        FEASIBILITY_SWEEPS, a constraint is still violated by more than
+        STOP_CONSTRAINT_TOL (a what-if limit, or a trajectory that left the
+        model's domain).
+
+        Any feasible point bounds the optimum from above: an unconverged solve's
+        last iterate, made feasible this way, gives a lower bound on the
+        chi-square a richer model removes (`score_test.confirm`).
+        """
+        all_states = [st.name for st in self.model.states]
+        n_gaps = self.model.nx * (len(self.t) - 1)
+        n_states, n_free, ncap = self._nz
+        captures = slice(n_states + n_free, n_states + n_free + ncap)
+        effect_rows = slice(n_gaps + ncap, n_gaps + ncap + len(self.model.constraints))
+        params = self._param_index
+        point = self.swept(z, all_states)
+        for _ in range(FEASIBILITY_SWEEPS):
+            g, A = self._points.constraints(point)
+            excess = g - np.clip(g, self._lbg, self._ubg)
+            if not np.all(np.isfinite(excess)) \
+                    or np.max(np.abs(excess[n_gaps:]), initial=0.0) <= STOP_CONSTRAINT_TOL:
+                break
+            point = point.copy()
+            # Capture rows read C_i - (the trajectory's value at the event) / cscale.
+            point[captures] -= excess[n_gaps:n_gaps + ncap]
+            if effect_rows.stop > effect_rows.start:
+                rows = A[effect_rows][:, params].toarray()
+                point[params] -= np.linalg.lstsq(rows, excess[effect_rows], rcond=None)[0]
+            point[params] = np.clip(point[params], self._lbz[params], self._ubz[params])
+            point = self.swept(point, all_states)
+        chi2, violation = self.evaluate(point)
+        if not (np.isfinite(chi2) and violation <= STOP_CONSTRAINT_TOL):
+            return None
+        return point, chi2
+
     def _state_guesses(self, values: dict[str, float], t: np.ndarray
                        ) -> dict[str, np.ndarray]:
         """The effects' own guesses of their states at times `t` (`Effect.state_guess`)."""
@@ -981,11 +1027,13 @@ class Estimator:
         step's components along them are their linearised estimates (`score_test`).
         """
         lin = self._linearize(z, release)
-        dz = gauss_newton_step(lin)
-        idx = self._param_index
-        values = (z[idx] + dz[idx]) * self.pscale
-        cov = kkt_covariance(lin, idx, self.pscale, self.free)
-        return dict(zip(self.free, map(float, values), strict=True)), cov
+        cov = kkt_covariance(lin, self._param_index, self.pscale, self.free)
+        return self.free_values(z + gauss_newton_step(lin)), cov
+
+    def free_values(self, z: np.ndarray) -> dict[str, float]:
+        """The free parameters at the decision vector `z` (SI)."""
+        values = z[self._param_index] * self.pscale
+        return dict(zip(self.free, map(float, values), strict=True))
 
     def _lagrangian_hessian_product(self) -> ca.Function:
         """(z, lambda, v) -> H v, H the Hessian of 0.5 |r|^2 + lambda' g in the scaled z

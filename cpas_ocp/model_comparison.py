@@ -61,11 +61,17 @@ class Criteria:
 @dataclass(frozen=True)
 class LikelihoodRatio:
     """LR = chi^2 of the smaller model minus chi^2 of the larger, on `dof` added parameters
-    of which `one_sided` sit on a bound at their null values."""
+    of which `one_sided` sit on a bound at their null values.
+
+    With `lower_bound`, the larger model's chi-square is that of a feasible
+    point rather than of its optimum (a refit that did not converge), so LR is
+    at least `statistic` and the p-value at most `p_value`: a conservative test.
+    """
 
     statistic: float
     dof: int
     one_sided: int = 0
+    lower_bound: bool = False
 
     @property
     def p_value(self) -> float:
@@ -74,20 +80,20 @@ class LikelihoodRatio:
 
     def text(self) -> str:
         sided = f", {self.one_sided} one-sided" if self.one_sided else ""
-        return (f"likelihood ratio {self.statistic:.2f} on {self.dof} dof{sided}: "
-                f"p = {self.p_value:.3g}")
+        at_least, at_most = (">= ", "<= ") if self.lower_bound else ("", "= ")
+        return (f"likelihood ratio {at_least}{self.statistic:.2f} on {self.dof} dof{sided}: "
+                f"p {at_most}{self.p_value:.3g}")
 
 
-def refit(fit: Fit, spec: ModelSpec, free: list[str] | None = None,
-          values: dict[str, float] | None = None, progress: bool = False,
-          max_iter: int | None = None) -> tuple[Estimator, Fit]:
-    """Fit `spec` to `fit`'s test on the same grid, starting from `fit`; the estimator (for
-    the covariance) and the new fit.
+def nested_start(fit: Fit, spec: ModelSpec, free: list[str] | None = None,
+                 values: dict[str, float] | None = None,
+                 max_iter: int | None = None) -> tuple[Estimator, np.ndarray]:
+    """The estimator of `spec` on `fit`'s test and grid, and its start at `fit`
+    (`Estimator.extension_start`).
 
     `free`: the parameters to estimate (default: the spec's choice); their
     start values are the fit's where it has them, else `values` (SI), else the
     new model's defaults.  `max_iter`: Ipopt's iteration limit (default: the fit's).
-    Raises SolverFailure when the solve fails.
     """
     model = spec.model(fit.test)
     names = free if free is not None else spec.free_names(model)
@@ -96,7 +102,17 @@ def refit(fit: Fit, spec: ModelSpec, free: list[str] | None = None,
     settings = dataclasses.replace(fit.settings, free=list(names), guess=start, limits={},
                                    fixed={}, max_iter=max_iter or fit.settings.max_iter)
     est = Estimator(fit.test, spec, settings)
-    z0, _ = est.extension_start(fit, start)
+    return est, est.extension_start(fit, start)[0]
+
+
+def refit(fit: Fit, spec: ModelSpec, free: list[str] | None = None,
+          values: dict[str, float] | None = None, progress: bool = False,
+          max_iter: int | None = None) -> tuple[Estimator, Fit]:
+    """Fit `spec` to `fit`'s test on the same grid, starting from `fit` (`nested_start`,
+    which see for the arguments); the estimator (for the covariance) and the new fit.
+    Raises SolverFailure when the solve fails.
+    """
+    est, z0 = nested_start(fit, spec, free, values, max_iter)
     return est, est.solve(progress=progress, start=z0)
 
 

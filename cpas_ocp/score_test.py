@@ -65,7 +65,7 @@ from .effects.registry import BUILTIN, EffectType
 from .errors import InputError, SolverFailure
 from .estimation import POLISH_CONSTRAINT_TOL, STOP_CONSTRAINT_TOL, Estimator, Fit
 from .hypothesis_tests import chi_bar_square_sf
-from .model_comparison import LikelihoodRatio, refit
+from .model_comparison import LikelihoodRatio, nested_start
 from .model_spec import RISER_MODELS, ModelSpec
 
 # Relative chi-square mismatch above which the effect at its null values is taken not to
@@ -279,19 +279,46 @@ def confirm(fit: Fit, result: ScoreTest, progress: bool = False) -> None:
         if not prm.lower + inside <= guess <= prm.upper - inside:
             guess = min(max(result.null[n], prm.lower + inside), prm.upper - inside)
         start[n] = guess
+    est, z0 = nested_start(fit, result.spec, [*fit.free, *result.parameters], start,
+                           CONFIRM_MAX_ITER)
+    dof = len(result.parameters) - len(result.undetermined)
     try:
-        est, refitted = refit(fit, result.spec, [*fit.free, *result.parameters], start,
-                              progress, CONFIRM_MAX_ITER)
+        refitted = est.solve(progress=progress, start=z0)
     except SolverFailure as exc:
         result.refit_note = f"the refit did not converge: {exc}"
+        _bound_from_last_iterate(fit, result, est, exc, dof)
         return
-    result.refit = LikelihoodRatio(fit.chi_square - refitted.chi_square,
-                                   len(result.parameters) - len(result.undetermined),
+    result.refit = LikelihoodRatio(fit.chi_square - refitted.chi_square, dof,
                                    len(result.one_sided))
     result.refit_estimate = {n: refitted.parameters[n] for n in result.parameters}
     result.refitted = (est, refitted)
     result.refit_note = (f"{refitted.solver.iterations} iterations, chi-square "
                          f"{fit.chi_square:.1f} -> {refitted.chi_square:.1f}")
+
+
+def _bound_from_last_iterate(fit: Fit, result: ScoreTest, est: Estimator,
+                             failure: SolverFailure, dof: int) -> None:
+    """After a refit that did not converge: where its last iterate, integrated into a
+    feasible point of the extended model (`Estimator.feasible_point`), has a lower
+    chi-square than `fit`, record the likelihood ratio as the lower bound that
+    point gives (in place), with the effect's values there.
+
+    The extended model's optimum lies at or below any of its feasible points,
+    so LR >= chi^2(fit) - chi^2(point) and the p-value of that bound is an
+    upper bound on the test's: a refit that ran out of iterations far below
+    the fit still confirms the effect, without a claim on its final estimates.
+    """
+    last = failure.last_iterate
+    found = est.feasible_point(last.z) if last is not None else None
+    if found is None or not fit.chi_square - found[1] > 0.0:
+        return
+    point, chi2 = found
+    values = est.free_values(point)
+    result.refit = LikelihoodRatio(fit.chi_square - chi2, dof, len(result.one_sided),
+                                   lower_bound=True)
+    result.refit_estimate = {n: values[n] for n in result.parameters}
+    result.refit_note += (f"; its last iterate, integrated to a feasible point, has "
+                          f"chi-square {chi2:.1f} against the fit's {fit.chi_square:.1f}")
 
 
 def confirmed_ranking(tests: list[ScoreTest]) -> list[ScoreTest]:

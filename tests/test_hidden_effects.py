@@ -185,3 +185,48 @@ def test_a_significant_effect_whose_refit_failed_leaves_the_verdict_undecided() 
     failed.p_value = 0.5
     assert "consistent with the sensor noise" in Diagnosis(
         None, [], [], [failed, quiet], []).verdict()  # type: ignore[arg-type]
+
+
+def test_an_unconverged_refit_bounds_the_likelihood_ratio_from_below(hidden, monkeypatch
+                                                                    ) -> None:
+    """A confirming refit stopped after one iteration still confirms the effect: its last
+    iterate, integrated into a feasible point of the extended model, has a chi-square at
+    or above the extended optimum, so fit minus point bounds the likelihood ratio of the
+    converged refit from below, and its p-value bounds the test's from above."""
+    from cpas_ocp import score_test
+
+    diag, _ = hidden("added_mass")
+    converged = diag.explanation
+    assert converged is not None and not converged.refit.lower_bound
+    monkeypatch.setattr(score_test, "CONFIRM_MAX_ITER", 1)
+    capped = dataclasses.replace(converged, refit=None, refit_note="", refitted=None)
+    score_test.confirm(diag.fit, capped)
+    assert "did not converge" in capped.refit_note, capped.refit_note
+    bound = capped.refit
+    assert bound is not None and bound.lower_bound, capped.refit_note
+    # The converged refit stops within the statistical stop's 0.01 of its optimum.
+    assert 0.0 < bound.statistic <= converged.refit.statistic + 0.01
+    assert bound.p_value < ALPHA / diag.tests_made
+    assert ">=" in bound.text() and "<=" in bound.text()
+
+
+def test_the_verdict_names_a_bounded_effect_and_warns_of_unconverged_rivals() -> None:
+    """An effect confirmed only by a lower bound is named with the bound ('>='); an
+    effect confirmed exactly is named with a warning when a significant rival's refit
+    did not converge, since that rival may explain more."""
+    from cpas_ocp.diagnosis import Diagnosis
+    from cpas_ocp.model_comparison import LikelihoodRatio
+    from cpas_ocp.score_test import ScoreTest
+
+    bounded = ScoreTest("elastic_riser", "library", ("riser_frequency[d]",), statistic=145.0,
+                        dof=1, p_value=1e-30, refit=LikelihoodRatio(476.0, 1, lower_bound=True),
+                        refit_estimate={"riser_frequency[d]": 7.1},
+                        refit_note="the refit did not converge: ...")
+    verdict = Diagnosis(None, [], [], [bounded], []).verdict()  # type: ignore[arg-type]
+    assert verdict.startswith("missing effect: elastic_riser (likelihood ratio >= 476"), verdict
+    exact = ScoreTest("added_mass", "library", ("added_mass_factor[d]",), statistic=900.0,
+                      dof=1, p_value=1e-40, refit=LikelihoodRatio(1411.0, 1),
+                      refit_estimate={"added_mass_factor[d]": 1.3}, refit_note="37 iterations")
+    verdict = Diagnosis(None, [], [], [exact, bounded], []).verdict()  # type: ignore[arg-type]
+    assert verdict.startswith("missing effect: added_mass (likelihood ratio 1411"), verdict
+    assert "elastic_riser did not converge, so they may explain more" in verdict
