@@ -118,11 +118,14 @@ def infinite_mass_cds(t: Expr, t_start: Expr, cds_prev: Expr, cds: Expr, ck: Exp
     """
     t_fp = fill_time(n_p, length, v_start)
     tau = ca.fmax(smooth_ramp(t - t_start) / t_fp, _TINY)
-    x = peak_ratio(cds_prev, cds, ck)
     after_peak = t - t_start - t_fp
     # Each branch is evaluated a little beyond its own range so the blend is smooth;
-    # the clamps keep the unused far ends finite.
-    rising = cds_prev + (cds - cds_prev) * x * ca.fmin(tau, 2.0) ** expopen
+    # the clamps keep the unused far ends finite.  Eq. 5 to the peak reads
+    # CdS_{i-1} + (CdS_i - CdS_{i-1}) x tau^expopen with x = `peak_ratio`, i.e.
+    # (Ck CdS_i - CdS_{i-1}) tau^expopen: written without the division, the curve
+    # stays finite where a guess puts CdS_i at or below CdS_{i-1} (the ratio's
+    # denominator would be clamped to 1e-12 there and the drag area reach 1e13 m^2).
+    rising = cds_prev + (ck * cds - cds_prev) * ca.fmin(tau, 2.0) ** expopen
     decaying = ck * cds * ck ** (-ca.fmax(after_peak, -CORNER_S) / t_k)
     to_decay = smoothstep(after_peak / CORNER_S)
     to_steady = smoothstep((after_peak - t_k) / CORNER_S)

@@ -36,6 +36,20 @@ def test_rises_from_previous_stage_to_peak_at_t_fp() -> None:
     assert curve(T0 + t_fp) == pytest.approx(CK * CDS, rel=5e-3)
 
 
+def test_a_guess_below_the_previous_stage_keeps_the_curve_finite() -> None:
+    """A start that puts a stage's drag area at or below the previous stage's (a guess
+    scaled by +-30 % can) gives a bounded curve between the two areas and the peak, not
+    the 1e13 m^2 a division by the clamped growth made of it (which failed the first
+    Ipopt iteration on `drogue`)."""
+    t_fp = NP * D / V
+    for cds in (PREV, 0.9 * PREV):
+        values = [float(infinite_mass_cds(t, T0, PREV, cds, CK, NP, E, TK, D, V))
+                  for t in np.linspace(T0 - 0.1, T0 + t_fp + 3 * TK, 200)]
+        assert np.all(np.isfinite(values))
+        assert min(values) >= min(PREV, cds) - 1e-9
+        assert max(values) <= max(PREV, CK * cds) + 1e-9
+
+
 def test_decays_per_eq6_and_settles_after_t_k() -> None:
     t_fp = NP * D / V
     t = T0 + t_fp + 0.1
