@@ -6,15 +6,18 @@ would be: every inflation start time shifted by a uniform draw in +-0.3 s
 and every other inflation parameter (CdS, n, n_p, expopen, Ck, t_k) scaled
 by a uniform draw in 0.7-1.3, each clipped into its bounds.  The start-time
 windows stay those of the manifest's events (the event times themselves are
-not moved).  Every start is solved with the default settings.
+not moved).  Every start is solved with the default settings, then restarted
+where a start time misfits (`restarts`, as `cpas-ocp reconstruct` does;
+`--no-restarts` for the earlier path).
 
 A start reaches the basin when it converges to a chi-square within 1 of the
 best any start found.  Printed per problem: converged starts, starts in the
-basin, the spread of chi-square, iterations (median and largest) and wall
-time.  Draws come from `numpy.random.default_rng(--seed)`.
+basin, the spread of chi-square, iterations (median and largest, of the
+first solve), wall time (with restarts) and how many fits were restarted.
+Draws come from `numpy.random.default_rng(--seed)`.
 
     python benchmarks/convergence_study.py [--problems fbcp drogue ...] [--starts 50]
-                                           [--seed 0]
+                                           [--seed 0] [--no-restarts]
 """
 
 from __future__ import annotations
@@ -31,6 +34,7 @@ from cpas_ocp.estimation import Estimator
 from cpas_ocp.flight_test import load_test
 from cpas_ocp.parameters import split_name
 from cpas_ocp.problems import load_problem
+from cpas_ocp.restarts import restart_start_times
 from cpas_ocp.simulate import simulate_problem
 
 SHAPES = ("CdS", "n", "n_p", "expopen", "Ck", "t_k")  # inflation parameters scaled +-30 %
@@ -57,15 +61,20 @@ def perturbed_start(est: Estimator, rng: np.random.Generator) -> np.ndarray:
     return z
 
 
-def study(name: str, starts: int, rng: np.random.Generator, folder: Path) -> None:
+def study(name: str, starts: int, rng: np.random.Generator, folder: Path,
+          restarts: bool = True) -> None:
     """Run and print the study of one problem."""
     simulate_problem(load_problem(name), folder, 1)
     est = Estimator(load_test(folder))
     chi2, iterations, walls, failures = [], [], [], []
+    restarted = 0
     for k in range(starts):
         t0 = time.perf_counter()
         try:
             fit = est.solve(start=perturbed_start(est, rng))
+            if restarts:
+                fit, done = restart_start_times(est, fit)
+                restarted += bool(done)
         except SolverFailure as exc:
             walls.append(time.perf_counter() - t0)
             failures.append(f"{exc.status} after {exc.iterations}")
@@ -85,7 +94,7 @@ def study(name: str, starts: int, rng: np.random.Generator, folder: Path) -> Non
     print(f"{name:12s} converged {len(chi2)}/{starts}, in the basin {basin}/{starts} "
           f"({100.0 * basin / starts:.0f} %), chi-square best {best:.3f} worst "
           f"{max(chi2):.3f}, iterations median {int(np.median(iterations))} max "
-          f"{max(iterations)}, wall median {np.median(walls):.1f} s"
+          f"{max(iterations)}, wall median {np.median(walls):.1f} s, restarted {restarted}"
           + (f"; failures: {'; '.join(failures[:3])}" if failures else ""), flush=True)
 
 
@@ -94,11 +103,13 @@ def main() -> None:
     parser.add_argument("--problems", nargs="+", default=["fbcp", "drogue", "pilot", "main2"])
     parser.add_argument("--starts", type=int, default=50)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--no-restarts", action="store_true",
+                        help="the earlier path: no restarts of misfit start times")
     args = parser.parse_args()
     rng = np.random.default_rng(args.seed)
     with tempfile.TemporaryDirectory() as tmp:
         for name in args.problems:
-            study(name, args.starts, rng, Path(tmp) / name)
+            study(name, args.starts, rng, Path(tmp) / name, not args.no_restarts)
 
 
 if __name__ == "__main__":

@@ -33,6 +33,7 @@ from .errors import SolverFailure
 from .estimation import Estimator, Fit, Settings
 from .flight_test import FlightTest
 from .model_spec import ModelSpec
+from .restarts import restart_start_times
 
 
 def relaxed_spec(spec: ModelSpec, test: FlightTest) -> ModelSpec | None:
@@ -71,8 +72,13 @@ DIRECT_ITERATIONS = 100
 
 def solve(est: Estimator, progress: bool = False) -> Fit:
     """Fit `est`'s model from the reduction; where it has continuation effects and the
-    direct start fails, through its relaxed model (see the module docstring).  Raises
+    direct start fails, through its relaxed model (see the module docstring); then
+    restarted with the start times that misfit moved (`restarts`).  Raises
     SolverFailure as `Estimator.solve` does, for the last attempt."""
+    return restart_start_times(est, _solve_from_reduction(est, progress), progress)[0]
+
+
+def _solve_from_reduction(est: Estimator, progress: bool) -> Fit:
     relaxed = relaxed_spec(est.spec, est.test)
     if relaxed is None:
         return est.solve(progress=progress)

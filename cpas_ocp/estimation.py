@@ -1030,6 +1030,18 @@ class Estimator:
         cov = kkt_covariance(lin, self._param_index, self.pscale, self.free)
         return self.free_values(z + gauss_newton_step(lin)), cov
 
+    def gauss_newton_point(self, z: np.ndarray) -> np.ndarray:
+        """The end of one full Gauss-Newton step from the decision vector `z` (the linearised
+        constraints met there), clipped into the variables' bounds."""
+        return np.clip(z + gauss_newton_step(self._linearize(z)), self._lbz, self._ubz)
+
+    def with_value(self, z: np.ndarray, name: str, value: float) -> np.ndarray:
+        """A copy of the decision vector `z` with the free parameter `name` at `value` (SI)."""
+        i = self.free.index(name)
+        out = z.copy()
+        out[self._param_index[i]] = value / self.pscale[i]
+        return out
+
     def free_values(self, z: np.ndarray) -> dict[str, float]:
         """The free parameters at the decision vector `z` (SI)."""
         values = z[self._param_index] * self.pscale
