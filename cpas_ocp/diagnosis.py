@@ -95,9 +95,10 @@ class Diagnosis:
             else:
                 found = (f"likelihood ratio {lr.statistic:.1f}, p = {lr.p_value:.2g}; refit "
                          f"estimates {estimates}")
-            rivals = ("; the refits of " + ", ".join(t.effect for t in unresolved)
-                      + " did not converge, so they may explain more (see the refits above)"
-                      if unresolved else "")
+            rivals = "".join(
+                f"; the refit of {t.effect} did not converge"
+                + (f" (likelihood ratio >= {t.refit.statistic:.1f})" if t.refit else "")
+                + ", so it may explain more" for t in unresolved)
             return f"missing effect: {best.effect} ({found}){rivals}"
         if unresolved:
             signature = ("; the residual's signature:\n" + signature_text(self.structure)

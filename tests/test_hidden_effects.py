@@ -229,4 +229,5 @@ def test_the_verdict_names_a_bounded_effect_and_warns_of_unconverged_rivals() ->
                       refit_estimate={"added_mass_factor[d]": 1.3}, refit_note="37 iterations")
     verdict = Diagnosis(None, [], [], [exact, bounded], []).verdict()  # type: ignore[arg-type]
     assert verdict.startswith("missing effect: added_mass (likelihood ratio 1411"), verdict
-    assert "elastic_riser did not converge, so they may explain more" in verdict
+    assert ("the refit of elastic_riser did not converge (likelihood ratio >= 476.0), so it "
+            "may explain more") in verdict
