@@ -789,8 +789,9 @@ class Estimator:
         the parameters take the least-norm (scaled) step that meets the
         effects' own constraints to first order.  None where, after
         FEASIBILITY_SWEEPS, a constraint is still violated by more than
-        STOP_CONSTRAINT_TOL (a what-if limit, or a trajectory that left the
-        model's domain).
+        STOP_CONSTRAINT_TOL: a what-if limit, a trajectory that left the
+        model's domain, or a constraint on a captured state (a Pilot's riser
+        gap at its start time), which only a change of the trajectory would meet.
 
         Any feasible point bounds the optimum from above: an unconverged solve's
         last iterate, made feasible this way, gives a lower bound on the

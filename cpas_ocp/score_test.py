@@ -265,22 +265,26 @@ def confirm(fit: Fit, result: ScoreTest, progress: bool = False) -> None:
     """Refit the model with `result`'s effect, starting from `fit`, and record the
     likelihood-ratio test against `fit` (in place).
 
-    The effect's parameters start on the score test's step, from the null
-    values to the linearised estimates (each kept just inside its bounds), at
-    the fraction whose start has the lowest chi-square (`_start_on_step`).
+    The effect's parameters start at their linearised estimates where those
+    lie inside the bounds, else just inside the bound at the null value.
+    Where that start is far from feasible, the refit starts on a fraction of
+    the score step instead (`_start_on_step`).
     """
     if not result.tested or result.spec is None:
         return
     model = result.spec.model(fit.test)
-    null, target = {}, {}
+    null, target, start = {}, {}, {}
     for n in result.parameters:
         prm = model.parameter(n)
         inside = 0.01 * (prm.upper - prm.lower)
         null[n] = min(max(result.null[n], prm.lower + inside), prm.upper - inside)
         target[n] = min(max(result.estimate[n], prm.lower + inside), prm.upper - inside)
-    est, _ = nested_start(fit, result.spec, [*fit.free, *result.parameters], target,
-                          CONFIRM_MAX_ITER)
-    z0 = _start_on_step(est, fit, null, target)
+        start[n] = result.estimate[n] if target[n] == result.estimate[n] else null[n]
+    est, z0 = nested_start(fit, result.spec, [*fit.free, *result.parameters], start,
+                           CONFIRM_MAX_ITER)
+    chi2, violation = est.evaluate(z0)
+    if not (np.isfinite(chi2) and violation <= POLISH_CONSTRAINT_TOL):
+        z0 = _start_on_step(est, fit, null, target, z0)
     dof = len(result.parameters) - len(result.undetermined)
     try:
         refitted = est.solve(progress=progress, start=z0)
@@ -296,23 +300,27 @@ def confirm(fit: Fit, result: ScoreTest, progress: bool = False) -> None:
                          f"{fit.chi_square:.1f} -> {refitted.chi_square:.1f}")
 
 
-# Fractions of the score test's step at which a confirming refit's start is tried.
-START_FRACTIONS = (1.0, 0.5, 0.25, 0.125, 0.0)
+# Fractions of the score test's step at which a confirming refit's start is tried when
+# the linearised estimates make a start far from feasible.
+START_FRACTIONS = (0.5, 0.25, 0.125)
 
 
 def _start_on_step(est: Estimator, fit: Fit, null: dict[str, float],
-                   target: dict[str, float]) -> np.ndarray:
+                   target: dict[str, float], fallback: np.ndarray) -> np.ndarray:
     """The extended model's start at `fit` (`Estimator.extension_start`) with the effect's
     parameters at null + a (target - null), for the a of START_FRACTIONS whose start
-    has the lowest chi-square among those within POLISH_CONSTRAINT_TOL of feasible.
+    is within POLISH_CONSTRAINT_TOL of feasible and has the lowest chi-square;
+    `fallback` where none is.
 
     The score step is linear; the effect may not be.  On `drogue` flown with
     6 Hz elastic risers (damping 0.3) and fitted with rigid ones, the full
-    step (42 and 38 Hz, damping 0.49 and 0.11) starts at chi-square 1e10 and
-    the refit ends in a minimum at 12 Hz (LR 16); from the null values (25 Hz,
-    critically damped, 7,196.8) it had not converged after 150 iterations;
-    from an eighth of the step (27 Hz, 7,194.0) it reached 6.4 and 5.4 Hz,
-    damping 0.42 and 0.24, in 128 iterations (LR 90).
+    step (42 and 38 Hz, damping 0.49 and 0.11) starts at chi-square 1e10,
+    gaps 0.08.  From an eighth of it (27 Hz, 7,194.0) the refit reached 6.4
+    and 5.4 Hz, damping 0.42 and 0.24, in 128 iterations (LR 90).  The null
+    values themselves are not tried: there the riser is all but rigid, the
+    chi-square flat in its parameters, and refits from there did not
+    converge in 150 iterations, on `drogue` or on `fbcp` (where a quarter or
+    half of the step converged in 33-35).
     """
     best: tuple[float, np.ndarray] | None = None
     for a in START_FRACTIONS:
@@ -321,7 +329,7 @@ def _start_on_step(est: Estimator, fit: Fit, null: dict[str, float],
         if violation <= POLISH_CONSTRAINT_TOL and np.isfinite(chi2) \
                 and (best is None or chi2 < best[0]):
             best = (chi2, z)
-    return best[1] if best is not None else est.extension_start(fit, target)[0]
+    return best[1] if best is not None else fallback
 
 
 def _bound_from_last_iterate(fit: Fit, result: ScoreTest, est: Estimator,
