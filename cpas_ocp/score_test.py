@@ -129,7 +129,8 @@ class ScoreTest:
         if self.refit is None:
             return f"{self.effect:18s} refit: {self.refit_note}" if self.refit_note else ""
         shown = ", ".join(f"{n} = {v:.4g}" for n, v in self.refit_estimate.items())
-        return f"{self.effect:18s} refit: {self.refit.text()}   {shown}"
+        how = f" ({self.refit_note})" if self.refit.lower_bound else ""
+        return f"{self.effect:18s} refit: {self.refit.text()}   {shown}{how}"
 
     def as_dict(self) -> dict:
         out = {}

@@ -208,6 +208,7 @@ def test_an_unconverged_refit_bounds_the_likelihood_ratio_from_below(hidden, mon
     assert 0.0 < bound.statistic <= converged.refit.statistic + 0.01
     assert bound.p_value < ALPHA / diag.tests_made
     assert ">=" in bound.text() and "<=" in bound.text()
+    assert "did not converge" in capped.refit_text()
 
 
 def test_the_verdict_names_a_bounded_effect_and_warns_of_unconverged_rivals() -> None:
