@@ -107,6 +107,8 @@ def restart_start_times(est: Estimator, fit: Fit, progress: bool = False,
         best, best_shift = fit, 0.0
         for shift in RESTART_SHIFTS_S:
             value = float(np.clip(fit.parameters[name] + shift, prm.lower, prm.upper))
+            if value == fit.parameters[name]:
+                continue  # the fit sits on the bound this move would cross
             moved = est.with_value(fit.z, name, value)
             start = _probe(est, moved, best.chi_square) if screen else moved
             if start is None:
