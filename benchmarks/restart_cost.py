@@ -21,12 +21,11 @@ after, and wall time, then the ratio screened / solved.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import tempfile
 import time
 from pathlib import Path
 
-from diagnosis_cost import hidden_cases
+from iteration_cost import make_test
 
 from cpas_ocp.estimation import Estimator, Fit
 from cpas_ocp.flight_test import load_test
@@ -49,11 +48,7 @@ def pilot_late(root: Path, seed: int) -> tuple[Estimator, Fit]:
 
 
 def drogue_added_mass(root: Path, seed: int) -> tuple[Estimator, Fit]:
-    effects, values = hidden_cases()["added_mass"]
-    problem = load_problem("drogue")
-    simulate_problem(dataclasses.replace(problem, truth={**problem.truth, **values}),
-                     root / "drogue", seed, effects=effects)
-    est = Estimator(load_test(root / "drogue"), baseline_spec())
+    est = Estimator(make_test("drogue+added_mass", seed, root), baseline_spec())
     t0 = time.perf_counter()
     fit = est.solve()
     print(f"[drogue+added_mass] fit from the reduction: chi-square {fit.chi_square:.2f}, "

@@ -1031,10 +1031,13 @@ class Estimator:
         cov = kkt_covariance(lin, self._param_index, self.pscale, self.free)
         return self.free_values(z + gauss_newton_step(lin)), cov
 
-    def gauss_newton_point(self, z: np.ndarray) -> np.ndarray:
+    def gauss_newton_point(self, z: np.ndarray) -> tuple[np.ndarray, float]:
         """The end of one full Gauss-Newton step from the decision vector `z` (the linearised
-        constraints met there), clipped into the variables' bounds."""
-        return np.clip(z + gauss_newton_step(self._linearize(z)), self._lbz, self._ubz)
+        constraints met there), clipped into the variables' bounds, and the chi-square
+        at `z`: both from one linearisation."""
+        lin = self._linearize(z)
+        step_end = np.clip(z + gauss_newton_step(lin), self._lbz, self._ubz)
+        return step_end, float(lin.r @ lin.r)
 
     def with_value(self, z: np.ndarray, name: str, value: float) -> np.ndarray:
         """A copy of the decision vector `z` with the free parameter `name` at `value` (SI)."""

@@ -87,9 +87,10 @@ class LikelihoodRatio:
 
 def nested_start(fit: Fit, spec: ModelSpec, free: list[str] | None = None,
                  values: dict[str, float] | None = None,
-                 max_iter: int | None = None) -> tuple[Estimator, np.ndarray]:
-    """The estimator of `spec` on `fit`'s test and grid, and its start at `fit`
-    (`Estimator.extension_start`).
+                 max_iter: int | None = None
+                 ) -> tuple[Estimator, np.ndarray, tuple[float, float]]:
+    """The estimator of `spec` on `fit`'s test and grid, its start at `fit`, and the
+    start's chi-square and largest scaled gap (`Estimator.extension_start`).
 
     `free`: the parameters to estimate (default: the spec's choice); their
     start values are the fit's where it has them, else `values` (SI), else the
@@ -102,7 +103,7 @@ def nested_start(fit: Fit, spec: ModelSpec, free: list[str] | None = None,
     settings = dataclasses.replace(fit.settings, free=list(names), guess=start, limits={},
                                    fixed={}, max_iter=max_iter or fit.settings.max_iter)
     est = Estimator(fit.test, spec, settings)
-    return est, est.extension_start(fit, start)[0]
+    return est, *est.extension_start(fit, start)
 
 
 def refit(fit: Fit, spec: ModelSpec, free: list[str] | None = None,
@@ -112,7 +113,7 @@ def refit(fit: Fit, spec: ModelSpec, free: list[str] | None = None,
     which see for the arguments); the estimator (for the covariance) and the new fit.
     Raises SolverFailure when the solve fails.
     """
-    est, z0 = nested_start(fit, spec, free, values, max_iter)
+    est, z0, _ = nested_start(fit, spec, free, values, max_iter)
     return est, est.solve(progress=progress, start=z0)
 
 

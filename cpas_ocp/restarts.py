@@ -129,12 +129,14 @@ def restart_start_times(est: Estimator, fit: Fit, progress: bool = False,
 
 def _probe(est: Estimator, z: np.ndarray, chi_square: float) -> np.ndarray | None:
     """The first of up to PROBE_STEPS Gauss-Newton iterates from `z` whose chi-square is
-    below `chi_square` less IMPROVEMENT_CHI2; None if none is."""
+    below `chi_square` less IMPROVEMENT_CHI2; None if none is.  Each iterate is
+    linearised once, for its chi-square and the step from it."""
+    z, _ = est.gauss_newton_point(z)
     for _ in range(PROBE_STEPS):
-        z = est.gauss_newton_point(z)
-        value = est.evaluate(z)[0]
+        following, value = est.gauss_newton_point(z)
         if not np.isfinite(value):
             return None
         if value < chi_square - IMPROVEMENT_CHI2:
             return z
+        z = following
     return None

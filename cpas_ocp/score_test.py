@@ -281,9 +281,9 @@ def confirm(fit: Fit, result: ScoreTest, progress: bool = False) -> None:
         null[n] = min(max(result.null[n], prm.lower + inside), prm.upper - inside)
         target[n] = min(max(result.estimate[n], prm.lower + inside), prm.upper - inside)
         start[n] = result.estimate[n] if target[n] == result.estimate[n] else null[n]
-    est, z0 = nested_start(fit, result.spec, [*fit.free, *result.parameters], start,
-                           CONFIRM_MAX_ITER)
-    chi2, violation = est.evaluate(z0)
+    est, z0, (chi2, violation) = nested_start(fit, result.spec,
+                                              [*fit.free, *result.parameters], start,
+                                              CONFIRM_MAX_ITER)
     if not (np.isfinite(chi2) and violation <= POLISH_CONSTRAINT_TOL):
         z0 = _start_on_step(est, fit, null, target, z0)
     dof = len(result.parameters) - len(result.undetermined)
