@@ -28,6 +28,7 @@ so the weights neither depend on the parameters nor on the sample's own noise.
 
 from __future__ import annotations
 
+import itertools
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -36,6 +37,7 @@ from dataclasses import dataclass, field, replace
 import casadi as ca
 import numpy as np
 
+from .action_windows import ActionWindows
 from .compiled import compile_functions
 from .effects import Effect
 from .errors import SolverFailure
@@ -43,12 +45,7 @@ from .flight_test import FlightTest
 from .kinematic_track import kinematic_track
 from .model import CORE_STATES, Model, timing_label
 from .model_spec import ModelSpec, spec_from_effects, spec_of_test
-from .nlp_functions import (
-    MarquardtDamping,
-    PointEvaluations,
-    gauss_newton_hessian,
-    ipopt_functions,
-)
+from .nlp_functions import MarquardtDamping, PointEvaluations, ipopt_functions
 from .reduction import initial_guess
 from .shooting_grid import TimeWindow, dynamics_grid, stable_refinement
 from .simulate import rk4_step, simulate
@@ -101,6 +98,11 @@ class Settings:
     earlier path, for benchmarks).
     damping: Levenberg-Marquardt damping of the Gauss-Newton Hessian where its
     steps fail to deliver (`nlp_functions.MarquardtDamping`; needs point_cache).
+    window_margin (s): Ipopt gets each parameter's Jacobian entries only within
+    its window of action at the start, widened by this much on each side
+    (`action_windows`; a solve restarts with wider windows when a parameter
+    acts outside them); None gives Ipopt every structural entry (the earlier
+    path; needs point_cache).
     """
 
     grid_step: float | None = None
@@ -119,6 +121,7 @@ class Settings:
     polish: bool = True
     point_cache: bool = True
     damping: bool = True
+    window_margin: float | None = 0.5
 
 
 MIN_GRID_STEP_S = 0.001
@@ -342,35 +345,8 @@ class Estimator:
         ks = np.arange(n)
         blocks = [_Block(ca.Function("gap", [xs, xs1, ts, dts, ps, cs], [(xs1 - xe) / xscale]),
                          [ks, ks + 1], self.t[:n], [np.diff(self.t)])]
-        self._samples = []
-        for sensor in self.test.sensors:
-            if sensor.name not in m.outputs:
-                continue
-            ts_all = sensor.time
-            keep = (ts_all >= self.t[0] - 1e-9) & (ts_all <= self.t[-1] + 1e-9)
-            tsamp = ts_all[keep]
-            k = np.clip(np.searchsorted(self.t, tsamp + 1e-7 * h, side="right") - 1, 0, n - 1)
-            dt = tsamp - self.t[k]
-            dt[np.abs(dt) < 1e-7] = 0.0
-            channels = m.sensor_channels[sensor.name]
-            meas = np.vstack([sensor.data[c].to_numpy()[keep] for c in channels])
-            sig = np.vstack([sensor.weighting_sigma(c)[keep] for c in channels])
-            nch = len(channels)
-            ym = ca.SX.sym("ym", nch)
-            sg = ca.SX.sym("sg", nch)
-            if np.any(dt > 0):
-                x_at = step(xs, ts, dts, ps, cs)
-                y_at = m.outputs[sensor.name](x_at, ts + dts, ps, cs)
-                extra = [dt]
-                sym_extra = [dts]
-            else:
-                y_at = m.outputs[sensor.name](xs, ts, ps, cs)
-                extra, sym_extra = [], []
-            blocks.append(_Block(ca.Function(f"residual_{len(self._samples)}",
-                                             [xs, ts, *sym_extra, ym, sg, ps, cs],
-                                             [(ym - y_at) / sg]),
-                                 [k], self.t[k], [*extra, meas, sig]))
-            self._samples.append((sensor.name, channels, tsamp, meas, sig))
+        sensor_blocks, destinations, offsets = self._sensor_blocks(step, n, h)
+        blocks += sensor_blocks
         # Each block's values (the line search's trial points) and its values with the
         # Jacobian (accepted points) run as native code; the functions themselves stay
         # in CasADi's VM as well, for the differentiable graph (`_obj`, `_g`).
@@ -380,7 +356,7 @@ class Estimator:
             native = compile_functions(native)
         mapped = [self._mapped_block(b, value_fn, jac_fn) for b, value_fn, jac_fn
                   in zip(blocks, native[:len(blocks)], native[len(blocks):], strict=True)]
-        residual_pieces = mapped[1:]
+        residual_pieces = _gathered(mapped[1:], destinations, offsets)
         g = [mapped[0]]
         lbg = [np.zeros(nx * n)]
         ubg = [np.zeros(nx * n)]
@@ -482,14 +458,14 @@ class Estimator:
         ubg_all = np.concatenate([np.ravel(a) for a in ubg])
         self._damping = (MarquardtDamping(self._points, lbg_all, ubg_all)
                          if s.point_cache and s.damping else None)
-        if s.point_cache:
-            self._ipopt = ipopt_functions(self._points,
-                                          gauss_newton_hessian(jac.sparsity(), curvature),
-                                          small_rows, self._damping)
-            nlp, derivatives = self._ipopt.nlp, self._ipopt.options
-        else:
-            nlp, derivatives = self._plain_nlp(residual, jac, constraint_jac, curvature,
-                                               small_rows)
+        self._windows = ActionWindows(
+            (self._points._buffers["rJ"].pattern(1), self._points._buffers["gA"].pattern(1)),
+            (_stack_times(residual_pieces), _stack_times(g)), X.numel(),
+            s.window_margin if s.point_cache else None)
+        self._curvature, self._small_rows = curvature, small_rows
+        if not s.point_cache:
+            self._expressions = self._plain_nlp(residual, jac, constraint_jac, curvature,
+                                                small_rows)
         self._unpack = ca.Function("unpack", [z_all], [Xp, pfull, Cp])
         self._residuals = ca.Function("residuals", [z_all], [p.value for p in residual_pieces])
         self._lbg, self._ubg = lbg_all, ubg_all
@@ -520,21 +496,44 @@ class Estimator:
         # the objective no longer changes (relative 1e-9, i.e. ~1e-5 in chi-square, over
         # 5 iterations; a change of 1 in chi-square is the statistical scale) and the
         # constraints hold to 1e-8.  `solve` reports which criterion ended the run.
-        opts = {
+        self._options = {
             "ipopt.max_iter": s.max_iter, "ipopt.tol": s.tol,
             "ipopt.acceptable_tol": 1e-1, "ipopt.acceptable_iter": 5,
             "ipopt.acceptable_obj_change_tol": 1e-9,
             "ipopt.acceptable_constr_viol_tol": 1e-8,
             "ipopt.watchdog_shortened_iter_trigger": s.watchdog_trigger,
             "ipopt.print_level": 5 if s.verbose else 0, "print_time": False,
-            "ipopt.sb": "yes", **derivatives,
+            "ipopt.sb": "yes",
         }
         self._hessian_product: ca.Function | None = None
         # the solver keeps only a reference to its callbacks
         self._monitor = _Monitor(self._z.numel(), self._g.numel(), self._stop_test,
                                  s.chi2_step_tol, self._damping)
-        opts["iteration_callback"] = self._monitor
-        self._solver = ca.nlpsol("reconstruction", "ipopt", nlp, opts)
+        self._make_solver()
+
+    def _make_solver(self) -> None:
+        """Ipopt on the NLP, its derivatives on the pattern `self._windows` keeps."""
+        if self.settings.point_cache:
+            self._ipopt = ipopt_functions(self._points, self._curvature, self._small_rows,
+                                          self._windows, self._monitor.left_windows,
+                                          self._damping)
+            nlp, derivatives = self._ipopt.nlp, self._ipopt.options
+        else:
+            nlp, derivatives = self._expressions
+        self._solver = ca.nlpsol("reconstruction", "ipopt", nlp, {
+            **self._options, **derivatives, "iteration_callback": self._monitor})
+
+    def _fit_windows(self, z: np.ndarray, widen: bool = False) -> None:
+        """Fit (or widen) the parameters' windows of action to their Jacobians' nonzeros at
+        `z`, and rebuild the solver on the pattern they keep."""
+        if not self._windows.active:
+            return
+        values = (self._points.residual_jacobian(z)[1].data, self._points.constraints(z)[1].data)
+        if widen:
+            self._windows.widen(values)
+        else:
+            self._windows.fit(values)
+        self._make_solver()
 
     def _plain_nlp(self, residual: ca.MX, jac: ca.MX, constraint_jac: ca.MX,
                    curvature: ca.Function, small_rows: slice) -> tuple[dict, dict]:
@@ -558,6 +557,73 @@ class Estimator:
             "hess_lag": ca.Function("gauss_newton", [z, empty, sigma_f, lam_g],
                                     [ca.triu(hessian)], ["x", "p", "lam_f", "lam_g"],
                                     ["hess_gamma_x_x"])}
+
+    def _sensor_blocks(self, step: ca.Function, n: int, h: float
+                       ) -> tuple[list[_Block], list[np.ndarray], list[int]]:
+        """The per-sample residual functions of every sensor the model observes, and where
+        each block's rows go; records `self._samples`, one entry per sensor.
+
+        A sample at a node is predicted from that node's state; a sample between
+        nodes one partial RK4 step after the node before it.  Sensors sampled at the
+        same times (an IMU and the load cells) share one block, so the step to each
+        sample time is taken once for all of them: per such set of times, one block
+        of the samples at nodes and one of those between.  The rows of every block
+        are instance-major (every channel of one sample, then the next sample);
+        `destinations[b]` gives, per row of block b, its row in the sensors' part of
+        the residual vector, where sensor j's rows are offsets[j]..offsets[j+1]-1,
+        instance-major, in the order of `self._samples`.
+        """
+        m = self.model
+        xs, ts, dts = ca.SX.sym("x", m.nx), ca.SX.sym("t"), ca.SX.sym("dt")
+        ps, cs = ca.SX.sym("p", len(m.parameters)), ca.SX.sym("c", len(m.captures))
+        self._samples = []
+        groups: list[tuple[np.ndarray, list[int]]] = []  # (sample times, sensor numbers)
+        offsets = [0]
+        for sensor in self.test.sensors:
+            if sensor.name not in m.outputs:
+                continue
+            keep = (sensor.time >= self.t[0] - 1e-9) & (sensor.time <= self.t[-1] + 1e-9)
+            tsamp = sensor.time[keep]
+            channels = m.sensor_channels[sensor.name]
+            meas = np.vstack([sensor.data[c].to_numpy()[keep] for c in channels])
+            sig = np.vstack([sensor.weighting_sigma(c)[keep] for c in channels])
+            number = len(self._samples)
+            self._samples.append((sensor.name, channels, tsamp, meas, sig))
+            offsets.append(offsets[-1] + meas.size)
+            same = next((members for times, members in groups
+                         if np.array_equal(times, tsamp)), None)
+            if same is None:
+                groups.append((tsamp, [number]))
+            else:
+                same.append(number)
+        blocks, destinations = [], []
+        for tsamp, members in groups:
+            k = np.clip(np.searchsorted(self.t, tsamp + 1e-7 * h, side="right") - 1, 0, n - 1)
+            dt = tsamp - self.t[k]
+            between = np.abs(dt) >= 1e-7
+            for samples in (np.flatnonzero(~between), np.flatnonzero(between)):
+                if samples.size == 0:
+                    continue
+                names = [self._samples[i][0] for i in members]
+                meas = np.vstack([self._samples[i][3][:, samples] for i in members])
+                sig = np.vstack([self._samples[i][4][:, samples] for i in members])
+                ym, sg = ca.SX.sym("ym", meas.shape[0]), ca.SX.sym("sg", meas.shape[0])
+                if between[samples[0]]:
+                    x_at, t_at, sym_extra, extra = (step(xs, ts, dts, ps, cs), ts + dts,
+                                                    [dts], [dt[samples]])
+                else:
+                    x_at, t_at, sym_extra, extra = xs, ts, [], []
+                y_at = ca.vertcat(*[m.outputs[name](x_at, t_at, ps, cs) for name in names])
+                fn = ca.Function(f"residual_{len(blocks)}", [xs, ts, *sym_extra, ym, sg, ps, cs],
+                                 [(ym - y_at) / sg])
+                blocks.append(_Block(fn, [k[samples]], self.t[k[samples]],
+                                     [*extra, meas, sig]))
+                # Row (sample j, channel c) of sensor i lies at offsets[i] + j n_i + c.
+                destinations.append(np.concatenate([
+                    offsets[i] + samples[:, None] * len(self._samples[i][1])
+                    + np.arange(len(self._samples[i][1]))[None, :]
+                    for i in members], axis=1).ravel())
+        return blocks, destinations, offsets
 
     def _local_jacobian(self, fn: ca.Function, n_states: int) -> ca.Function:
         """Values and Jacobian of one instance of `fn` w.r.t. its scaled states, free
@@ -631,7 +697,7 @@ class Estimator:
         sp = ca.Sparsity.triplet(n_inst * mrows, n_z, r_full[order].tolist(),
                                  c_full[order].tolist())
         return _Piece(mapped(block.fn)[0], mapped(value_fn)[0], with_jacobian,
-                      ca.MX(sp, nz[order.tolist()]))
+                      ca.MX(sp, nz[order.tolist()]), np.repeat(block.times, mrows))
 
     def initial_point(self) -> np.ndarray:
         """Shooting nodes from the kinematic track (GPS, or the altimeter's vertical track) and
@@ -863,10 +929,23 @@ class Estimator:
             lbz[n_states + i], ubz[n_states + i] = lo / self.pscale[i], hi / self.pscale[i]
         z0 = np.clip(z0, lbz, ubz)
         t0 = time.perf_counter()
-        self._monitor.reset(progress, (lbz, ubz), max_iter)
-        sol = self._solver(x0=z0, lbx=lbz, ubx=ubz, lbg=self._lbg, ubg=self._ubg)
+        cap = min(max_iter or self.settings.max_iter, self.settings.max_iter)
+        self._fit_windows(z0)
+        iterations = 0
+        while True:
+            self._monitor.reset(progress, (lbz, ubz), cap - iterations, iterations)
+            sol = self._solver(x0=z0, lbx=lbz, ubx=ubz, lbg=self._lbg, ubg=self._ubg)
+            st = self._solver.stats()
+            iterations += int(st["iter_count"])
+            left = self._monitor.left_at
+            if left is None or self._monitor.capped or iterations >= cap:
+                break
+            # A parameter acted outside its window (a start time moved further than the
+            # margin): widen the windows over both points and go on from the iterate.
+            z0 = np.asarray(sol["x"]).ravel()
+            self._fit_windows(left, widen=True)
+            self._fit_windows(z0, widen=True)
         self._monitor.finish()
-        st = self._solver.stats()
         z = np.asarray(sol["x"]).ravel()
         g = np.asarray(sol["g"]).ravel()
         multipliers = np.asarray(sol["lam_g"]).ravel()
@@ -888,9 +967,10 @@ class Estimator:
         status, success = st["return_status"], bool(st["success"])
         if status == "User_Requested_Stop" and self._monitor.stopped:
             status, success = STATISTICALLY_CONVERGED, True
-        elif status == "User_Requested_Stop" and self._monitor.capped:
+        elif status == "User_Requested_Stop" and (self._monitor.capped
+                                                   or self._monitor.left_at is not None):
             status = "Maximum_Iterations_Exceeded"
-        stats = SolverStats(status, success, int(st["iter_count"]), wall, objective, worst,
+        stats = SolverStats(status, success, iterations, wall, objective, worst,
                             self._monitor.decrement if self._monitor.stopped else None,
                             "the offline reduction" if start is None else
                             "a fit" if isinstance(start, Fit) else "a given point")
@@ -1126,10 +1206,13 @@ class _Monitor(ca.Callback):
         self.construct("monitor", {})
 
     def reset(self, progress: bool, bounds: tuple[np.ndarray, np.ndarray],
-              max_iter: int | None = None) -> None:
+              max_iter: int | None = None, done: int = 0) -> None:
         """Start a run within `bounds` (the scaled decision vector's lower and upper),
-        stopped after `max_iter` iterations if given."""
+        stopped after `max_iter` iterations if given; `done` iterations were made before
+        it (a restart), for the progress line."""
         self._k, self._last_test, self._gap, self._chi2 = 0, -100, 3, np.inf
+        self._done = done
+        self.left_at: np.ndarray | None = None  # where a parameter left its window
         self.stopped, self.decrement = False, None
         self.max_iter, self.capped = max_iter, False
         self.point: np.ndarray | None = None  # where the statistical test ended the run
@@ -1139,8 +1222,14 @@ class _Monitor(ca.Callback):
             self._damping.reset()
 
     def finish(self) -> None:
-        if self.progress and self._k:
+        if self.progress and self._k + self._done:
             sys.stderr.write("\n")
+
+    def left_windows(self, z: np.ndarray) -> None:
+        """Stop the run at the next iterate: at `z` a parameter acts outside the window of
+        action Ipopt's derivatives were given (the solve restarts with wider ones)."""
+        if self.left_at is None:
+            self.left_at = np.array(z, dtype=float)
 
     def get_n_in(self) -> int:
         return ca.nlpsol_n_out()
@@ -1165,11 +1254,14 @@ class _Monitor(ca.Callback):
         if self.max_iter is not None and self._k > self.max_iter:
             self.capped = True  # called at iterations 0, 1, ...: this is iteration max_iter
             return [1]
+        if self.left_at is not None:
+            return [1]
         chi2 = 2.0 * float(arg[1])
         if self._damping is not None:
             self._damping.observe(np.asarray(arg[0]).ravel())
         if self.progress:
-            sys.stderr.write(f"\r  iteration {self._k:4d}   chi-square {chi2:14.6g}")
+            sys.stderr.write(f"\r  iteration {self._done + self._k:4d}   "
+                             f"chi-square {chi2:14.6g}")
             sys.stderr.flush()
         improved, self._chi2 = self._chi2 - chi2, chi2
         if self._tol is None or improved >= self._tol or self._k - self._last_test < self._gap:
@@ -1211,22 +1303,48 @@ class _Piece:
     """A stretch of the residual or constraint vector, four ways: `symbolic` through CasADi's
     VM (differentiable: the exact Hessian's graph), `value` for trial points (native
     code where compiled), `with_jacobian` the same values from the Jacobian function,
-    and `jacobian` w.r.t. the scaled decision vector."""
+    and `jacobian` w.r.t. the scaled decision vector; and the time of each row (an
+    instance's first node), for `ActionWindows`."""
 
     symbolic: ca.MX
     value: ca.MX
     with_jacobian: ca.MX
     jacobian: ca.MX
+    times: np.ndarray  # per row, the time (s) it belongs to; NaN where none
 
     @classmethod
     def of(cls, expr: ca.MX, z: ca.MX) -> _Piece:
-        """A small expression: one graph for its values, CasADi's Jacobian for the rest."""
-        return cls(expr, expr, expr, ca.jacobian(expr, z))
+        """A small expression: one graph for its values, CasADi's Jacobian for the rest (its
+        rows belong to no time)."""
+        return cls(expr, expr, expr, ca.jacobian(expr, z), np.full(expr.numel(), np.nan))
 
 
 def _stack(pieces: Sequence[_Piece], field_name: str) -> ca.MX:
     """One field of every piece, stacked."""
     return ca.vertcat(*[getattr(p, field_name) for p in pieces])
+
+
+def _gathered(pieces: Sequence[_Piece], destinations: Sequence[np.ndarray],
+              offsets: Sequence[int]) -> list[_Piece]:
+    """Row i of `pieces[b]` moved to row `destinations[b][i]` of the stacked result (the
+    destinations cover 0..offsets[-1]-1 once), cut into one piece per range
+    offsets[j]..offsets[j+1]."""
+    if not pieces:
+        return []
+    order = np.argsort(np.concatenate(destinations))  # stacked row of each result row
+    stacked = [_stack(pieces, f) for f in ("symbolic", "value", "with_jacobian", "jacobian")]
+    times = _stack_times(pieces)
+    out = []
+    for a, b in itertools.pairwise(offsets):
+        rows = order[a:b].tolist()
+        out.append(_Piece(*(x[rows] for x in stacked[:3]), stacked[3][rows, :],
+                          times[order[a:b]]))
+    return out
+
+
+def _stack_times(pieces: Sequence[_Piece]) -> np.ndarray:
+    """The row times of every piece, stacked."""
+    return np.concatenate([p.times for p in pieces]) if pieces else np.zeros(0)
 
 
 def cubic_bspline(u: ca.MX) -> ca.MX:

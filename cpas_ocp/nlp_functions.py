@@ -17,9 +17,13 @@ buffer into NumPy arrays (`FunctionBuffer`), and Ipopt's functions are
 assembled from them (`ipopt_functions`):
 
 * objective 0.5 |r|^2 and gradient J'r (SciPy, J on its fixed pattern);
-* the Gauss-Newton Hessian J'J plus the curvature of the few capture and
-  effect constraints, as CasADi's sparse product on J's fixed pattern, so
-  the Hessian's pattern is the one promised to Ipopt whatever the values.
+* the Gauss-Newton Hessian J'J (SciPy's sparse product, which skips the
+  Jacobian's numerical zeros: 3 ms on `drogue` where CasADi's product on
+  J's structural pattern took 39) plus the curvature of the few capture and
+  effect constraints, scattered into a pattern fixed for the solve.
+
+The constraint Jacobian and the J in J'J are given on the entries each
+parameter's window of action keeps (`action_windows`).
 """
 
 from __future__ import annotations
@@ -30,6 +34,8 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 import scipy.sparse as sp
+
+from .action_windows import ActionWindows
 
 POINTS_KEPT = 2  # the accepted iterate and the line search's latest trial point
 
@@ -67,6 +73,11 @@ class FunctionBuffer:
         """Every output at `args`: a column as a dense vector whatever its pattern, a
         matrix as a SciPy CSC matrix on its fixed pattern."""
         return [self.shaped(i, values) for i, values in enumerate(self.nonzeros(*args))]
+
+    def pattern(self, i: int) -> sp.csc_matrix:
+        """Output `i`'s fixed pattern, every stored entry 1."""
+        row, colind, shape = self._patterns[i]
+        return sp.csc_matrix((np.ones(row.size), row, colind), shape=shape)
 
     def shaped(self, i: int, values: np.ndarray) -> np.ndarray | sp.csc_matrix:
         """Output `i` from its nonzeros."""
@@ -251,25 +262,33 @@ class MarquardtDamping:
         self._last = (np.array(z, dtype=float), r, J)
 
 
-def ipopt_functions(points: PointEvaluations, hessian: ca.Function,
-                    small_rows: slice, damping: MarquardtDamping | None = None
-                    ) -> IpoptFunctions:
+def ipopt_functions(points: PointEvaluations, curvature: ca.Function, small_rows: slice,
+                    windows: ActionWindows, on_outside: Callable[[np.ndarray], None],
+                    damping: MarquardtDamping | None = None) -> IpoptFunctions:
     """Ipopt's objective, constraints and derivatives from `points` (see the module docstring).
 
-    `hessian(J, z, sigma, lam_small)` is triu(sigma J'J + curvature of the
-    small constraints at their multipliers), J a symbolic matrix on the
-    residual Jacobian's pattern; `small_rows` locates those constraints' rows
-    in g.  With `damping`, sigma mu diag(J'J) is added to the Hessian.
+    The Hessian is triu(sigma J'J + curvature(z, lam_small)), the curvature
+    being that of the few small constraints whose rows `small_rows` locates in
+    g; with `damping`, sigma mu diag(J'J) is added.  The constraint Jacobian
+    and J in J'J carry only the entries `windows` keeps; where an evaluation
+    finds a nonzero among those left out, `on_outside(z)` is called (the
+    values Ipopt gets then miss it, and the estimator restarts with wider
+    windows).  The gradient J'r uses every entry.
     """
-    rJ, gA = points._buffers["rJ"].fn, points._buffers["gA"].fn
-    nz, ng = rJ.nnz_in(0), gA.nnz_out(0)
+    J_pattern, A_pattern = (points._buffers[name].pattern(1) for name in ("rJ", "gA"))
+    nz, ng = J_pattern.shape[1], A_pattern.shape[0]
+    kept_J, kept_A = (windows.kept_matrix(i, p) for i, p in enumerate((J_pattern, A_pattern)))
     x_in = ("x", ca.Sparsity.dense(nz, 1))
     p_in = ("p", ca.Sparsity(0, 1))
     dense = ca.Sparsity.dense
-    hess_buffer = FunctionBuffer(hessian)
-    rows, cols = hessian.sparsity_out(0).get_triplet()
-    diagonal = np.flatnonzero(np.asarray(rows) == np.asarray(cols))
-    diagonal_column = np.asarray(cols)[diagonal]
+    curvature_buffer = FunctionBuffer(_upper_curvature(curvature))
+    curvature_pattern = curvature_buffer.pattern(0)
+    hessian_pattern = sp.triu(abs(kept_J).T @ abs(kept_J), format="csc") + curvature_pattern
+    hessian_pattern.sort_indices()
+    keys = _column_major_keys(hessian_pattern)
+    curvature_at = np.searchsorted(keys, _column_major_keys(curvature_pattern))
+    diagonal = np.flatnonzero(hessian_pattern.diagonal())
+    diagonal_at = np.searchsorted(keys, diagonal * (nz + 1))
 
     def objective(a: list[np.ndarray]) -> list:
         r = points.residual_value(a[0])
@@ -284,26 +303,35 @@ def ipopt_functions(points: PointEvaluations, hessian: ca.Function,
 
     def constraint_jacobian(a: list[np.ndarray]) -> list:
         g, A = points.constraints(a[0])
-        return [g, A.data]
+        if windows.outside(1, A.data):
+            on_outside(a[0])
+        return [g, A.data[windows.keep[1]]]
 
     def lagrangian_hessian(a: list[np.ndarray]) -> list:
         z, _, sigma, lam_g = a
         _, J = points.residual_jacobian(z)
-        out = hess_buffer.nonzeros(J.data, z, sigma, lam_g[small_rows])
+        if windows.outside(0, J.data):
+            on_outside(z)
+        Jk = windows.kept_matrix(0, J)
+        product = sp.triu(Jk.T @ Jk, format="coo")
+        out = np.zeros(keys.size)
+        out[np.searchsorted(keys, product.col.astype(np.int64) * nz + product.row)] = \
+            float(sigma[0]) * product.data
+        out[curvature_at] += curvature_buffer.nonzeros(z, lam_g[small_rows])[0]
         if damping is not None and damping.mu > 0.0:
             squares = np.asarray(J.multiply(J).sum(axis=0)).ravel()
-            out[0][diagonal] += float(sigma[0]) * damping.mu * squares[diagonal_column]
-        return out
+            out[diagonal_at] += float(sigma[0]) * damping.mu * squares[diagonal]
+        return [out]
 
     f = _Oracle("objective", [x_in], [("f", dense(1, 1))], objective)
     g = _Oracle("constraint_value", [x_in], [("g", dense(ng, 1))], constraint_value)
     grad_f = _Oracle("grad_f", [x_in, p_in], [("f", dense(1, 1)), ("grad_f_x", dense(nz, 1))],
                      gradient)
-    jac_g = _Oracle("jac_g", [x_in, p_in],
-                    [("g", dense(ng, 1)), ("jac_g_x", gA.sparsity_out(1))], constraint_jacobian)
+    jac_g = _Oracle("jac_g", [x_in, p_in], [("g", dense(ng, 1)), ("jac_g_x", _casadi(kept_A))],
+                    constraint_jacobian)
     hess_lag = _Oracle("gauss_newton", [x_in, p_in, ("lam_f", dense(1, 1)),
                                         ("lam_g", dense(ng, 1))],
-                       [("hess_gamma_x_x", hessian.sparsity_out(0))], lagrangian_hessian)
+                       [("hess_gamma_x_x", _casadi(hessian_pattern))], lagrangian_hessian)
     x = ca.MX.sym("x", nz)
     return IpoptFunctions(
         {"x": x, "f": f(x), "g": g(x)},
@@ -314,14 +342,21 @@ def ipopt_functions(points: PointEvaluations, hessian: ca.Function,
         [f, g, grad_f, jac_g, hess_lag])
 
 
-def gauss_newton_hessian(jacobian_sparsity: ca.Sparsity, curvature: ca.Function
-                         ) -> ca.Function:
-    """(J, z, sigma, lam_small) -> triu(sigma J'J + curvature(z, lam_small)), J symbolic on
-    `jacobian_sparsity`: the Hessian of the Lagrangian Ipopt is given."""
-    J = ca.MX.sym("J", jacobian_sparsity)
+def _upper_curvature(curvature: ca.Function) -> ca.Function:
+    """(z, lam_small) -> the upper triangle of `curvature`."""
     z = ca.MX.sym("z", curvature.sparsity_in(0))
-    n_small = curvature.nnz_in(1)
-    sigma = ca.MX.sym("sigma")
-    lam_small = ca.MX.sym("lam_small", n_small)
-    return ca.Function("gauss_newton_hessian", [J, z, sigma, lam_small],
-                       [ca.triu(sigma * ca.mtimes(J.T, J) + curvature(z, lam_small))])
+    lam = ca.MX.sym("lam_small", curvature.sparsity_in(1))
+    return ca.Function("curvature_upper", [z, lam], [ca.triu(curvature(z, lam))])
+
+
+def _column_major_keys(matrix: sp.csc_matrix) -> np.ndarray:
+    """col * n_rows + row of every stored entry of a CSC matrix with sorted indices
+    (increasing)."""
+    column = np.repeat(np.arange(matrix.shape[1], dtype=np.int64), np.diff(matrix.indptr))
+    return column * matrix.shape[0] + matrix.indices
+
+
+def _casadi(matrix: sp.csc_matrix) -> ca.Sparsity:
+    """The pattern of a CSC matrix (sorted indices) as a CasADi sparsity."""
+    return ca.Sparsity(matrix.shape[0], matrix.shape[1], matrix.indptr.tolist(),
+                       matrix.indices.tolist())

@@ -1,5 +1,6 @@
-"""Ipopt's functions from one evaluation per point give what CasADi's expressions gave, and
-the Marquardt damping reacts to the progress the steps make."""
+"""Ipopt's functions from one evaluation per point give what CasADi's expressions gave, the
+parameters' windows of action leave out only entries that are zero, and the Marquardt
+damping reacts to the progress the steps make."""
 
 from __future__ import annotations
 
@@ -25,7 +26,7 @@ FUNCTIONS = ("nlp_f", "nlp_g", "nlp_grad_f", "nlp_jac_g", "nlp_hess_l")
 def estimators(drogue_folder):
     test = load_test(drogue_folder(1))
     return (Estimator(test, settings=Settings(point_cache=False)),
-            Estimator(test, settings=Settings()))
+            Estimator(test, settings=Settings(window_margin=None)))
 
 
 def _outputs(est: Estimator, name: str, z: np.ndarray, lam: np.ndarray) -> list[ca.DM]:
@@ -61,6 +62,37 @@ def test_each_point_is_evaluated_once(estimators) -> None:
     made = {k: est._points.evaluations[k] - before[k] for k in before}
     # Values come from the Jacobian evaluation once one exists; nlp_f and nlp_g ran first.
     assert made == {"r": 1, "rJ": 1, "g": 1, "gA": 1}
+
+
+def test_windows_leave_out_only_zeros_and_keep_their_promise(drogue_folder) -> None:
+    """At the start, every entry left out of Ipopt's constraint Jacobian and Hessian is an
+    exact zero, so Ipopt's functions equal the whole pattern's there; and a solve whose
+    start times move further than the margin widens the windows and ends where the whole
+    pattern's solve ends."""
+    test = load_test(drogue_folder(1))
+    whole = Estimator(test, settings=Settings(window_margin=None))
+    est = Estimator(test, settings=Settings(nodes=whole.settings.nodes))
+    z = whole.initial_point()
+    est._fit_windows(z)
+    lam = np.random.default_rng(4).standard_normal(est._g.numel())
+    kept = est._windows.keep
+    assert 0.1 < kept[0].mean() < 0.5 and 0.1 < kept[1].mean() < 0.5  # most are left out
+    for name in ("nlp_jac_g", "nlp_hess_l"):
+        expected, got = (_outputs(e, name, z, lam)[-1].sparse() for e in (whole, est))
+        assert got.nnz < expected.nnz, name
+        assert abs(expected - got).max() <= 1e-9 * abs(expected).max(), name
+
+    # Start times 0.8 s early, beyond the 0.5 s margin: the second stages' parameters
+    # act where the first windows did not reach.
+    starts = [n for n in est.free if n.startswith("t_start[") and "stage2" in n]
+    z0 = z.copy()
+    for name in starts:
+        z0 = est.with_value(z0, name, est.free_values(z0)[name] - 0.8)
+    fit, reference = est.solve(start=z0), whole.solve(start=z0)
+    assert est._windows.widenings >= 1
+    assert fit.chi_square == pytest.approx(reference.chi_square, abs=0.05)
+    for name in starts:
+        assert fit.parameters[name] == pytest.approx(reference.parameters[name], abs=2e-3)
 
 
 class _Points:
