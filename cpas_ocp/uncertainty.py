@@ -463,14 +463,15 @@ class GaussNewtonStep:
     step: np.ndarray
     decrement: float
     restoration: float
+    projection: np.ndarray  # the step to the feasible projection (to first order)
 
 
 def gauss_newton(lin: Linearization) -> GaussNewtonStep:
     """The Gauss-Newton step, its decrement and the gaps' restoration cost, from one
     factorisation."""
-    dz, after, projected = _gauss_newton(lin)
+    dz, after, projected, to_projection = _gauss_newton(lin)
     return GaussNewtonStep(dz, max(float(projected @ projected - after @ after), 0.0),
-                           float(projected @ projected - lin.r @ lin.r))
+                           float(projected @ projected - lin.r @ lin.r), to_projection)
 
 
 def gauss_newton_step(lin: Linearization) -> np.ndarray:
@@ -483,13 +484,14 @@ def gauss_newton_step(lin: Linearization) -> np.ndarray:
     return _gauss_newton(lin)[0]
 
 
-def _gauss_newton(lin: Linearization) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The step dz, the weighted residuals r + J dz it predicts, and those it predicts at
-    the point's feasible projection."""
+def _gauss_newton(lin: Linearization
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The step dz, the weighted residuals r + J dz it predicts, those it predicts at the
+    point's feasible projection, and the step to that projection."""
     red = reduce_linearization(lin)
     ns = _null_space(red)
     base = red.r + red.JZ @ ns.dw0
     gradient = ns.N.T @ (red.JZ.T @ base)
     y = -(ns.inverse() @ gradient)
-    dz = red.dz_p + red.Z @ (ns.dw0 + ns.N @ y)
-    return dz, base + red.JZ @ (ns.N @ y), base
+    to_projection = red.dz_p + red.Z @ ns.dw0
+    return to_projection + red.Z @ (ns.N @ y), base + red.JZ @ (ns.N @ y), base, to_projection
