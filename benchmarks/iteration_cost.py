@@ -9,8 +9,11 @@ reduction is solved three ways:
   the residuals or the Jacobians it needs (`Settings(point_cache=False)`);
 * ``cached``: the same iterations, every model evaluation made once per
   point in native code and shared (`Settings(damping=False)`);
-* ``damped``: the defaults, the cached functions with Levenberg-Marquardt
-  damping where Gauss-Newton steps fail to deliver.
+* ``damped``: the cached functions with Levenberg-Marquardt damping where
+  Gauss-Newton steps fail to deliver;
+* ``windowed``: the defaults, the damped path with Ipopt given each
+  parameter's Jacobian entries only within its window of action
+  (`action_windows`).
 
 ``drogue+added_mass`` is the `drogue` problem simulated with added mass
 (factor 1.4 on both Drogues) and fitted without it: a misspecified model, the
@@ -39,7 +42,8 @@ from cpas_ocp.problems import load_problem
 from cpas_ocp.simulate import simulate_problem
 
 PATHS = {"expressions": {"point_cache": False, "damping": False},
-         "cached": {"damping": False}, "damped": {}}
+         "cached": {"damping": False, "window_margin": None},
+         "damped": {"window_margin": None}, "windowed": {}}
 
 
 def make_test(name: str, seed: int, root: Path) -> FlightTest:
@@ -87,7 +91,7 @@ def main() -> None:
                 print(f"{name:18s} {label:11s} {it:5d} {wall:8.1f} {wall / max(it, 1):7.3f} "
                       f"{chi2:12.3f}  {status}", flush=True)
             it0, wall0, chi0, _ = runs["expressions"]
-            for label in ("cached", "damped"):
+            for label in ("cached", "damped", "windowed"):
                 it, wall, chi2, _ = runs[label]
                 print(f"{name:18s} {label}/expressions: iterations {it / it0:.2f}, solve time "
                       f"{wall / wall0:.2f}, time per iteration {(wall / it) / (wall0 / it0):.2f}"

@@ -267,9 +267,9 @@ def ipopt_functions(points: PointEvaluations, curvature: ca.Function, small_rows
                     damping: MarquardtDamping | None = None) -> IpoptFunctions:
     """Ipopt's objective, constraints and derivatives from `points` (see the module docstring).
 
-    The Hessian is triu(sigma J'J + curvature(z, lam_small)), the curvature
-    being that of the few small constraints whose rows `small_rows` locates in
-    g; with `damping`, sigma mu diag(J'J) is added.  The constraint Jacobian
+    The Hessian is triu(sigma J'J) + curvature(z, lam_small), the latter the
+    upper triangle of the curvature of the few small constraints whose rows
+    `small_rows` locates in g; with `damping`, sigma mu diag(J'J) is added.  The constraint Jacobian
     and J in J'J carry only the entries `windows` keeps; where an evaluation
     finds a nonzero among those left out, `on_outside(z)` is called (the
     values Ipopt gets then miss it, and the estimator restarts with wider
@@ -281,7 +281,7 @@ def ipopt_functions(points: PointEvaluations, curvature: ca.Function, small_rows
     x_in = ("x", ca.Sparsity.dense(nz, 1))
     p_in = ("p", ca.Sparsity(0, 1))
     dense = ca.Sparsity.dense
-    curvature_buffer = FunctionBuffer(_upper_curvature(curvature))
+    curvature_buffer = FunctionBuffer(curvature)
     curvature_pattern = curvature_buffer.pattern(0)
     hessian_pattern = sp.triu(abs(kept_J).T @ abs(kept_J), format="csc") + curvature_pattern
     hessian_pattern.sort_indices()
@@ -340,13 +340,6 @@ def ipopt_functions(points: PointEvaluations, curvature: ca.Function, small_rows
         {"grad_f": grad_f, "jac_g": jac_g, "hess_lag": hess_lag, "no_nlp_grad": True,
          "calc_lam_p": False},
         [f, g, grad_f, jac_g, hess_lag])
-
-
-def _upper_curvature(curvature: ca.Function) -> ca.Function:
-    """(z, lam_small) -> the upper triangle of `curvature`."""
-    z = ca.MX.sym("z", curvature.sparsity_in(0))
-    lam = ca.MX.sym("lam_small", curvature.sparsity_in(1))
-    return ca.Function("curvature_upper", [z, lam], [ca.triu(curvature(z, lam))])
 
 
 def _column_major_keys(matrix: sp.csc_matrix) -> np.ndarray:
