@@ -27,6 +27,7 @@ from .effects.registry import EffectType
 from .estimation import Fit
 from .model_spec import ModelSpec
 from .phase_windows import PhaseWindow, phase_windows
+from .process_memory import release_freed_memory
 from .residual_diagnosis import Finding, diagnose_residuals, signature_text
 from .score_test import ScoreTest, confirm, confirmed_ranking, score_tests
 
@@ -139,5 +140,6 @@ def diagnose(fit: Fit, spec: ModelSpec, candidates: Mapping[str, EffectType] | N
     leading = [t for t in tests if t.significant(alpha, m)][:confirm_top]
     for t in leading:
         confirm(fit, t, progress)
+        release_freed_memory()
     return Diagnosis(fit, windows, window_statistics(fit, windows), confirmed_ranking(tests),
                      diagnose_residuals(fit, windows, alpha), alpha)

@@ -67,6 +67,7 @@ from .estimation import POLISH_CONSTRAINT_TOL, STOP_CONSTRAINT_TOL, Estimator, F
 from .hypothesis_tests import chi_bar_square_sf
 from .model_comparison import LikelihoodRatio, nested_start
 from .model_spec import RISER_MODELS, ModelSpec
+from .process_memory import release_freed_memory
 
 # Relative chi-square mismatch above which the effect at its null values is taken not to
 # reproduce the fit (its null point is then found by a restricted solve).
@@ -167,6 +168,7 @@ def score_tests(fit: Fit, spec: ModelSpec,
             sys.stderr.write(f"\r  score test {i + 1}/{len(entries)}: {name:24s}")
             sys.stderr.flush()
         out.append(score_test(fit, spec, entry))
+        release_freed_memory()
     if progress and sys.stderr.isatty():
         sys.stderr.write("\n")
     return rank(out)
