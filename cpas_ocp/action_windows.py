@@ -21,10 +21,12 @@ Rows without a time (captures, event-time residuals, priors, an effect's
 parameter constraints) and state columns are always kept.
 
 Leaving an entry out of the constraint Jacobian would change what Ipopt
-converges to, so the windows are a promise that must be kept: `outside`
-reports the first evaluation with a nonzero outside them (a start time
-that moved further than the margin), and the estimator then widens the
-windows to cover it and restarts Ipopt from that iterate.  The gradient of
+converges to, so the windows are a promise that must be kept where it
+matters: `outside` tells whether an evaluation has a nonzero outside them (a
+start time that moved further than the margin).  Along the way an iterate
+outside them only gets a less exact step; where that persists, and always
+at the point Ipopt converges to, the estimator widens the windows to cover
+it and restarts Ipopt from that iterate.  The gradient of
 chi-square (J'r) is always formed from the whole Jacobian, and the
 covariance and the statistical stop linearise the whole model.
 """
@@ -100,6 +102,10 @@ class ActionWindows:
     def outside(self, which: int, values: np.ndarray) -> bool:
         """Whether matrix `which` (0: J, 1: A) has a nonzero among the entries left out."""
         return bool(np.any(values[~self.keep[which]] != 0.0))
+
+    def outside_at(self, values: tuple[np.ndarray, np.ndarray]) -> bool:
+        """Whether J or A (their stored values at a point) has a nonzero left out."""
+        return any(self.outside(i, v) for i, v in enumerate(values))
 
     def kept_matrix(self, which: int, matrix: sp.csc_matrix) -> sp.csc_matrix:
         """`matrix` (on its fixed pattern) with only the entries kept."""

@@ -518,7 +518,7 @@ class Estimator:
         """Ipopt on the NLP, its derivatives on the pattern `self._windows` keeps."""
         if self.settings.point_cache:
             self._ipopt = ipopt_functions(self._points, self._curvature, self._small_rows,
-                                          self._windows, self._monitor.left_windows,
+                                          self._windows, self._monitor.window_check,
                                           self._damping)
             nlp, derivatives = self._ipopt.nlp, self._ipopt.options
         else:
@@ -526,16 +526,19 @@ class Estimator:
         self._solver = ca.nlpsol("reconstruction", "ipopt", nlp, {
             **self._options, **derivatives, "iteration_callback": self._monitor})
 
+    def _jacobian_values(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The stored values of the residual and constraint Jacobians at `z`."""
+        return self._points.residual_jacobian(z)[1].data, self._points.constraints(z)[1].data
+
     def _fit_windows(self, z: np.ndarray, widen: bool = False) -> None:
         """Fit (or widen) the parameters' windows of action to their Jacobians' nonzeros at
         `z`, and rebuild the solver on the pattern they keep."""
         if not self._windows.active:
             return
-        values = (self._points.residual_jacobian(z)[1].data, self._points.constraints(z)[1].data)
         if widen:
-            self._windows.widen(values)
+            self._windows.widen(self._jacobian_values(z))
         else:
-            self._windows.fit(values)
+            self._windows.fit(self._jacobian_values(z))
         self._make_solver()
 
     def _plain_nlp(self, residual: ca.MX, jac: ca.MX, constraint_jac: ca.MX,
@@ -940,13 +943,18 @@ class Estimator:
             sol = self._solver(x0=z0, lbx=lbz, ubx=ubz, lbg=self._lbg, ubg=self._ubg)
             st = self._solver.stats()
             iterations += int(st["iter_count"])
+            z0 = np.asarray(sol["x"]).ravel()
             left = self._monitor.left_at
+            if left is None and st["success"]:
+                # What Ipopt converged on must hold with every entry: a parameter that
+                # acts outside its window at the end sends the run on.
+                left = z0 if self._windows.active and self._windows.outside_at(
+                    self._jacobian_values(z0)) else None
             if left is None or self._monitor.capped or iterations >= cap:
                 break
-            # A parameter acted outside its window (a start time moved further than the
+            # A parameter acts outside its window (a start time moved further than the
             # margin): widen the windows over both points and go on from the iterate.
-            z0 = np.asarray(sol["x"]).ravel()
-            self._fit_windows(left, widen=True)
+            self._windows.widen(self._jacobian_values(left))
             self._fit_windows(z0, widen=True)
         self._monitor.finish()
         z = np.asarray(sol["x"]).ravel()
@@ -1225,7 +1233,8 @@ class _Monitor(ca.Callback):
         it (a restart), for the progress line."""
         self._k, self._last_test, self._gap, self._chi2 = 0, -100, 3, np.inf
         self._done = done
-        self.left_at: np.ndarray | None = None  # where a parameter left its window
+        self._outside = 0  # successive iterates with a parameter acting outside its window
+        self.left_at: np.ndarray | None = None  # where that has persisted
         self.stopped, self.decrement = False, None
         self.max_iter, self.capped = max_iter, False
         self.point: np.ndarray | None = None  # where the statistical test ended the run
@@ -1238,10 +1247,19 @@ class _Monitor(ca.Callback):
         if self.progress and self._k + self._done:
             sys.stderr.write("\n")
 
-    def left_windows(self, z: np.ndarray) -> None:
-        """Stop the run at the next iterate: at `z` a parameter acts outside the window of
-        action Ipopt's derivatives were given (the solve restarts with wider ones)."""
-        if self.left_at is None:
+    # Successive iterates at which some parameter acts outside the window of action
+    # Ipopt's derivatives were given before the run is stopped to widen the windows.  A
+    # watchdog's trial steps (up to 3) can take the iterate far afield and back: on an
+    # elastic-riser refit a restart from such an excursion (chi-square 2e8 against 8,500)
+    # started the refit over.
+    OUTSIDE_PERSISTS = 4
+
+    def window_check(self, z: np.ndarray, outside: bool) -> None:
+        """Whether at the iterate `z` a parameter acts outside its window of action; once
+        that has persisted over OUTSIDE_PERSISTS iterates, the run stops at the next
+        (and the solve restarts with wider windows from it)."""
+        self._outside = self._outside + 1 if outside else 0
+        if self._outside >= self.OUTSIDE_PERSISTS and self.left_at is None:
             self.left_at = np.array(z, dtype=float)
 
     def get_n_in(self) -> int:

@@ -263,17 +263,18 @@ class MarquardtDamping:
 
 
 def ipopt_functions(points: PointEvaluations, curvature: ca.Function, small_rows: slice,
-                    windows: ActionWindows, on_outside: Callable[[np.ndarray], None],
+                    windows: ActionWindows, checked: Callable[[np.ndarray, bool], None],
                     damping: MarquardtDamping | None = None) -> IpoptFunctions:
     """Ipopt's objective, constraints and derivatives from `points` (see the module docstring).
 
     The Hessian is triu(sigma J'J) + curvature(z, lam_small), the latter the
     upper triangle of the curvature of the few small constraints whose rows
     `small_rows` locates in g; with `damping`, sigma mu diag(J'J) is added.  The constraint Jacobian
-    and J in J'J carry only the entries `windows` keeps; where an evaluation
-    finds a nonzero among those left out, `on_outside(z)` is called (the
-    values Ipopt gets then miss it, and the estimator restarts with wider
-    windows).  The gradient J'r uses every entry.
+    and J in J'J carry only the entries `windows` keeps; at every iterate
+    (once, with its Hessian) `checked(z, outside)` says whether either
+    Jacobian has a nonzero among the entries left out, which the values Ipopt
+    gets then miss (the estimator widens the windows and restarts where that
+    persists).  The gradient J'r uses every entry.
     """
     J_pattern, A_pattern = (points._buffers[name].pattern(1) for name in ("rJ", "gA"))
     nz, ng = J_pattern.shape[1], A_pattern.shape[0]
@@ -303,15 +304,13 @@ def ipopt_functions(points: PointEvaluations, curvature: ca.Function, small_rows
 
     def constraint_jacobian(a: list[np.ndarray]) -> list:
         g, A = points.constraints(a[0])
-        if windows.outside(1, A.data):
-            on_outside(a[0])
         return [g, A.data[windows.keep[1]]]
 
     def lagrangian_hessian(a: list[np.ndarray]) -> list:
         z, _, sigma, lam_g = a
         _, J = points.residual_jacobian(z)
-        if windows.outside(0, J.data):
-            on_outside(z)
+        checked(z, windows.outside(0, J.data)
+                or windows.outside(1, points.constraints(z)[1].data))
         Jk = windows.kept_matrix(0, J)
         product = sp.triu(Jk.T @ Jk, format="coo")
         out = np.zeros(keys.size)
