@@ -1230,7 +1230,8 @@ class _Monitor(ca.Callback):
               max_iter: int | None = None, done: int = 0) -> None:
         """Start a run within `bounds` (the scaled decision vector's lower and upper),
         stopped after `max_iter` iterations if given; `done` iterations were made before
-        it (a restart), for the progress line."""
+        it (a restart with wider windows of action, which keeps the Marquardt damping
+        the run had reached)."""
         self._k, self._last_test, self._gap, self._chi2 = 0, -100, 3, np.inf
         self._done = done
         self._outside = 0  # successive iterates with a parameter acting outside its window
@@ -1240,7 +1241,7 @@ class _Monitor(ca.Callback):
         self.point: np.ndarray | None = None  # where the statistical test ended the run
         self.bounds = bounds
         self.progress = progress and sys.stderr.isatty()
-        if self._damping is not None:
+        if self._damping is not None and not done:
             self._damping.reset()
 
     def finish(self) -> None:
