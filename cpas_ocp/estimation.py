@@ -945,11 +945,11 @@ class Estimator:
             iterations += int(st["iter_count"])
             z0 = np.asarray(sol["x"]).ravel()
             left = self._monitor.left_at
-            if left is None and st["success"]:
+            if left is None and st["success"] and self._windows.active \
+                    and self._windows.outside_at(self._jacobian_values(z0)):
                 # What Ipopt converged on must hold with every entry: a parameter that
                 # acts outside its window at the end sends the run on.
-                left = z0 if self._windows.active and self._windows.outside_at(
-                    self._jacobian_values(z0)) else None
+                left = z0
             if left is None or self._monitor.capped or iterations >= cap:
                 break
             # A parameter acts outside its window (a start time moved further than the
@@ -976,10 +976,11 @@ class Estimator:
         worst = f"index {int(np.argmax(viol))}, violation {float(np.max(viol)):.3g}" \
             if viol.size else ""
         status, success = st["return_status"], bool(st["success"])
-        if status == "User_Requested_Stop" and self._monitor.stopped:
+        if left is not None:  # the iterations ran out before the windows held
+            status, success = "Maximum_Iterations_Exceeded", False
+        elif status == "User_Requested_Stop" and self._monitor.stopped:
             status, success = STATISTICALLY_CONVERGED, True
-        elif status == "User_Requested_Stop" and (self._monitor.capped
-                                                   or self._monitor.left_at is not None):
+        elif status == "User_Requested_Stop" and self._monitor.capped:
             status = "Maximum_Iterations_Exceeded"
         stats = SolverStats(status, success, iterations, wall, objective, worst,
                             self._monitor.decrement if self._monitor.stopped else None,

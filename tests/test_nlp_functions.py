@@ -12,7 +12,7 @@ import pytest
 import scipy.sparse as sp
 
 from cpas_ocp.effects import AddedMass, baseline_effects
-from cpas_ocp.estimation import STATISTICALLY_CONVERGED, Estimator, Settings
+from cpas_ocp.estimation import STATISTICALLY_CONVERGED, Estimator, Settings, _Monitor
 from cpas_ocp.flight_test import load_test
 from cpas_ocp.model_spec import baseline_spec
 from cpas_ocp.nlp_functions import MarquardtDamping
@@ -93,6 +93,20 @@ def test_windows_leave_out_only_zeros_and_keep_their_promise(drogue_folder) -> N
     assert fit.chi_square == pytest.approx(reference.chi_square, abs=0.05)
     for name in starts:
         assert fit.parameters[name] == pytest.approx(reference.parameters[name], abs=2e-3)
+
+
+def test_windows_are_widened_only_where_leaving_them_persists() -> None:
+    """A watchdog's trial steps (at most 3) may leave the windows and come back: only a
+    fourth successive iterate outside them stops the run, at that iterate."""
+    monitor = _Monitor(2, 1, lambda z: None, 0.01)
+    monitor.reset(False, (np.full(2, -np.inf), np.full(2, np.inf)))
+    for k, outside in enumerate((True, True, True, False, True, True, True)):
+        monitor.window_check(np.full(2, float(k)), outside)
+    assert monitor.left_at is None
+    monitor.window_check(np.full(2, 7.0), True)
+    np.testing.assert_array_equal(monitor.left_at, np.full(2, 7.0))
+    monitor.window_check(np.full(2, 8.0), True)  # the first such iterate is kept
+    np.testing.assert_array_equal(monitor.left_at, np.full(2, 7.0))
 
 
 class _Points:
