@@ -269,12 +269,12 @@ def ipopt_functions(points: PointEvaluations, curvature: ca.Function, small_rows
 
     The Hessian is triu(sigma J'J) + curvature(z, lam_small), the latter the
     upper triangle of the curvature of the few small constraints whose rows
-    `small_rows` locates in g; with `damping`, sigma mu diag(J'J) is added.  The constraint Jacobian
-    and J in J'J carry only the entries `windows` keeps; at every iterate
-    (once, with its Hessian) `checked(z, outside)` says whether either
-    Jacobian has a nonzero among the entries left out, which the values Ipopt
-    gets then miss (the estimator widens the windows and restarts where that
-    persists).  The gradient J'r uses every entry.
+    `small_rows` locates in g; with `damping`, sigma mu diag(J'J) is added.
+    The constraint Jacobian and J in J'J carry only the entries `windows`
+    keeps; at every iterate (once, with its Hessian) `checked(z, outside)`
+    says whether either Jacobian has a nonzero among the entries left out,
+    which the values Ipopt gets then miss (the estimator widens the windows
+    and restarts where that persists).  The gradient J'r uses every entry.
     """
     J_pattern, A_pattern = (points._buffers[name].pattern(1) for name in ("rJ", "gA"))
     nz, ng = J_pattern.shape[1], A_pattern.shape[0]
