@@ -97,10 +97,12 @@ class ActionWindows:
         self.lower[:, idle], self.upper[:, idle] = -np.inf, np.inf
         self.keep = self._kept()
 
-    def widen(self, values: tuple[np.ndarray, np.ndarray]) -> None:
-        """Widen the windows to cover the nonzeros of J's and A's stored values."""
+    def widen(self, *points: tuple[np.ndarray, np.ndarray]) -> None:
+        """Widen the windows to cover the nonzeros of J's and A's stored values at each of
+        `points`."""
         self.widenings += 1
-        self._include(values)
+        for values in points:
+            self._include(values)
 
     def _include(self, values: tuple[np.ndarray, np.ndarray]) -> None:
         if self.margin is None:

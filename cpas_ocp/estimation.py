@@ -530,15 +530,15 @@ class Estimator:
         """The stored values of the residual and constraint Jacobians at `z`."""
         return self._points.residual_jacobian(z)[1].data, self._points.constraints(z)[1].data
 
-    def _fit_windows(self, z: np.ndarray, widen: bool = False) -> None:
-        """Fit (or widen) the parameters' windows of action to their Jacobians' nonzeros at
-        `z`, and rebuild the solver on the pattern they keep."""
+    def _fit_windows(self, *points: np.ndarray, widen: bool = False) -> None:
+        """Fit the parameters' windows of action to their Jacobians' nonzeros at a point (or
+        widen them over several), and rebuild the solver on the pattern they keep."""
         if not self._windows.active:
             return
         if widen:
-            self._windows.widen(self._jacobian_values(z))
+            self._windows.widen(*map(self._jacobian_values, points))
         else:
-            self._windows.fit(self._jacobian_values(z))
+            self._windows.fit(self._jacobian_values(points[0]))
         self._make_solver()
 
     def _plain_nlp(self, residual: ca.MX, jac: ca.MX, constraint_jac: ca.MX,
@@ -954,8 +954,7 @@ class Estimator:
                 break
             # A parameter acts outside its window (a start time moved further than the
             # margin): widen the windows over both points and go on from the iterate.
-            self._windows.widen(self._jacobian_values(left))
-            self._fit_windows(z0, widen=True)
+            self._fit_windows(left, z0, widen=True)
         self._monitor.finish()
         z = np.asarray(sol["x"]).ravel()
         g = np.asarray(sol["g"]).ravel()
