@@ -58,8 +58,9 @@ class ActionWindows:
             column = np.repeat(np.arange(n_cols), np.diff(pattern.indptr))
             time = np.asarray(times, dtype=float)[pattern.indices]
             self._entries.append((column, np.where(column < first_windowed, np.nan, time)))
-        self.lower = np.full((2, n_cols), np.inf)
-        self.upper = np.full((2, n_cols), -np.inf)
+        # Until fitted to a point, every window is the whole phase.
+        self.lower = np.full((2, n_cols), -np.inf)
+        self.upper = np.full((2, n_cols), np.inf)
         self.keep = self._kept()
         self.widenings = 0  # how often a point needed a wider window than the first
 

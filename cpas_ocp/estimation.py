@@ -971,7 +971,7 @@ class Estimator:
             objective = 0.5 * float(r @ r)
             g = self._points.constraint_value(z)
         wall = time.perf_counter() - t0
-        viol = np.maximum(self._lbg - g, 0) + np.maximum(g - self._ubg, 0)
+        viol = self._violations(g)
         worst = f"index {int(np.argmax(viol))}, violation {float(np.max(viol)):.3g}" \
             if viol.size else ""
         status, success = st["return_status"], bool(st["success"])
@@ -1114,15 +1114,17 @@ class Estimator:
         return kkt_covariance(self._linearize(fit.z), self._param_index, self.pscale,
                               self.free, scale_by_residual, product)
 
+    def _violations(self, g: np.ndarray) -> np.ndarray:
+        """How far each constraint value in `g` lies outside its bounds (scaled)."""
+        return np.maximum(self._lbg - g, 0) + np.maximum(g - self._ubg, 0)
+
     def _value_violation(self, z: np.ndarray) -> float:
         """Largest scaled constraint violation at `z`, from the constraint values alone (the
         same figure as `_violation` of the linearisation there; NaN where not finite)."""
         g = self._points.constraint_value(z)
-        if g.size == 0:
-            return 0.0
         if not np.all(np.isfinite(g)):
             return np.nan
-        return float(max(np.max(self._lbg - g), np.max(g - self._ubg), 0.0))
+        return float(np.max(self._violations(g), initial=0.0))
 
     def evaluate(self, z: np.ndarray) -> tuple[float, float]:
         """Chi-square at the decision vector `z` and its largest scaled constraint violation
