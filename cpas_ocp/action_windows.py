@@ -61,7 +61,8 @@ class ActionWindows:
         # Until fitted to a point, every window is the whole phase.
         self.lower = np.full((2, n_cols), -np.inf)
         self.upper = np.full((2, n_cols), np.inf)
-        self.keep = self._kept()
+        self._n_cols = n_cols
+        self._update_keep()
         self.widenings = 0  # how often a point needed a wider window than the first
 
     @property
@@ -69,16 +70,21 @@ class ActionWindows:
         """Whether any entry is left out (False without a margin)."""
         return self.margin is not None
 
-    def _kept(self) -> tuple[np.ndarray, ...]:
+    def _update_keep(self) -> None:
+        """Set `keep` from the windows, and each kept matrix's column pointers."""
         if self.margin is None:
-            return tuple(np.ones(column.size, dtype=bool) for column, _ in self._entries)
-        kept = []
-        for (column, time), lower, upper in zip(self._entries, self.lower, self.upper,
-                                                strict=True):
-            with np.errstate(invalid="ignore"):
-                inside = (time >= lower[column]) & (time <= upper[column])
-            kept.append(np.isnan(time) | inside)
-        return tuple(kept)
+            self.keep = tuple(np.ones(column.size, dtype=bool) for column, _ in self._entries)
+        else:
+            kept = []
+            for (column, time), lower, upper in zip(self._entries, self.lower, self.upper,
+                                                    strict=True):
+                with np.errstate(invalid="ignore"):
+                    inside = (time >= lower[column]) & (time <= upper[column])
+                kept.append(np.isnan(time) | inside)
+            self.keep = tuple(kept)
+        self._indptr = [np.concatenate([[0], np.cumsum(np.bincount(column[keep],
+                                                                   minlength=self._n_cols))])
+                        for (column, _), keep in zip(self._entries, self.keep, strict=True)]
 
     def fit(self, values: tuple[np.ndarray, np.ndarray]) -> None:
         """Windows from the nonzeros of J's and A's stored values at a point.
@@ -96,7 +102,7 @@ class ActionWindows:
         idle = np.all(np.isinf(self.lower), axis=0)
         idle[:self._first_windowed] = False
         self.lower[:, idle], self.upper[:, idle] = -np.inf, np.inf
-        self.keep = self._kept()
+        self._update_keep()
 
     def widen(self, *points: tuple[np.ndarray, np.ndarray]) -> None:
         """Widen the windows to cover the nonzeros of J's and A's stored values at each of
@@ -104,6 +110,7 @@ class ActionWindows:
         self.widenings += 1
         for values in points:
             self._include(values)
+        self._update_keep()
 
     def _include(self, values: tuple[np.ndarray, np.ndarray]) -> None:
         if self.margin is None:
@@ -113,7 +120,6 @@ class ActionWindows:
             acting = (v != 0.0) & ~np.isnan(time)
             np.minimum.at(lower, column[acting], time[acting] - self.margin)
             np.maximum.at(upper, column[acting], time[acting] + self.margin)
-        self.keep = self._kept()
 
     def outside(self, which: int, values: np.ndarray) -> bool:
         """Whether matrix `which` (0: J, 1: A) has a nonzero among the entries left out."""
@@ -126,10 +132,7 @@ class ActionWindows:
     def kept_matrix(self, which: int, matrix: sp.csc_matrix) -> sp.csc_matrix:
         """`matrix` (on its fixed pattern) with only the entries kept."""
         keep = self.keep[which]
-        column = self._entries[which][0]
-        indptr = np.concatenate([[0], np.cumsum(np.bincount(column[keep],
-                                                            minlength=matrix.shape[1]))])
-        return sp.csc_matrix((matrix.data[keep], matrix.indices[keep], indptr),
+        return sp.csc_matrix((matrix.data[keep], matrix.indices[keep], self._indptr[which]),
                              shape=matrix.shape)
 
     def summary(self) -> str:
