@@ -14,27 +14,15 @@ and the ratios printed against the current code at the smallest bound.
 from __future__ import annotations
 
 import argparse
-import json
-import os
-import subprocess
-import sys
 import tempfile
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+from revisions import ROOT, code_at, run_child
 
 CHILD = r"""
 import dataclasses, json, resource, sys, time
 from pathlib import Path
 
-# The project is installed in development mode: point its import mapping at the code to run.
-code = Path(sys.argv[3])
-for module in list(sys.modules.values()):
-    if type(getattr(module, "MAPPING", None)) is dict and "cpas_ocp" in module.MAPPING:
-        module.MAPPING.update({"cpas_ocp": str(code / "cpas_ocp"),
-                               "cpas_ocp.problem_data": str(code / "problems"),
-                               "cpas_ocp.schemas": str(code / "data_schemas")})
-        module.NAMESPACES.update({"cpas_ocp": [str(code / "cpas_ocp")]})
 from cpas_ocp import estimation
 from cpas_ocp.effects import SensorLag, baseline_effects
 from cpas_ocp.errors import SolverFailure
@@ -68,15 +56,7 @@ print(json.dumps({"code": str(Path(estimation.__file__).parent), "build_s": buil
 
 def run(code_root: Path, folder: Path, bound: float) -> dict:
     """One fit in a fresh process importing cpas_ocp from `code_root`, with an empty cache."""
-    with tempfile.TemporaryDirectory() as cache:
-        env = {**os.environ, "CPAS_OCP_CACHE": cache}
-        out = subprocess.run([sys.executable, "-c", CHILD, str(folder), str(bound),
-                              str(code_root)],
-                             env=env, cwd=cache, capture_output=True, text=True,
-                             check=False)
-    if out.returncode:
-        raise RuntimeError(f"the fit at +-{bound} s with {code_root} failed:\n{out.stderr}")
-    return json.loads(out.stdout.strip().splitlines()[-1])
+    return run_child(CHILD, code_root, str(folder), str(bound))
 
 
 def _peak(result: dict) -> float:
@@ -89,34 +69,23 @@ def main() -> None:
     parser.add_argument("--bounds", type=float, nargs="+", default=[0.2, 0.3, 0.5])
     parser.add_argument("--baseline", help="git revision whose code is run as well")
     args = parser.parse_args()
-    with tempfile.TemporaryDirectory() as tmp:
-        roots = {"current": ROOT}
-        if args.baseline:
-            worktree = Path(tmp) / "baseline"
-            subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach",
-                            str(worktree), args.baseline], check=True, capture_output=True)
-            roots[args.baseline] = worktree
+    with tempfile.TemporaryDirectory() as tmp, code_at(args.baseline) as baseline:
+        roots = {"current": ROOT, **({args.baseline: baseline} if args.baseline else {})}
         folder = Path(tmp) / "drogue-lag"
-        try:
-            reference = None
-            for label, root in roots.items():
-                for bound in sorted(args.bounds):
-                    r = run(root, folder, bound)
-                    reference = reference or r
-                    fit = (f"failed: {r['failed']}" if "failed" in r else
-                           f"{r['iterations']} it, chi-square {r['chi2']:.2f}, "
-                           f"lag {r['lag']:.4f} s")
-                    print(f"{label:>10s} +-{bound:.2f} s: build {r['build_s']:6.1f} s, solve "
-                          f"{r['solve_s']:6.1f} s, peak {r['peak_gb']:.2f} GB (compiler "
-                          f"{r['compiler_peak_gb']:.2f} GB); memory ratio "
-                          f"{_peak(r) / _peak(reference):.2f}, build ratio "
-                          f"{r['build_s'] / reference['build_s']:.2f}; {fit} [{r['code']}]",
-                          flush=True)
-        finally:
-            if args.baseline:
-                subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force",
-                                str(worktree)], check=False, capture_output=True)
-
+        reference = None
+        for label, root in roots.items():
+            for bound in sorted(args.bounds):
+                r = run(root, folder, bound)
+                reference = reference or r
+                fit = (f"failed: {r['failed']}" if "failed" in r else
+                       f"{r['iterations']} it, chi-square {r['chi2']:.2f}, "
+                       f"lag {r['lag']:.4f} s")
+                print(f"{label:>10s} +-{bound:.2f} s: build {r['build_s']:6.1f} s, solve "
+                      f"{r['solve_s']:6.1f} s, peak {r['peak_gb']:.2f} GB (compiler "
+                      f"{r['compiler_peak_gb']:.2f} GB); memory ratio "
+                      f"{_peak(r) / _peak(reference):.2f}, build ratio "
+                      f"{r['build_s'] / reference['build_s']:.2f}; {fit} [{r['code']}]",
+                      flush=True)
 
 if __name__ == "__main__":
     main()

@@ -122,3 +122,60 @@ def test_curves_have_no_kinks(law: str) -> None:
     jumps = np.abs(np.diff(s))
     # a corner handled as a kink would jump by a sizeable part of the largest slope
     assert jumps.max() < 0.05 * np.abs(s).max()
+
+
+def test_canopy_drag_area_is_the_law_of_its_last_started_stage(drogue_folder) -> None:
+    """The model evaluates one stage's law at a time (its inputs selected by the stages'
+    start times); value and every derivative equal the piecewise definition, each stage's
+    Eq. 5-6 curve from CORNER_S before its start, the last stage started taking over, here
+    with a third stage that starts during the second's rise and a second stage set to
+    start before the first."""
+    from cpas_ocp.effects import baseline_effects
+    from cpas_ocp.flight_test import load_test
+    from cpas_ocp.model import Model
+    from cpas_ocp.parameters import param_name
+    from cpas_ocp.problems import load_problem
+
+    model = Model(load_test(drogue_folder(1)), baseline_effects())
+    chute = model.test.parachutes[0]
+    assert chute.inflation == "infinite_mass" and len(chute.stages) == 3
+    x, t = ca.SX.sym("x", model.nx), ca.SX.sym("t")
+    p, c = ca.SX.sym("p", len(model.parameters)), ca.SX.sym("c", len(model.captures))
+    names = model.parameter_names
+
+    def par(kind: str, stage: str) -> ca.SX:
+        return p[names.index(param_name(kind, chute.name, stage))]
+
+    reference, prev = ca.SX(0.0), 0.0
+    final = par("CdS", chute.stages[-1])
+    for stage in chute.stages:
+        steady = par("CdS", stage)
+        law = infinite_mass_cds(
+            t, par("t_start", stage), prev, steady, par("Ck", stage), par("n_p", stage),
+            par("expopen", stage), par("t_k", stage),
+            fill_length(chute.fill_length, chute.diameter, prev, steady, final),
+            c[[cap.name for cap in model.captures].index(param_name("V_start", chute.name,
+                                                                    stage))])
+        reference = ca.if_else(t >= par("t_start", stage) - CORNER_S, law, reference)
+        prev = steady
+    cds = model.quantities(x, t, p, c)[model.quantity_names.index(f"cds[{chute.name}]")]
+    both = ca.Function("both", [t, p, c], [cds, reference, ca.jacobian(cds, ca.vertcat(t, p)),
+                                           ca.jacobian(reference, ca.vertcat(t, p))])
+
+    truth = load_problem("drogue").truth
+    t1, t2, t3 = (truth[param_name("t_start", chute.name, s)] for s in chute.stages)
+    cases = {"as flown": dict(truth),
+             "third starts in the second's rise": {
+                 **truth, param_name("t_start", chute.name, chute.stages[2]): t2 + 0.15},
+             "second starts before the first": {
+                 **truth, param_name("t_start", chute.name, chute.stages[1]): t1 - 0.2}}
+    speeds = np.full(len(model.captures), 80.0)
+    times = np.concatenate([np.linspace(t1 - 0.5, t3 + 3.0, 1500),
+                            [t1 - 0.2 - CORNER_S, t1 - CORNER_S, t2, t3]])
+    for label, values in cases.items():
+        pvec = model.parameter_vector(values)
+        for tv in times:
+            got, want, dgot, dwant = (np.asarray(v) for v in both(tv, pvec, speeds))
+            np.testing.assert_allclose(got, want, rtol=1e-13, atol=1e-12, err_msg=label)
+            np.testing.assert_allclose(dgot, dwant, rtol=1e-12, atol=1e-10, err_msg=label)
+        assert np.asarray(both(t3 + 3.0, pvec, speeds)[0]).item() > 0.0

@@ -147,35 +147,50 @@ class CanopyInflation(Effect):
     def forces(self, ctx: ModelContext) -> None:
         t, p = ctx.t, ctx.p
         for chute in ctx.test.parachutes:
-            cds = ca.SX(0.0)
-            prev = ca.SX(0.0)
             cds_o = p[param_name("CdS", chute.name, chute.stages[-1])]
             starts = [p[param_name("t_start", chute.name, s)] for s in chute.stages]
+            started = [stage_started(t, start) for start in starts]
+            # The inputs of each stage's law (Eq. 5, and Eq. 6 for infinite mass).
+            laws: list[dict[str, ca.SX]] = []
             # Weight with which each stage's sensor gains apply: 1 before the next
             # stage starts, handing over smoothly through the next stage's rise.
             arrivals: list[ca.SX] = []
+            prev = ca.SX(0.0)
             for k, stage in enumerate(chute.stages):
                 idx = (chute.name, stage)
                 steady = p[param_name("CdS", *idx)]
-                length = fill_length(chute.fill_length, chute.diameter, prev, steady, cds_o)
-                v_i = ctx.c[param_name("V_start", *idx)]
+                law = {"t_start": starts[k], "cds_prev": prev, "cds": steady,
+                       "expopen": p[param_name("expopen", *idx)],
+                       "length": fill_length(chute.fill_length, chute.diameter, prev, steady,
+                                             cds_o),
+                       "v_start": ctx.c[param_name("V_start", *idx)]}
                 if chute.inflation == "infinite_mass":
-                    n_p = p[param_name("n_p", *idx)]
-                    curve = infinite_mass_cds(t, starts[k], prev, steady,
-                                              p[param_name("Ck", *idx)], n_p,
-                                              p[param_name("expopen", *idx)],
-                                              p[param_name("t_k", *idx)], length, v_i)
-                    rise = fill_time(n_p, length, v_i)
+                    law |= {"ck": p[param_name("Ck", *idx)], "n_p": p[param_name("n_p", *idx)],
+                            "t_k": p[param_name("t_k", *idx)]}
+                    constant = law["n_p"]
                 else:
-                    n_f = p[param_name("n", *idx)]
-                    curve = finite_mass_cds(t, starts[k], prev, steady, n_f,
-                                            p[param_name("expopen", *idx)], length, v_i)
-                    rise = fill_time(n_f, length, v_i)
-                cds = ca.if_else(stage_started(t, starts[k]), curve, cds)
+                    law["n"] = p[param_name("n", *idx)]
+                    constant = law["n"]
+                rise = fill_time(constant, law["length"], law["v_start"])
                 ctx.q[param_name("rise_end", *idx)] = starts[k] + rise
+                laws.append(law)
                 prev = steady
                 arrivals.append(1.0 if k == 0 else
                                 smoothstep(2.0 * (t - starts[k]) / rise - 1.0))
+            # The curve of the last stage started applies.  Its inputs are selected
+            # first and the law evaluated once: selecting whole curves would evaluate
+            # every stage's law (and its derivatives) at every time, although only one
+            # ever applies; the value and every derivative are the same.
+            current = laws[0]
+            for k in range(1, len(laws)):
+                current = {key: ca.if_else(started[k], value, current[key])
+                           for key, value in laws[k].items()}
+            curve = (infinite_mass_cds(t, **current) if chute.inflation == "infinite_mass"
+                     else finite_mass_cds(t, **current))
+            any_started = started[0]
+            for flag in started[1:]:
+                any_started = ca.logic_or(any_started, flag)
+            cds = ca.if_else(any_started, curve, 0.0)
             # reached[k]: how far the canopy has come into stage k (a product, so that
             # the weights below sum to one even when a stage starts before the rise
             # of the previous one has ended).
