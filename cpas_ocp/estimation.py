@@ -172,6 +172,9 @@ STOP_CONSTRAINT_TOL = 1e-6
 # finish the run (`Estimator._stop_test`): Ipopt's Gauss-Newton iterations close the last
 # shooting gaps only as fast as the steps shrink, linearly.
 POLISH_CONSTRAINT_TOL = 1e-3
+# Gauss-Newton steps the statistical test may take of its own from an iterate
+# (`Estimator._stop_test`).
+FINISHING_STEPS = 3
 DECREMENT_FLOOR = 1e-4  # chi-square: below it the decrement is taken as the model gives it
 # Alternations of integrating the trajectory and meeting the other constraints that
 # `Estimator.feasible_point` makes (each correction moves the trajectory only slightly).
@@ -1048,9 +1051,10 @@ class Estimator:
         add up).  An iterate that misses either but whose gaps are within
         POLISH_CONSTRAINT_TOL is offered one full Gauss-Newton step (the
         linearised constraints hold after it, so what remains of the gaps is
-        second order in the step); the step's end is the point if it is
-        feasible and within the bounds.  Near the optimum Ipopt shrinks the
-        gaps only linearly, by the same factor as its steps, several
+        second order in the step) and a few more (`_finishing_steps`); a
+        step's end is the point if it is feasible and within the bounds, else
+        its feasible projection or the iterate's may be.  Near the optimum Ipopt
+        shrinks the gaps only linearly, by the same factor as its steps, several
         iterations for what one step does.
         """
         tol = self.settings.chi2_step_tol or 0.0
@@ -1063,31 +1067,103 @@ class Estimator:
         if violation > STOP_CONSTRAINT_TOL and not may_polish:
             return None  # no Gauss-Newton solve for an iterate that cannot end the run
         gn = gauss_newton(lin)
+        found = None  # (decrement, point) that sets the tests' back-off
         if violation <= STOP_CONSTRAINT_TOL and abs(gn.restoration) <= tol:
-            return self._measured_decrement(lin, gn), z
+            found = self._measured_decrement(lin, gn), z
+            if found[0] < tol or not may_polish:
+                return found
         if not may_polish:
             return None
+        stop, first = self._finishing_steps(lin, gn, tol)
+        if stop is not None:
+            return stop
+        found = found or first
+        if found is None and violation > STOP_CONSTRAINT_TOL:
+            # The iterate's feasible projection: it ends the run or counts for nothing.
+            lower, upper = self._monitor.bounds
+            projection = self._candidate(z + gn.projection, lower, upper, STOP_CONSTRAINT_TOL)
+            if projection is not None and self._feasible(projection, tol):
+                decrement = self._measured_decrement(*projection)
+                if decrement < tol:
+                    return decrement, projection[0].z
+        return found
+
+    def _finishing_steps(self, lin: Linearization, gn: GaussNewtonStep, tol: float
+                         ) -> tuple[tuple[float, np.ndarray] | None,
+                                    tuple[float, np.ndarray] | None]:
+        """Up to FINISHING_STEPS Gauss-Newton steps of the estimator's own from `lin`'s
+        point: (decrement, point) where one ends the run, else None; and the first
+        step's end with its decrement if that end is feasible as it stands.
+
+        Each step's end is projected onto the gaps where it misses them (a Newton
+        step on the gaps with the parameters held closes them quadratically, where
+        the step's nonlinearity leaves them open: on `drogue_full` a step that
+        travelled far along a weakly determined direction closed 1.5e-4 only to
+        5e-5).  After the first full step each is shortened to where chi-square is
+        least along it (a = D / c, the curvature c measured by
+        `_measured_decrement`): the Gauss-Newton model leaves out the shooting
+        gaps' curvature, and full steps did not converge (on `drogue`, from
+        decrements of 0.46, 0.17 and 0.10, a second full step reached 0.71, 0.24
+        and 0.18).  Ipopt's own iterate is held off the optimum by the barrier of
+        the parameters' bounds and by that curvature: on `drogue` from the
+        reduction it sat a decrement of 6.4 from the optimum at the third
+        iteration and crept after it for 23 more; after its first iteration these
+        steps reached 1.18, 0.064 and then 0.009, which ends the run.  A step that
+        does not halve the decrement leaves the run to Ipopt.  The decrement is
+        measured along a direction that leaves that curvature out, so a point
+        just below the tolerance may lie a little more than it above the optimum
+        (0.0102 against a tolerance of 0.01 on `drogue`, seed 1): where a step's
+        end ends the run, one more step is taken, and kept where its decrement
+        is lower.  Only the first
+        step's end, unprojected, may set the tests' back-off: the decrement at a
+        projection or after several steps ends the run or counts for nothing (on
+        `fbcp` a projection's put off the test that ends the run by three
+        iterations).
+        """
         lower, upper = self._monitor.bounds
-        # The step's end; else the point's feasible projection, where the step's
-        # nonlinearity leaves the gaps open (a weakly determined direction that the step
-        # travels far along: on `drogue_full` it closed 1.5e-4 only to 5e-5, while the
-        # projection, a Newton step on the gaps alone, closes them quadratically).  The
-        # projection ends the run or counts for nothing: the decrement measured there
-        # must not set the tests' back-off, which the step's end sets (on `fbcp` it put
-        # off the test that ends the run by three iterations).
-        for z1, only_to_stop in ((z + gn.step, False), (z + gn.projection, True)):
-            if np.any(z1 < lower) or np.any(z1 > upper) \
-                    or not self._value_violation(z1) <= STOP_CONSTRAINT_TOL:  # NaN too
-                continue  # judged on the constraint values (3 ms on `drogue`, a
-                # linearisation takes 70)
-            lin1 = self._linearize(z1)
-            gn1 = gauss_newton(lin1)
-            if abs(gn1.restoration) > tol:
-                continue
-            decrement = self._measured_decrement(lin1, gn1)
-            if decrement < tol or not only_to_stop:
-                return decrement, z1
-        return None
+        first = stop = None
+        point, last, length = (lin, gn), np.inf, 1.0
+        for k in range(FINISHING_STEPS + 1):
+            end = self._candidate(point[0].z + length * point[1].step, lower, upper,
+                                  POLISH_CONSTRAINT_TOL)
+            projected = end is not None and not self._feasible(end, tol)
+            if projected:
+                end = self._candidate(end[0].z + end[1].projection, lower, upper,
+                                      STOP_CONSTRAINT_TOL)
+            if end is None or not self._feasible(end, tol):
+                break
+            decrement = self._measured_decrement(*end)
+            if stop is not None:  # the polishing step: kept where it got closer
+                if decrement < stop[0]:
+                    stop = decrement, end[0].z
+                break
+            if decrement < tol:
+                stop = decrement, end[0].z
+            elif k == FINISHING_STEPS - 1 or not decrement < 0.5 * last:
+                break
+            if k == 0 and not projected:
+                first = decrement, end[0].z
+            point, last = end, decrement
+            length = min(1.0, decrement / max(end[1].decrement, DECREMENT_FLOOR))
+        return stop, first
+
+    @staticmethod
+    def _feasible(candidate: tuple[Linearization, GaussNewtonStep], tol: float) -> bool:
+        """Whether a candidate's point meets STOP_CONSTRAINT_TOL and closing its remaining
+        gaps is worth less than `tol` in chi-square."""
+        lin, gn = candidate
+        return _violation(lin) <= STOP_CONSTRAINT_TOL and abs(gn.restoration) <= tol
+
+    def _candidate(self, z: np.ndarray, lower: np.ndarray, upper: np.ndarray, limit: float
+                   ) -> tuple[Linearization, GaussNewtonStep] | None:
+        """The linearisation and Gauss-Newton step at a point where the run might stop, if it
+        lies within the bounds and its scaled constraints within `limit` (judged on their
+        values first: 3 ms on `drogue`, where a linearisation takes 70)."""
+        if np.any(z < lower) or np.any(z > upper) \
+                or not self._value_violation(z) <= limit:  # NaN too
+            return None
+        lin = self._linearize(z)
+        return lin, gauss_newton(lin)
 
     def _measured_decrement(self, lin: Linearization, gn: GaussNewtonStep) -> float:
         """The chi-square decrease still to be had along the Gauss-Newton step `gn` from
