@@ -519,7 +519,7 @@ class Estimator:
         }
         self._hessian_product: ca.Function | None = None
         # the solver keeps only a reference to its callbacks
-        self._monitor = _Monitor(self._z.numel(), self._g.numel(), self._stop_test,
+        self._monitor = _Monitor(self._z.numel(), (self._lbg, self._ubg), self._stop_test,
                                  s.chi2_step_tol, self._damping)
         self._make_solver()
 
@@ -1017,6 +1017,14 @@ class Estimator:
             fit.sensitivities = self._bound_sensitivities(z, multipliers, list(bounds))
         return fit
 
+    @property
+    def best_iterate(self) -> np.ndarray | None:
+        """The last solve's nearly feasible iterate (constraints within
+        POLISH_CONSTRAINT_TOL, scaled) with the lowest chi-square, None if it had none:
+        where a run that did not converge came closest, which its last iterate (a
+        watchdog's trial step, say) need not be."""
+        return self._monitor.best
+
     def _last_iterate(self, z: np.ndarray, stats: SolverStats) -> Fit | None:
         """The Fit at an unconverged solve's last iterate, for its failure report only
         (None where the iterate cannot even be evaluated)."""
@@ -1325,11 +1333,12 @@ class _Monitor(ca.Callback):
     stays above 10 tol.
     """
 
-    def __init__(self, nx: int, ng: int,
+    def __init__(self, nx: int, constraint_bounds: tuple[np.ndarray, np.ndarray],
                  test: Callable[[np.ndarray], tuple[float, np.ndarray] | None],
                  tol: float | None, damping: MarquardtDamping | None = None) -> None:
         ca.Callback.__init__(self)
-        self._nx, self._ng, self._test, self._tol = nx, ng, test, tol
+        self._lbg, self._ubg = constraint_bounds
+        self._nx, self._ng, self._test, self._tol = nx, self._lbg.size, test, tol
         self._damping = damping
         self.reset(False, (np.full(nx, -np.inf), np.full(nx, np.inf)))
         self.construct("monitor", {})
@@ -1351,6 +1360,11 @@ class _Monitor(ca.Callback):
         self.progress = progress and sys.stderr.isatty()
         if self._damping is not None and not done:
             self._damping.reset()
+        if not done:
+            # The nearly feasible iterate with the lowest chi-square so far (constraints
+            # within POLISH_CONSTRAINT_TOL): an unconverged run's best witness.
+            self.best: np.ndarray | None = None
+            self._best_chi2 = np.inf
 
     def finish(self) -> None:
         if self.progress and self._k + self._done:
@@ -1397,6 +1411,11 @@ class _Monitor(ca.Callback):
         if self.left_at is not None:
             return [1]
         chi2 = 2.0 * float(arg[1])
+        if chi2 < self._best_chi2:
+            g = np.asarray(arg[2]).ravel()
+            if not np.max(np.maximum(self._lbg - g, g - self._ubg), initial=0.0) \
+                    > POLISH_CONSTRAINT_TOL:  # NaN too
+                self.best, self._best_chi2 = np.asarray(arg[0]).ravel().copy(), chi2
         if self._damping is not None:
             self._damping.observe(np.asarray(arg[0]).ravel())
         if self.progress:

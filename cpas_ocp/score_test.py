@@ -337,10 +337,11 @@ def _start_on_step(est: Estimator, fit: Fit, null: dict[str, float],
 
 def _bound_from_last_iterate(fit: Fit, result: ScoreTest, est: Estimator,
                              failure: SolverFailure, dof: int) -> None:
-    """After a refit that did not converge: where its last iterate, integrated into a
-    feasible point of the extended model (`Estimator.feasible_point`), has a lower
-    chi-square than `fit`, record the likelihood ratio as the lower bound that
-    point gives (in place), with the effect's values there.
+    """After a refit that did not converge: where its last iterate or its best nearly
+    feasible one (`Estimator.best_iterate`), integrated into a feasible point of the
+    extended model (`Estimator.feasible_point`), has a lower chi-square than `fit`,
+    record the likelihood ratio as the lower bound the lower of the two gives (in
+    place), with the effect's values there.
 
     The extended model's optimum lies at or below any of its feasible points,
     so LR >= chi^2(fit) - chi^2(point) and the p-value of that bound is an
@@ -348,15 +349,22 @@ def _bound_from_last_iterate(fit: Fit, result: ScoreTest, est: Estimator,
     the fit still confirms the effect, without a claim on its final estimates.
     """
     last = failure.last_iterate
-    found = est.feasible_point(last.z) if last is not None else None
-    if found is None or not fit.chi_square - found[1] > 0.0:
+    witnesses = {"last": last.z if last is not None else None,
+                 "lowest nearly feasible": est.best_iterate}
+    feasible = {label: est.feasible_point(z) for label, z in witnesses.items()
+                if z is not None}
+    found = {label: f for label, f in feasible.items() if f is not None}
+    if not found:
         return
-    point, chi2 = found
+    label = min(found, key=lambda k: found[k][1])
+    point, chi2 = found[label]
+    if not fit.chi_square - chi2 > 0.0:
+        return
     values = est.free_values(point)
     result.refit = LikelihoodRatio(fit.chi_square - chi2, dof, len(result.one_sided),
                                    lower_bound=True)
     result.refit_estimate = {n: values[n] for n in result.parameters}
-    result.refit_note += (f"; its last iterate, integrated to a feasible point, has "
+    result.refit_note += (f"; its {label} iterate, integrated to a feasible point, has "
                           f"chi-square {chi2:.1f} against the fit's {fit.chi_square:.1f}")
 
 
