@@ -172,8 +172,8 @@ STOP_CONSTRAINT_TOL = 1e-6
 # finish the run (`Estimator._stop_test`): Ipopt's Gauss-Newton iterations close the last
 # shooting gaps only as fast as the steps shrink, linearly.
 POLISH_CONSTRAINT_TOL = 1e-3
-# Gauss-Newton steps the statistical test may take of its own from an iterate
-# (`Estimator._stop_test`).
+# Gauss-Newton steps the statistical test may take of its own from an iterate before
+# it has a point to end the run at (`Estimator._finishing_steps`); one more polishes it.
 FINISHING_STEPS = 3
 DECREMENT_FLOOR = 1e-4  # chi-square: below it the decrement is taken as the model gives it
 # Alternations of integrating the trajectory and meeting the other constraints that
@@ -1117,16 +1117,16 @@ class Estimator:
         reduction it sat a decrement of 6.4 from the optimum at the third
         iteration and crept after it for 23 more; after its first iteration these
         steps reached 1.18, 0.064 and then 0.009, which ends the run.  A step that
-        does not halve the decrement leaves the run to Ipopt.  The decrement is
-        measured along a direction that leaves that curvature out, so a point
-        just below the tolerance may lie a little more than it above the optimum
-        (0.0102 against a tolerance of 0.01 on `drogue`, seed 1): where a step's
-        end ends the run, one more step is taken, and kept where its decrement
-        is lower.  Only the first
-        step's end, unprojected, may set the tests' back-off: the decrement at a
-        projection or after several steps ends the run or counts for nothing (on
-        `fbcp` a projection's put off the test that ends the run by three
-        iterations).
+        does not halve the decrement leaves the run to Ipopt.
+
+        The decrement is measured along a direction that leaves that curvature
+        out, so a point just below the tolerance may lie a little more than it
+        above the optimum (0.0102 against a tolerance of 0.01 on `drogue`, seed
+        1): where a step's end ends the run, one more step is taken, and kept
+        where its decrement is lower.  Only the first step's end, unprojected,
+        may set the tests' back-off: the decrement at a projection or after
+        several steps ends the run or counts for nothing (on `fbcp` a
+        projection's put off the test that ends the run by three iterations).
         """
         lower, upper = self._monitor.bounds
         first = stop = None
