@@ -519,8 +519,8 @@ class Estimator:
         }
         self._hessian_product: ca.Function | None = None
         # the solver keeps only a reference to its callbacks
-        self._monitor = _Monitor(self._z.numel(), (self._lbg, self._ubg), self._stop_test,
-                                 s.chi2_step_tol, self._damping)
+        self._monitor = _Monitor(self._z.numel(), self._g.numel(), self._violations,
+                                 self._stop_test, s.chi2_step_tol, self._damping)
         self._make_solver()
 
     def _make_solver(self, barrier: float | None = None) -> None:
@@ -1333,12 +1333,12 @@ class _Monitor(ca.Callback):
     stays above 10 tol.
     """
 
-    def __init__(self, nx: int, constraint_bounds: tuple[np.ndarray, np.ndarray],
+    def __init__(self, nx: int, ng: int, violations: Callable[[np.ndarray], np.ndarray],
                  test: Callable[[np.ndarray], tuple[float, np.ndarray] | None],
                  tol: float | None, damping: MarquardtDamping | None = None) -> None:
         ca.Callback.__init__(self)
-        self._lbg, self._ubg = constraint_bounds
-        self._nx, self._ng, self._test, self._tol = nx, self._lbg.size, test, tol
+        self._violations = violations  # how far each constraint value lies outside its bounds
+        self._nx, self._ng, self._test, self._tol = nx, ng, test, tol
         self._damping = damping
         self.reset(False, (np.full(nx, -np.inf), np.full(nx, np.inf)))
         self.construct("monitor", {})
@@ -1413,8 +1413,7 @@ class _Monitor(ca.Callback):
         chi2 = 2.0 * float(arg[1])
         if chi2 < self._best_chi2:
             g = np.asarray(arg[2]).ravel()
-            if not np.max(np.maximum(self._lbg - g, g - self._ubg), initial=0.0) \
-                    > POLISH_CONSTRAINT_TOL:  # NaN too
+            if np.max(self._violations(g), initial=0.0) <= POLISH_CONSTRAINT_TOL:  # not NaN
                 self.best, self._best_chi2 = np.asarray(arg[0]).ravel().copy(), chi2
         if self._damping is not None:
             self._damping.observe(np.asarray(arg[0]).ravel())

@@ -351,6 +351,9 @@ def _bound_from_last_iterate(fit: Fit, result: ScoreTest, est: Estimator,
     last = failure.last_iterate
     witnesses = {"last": last.z if last is not None else None,
                  "lowest nearly feasible": est.best_iterate}
+    if witnesses["last"] is not None and witnesses["lowest nearly feasible"] is not None \
+            and np.array_equal(*witnesses.values()):
+        del witnesses["lowest nearly feasible"]  # one point, integrated once
     feasible = {label: est.feasible_point(z) for label, z in witnesses.items()
                 if z is not None}
     found = {label: f for label, f in feasible.items() if f is not None}

@@ -98,7 +98,7 @@ def test_windows_leave_out_only_zeros_and_keep_their_promise(drogue_folder) -> N
 def test_windows_are_widened_only_where_leaving_them_persists() -> None:
     """A watchdog's trial steps (at most 3) may leave the windows and come back: only a
     fourth successive iterate outside them stops the run, at that iterate."""
-    monitor = _Monitor(2, (np.zeros(1), np.zeros(1)), lambda z: None, 0.01)
+    monitor = _Monitor(2, 1, np.abs, lambda z: None, 0.01)
     monitor.reset(False, (np.full(2, -np.inf), np.full(2, np.inf)))
     for k, outside in enumerate((True, True, True, False, True, True, True)):
         monitor.window_check(np.full(2, float(k)), outside)
@@ -113,7 +113,7 @@ def test_an_unconverged_run_keeps_its_lowest_nearly_feasible_iterate() -> None:
     """The witness for an unconverged refit's likelihood-ratio bound: the iterate with
     the lowest chi-square among those whose constraints hold within
     POLISH_CONSTRAINT_TOL, kept through a widening restart, forgotten by a new solve."""
-    monitor = _Monitor(1, (np.zeros(1), np.zeros(1)), lambda z: None, None)
+    monitor = _Monitor(1, 1, np.abs, lambda z: None, None)  # one constraint, held at 0
 
     def iterate(z: float, chi2: float, gap: float) -> None:
         monitor.eval([ca.DM(z), ca.DM(chi2 / 2.0), ca.DM(gap), ca.DM(0.0), ca.DM(0.0),
@@ -124,6 +124,7 @@ def test_an_unconverged_run_keeps_its_lowest_nearly_feasible_iterate() -> None:
     iterate(2.0, 5.0, 0.1)  # lower, but far from feasible (a watchdog's trial step)
     iterate(3.0, 8.0, 5e-4)
     iterate(4.0, 12.0, 0.0)
+    iterate(4.5, 1.0, np.nan)  # a point that could not be evaluated is no witness
     np.testing.assert_array_equal(monitor.best, [3.0])
     monitor.reset(False, (np.full(1, -np.inf), np.full(1, np.inf)), done=4)  # widened
     iterate(5.0, 9.0, 0.0)
