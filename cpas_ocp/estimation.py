@@ -98,6 +98,12 @@ class Settings:
     earlier path, for benchmarks).
     damping: Levenberg-Marquardt damping of the Gauss-Newton Hessian where its
     steps fail to deliver (`nlp_functions.MarquardtDamping`; needs point_cache).
+    levenberg: a Levenberg term on the free parameters' diagonal of the Hessian
+    Ipopt is given (per scaled unit squared; `nlp_functions.ipopt_functions`,
+    needs point_cache; None: the earlier path).  It bounds the steps along
+    parameters the data hardly determine at the iterate, such as a stiff
+    elastic riser's damping ratio, whose Gauss-Newton steps were cut to
+    1/128-1/256 and sent the watchdog's trial steps to chi-square 1e5-1e8.
     window_margin (s): Ipopt gets each parameter's Jacobian entries only within
     its window of action at the start, widened by this much on each side
     (`action_windows`; a solve restarts with wider windows when a parameter
@@ -121,6 +127,7 @@ class Settings:
     polish: bool = True
     point_cache: bool = True
     damping: bool = True
+    levenberg: float | None = 1.0
     window_margin: float | None = 0.5
 
 
@@ -530,7 +537,7 @@ class Estimator:
         if self.settings.point_cache:
             self._ipopt = ipopt_functions(self._points, self._curvature, self._small_rows,
                                           self._windows, self._monitor.window_check,
-                                          self._damping)
+                                          self._damping, self._levenberg())
             nlp, derivatives = self._ipopt.nlp, self._ipopt.options
         else:
             nlp, derivatives = self._expressions
@@ -539,6 +546,11 @@ class Estimator:
             "ipopt.warm_start_bound_push": 1e-9, "ipopt.warm_start_mult_bound_push": 1e-9}
         self._solver = ca.nlpsol("reconstruction", "ipopt", nlp, {
             **self._options, **warm, **derivatives, "iteration_callback": self._monitor})
+
+    def _levenberg(self) -> tuple[np.ndarray, float] | None:
+        """The Levenberg term's columns of z (the free parameters) and size, or None."""
+        delta = self.settings.levenberg
+        return None if not delta else (self._param_index, float(delta))
 
     def _jacobian_values(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The stored values of the residual and constraint Jacobians at `z`."""

@@ -264,12 +264,26 @@ class MarquardtDamping:
 
 def ipopt_functions(points: PointEvaluations, curvature: ca.Function, small_rows: slice,
                     windows: ActionWindows, checked: Callable[[np.ndarray, bool], None],
-                    damping: MarquardtDamping | None = None) -> IpoptFunctions:
+                    damping: MarquardtDamping | None = None,
+                    levenberg: tuple[np.ndarray, float] | None = None) -> IpoptFunctions:
     """Ipopt's objective, constraints and derivatives from `points` (see the module docstring).
 
     The Hessian is triu(sigma J'J) + curvature(z, lam_small), the latter the
     upper triangle of the curvature of the few small constraints whose rows
-    `small_rows` locates in g; with `damping`, sigma mu diag(J'J) is added.
+    `small_rows` locates in g; with `damping`, sigma mu diag(J'J) is added;
+    with `levenberg` = (columns, delta), sigma delta on the diagonal at the
+    given columns of z (the scaled free parameters).
+
+    The Levenberg term bounds the step along a parameter the data hardly
+    determine where the iterate stands (data curvature well below delta per
+    scaled unit squared, i.e. a standard error larger than the parameter's
+    own scale): Gauss-Newton would move it by the gradient over a nearly
+    vanishing curvature, far beyond where its linearisation holds.  With
+    delta = 1 the step there is at most the gradient, in the units of the
+    parameter's scale.  It shapes the path only: the Hessian is an
+    approximation either way, and the KKT points, hence the fit, are those
+    of the undamped problem (the statistical stop and the covariance use
+    J'J alone).
     The constraint Jacobian and J in J'J carry only the entries `windows`
     keeps; at every iterate (once, with its Hessian) `checked(z, outside)`
     says whether either Jacobian has a nonzero among the entries left out,
@@ -284,12 +298,16 @@ def ipopt_functions(points: PointEvaluations, curvature: ca.Function, small_rows
     dense = ca.Sparsity.dense
     curvature_buffer = FunctionBuffer(curvature)
     curvature_pattern = curvature_buffer.pattern(0)
-    hessian_pattern = sp.triu(abs(kept_J).T @ abs(kept_J), format="csc") + curvature_pattern
+    columns, delta = levenberg if levenberg is not None else (np.zeros(0, dtype=int), 0.0)
+    on_columns = sp.csc_matrix((np.ones(columns.size), (columns, columns)), shape=(nz, nz))
+    hessian_pattern = (sp.triu(abs(kept_J).T @ abs(kept_J), format="csc") + curvature_pattern
+                       + on_columns)
     hessian_pattern.sort_indices()
     keys = _column_major_keys(hessian_pattern)
     curvature_at = np.searchsorted(keys, _column_major_keys(curvature_pattern))
     diagonal = np.flatnonzero(hessian_pattern.diagonal())
     diagonal_at = np.searchsorted(keys, diagonal * (nz + 1))
+    levenberg_at = np.searchsorted(keys, columns.astype(np.int64) * (nz + 1))
 
     def objective(a: list[np.ndarray]) -> list:
         r = points.residual_value(a[0])
@@ -317,6 +335,7 @@ def ipopt_functions(points: PointEvaluations, curvature: ca.Function, small_rows
         out[np.searchsorted(keys, product.col.astype(np.int64) * nz + product.row)] = \
             float(sigma[0]) * product.data
         out[curvature_at] += curvature_buffer.nonzeros(z, lam_g[small_rows])[0]
+        out[levenberg_at] += float(sigma[0]) * delta
         if damping is not None and damping.mu > 0.0:
             squares = np.asarray(J.multiply(J).sum(axis=0)).ravel()
             out[diagonal_at] += float(sigma[0]) * damping.mu * squares[diagonal]

@@ -26,7 +26,7 @@ FUNCTIONS = ("nlp_f", "nlp_g", "nlp_grad_f", "nlp_jac_g", "nlp_hess_l")
 def estimators(drogue_folder):
     test = load_test(drogue_folder(1))
     return (Estimator(test, settings=Settings(point_cache=False)),
-            Estimator(test, settings=Settings(window_margin=None)))
+            Estimator(test, settings=Settings(window_margin=None, levenberg=None)))
 
 
 def _outputs(est: Estimator, name: str, z: np.ndarray, lam: np.ndarray) -> list[ca.DM]:
@@ -49,6 +49,29 @@ def test_cached_functions_equal_the_expressions(estimators) -> None:
             x, y = np.asarray(a.nonzeros()), np.asarray(b.nonzeros())
             np.testing.assert_allclose(y, x, rtol=1e-10, atol=1e-10 * max(np.abs(x).max(), 1.0),
                                        err_msg=name)
+
+
+def test_levenberg_term_is_on_the_parameters_diagonal_only(estimators) -> None:
+    """The Levenberg term adds sigma delta to the Hessian's diagonal at the free parameters'
+    columns and nothing anywhere else."""
+    _, est = estimators
+    z = est.initial_point()
+    lam = np.zeros(est._g.numel())
+    plain = ca.DM(est._solver.get_function("nlp_hess_l")(z, np.zeros(0), 0.7, lam))
+    est.settings.levenberg = 2.0
+    try:
+        est._make_solver()
+        damped = ca.DM(est._solver.get_function("nlp_hess_l")(z, np.zeros(0), 0.7, lam))
+    finally:
+        est.settings.levenberg = None
+        est._make_solver()
+    difference = damped - plain
+    rows, cols = (np.asarray(i) for i in difference.sparsity().get_triplet())
+    values = np.asarray(difference.nonzeros())
+    changed = np.abs(values) > 1e-9 * np.abs(np.asarray(plain.nonzeros())).max()
+    assert np.array_equal(rows[changed], cols[changed])
+    assert set(rows[changed]) == set(est._param_index)
+    np.testing.assert_allclose(values[changed], 0.7 * 2.0)
 
 
 def test_each_point_is_evaluated_once(estimators) -> None:
