@@ -56,7 +56,7 @@ def hidden_cases() -> dict[str, tuple[list[Effect], dict[str, float]]]:
         "none": (base, {}),
         "added_mass": ([*base, AddedMass()], {f"added_mass_factor[{c}]": 1.4 for c in DROGUES}),
         "elastic_riser": (with_elastic_risers(base),
-                          {**{f"riser_frequency[{c}]": 6.0 for c in DROGUES},
+                          {**{f"riser_period[{c}]": 1.0 / 6.0 for c in DROGUES},
                            **{f"riser_damping_ratio[{c}]": 0.3 for c in DROGUES}}),
         "loadcell_friction": ([*base, LoadCellFriction()],
                               {f"friction_loss[{c}]": 0.15 for c in DROGUES}),

@@ -50,7 +50,7 @@ def _cases() -> dict[str, tuple[list, dict[str, float]]]:
     return {
         "added_mass": ([*base, AddedMass()], {f"added_mass_factor[{c}]": 1.4 for c in both}),
         "elastic_riser": (with_elastic_risers(base),
-                          {**{f"riser_frequency[{c}]": 6.0 for c in both},
+                          {**{f"riser_period[{c}]": 1.0 / 6.0 for c in both},
                            **{f"riser_damping_ratio[{c}]": 0.3 for c in both}}),
         "loadcell_friction": ([*base, LoadCellFriction()],
                               {f"friction_loss[{c}]": 0.15 for c in both}),
@@ -173,7 +173,7 @@ def test_a_significant_effect_whose_refit_failed_leaves_the_verdict_undecided() 
     from cpas_ocp.diagnosis import Diagnosis
     from cpas_ocp.score_test import ScoreTest
 
-    failed = ScoreTest("elastic_riser", "library", ("riser_frequency[d]",), statistic=145.0,
+    failed = ScoreTest("elastic_riser", "library", ("riser_period[d]",), statistic=145.0,
                        dof=4, p_value=2e-31,
                        refit_note="the refit did not converge: solver failed: status "
                                   "Maximum_Iterations_Exceeded after 150 iterations")
@@ -219,9 +219,9 @@ def test_the_verdict_names_a_bounded_effect_and_warns_of_unconverged_rivals() ->
     from cpas_ocp.model_comparison import LikelihoodRatio
     from cpas_ocp.score_test import ScoreTest
 
-    bounded = ScoreTest("elastic_riser", "library", ("riser_frequency[d]",), statistic=145.0,
+    bounded = ScoreTest("elastic_riser", "library", ("riser_period[d]",), statistic=145.0,
                         dof=1, p_value=1e-30, refit=LikelihoodRatio(476.0, 1, lower_bound=True),
-                        refit_estimate={"riser_frequency[d]": 7.1},
+                        refit_estimate={"riser_period[d]": 0.14},
                         refit_note="the refit did not converge: ...")
     verdict = Diagnosis(None, [], [], [bounded], []).verdict()  # type: ignore[arg-type]
     assert verdict.startswith("missing effect: elastic_riser (likelihood ratio >= 476"), verdict

@@ -48,7 +48,7 @@ def test_block_sets_effects_options_fixed_and_free(problem_folder, tmp_path) -> 
     assert spec.effect_names == [e if isinstance(e, str) else e["effect"] for e in FULL]
     riser = next(e for e in spec.effects if isinstance(e, ElasticRiser))
     assert riser.frequency == 12.0
-    assert model.parameter("riser_frequency[fbcp1]").default == 12.0
+    assert model.parameter("riser_period[fbcp1]").default == pytest.approx(1.0 / 12.0)
     fixed = spec.fixed_values(model)
     assert fixed["CdS[fbcp1,stage1]"] == pytest.approx(10.0 * FT**2)
     assert fixed["t_start[fbcp2,stage1]"] == pytest.approx(0.85)

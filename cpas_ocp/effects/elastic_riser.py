@@ -6,14 +6,24 @@ trailing canopy (the vehicle's drag direction; its slow rotation is
 neglected).  Its position along e, relative to the unstretched riser, is the
 stretch s (m), a state with its rate s' (m/s).  The riser force is
 
-    T = k_s s + c_s s'   (N),  k_s = m_p (2 pi f)^2,  c_s = 2 zeta m_p (2 pi f)
+    T = k_s s + c_s s'   (N),  k_s = m_p w^2,  c_s = 2 zeta m_p w,  w = 2 pi / P
 
 clipped smoothly at zero once the canopy has left the vehicle (a riser cannot
-push).  It is parameterised by the natural frequency f = ``riser_frequency[P]``
-(Hz) and damping ratio zeta = ``riser_damping_ratio[P]`` of the canopy's dry
-mass m_p on the riser (the air mass m_A lowers the actual frequency).  The
-bounds (f up to 25 Hz, zeta up to 1) keep the fastest mode within RK4's
+push).  It is parameterised by the natural period P = ``riser_period[P]`` (s)
+and damping ratio zeta = ``riser_damping_ratio[P]`` of the canopy's dry mass
+m_p on the riser (the air mass m_A lengthens the actual period).  The bounds
+(P down to 40 ms, i.e. 25 Hz; zeta up to 1) keep the fastest mode within RK4's
 stability on grids of 10 ms and finer.
+
+The period rather than the frequency is the decision variable because the
+rigid riser is its limit P -> 0, which the model approaches smoothly: the
+riser's static stretch grows as P^2 and the canopy's lag behind the vehicle
+as P, while in the frequency both bend as 1/f^2 and 1/f, flattest exactly
+where a confirming refit starts (the stiff null).  On `drogue` flown with
+6 Hz risers and fitted with rigid ones, the refit from the score step
+converged in the period (with the Levenberg term of
+`nlp_functions.ipopt_functions`) and stopped at its iteration cap in the
+frequency.
 
 Before the canopy's first stage starts, the pack rides in the vehicle: the
 link then also carries compression, and the switch from link to riser runs
@@ -57,6 +67,7 @@ if TYPE_CHECKING:
 DEPLOY_S = 0.05  # time over which the packed link becomes a tension-only riser (s)
 # Natural frequency (Hz; the upper end keeps RK4 stable on 10 ms grids) and damping ratio.
 FREQUENCY_BOUNDS_HZ = (0.5, 25.0)
+PERIOD_BOUNDS_S = (1.0 / FREQUENCY_BOUNDS_HZ[1], 1.0 / FREQUENCY_BOUNDS_HZ[0])
 DAMPING_BOUNDS = (0.02, 1.0)
 # A canopy whose observed start is this long after the phase begins is packed at the start (s).
 PACKED_MARGIN_S = 0.5
@@ -64,7 +75,8 @@ PACKED_MARGIN_S = 0.5
 
 @dataclass(frozen=True)
 class ElasticRiser(Effect):
-    """Spring-damper risers; `frequency` (Hz) and `damping_ratio` are the defaults."""
+    """Spring-damper risers; `frequency` (Hz; the period parameter's default is its
+    inverse) and `damping_ratio` are the defaults."""
 
     frequency: float = 8.0
     damping_ratio: float = 0.3
@@ -82,25 +94,25 @@ class ElasticRiser(Effect):
         out = []
         for c in test.parachutes:
             out += [
-                Parameter(param_name("riser_frequency", c.name), "Hz", self.frequency,
-                          *FREQUENCY_BOUNDS_HZ, scale=self.frequency,
-                          description="natural frequency of the dry canopy on its riser"),
+                Parameter(param_name("riser_period", c.name), "s", 1.0 / self.frequency,
+                          *PERIOD_BOUNDS_S, scale=1.0 / self.frequency,
+                          description="natural period of the dry canopy on its riser"),
                 Parameter(param_name("riser_damping_ratio", c.name), "1", self.damping_ratio,
                           *DAMPING_BOUNDS, description="damping ratio of the riser", scale=0.3),
             ]
         return out
 
     def null_values(self, test: FlightTest) -> dict[str, float]:
-        """The stiffest riser the model resolves: f and zeta at their upper bounds.
+        """The stiffest riser the model resolves: the shortest period, zeta at its upper bound.
 
-        A rigid riser is the limit f -> infinity, which no finite value reaches;
-        at 25 Hz, critically damped, the canopy follows the vehicle with a lag
+        A rigid riser is the limit P -> 0, which no positive value reaches;
+        at 40 ms (25 Hz), critically damped, the canopy follows the vehicle with a lag
         of 1 / (2 pi f) = 6 ms and no ringing, and the score test asks whether
         a softer or less damped riser explains the data better.
         """
         out = {}
         for c in test.parachutes:
-            out[param_name("riser_frequency", c.name)] = FREQUENCY_BOUNDS_HZ[1]
+            out[param_name("riser_period", c.name)] = PERIOD_BOUNDS_S[0]
             out[param_name("riser_damping_ratio", c.name)] = DAMPING_BOUNDS[1]
         return out
 
@@ -120,7 +132,7 @@ class ElasticRiser(Effect):
         out = {}
         for cell in test.sensors_of("load_cell"):
             chute = test.parachute(cell.parachute)
-            omega = 2.0 * math.pi * values[param_name("riser_frequency", chute.name)]
+            omega = 2.0 * math.pi / values[param_name("riser_period", chute.name)]
             tension = np.convolve(cell.data["tension"].to_numpy(), np.ones(5) / 5.0, mode="same")
             stretch = np.interp(t, cell.time, tension) / (chute.dry_mass * omega**2)
             out[param_name("stretch", chute.name)] = stretch
@@ -133,7 +145,7 @@ class ElasticRiser(Effect):
             ctx.separate_body(chute.name, self.name)
             s = ctx.x[param_name("stretch", chute.name)]
             s_dot = ctx.x[param_name("stretch_rate", chute.name)]
-            omega = 2.0 * math.pi * ctx.p[param_name("riser_frequency", chute.name)]
+            omega = 2.0 * math.pi / ctx.p[param_name("riser_period", chute.name)]
             zeta = ctx.p[param_name("riser_damping_ratio", chute.name)]
             linear = chute.dry_mass * omega * (omega * s + 2.0 * zeta * s_dot)
             pulled = tension_only(linear)
