@@ -64,11 +64,12 @@ def hidden_cases() -> dict[str, tuple[list[Effect], dict[str, float]]]:
     }
 
 
-def _timed(fn, log: list[tuple[str, float]], label):
+def _timed(fn, case: str, label):
+    """`fn`, printing its wall time and `label(args, out)` as each call ends."""
     def wrapper(*args, **kwargs):
         t0 = time.perf_counter()
         out = fn(*args, **kwargs)
-        log.append((label(args, out), time.perf_counter() - t0))
+        print(f"[{case}]   {time.perf_counter() - t0:7.1f} s  {label(args, out)}", flush=True)
         return out
     return wrapper
 
@@ -86,13 +87,12 @@ def run(case: str, seed: int, root: Path, null_point: str = "score") -> None:
     t_fit = time.perf_counter() - t_start
     print(f"[{case}] baseline fit: {fit.solver.iterations} iterations, {t_fit:.1f} s, "
           f"chi-square {fit.chi_square:.1f} ({fit.dof} dof)", flush=True)
-    log: list[tuple[str, float]] = []
     original_test, original_confirm = score_module.score_test, score_module.confirm
     score_module.score_test = _timed(
-        functools.partial(original_test, null_point=null_point), log,
+        functools.partial(original_test, null_point=null_point), case,
         lambda a, out: f"score {out.effect:18s} {out.note or 'null point reproduced'}")
     score_module.confirm = _timed(
-        original_confirm, log,
+        original_confirm, case,
         lambda a, out: f"refit {a[1].effect:18s} {a[1].refit_note}")
     diagnosis_module.confirm = score_module.confirm
     try:
@@ -102,8 +102,6 @@ def run(case: str, seed: int, root: Path, null_point: str = "score") -> None:
     finally:
         score_module.score_test, score_module.confirm = original_test, original_confirm
         diagnosis_module.confirm = original_confirm
-    for label, wall in log:
-        print(f"[{case}]   {wall:7.1f} s  {label}", flush=True)
     peak_gb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6
     print(f"[{case}] verdict: {diag.verdict()}")
     print(f"[{case}] diagnosis {t_diag:.1f} s, fit + diagnosis {t_fit + t_diag:.1f} s, "

@@ -1016,6 +1016,8 @@ class Estimator:
             status, success = STATISTICALLY_CONVERGED, True
         elif status == "User_Requested_Stop" and self._monitor.capped:
             status = "Maximum_Iterations_Exceeded"
+        elif status == "User_Requested_Stop" and self._monitor.diverged:
+            status = "Diverging_Iterates"
         stats = SolverStats(status, success, iterations, wall, objective, worst,
                             self._monitor.decrement if self._monitor.stopped else None,
                             "the offline reduction" if start is None else
@@ -1367,6 +1369,9 @@ class _Monitor(ca.Callback):
         self.left_at: np.ndarray | None = None  # where that has persisted
         self.stopped, self.decrement = False, None
         self.max_iter, self.capped = max_iter, False
+        self.diverged = False
+        if not done:
+            self._first_chi2: float | None = None  # the run's first iterate's
         self.point: np.ndarray | None = None  # where the statistical test ended the run
         self.bounds = bounds
         self.progress = progress and sys.stderr.isatty()
@@ -1423,6 +1428,11 @@ class _Monitor(ca.Callback):
         if self.left_at is not None:
             return [1]
         chi2 = 2.0 * float(arg[1])
+        if self._first_chi2 is None:
+            self._first_chi2 = chi2
+        if not chi2 <= DIVERGED_FACTOR * self._first_chi2:  # NaN too
+            self.diverged = True
+            return [1]
         if chi2 < self._best_chi2:
             g = np.asarray(arg[2]).ravel()
             if np.max(self._violations(g), initial=0.0) <= POLISH_CONSTRAINT_TOL:  # not NaN
@@ -1446,6 +1456,14 @@ class _Monitor(ca.Callback):
             # Still far: back off (3, 6, 12 iterations) while the estimate travels.
             self._gap = min(2 * self._gap, 12) if d > 10 * self._tol else 3
         return [1 if self.stopped else 0]
+
+
+# An accepted iterate whose chi-square exceeds the run's first by this factor (or is not a
+# number) ends the run as diverged.  Ipopt's watchdog accepts its trial steps on trust: on
+# `drogue` with added mass hidden, an elastic-riser refit's second trial step reached
+# chi-square 4e40 from 1.7e4, and the next iteration did not end in two minutes.  Trial
+# steps that came back had gone to 1e8 from 8.5e3.
+DIVERGED_FACTOR = 1e6
 
 
 def _violation(lin: Linearization) -> float:

@@ -226,3 +226,24 @@ def test_a_misspecified_fit_converges(tmp_path) -> None:
     assert fit.solver.chi2_decrement is not None and fit.solver.chi2_decrement < 0.01
     # The misspecification shows: chi-square well above its degrees of freedom.
     assert fit.chi_square > fit.dof + 5.0 * np.sqrt(2.0 * fit.dof)
+
+
+def test_a_run_whose_chi_square_explodes_stops_as_diverged() -> None:
+    """A watchdog's trial step may leave the physics (chi-square 1e40): the run ends there,
+    measured against its first iterate, and a new solve starts the count afresh."""
+    from cpas_ocp.estimation import DIVERGED_FACTOR
+    monitor = _Monitor(1, 1, np.abs, lambda z: None, None)
+
+    def iterate(chi2: float) -> int:
+        return int(monitor.eval([ca.DM(0.0), ca.DM(chi2 / 2.0), ca.DM(0.0), ca.DM(0.0),
+                                 ca.DM(0.0), ca.DM(0, 1)])[0])
+
+    monitor.reset(False, (np.full(1, -np.inf), np.full(1, np.inf)))
+    assert iterate(100.0) == 0
+    assert iterate(0.5 * DIVERGED_FACTOR * 100.0) == 0  # a far excursion may come back
+    assert not monitor.diverged
+    assert iterate(2.0 * DIVERGED_FACTOR * 100.0) == 1
+    assert monitor.diverged
+    monitor.reset(False, (np.full(1, -np.inf), np.full(1, np.inf)))
+    assert iterate(1e9) == 0 and not monitor.diverged
+    assert iterate(np.nan) == 1 and monitor.diverged
