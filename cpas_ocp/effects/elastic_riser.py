@@ -20,10 +20,11 @@ rigid riser is its limit P -> 0, which the model approaches smoothly: the
 riser's static stretch grows as P^2 and the canopy's lag behind the vehicle
 as P, while in the frequency both bend as 1/f^2 and 1/f, flattest exactly
 where a confirming refit starts (the stiff null).  On `drogue` flown with
-6 Hz risers and fitted with rigid ones, the refit from the score step
-converged in the period (with the Levenberg term of
-`nlp_functions.ipopt_functions`) and stopped at its iteration cap in the
-frequency.
+6 Hz risers and fitted with rigid ones, the refit from the score test's
+linearised estimates converged in the period (49 iterations, with the
+Levenberg term of `nlp_functions.ipopt_functions`) and stopped at its
+150-iteration cap in the frequency.  From other starts it still may not
+converge (see the README's diagnosis figures).
 
 Before the canopy's first stage starts, the pack rides in the vehicle: the
 link then also carries compression, and the switch from link to riser runs
@@ -107,7 +108,7 @@ class ElasticRiser(Effect):
 
         A rigid riser is the limit P -> 0, which no positive value reaches;
         at 40 ms (25 Hz), critically damped, the canopy follows the vehicle with a lag
-        of 1 / (2 pi f) = 6 ms and no ringing, and the score test asks whether
+        of P / (2 pi) = 6 ms and no ringing, and the score test asks whether
         a softer or less damped riser explains the data better.
         """
         out = {}
