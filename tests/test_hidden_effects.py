@@ -232,3 +232,23 @@ def test_the_verdict_names_a_bounded_effect_and_warns_of_unconverged_rivals() ->
     assert verdict.startswith("missing effect: added_mass (likelihood ratio 1411"), verdict
     assert ("the refit of elastic_riser did not converge (likelihood ratio >= 476.0), so it "
             "may explain more") in verdict
+
+
+def test_a_refit_retried_from_the_effects_defaults_reaches_the_same_optimum(hidden) -> None:
+    """The second try of a confirming refit starts at the effect's defaults (8 Hz, zeta 0.3
+    for an elastic riser) and ends where the refit from the score step ended; it is not
+    made where the defaults are the start already tried."""
+    from cpas_ocp.score_test import RETRY_MAX_ITER, _retry_from_defaults
+
+    diag, _ = hidden("elastic_riser")
+    result = diag.explanation
+    assert result is not None and result.effect == "elastic_riser" and result.refitted
+    est, first = result.refitted
+    model = result.spec.model(diag.fit.test)
+    elsewhere = {n: result.refit_estimate[n] for n in result.parameters}
+    retried, note = _retry_from_defaults(est, diag.fit, model, result, elsewhere, False)
+    assert retried is not None, note
+    assert retried.solver.iterations <= RETRY_MAX_ITER
+    assert abs(retried.chi_square - first.chi_square) < 0.1
+    defaults = {n: model.parameter(n).default for n in result.parameters}
+    assert _retry_from_defaults(est, diag.fit, model, result, defaults, False) == (None, "")
