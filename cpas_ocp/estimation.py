@@ -1370,18 +1370,18 @@ class _Monitor(ca.Callback):
         self.stopped, self.decrement = False, None
         self.max_iter, self.capped = max_iter, False
         self.diverged = False
-        if not done:
-            self._first_chi2: float | None = None  # the run's first iterate's
         self.point: np.ndarray | None = None  # where the statistical test ended the run
         self.bounds = bounds
         self.progress = progress and sys.stderr.isatty()
-        if self._damping is not None and not done:
+        if done:
+            return  # a widening restart goes on with what the run had gathered
+        if self._damping is not None:
             self._damping.reset()
-        if not done:
-            # The nearly feasible iterate with the lowest chi-square so far (constraints
-            # within POLISH_CONSTRAINT_TOL): an unconverged run's best witness.
-            self.best: np.ndarray | None = None
-            self._best_chi2 = np.inf
+        self._first_chi2: float | None = None  # the run's first iterate's (divergence)
+        # The nearly feasible iterate with the lowest chi-square so far (constraints
+        # within POLISH_CONSTRAINT_TOL): an unconverged run's best witness.
+        self.best: np.ndarray | None = None
+        self._best_chi2 = np.inf
 
     def finish(self) -> None:
         if self.progress and self._k + self._done:

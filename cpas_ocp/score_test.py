@@ -293,8 +293,7 @@ def confirm(fit: Fit, result: ScoreTest, progress: bool = False) -> None:
     est, z0, (chi2, violation) = nested_start(fit, result.spec,
                                               [*fit.free, *result.parameters], start,
                                               CONFIRM_MAX_ITER)
-    feasible = np.isfinite(chi2) and violation <= POLISH_CONSTRAINT_TOL
-    z0 = _start_on_step(est, fit, null, target, (chi2 if feasible else np.inf, z0))
+    z0 = _start_on_step(est, fit, null, target, (_start_chi2(chi2, violation), z0))
     dof = len(result.parameters) - len(result.undetermined)
     try:
         refitted = est.solve(progress=progress, start=z0)
@@ -340,7 +339,7 @@ def _retry_from_defaults(est: Estimator, fit: Fit, model: Model, result: ScoreTe
     if all(np.isclose(defaults[n], tried[n]) for n in defaults):
         return None, ""
     z0, (chi2, violation) = est.extension_start(fit, defaults)
-    if not (np.isfinite(chi2) and violation <= POLISH_CONSTRAINT_TOL):
+    if _start_chi2(chi2, violation) == np.inf:
         return None, ""
     try:
         return est.solve(progress=progress, start=z0, max_iter=RETRY_MAX_ITER), ""
@@ -349,9 +348,15 @@ def _retry_from_defaults(est: Estimator, fit: Fit, model: Model, result: ScoreTe
                       f"after {exc.iterations} iterations)")
 
 
-# Fractions of the score test's step at which a confirming refit's start is tried when
-# the linearised estimates make a start far from feasible.
+# Fractions of the score test's step at which a confirming refit's start is tried beside
+# the linearised estimates.
 START_FRACTIONS = (0.5, 0.25, 0.125)
+
+
+def _start_chi2(chi2: float, violation: float) -> float:
+    """A refit start's chi-square where the start is nearly feasible (its largest scaled
+    gap within POLISH_CONSTRAINT_TOL) and chi-square a number; inf otherwise."""
+    return chi2 if np.isfinite(chi2) and violation <= POLISH_CONSTRAINT_TOL else np.inf
 
 
 def _start_on_step(est: Estimator, fit: Fit, null: dict[str, float],
@@ -381,7 +386,7 @@ def _start_on_step(est: Estimator, fit: Fit, null: dict[str, float],
     for a in START_FRACTIONS:
         values = {n: null[n] + a * (target[n] - null[n]) for n in target}
         z, (chi2, violation) = est.extension_start(fit, values)
-        if violation <= POLISH_CONSTRAINT_TOL and chi2 < best[0]:  # NaN never wins
+        if _start_chi2(chi2, violation) < best[0]:
             best = (chi2, z)
     return best[1]
 
