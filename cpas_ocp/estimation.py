@@ -985,7 +985,6 @@ class Estimator:
         iterations = 0
         multipliers: dict[str, ca.DM] = {}
         descended: DescentEnd | None = None
-        left: np.ndarray | None = None
         stall = not bounds  # a what-if's sensitivities need Ipopt's own multipliers
         while True:
             self._monitor.reset(progress, (lbz, ubz), cap - iterations, iterations, stall)
@@ -996,6 +995,7 @@ class Estimator:
             z0 = np.asarray(sol["x"]).ravel()
             multipliers = {"lam_x0": sol["lam_x"], "lam_g0": sol["lam_g"]}
             barrier = float(st["iterations"]["mu"][-1])
+            left = self._monitor.left_at
             if self._monitor.stalled:
                 descended = self._descend(z0, (lbz, ubz), cap - iterations)
                 iterations += descended.steps if descended is not None else 0
@@ -1008,7 +1008,6 @@ class Estimator:
                 stall = False
                 self._make_solver(barrier)
                 continue
-            left = self._monitor.left_at
             if left is None and st["success"] and self._windows.active \
                     and self._windows.outside_at(self._jacobian_values(z0)):
                 # What Ipopt converged on must hold with every entry: a parameter that

@@ -252,3 +252,36 @@ def test_a_refit_retried_from_the_effects_defaults_reaches_the_same_optimum(hidd
     assert abs(retried.chi_square - first.chi_square) < 0.1
     defaults = {n: model.parameter(n).default for n in result.parameters}
     assert _retry_from_defaults(est, diag.fit, model, result, defaults, False) == (None, "")
+
+
+def test_a_refit_that_ends_above_the_fit_is_tried_again_from_the_defaults(
+        hidden, monkeypatch) -> None:
+    """A refit that converges above the fit it extends has found a stationary point, not the
+    extended model's optimum: the second try from the effect's defaults is made and the
+    lower kept.  The first refit's outcome is made to lie above the fit by doubling its
+    residuals (its chi-square four times the refit's, well above the fit's)."""
+    from cpas_ocp.score_test import confirm
+
+    diag, _ = hidden("elastic_riser")
+    found = diag.explanation
+    assert found is not None and found.refit is not None
+    result = dataclasses.replace(found, refit=None, refit_estimate={}, refitted=None,
+                                 refit_note="")
+    solve = Estimator.solve
+    calls: list[bool] = []
+
+    def above_first(self, progress=False, start=None, bounds=None, max_iter=None):
+        fit = solve(self, progress, start, bounds, max_iter)
+        calls.append(True)
+        if len(calls) == 1:
+            doubled = [dataclasses.replace(r, measured=r.model + 2.0 * (r.measured - r.model))
+                       for r in fit.residuals]
+            fit = dataclasses.replace(fit, residuals=doubled)
+        return fit
+
+    monkeypatch.setattr(Estimator, "solve", above_first)
+    confirm(diag.fit, result)
+    assert len(calls) == 2
+    assert "ended above the fit" in result.refit_note, result.refit_note
+    assert result.refit is not None
+    assert abs(result.refit.statistic - found.refit.statistic) < 0.1
