@@ -92,8 +92,12 @@ class AltusLog:
 def _header(path: Path) -> list[str]:
     """Column names of the first line without its '#', the second 'altitude' renamed
     'gps_altitude' (and any later repeat suffixed with its position)."""
-    with path.open(newline="") as f:
-        first = next(csv.reader(f), None)
+    try:
+        with path.open(newline="", encoding="utf-8-sig") as f:
+            first = next(csv.reader(f), None)
+    except UnicodeDecodeError as exc:
+        raise InputError(str(path), f"byte {exc.start}",
+                         "an AltOS CSV export (UTF-8 text; this file is not)") from None
     if not first or not first[0].startswith("#"):
         raise InputError(str(path), "line 1", "an AltOS CSV header row starting with '#'")
     names = [c.strip() for c in first]
@@ -121,7 +125,7 @@ def read_altus_log(path: str | Path) -> AltusLog:
     names = _header(path)
     try:
         raw = pd.read_csv(path, skiprows=1, header=None, names=names, skipinitialspace=True,
-                          low_memory=False)
+                          low_memory=False, encoding="utf-8-sig")
     except (pd.errors.ParserError, UnicodeDecodeError) as exc:
         raise InputError(str(path), "(csv)", f"comma-separated AltOS rows ({exc})") from None
     for column in REQUIRED:

@@ -19,18 +19,28 @@
                                               with the nominal drag areas and the measured descent
     cpas-ocp demo [--out DIR]                 simulate the built-in Drogue test and reconstruct it
 
-Exit codes: 0 success, 2 bad input (one line naming file, field and
-expectation), 3 the solver did not converge (status and iteration count).
+Exit codes: 0 success; 1 an internal error (one line, the traceback in a log
+file); 2 bad input (one line naming file, field and expectation); 3 the solver
+did not converge (status and iteration count); 130 and 143 interrupted by
+SIGINT (Ctrl-C) or SIGTERM, with nothing written.
 """
 
 from __future__ import annotations
 
 import argparse
+import math
+import os
+import signal
 import sys
+import time
+import traceback
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from . import interrupts
 from .errors import InputError, SolverFailure
+from .output_folder import check_output
 
 if TYPE_CHECKING:
     from .effects.registry import EffectType
@@ -42,9 +52,18 @@ if TYPE_CHECKING:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run one command; every way it can end is an exit code and at most one line on stderr
+    (the module's docstring lists them)."""
     parser = _parser()
-    args = parser.parse_args(argv)
     try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # --help (0), or a usage error already printed as one line (2)
+        return int(exc.code or 0)
+    previous = {sig: signal.getsignal(sig) for sig in interrupts.SIGNALS}
+    interrupts.handle_signals()
+    try:
+        if isinstance(getattr(args, "out", None), Path):
+            check_output(args.out)  # before the work, not after it
         return int(args.run(args) or 0)
     except InputError as exc:
         print(f"error: {exc}", file=sys.stderr)
@@ -52,10 +71,72 @@ def main(argv: list[str] | None = None) -> int:
     except SolverFailure as exc:
         print(f"error: {exc}; no result written", file=sys.stderr)
         return 3
+    except interrupts.Interrupted as exc:
+        print(f"interrupted ({exc}); nothing written", file=sys.stderr)
+        return exc.exit_code
+    except KeyboardInterrupt:
+        print("interrupted (SIGINT); nothing written", file=sys.stderr)
+        return 128 + signal.SIGINT
+    except SystemExit as exc:  # a plug-in or library code ending the process mid-command
+        print(f"error: code run by the command called sys.exit({exc.code!r}) before it "
+              f"finished (a plug-in?)", file=sys.stderr)
+        return 1
+    except Exception as exc:  # the one boundary for errors
+        return _internal_error(exc)
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
+def _internal_error(exc: Exception) -> int:
+    """Report an error that is the tool's own, not the user's: one line on stderr, the
+    traceback in a log file beside the compile cache; exit code 1."""
+    from .compiled import cache_folder
+    line = f"{type(exc).__name__}: {exc}".splitlines()[0][:300]
+    log = cache_folder() / "crash" / f"{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}.log"
+    try:
+        log.parent.mkdir(parents=True, exist_ok=True)
+        log.write_text("".join(traceback.format_exception(exc)))
+        where = f"; the traceback is in {log}"
+    except OSError:
+        where = ""
+    print(f"internal error: {line}{where}", file=sys.stderr)
+    return 1
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with its errors as one line (no usage block) and exit code 2."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        self.exit(2, f"error: {self.prog}: {message}\n")
+
+
+def _ranged(kind: type, low: float, high: float = math.inf, low_open: bool = False,
+            high_open: bool = False) -> Callable[[str], float]:
+    """An argparse type: a finite number of `kind` within [low, high] (ends open as asked)."""
+    what = (f"a{'n integer' if kind is int else ' number'} "
+            f"{'>' if low_open else '>='} {low:g}"
+            + (f" and {'<' if high_open else '<='} {high:g}" if high < math.inf else ""))
+
+    def parse(text: str) -> float:
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{what}; got {text!r}") from None
+        if not (math.isfinite(value) and (value > low if low_open else value >= low)
+                and (value < high if high_open else value <= high)):
+            raise argparse.ArgumentTypeError(f"{what}; got {text!r}")
+        return value
+
+    return parse
+
+
+SEED = _ranged(int, 0)
+COUNT = _ranged(int, 1)
 
 
 def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="cpas-ocp", description=__doc__.split("\n\n")[0])
+    p = _Parser(prog="cpas-ocp", description=__doc__.split("\n\n")[0])
     sub = p.add_subparsers(required=True, metavar="COMMAND")
 
     s = sub.add_parser("problems", help="list the built-in test phases")
@@ -68,7 +149,7 @@ def _parser() -> argparse.ArgumentParser:
     s = sub.add_parser("simulate", help="simulate a built-in problem into a test folder")
     s.add_argument("name")
     s.add_argument("--out", required=True, type=Path)
-    s.add_argument("--seed", required=True, type=int)
+    s.add_argument("--seed", required=True, type=SEED)
     s.set_defaults(run=_simulate)
 
     s = sub.add_parser("reduce", help="offline drag-area reduction and the initial guess")
@@ -82,9 +163,10 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--out", required=True, type=Path)
     s.add_argument("--profile", action="append", default=[], metavar="NAME",
                    help="also profile the likelihood of this free parameter (repeatable)")
-    s.add_argument("--profile-span", type=float, default=3.0, metavar="SIGMAS",
+    s.add_argument("--profile-span", type=_ranged(float, 0.0, low_open=True), default=3.0,
+                   metavar="SIGMAS",
                    help="profile over the estimate -+ this many sigma (default 3)")
-    s.add_argument("--profile-points", type=int, default=13, metavar="N",
+    s.add_argument("--profile-points", type=_ranged(int, 2), default=13, metavar="N",
                    help="values per profile (default 13)")
     _model_option(s)
     _solver_options(s)
@@ -105,9 +187,10 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("test_dir", type=Path)
     s.add_argument("--out", required=True, type=Path)
     _plugin_option(s, "also test the effects this Python file defines (repeatable)")
-    s.add_argument("--confirm", type=int, default=3, metavar="N",
+    s.add_argument("--confirm", type=_ranged(int, 0), default=3, metavar="N",
                    help="refit with at most N significant effects to confirm them (default 3)")
-    s.add_argument("--alpha", type=float, default=0.01,
+    s.add_argument("--alpha", type=_ranged(float, 0.0, 1.0, low_open=True, high_open=True),
+                   default=0.01,
                    help="family-wise significance level (default 0.01)")
     _model_option(s)
     _solver_options(s)
@@ -134,8 +217,8 @@ def _parser() -> argparse.ArgumentParser:
                                            "a campaign's parameter table")
     s.add_argument("campaign", type=Path, help="a campaign folder or its parameters table")
     s.add_argument("--out", required=True, type=Path)
-    s.add_argument("--cases", type=int, default=200_000, help="cases per canopy (200,000)")
-    s.add_argument("--seed", type=int, required=True)
+    s.add_argument("--cases", type=COUNT, default=200_000, help="cases per canopy (200,000)")
+    s.add_argument("--seed", type=SEED, required=True)
     s.set_defaults(run=_dispersions)
 
     s = sub.add_parser("montecarlo", help="reconstruct a test folder and fly the dispersed "
@@ -144,7 +227,7 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--cases", required=True, type=Path, metavar="DISPERSIONS_DIR",
                    help="a cpas-ocp dispersions folder (cases_<type>_<stage>.parquet)")
     s.add_argument("--out", required=True, type=Path)
-    s.add_argument("--limit", type=int, default=None, metavar="N",
+    s.add_argument("--limit", type=COUNT, default=None, metavar="N",
                    help="fly the first N cases of each file (default: all)")
     _parallel_options(s)
     s.set_defaults(run=_montecarlo)
@@ -170,7 +253,7 @@ def _parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("demo", help="simulate the built-in Drogue test and reconstruct it")
     s.add_argument("--out", type=Path, default=Path("cpas-demo"))
-    s.add_argument("--seed", type=int, default=1)
+    s.add_argument("--seed", type=SEED, default=1)
     _solver_options(s)
     s.set_defaults(run=_demo)
     return p
@@ -191,20 +274,13 @@ def _plugins(args: argparse.Namespace) -> dict[str, EffectType]:
 
 
 def _parallel_options(s: argparse.ArgumentParser) -> None:
-    s.add_argument("--workers", type=int, default=2, help="local processes (default 2)")
+    s.add_argument("--workers", type=COUNT, default=2, help="local processes (default 2)")
     s.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="run on this Dask scheduler (e.g. tcp://host:8786) instead")
 
 
-def _at_least_one(option: str, value: int) -> None:
-    """InputError naming the command-line option when a count is below 1."""
-    if value < 1:
-        raise InputError("(command line)", option, f"at least 1; got {value}")
-
-
 def _where(args: argparse.Namespace) -> str:
-    """Where --workers and --scheduler send the tasks, in words; InputError below 1 worker."""
-    _at_least_one("--workers", args.workers)
+    """Where --workers and --scheduler send the tasks, in words."""
     return (f"Dask scheduler {args.scheduler}" if args.scheduler
             else f"{args.workers} local processes")
 
@@ -221,13 +297,14 @@ def _spec(test: FlightTest, model_file: Path | None) -> ModelSpec:
 
 
 def _solver_options(s: argparse.ArgumentParser) -> None:
+    from .estimation import MIN_GRID_STEP_S
     from .uncertainty import HESSIANS
-    s.add_argument("--grid-step", type=float, default=None,
+    s.add_argument("--grid-step", type=_ranged(float, MIN_GRID_STEP_S), default=None,
                    help="force a uniform shooting interval [s] (default: chosen from the "
                         "dynamics, the fastest sensor's sampling interval where the motion "
                         "changes fast)")
     s.add_argument("--verbose", action="store_true", help="show Ipopt's iteration log")
-    s.add_argument("--max-iter", type=int, default=500, metavar="N",
+    s.add_argument("--max-iter", type=COUNT, default=500, metavar="N",
                    help="stop the solver after N iterations (default 500); a run stopped "
                         "there writes a NOT CONVERGED failure report, not a result")
     s.add_argument("--hessian", choices=HESSIANS, default="gauss-newton",
@@ -299,7 +376,6 @@ def _diagnose(args: argparse.Namespace) -> int:
     from .diagnosis import diagnose
     from .discrepancy_report import write_diagnosis
     from .flight_test import load_test
-    _check_alpha(args.alpha)
     test = load_test(args.test_dir)
     plugins = _plugins(args)
     spec = _spec(test, args.model)
@@ -313,11 +389,6 @@ def _diagnose(args: argparse.Namespace) -> int:
     print(diag.text())
     print(f"\ndiagnosis written to {out} (diagnosis.md, diagnosis.json, windows.csv, figures)")
     return 0
-
-
-def _check_alpha(alpha: float) -> None:
-    if not 0.0 < alpha < 1.0:
-        raise InputError("(command line)", "--alpha", f"a level in (0, 1); got {alpha:g}")
 
 
 def _compare(args: argparse.Namespace) -> int:
@@ -372,7 +443,6 @@ def _dispersions(args: argparse.Namespace) -> int:
         read_stage_table,
         write_dispersions,
     )
-    _at_least_one("--cases", args.cases)
     table = read_parameter_table(args.campaign)
     stages = read_stage_table(args.campaign)
     models, skipped = dispersion_models(table)
@@ -406,8 +476,6 @@ def _montecarlo(args: argparse.Namespace) -> int:
         write_monte_carlo,
     )
     where = _where(args)
-    if args.limit is not None:
-        _at_least_one("--limit", args.limit)
     test = load_test(args.test_dir)
     stages = match_cases(test, args.cases, args.limit)
     with atomic_folder(args.out, MARKER) as tmp:
@@ -482,6 +550,9 @@ def _demo(args: argparse.Namespace) -> int:
     from .problems import load_problem
     from .simulate import simulate_problem
     test_dir = args.out / "test"
+    if test_dir.is_symlink() or (test_dir.exists() and not (test_dir / "truth.json").is_file()):
+        raise InputError(str(test_dir), "(folder)", "no such folder, or a test simulated by an "
+                         "earlier demo (holding truth.json) to replace")
     if test_dir.exists():
         shutil.rmtree(test_dir)
     print(f"simulating the built-in 'drogue' problem (seed {args.seed}) into {test_dir}")
@@ -526,8 +597,6 @@ def _estimator(test: FlightTest, args: argparse.Namespace, spec: ModelSpec) -> E
     """The NLP of a test phase with the command line's solver options (built and announced)."""
     from .estimation import Estimator, Settings
     from .shooting_grid import grid_text
-    if args.max_iter < 1:
-        raise InputError("(command line)", "--max-iter", f"at least 1; got {args.max_iter}")
     if args.grid_step is not None and not 0.0 < args.grid_step < test.t_end - test.t_start:
         raise InputError("(command line)", "--grid-step",
                          f"a step in seconds, positive and shorter than the phase; "

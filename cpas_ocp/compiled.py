@@ -95,8 +95,15 @@ def _compile(functions: list[ca.Function], cc: str) -> list[ca.Function]:
                                           stdout=subprocess.DEVNULL, stderr=subprocess.PIPE),
                          partial, lib))
         # Wait for every job before judging any, so none is still writing into the
-        # temporary folder when a failure removes it.
-        errors = [proc.communicate()[1] for proc, _, _ in jobs]
+        # temporary folder when a failure removes it.  Interrupted (Ctrl-C, SIGTERM, any
+        # error), the compilers die with their parent.
+        try:
+            errors = [proc.communicate()[1] for proc, _, _ in jobs]
+        except BaseException:
+            for proc, _, _ in jobs:
+                proc.kill()
+                proc.wait()
+            raise
         for (proc, partial, lib), err in zip(jobs, errors, strict=True):
             if proc.returncode != 0:
                 raise RuntimeError(f"compiling {lib.name} failed: {err.decode()[-500:]}")

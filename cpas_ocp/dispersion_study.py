@@ -174,7 +174,11 @@ def read_stage_table(campaign: str | Path) -> pd.DataFrame | None:
     path = (campaign if campaign.is_dir() else campaign.parent) / "stages.csv"
     if not path.is_file():
         return None
-    stages = pd.read_csv(path, keep_default_na=False, na_values=[""])
+    try:
+        stages = pd.read_csv(path, keep_default_na=False, na_values=[""], encoding="utf-8-sig")
+    except (ValueError, UnicodeDecodeError) as exc:  # pandas' parse errors too
+        raise InputError(str(path), "(file)", f"a campaign's stages table "
+                         f"({type(exc).__name__}: {str(exc).splitlines()[0][:200]})") from None
     missing = [c for c in STAGE_COLUMNS if c not in stages.columns]
     if missing:
         raise InputError(str(path), ", ".join(missing), "the columns of a campaign's stages")
@@ -192,8 +196,12 @@ def read_parameter_table(path: str | Path) -> pd.DataFrame:
                      if (path / f).is_file()), path / "parameters.parquet")
     if not path.is_file():
         raise InputError(str(path), "(file)", "a campaign's parameter table (cpas-ocp campaign)")
-    table = pd.read_parquet(path) if path.suffix == ".parquet" else pd.read_csv(
-        path, keep_default_na=False, na_values=[""])
+    try:
+        table = pd.read_parquet(path) if path.suffix == ".parquet" else pd.read_csv(
+            path, keep_default_na=False, na_values=[""], encoding="utf-8-sig")
+    except (OSError, ValueError, UnicodeDecodeError) as exc:  # pandas' parse errors too
+        raise InputError(str(path), "(file)", f"a campaign's parameter table "
+                         f"({type(exc).__name__}: {str(exc).splitlines()[0][:200]})") from None
     if "line_length" not in table.columns:  # tables written before the column existed
         table["line_length"] = np.nan
     missing = [c for c in COLUMNS if c not in table.columns]

@@ -37,6 +37,7 @@ from dataclasses import dataclass, field, replace
 import casadi as ca
 import numpy as np
 
+from . import interrupts
 from .action_windows import ActionWindows
 from .compiled import compile_functions
 from .effects import Effect
@@ -988,8 +989,9 @@ class Estimator:
         stall = not bounds  # a what-if's sensitivities need Ipopt's own multipliers
         while True:
             self._monitor.reset(progress, (lbz, ubz), cap - iterations, iterations, stall)
-            sol = self._solver(x0=z0, lbx=lbz, ubx=ubz, lbg=self._lbg, ubg=self._ubg,
-                               **multipliers)
+            with interrupts.deferred():  # a signal stops Ipopt at its next iteration
+                sol = self._solver(x0=z0, lbx=lbz, ubx=ubz, lbg=self._lbg, ubg=self._ubg,
+                                   **multipliers)
             st = self._solver.stats()
             iterations += int(st["iter_count"])
             z0 = np.asarray(sol["x"]).ravel()
@@ -1488,6 +1490,8 @@ class _Monitor(ca.Callback):
 
     def eval(self, arg: list) -> list:
         self._k += 1
+        if interrupts.pending():
+            return [1]  # `interrupts.deferred` raises once Ipopt has returned
         if self.max_iter is not None and self._k > self.max_iter:
             self.capped = True  # called at iterations 0, 1, ...: this is iteration max_iter
             return [1]

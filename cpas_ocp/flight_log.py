@@ -70,7 +70,7 @@ from scipy.signal import savgol_filter
 from .altus_metrum import AltusLog
 from .atmosphere import ISA_LAPSE_K_M, R_AIR, SiteAtmosphere, pressure_altitude
 from .errors import InputError
-from .flight_test import FORMAT, MANIFEST, load_test, validate_block
+from .flight_test import FORMAT, MANIFEST, load_test, read_json, validate_block
 from .problems import problem_names
 from .units import FACTORS, G0
 
@@ -126,13 +126,7 @@ def load_card(name_or_path: str) -> FlightCard:
     """A built-in flight card by problem name, or a card file."""
     path = Path(name_or_path)
     if path.suffix == ".json":
-        if not path.is_file():
-            raise InputError(str(path), "(file)", "an existing flight-card JSON file")
-        try:
-            raw = json.loads(path.read_text())
-        except json.JSONDecodeError as exc:
-            raise InputError(str(path), f"line {exc.lineno}", f"valid JSON ({exc.msg})") from None
-        return card_from_dict(raw, str(path))
+        return card_from_dict(read_json(path, "an existing flight-card JSON file"), str(path))
     names = problem_names("flight_log")
     if name_or_path not in names:
         raise InputError("flight card", "name", f"a card file (.json) or one of "

@@ -225,18 +225,95 @@ def validate_manifest(manifest: Any, file: str = MANIFEST) -> None:
     validate_block(manifest, "manifest.schema.json", file)
 
 
+# A canopy's deployment events in the order they happen; the Main-bag events of a Pilot.
+DEPLOYMENT_ORDER = ("mortar_fire", "line_stretch", "bag_strip")
+MAIN_BAG_ORDER = ("main_bag_lift", "main_bag_strip")
+# Events out of order by more than this many of their combined sigmas are refused.
+EVENT_ORDER_SIGMAS = 3.0
+
+
+def _check_events(mfile: str, events: list[Event], by_name: dict[str, Parachute]) -> None:
+    """InputError for an event given twice, or out of the order the physics fixes (beyond
+    EVENT_ORDER_SIGMAS of the two events' combined sigma).
+
+    Per canopy: mortar fire, line stretch, bag strip; every disreef after them,
+    in the order of the stages it opens into; a stage's full open after its
+    start (the deployment, or the disreef into it); a Pilot's Main-bag lift
+    before the Main-bag strip.  A disreef before its own mortar fire made the
+    fit run 500 iterations for 9 minutes and fail; a duplicate was silently
+    dropped.
+    """
+    seen: dict[tuple[str, str, str | None], int] = {}
+    for i, e in enumerate(events):
+        key = (e.name, e.parachute, e.stage)
+        if key in seen:
+            raise InputError(mfile, f"events[{i}]", f"one {e.name} event per canopy and stage; "
+                             f"events[{seen[key]}] is the same event")
+        seen[key] = i
+
+    def rank(e: Event) -> tuple[int, int] | None:
+        """Position in the canopy's sequence: (stage step, order within it)."""
+        if e.name in DEPLOYMENT_ORDER:
+            return 0, DEPLOYMENT_ORDER.index(e.name)
+        stages = by_name[e.parachute].stages
+        step = stages.index(e.stage) if e.stage in stages else 0
+        if e.name == "disreef":
+            return step, len(DEPLOYMENT_ORDER)
+        if e.name == "full_open":
+            return step, len(DEPLOYMENT_ORDER) + 1
+        return None  # the Main-bag events are a sequence of their own
+
+    for i, a in enumerate(events):
+        for j, b in enumerate(events):
+            if a.parachute != b.parachute or i == j:
+                continue
+            ra, rb = rank(a), rank(b)
+            if ra is not None and rb is not None:
+                before = ra < rb
+            else:
+                before = a.name in MAIN_BAG_ORDER and b.name in MAIN_BAG_ORDER \
+                    and MAIN_BAG_ORDER.index(a.name) < MAIN_BAG_ORDER.index(b.name)
+            slack = EVENT_ORDER_SIGMAS * float(np.hypot(a.sigma, b.sigma))
+            if before and b.time < a.time - slack:
+                what = f"{b.name}{f' ({b.stage})' if b.stage else ''} of {b.parachute}"
+                raise InputError(mfile, f"events[{j}].time", f"{what} at {b.time:.3f} s after "
+                                 f"events[{i}] ({a.name} at {a.time:.3f} s): the events are "
+                                 "out of order")
+
+
 def _si(quantity: dict[str, Any], dimension: str) -> float:
     return float(quantity["value"]) * FACTORS[dimension][quantity["unit"]]
 
 
-def read_json(path: Path, missing: str) -> Any:
-    """The JSON content of `path`; InputError with `missing` if absent, the line if invalid."""
+def read_text(path: Path, missing: str) -> str:
+    """The text of `path` as UTF-8 (a leading byte-order mark dropped); InputError with
+    `missing` if absent, and naming the byte where it is not UTF-8 text."""
     if not path.is_file():
         raise InputError(str(path), "(file)", missing)
     try:
-        return json.loads(path.read_text())
+        return path.read_text(encoding="utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise InputError(str(path), f"byte {exc.start}",
+                         "UTF-8 text (this file is binary or in another encoding)") from None
+
+
+def _no_constant(name: str) -> float:
+    raise ValueError(f"{name} is not a JSON number; write a finite number")
+
+
+def read_json(path: Path, missing: str) -> Any:
+    """The JSON content of `path`; InputError with `missing` if absent, the line if invalid.
+
+    JSON has no NaN or Infinity: Python's reader accepts those literals, and a
+    NaN that reached the model would surface as a solver failure minutes
+    later, so they are refused here."""
+    text = read_text(path, missing)
+    try:
+        return json.loads(text, parse_constant=_no_constant)
     except json.JSONDecodeError as exc:
         raise InputError(str(path), f"line {exc.lineno}", f"valid JSON ({exc.msg})") from None
+    except ValueError as exc:  # a NaN or Infinity literal
+        raise InputError(str(path), "(value)", str(exc)) from None
 
 
 def load_test(folder: str | Path) -> FlightTest:
@@ -303,6 +380,7 @@ def test_from_manifest(manifest: dict[str, Any], folder: Path,
             raise InputError(mfile, f"{where}.time", f"{t:.3f} s lies outside the data "
                              f"[{t_start:.3f}, {t_end:.3f}] s")
         events.append(Event(e["name"], e["parachute"], stage, t, _si(e["sigma"], "time")))
+    _check_events(mfile, events, by_name)
 
     return FlightTest(
         name=manifest["name"], path=folder, vehicle=vehicle, parachutes=tuple(parachutes),
@@ -370,7 +448,7 @@ def _read_columns(path: Path, units: dict[str, str], dimensions: dict[str, str],
     if not path.is_file():
         raise InputError(file, "(file)", f"{what} must exist")
     try:
-        raw = pd.read_csv(path)
+        raw = pd.read_csv(path, encoding="utf-8-sig")
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
         raise InputError(file, "(csv)", f"a CSV table with a header row ({exc})") from None
     out = {}

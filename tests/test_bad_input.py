@@ -36,6 +36,14 @@ def _swap_times(d: pd.DataFrame) -> pd.DataFrame:
     return d
 
 
+def _disreef_first(m: dict) -> None:
+    """Move the first disreef to 0.5 s before its canopy's mortar fire."""
+    disreef = next(e for e in m["events"] if e["name"] == "disreef")
+    fire = next(e for e in m["events"] if e["name"] == "mortar_fire"
+                and e["parachute"] == disreef["parachute"])
+    disreef["time"] = {**disreef["time"], "value": fire["time"]["value"] - 0.5}
+
+
 def _set(path: list, value) -> Callable[[dict], None]:
     def change(m: dict) -> None:
         node = m
@@ -56,6 +64,18 @@ CASES = {
                       "manifest.json", "vehicle.mass"),
     "event outside the data": (lambda f: _manifest(f, _set(["events", 0, "time", "value"], 99.0)),
                                "manifest.json", "events[0].time"),
+    "event given twice": (lambda f: _manifest(f, lambda m: m["events"].append(m["events"][0])),
+                          "manifest.json", "is the same event"),
+    "disreef before its mortar fire": (lambda f: _manifest(f, _disreef_first), "manifest.json",
+                                       "out of order"),
+    "binary manifest": (lambda f: (f / "manifest.json").write_bytes(b"\x89PNG\r\n\x1a\n\xff\x00"),
+                        "manifest.json", "byte 0"),
+    "UTF-16 manifest": (lambda f: (f / "manifest.json").write_bytes(
+        (f / "manifest.json").read_text().encode("utf-16")), "manifest.json", "byte 0"),
+    "NaN literal": (lambda f: _manifest(f, _set(["vehicle", "mass", "value"], float("nan"))),
+                    "manifest.json", "NaN"),
+    "Infinity literal": (lambda f: _manifest(f, _set(["vehicle", "mass", "value"], float("inf"))),
+                         "manifest.json", "Infinity"),
 }
 
 
@@ -86,3 +106,89 @@ def test_nan_run_names_the_rows(drogue_folder, tmp_path, capsys):
 def test_missing_folder(tmp_path, capsys):
     assert main(["reconstruct", str(tmp_path / "nowhere"), "--out", str(tmp_path / "r")]) == 2
     assert "manifest.json" in capsys.readouterr().err
+
+
+def test_a_byte_order_mark_is_valid_input(drogue_folder, tmp_path):
+    """Spreadsheet programs write UTF-8 with a byte-order mark: the manifest and the CSV
+    files load as they do without one."""
+    from cpas_ocp.flight_test import load_test
+
+    folder = tmp_path / "test"
+    shutil.copytree(drogue_folder(1), folder)
+    plain = load_test(folder)
+    for name in ("manifest.json", "gps.csv"):
+        path = folder / name
+        path.write_bytes(b"\xef\xbb\xbf" + path.read_bytes())
+    marked = load_test(folder)
+    assert [s.name for s in marked.sensors] == [s.name for s in plain.sensors]
+    for a, b in zip(marked.sensors, plain.sensors, strict=True):
+        assert a.data.equals(b.data), a.name
+    assert marked.vehicle == plain.vehicle
+
+
+@pytest.mark.parametrize("option, value", [
+    ("--grid-step", "0"), ("--grid-step", "-0.01"), ("--grid-step", "nan"),
+    ("--max-iter", "0"), ("--seed", "-1"), ("--profile-points", "1"),
+])
+def test_an_option_out_of_range_is_one_line_exit_2(option, value, tmp_path, capsys):
+    command = ["demo", "--out", str(tmp_path / "d")]
+    code = main([*command, option, value] if option != "--profile-points" else
+                ["reconstruct", str(tmp_path), "--out", str(tmp_path / "r"), option, value])
+    err = capsys.readouterr().err.strip()
+    assert code == 2
+    assert len(err.splitlines()) == 1 and option in err and repr(value) in err, err
+    assert not (tmp_path / "d").exists()
+
+
+def _link(tmp_path: Path) -> Path:
+    link = tmp_path / "link"
+    link.symlink_to(tmp_path / "earlier")  # dangling
+    return link
+
+
+def _under_file(tmp_path: Path) -> Path:
+    (tmp_path / "a_file").write_text("x")
+    return tmp_path / "a_file" / "report"
+
+
+@pytest.mark.parametrize("make", [_link, _under_file], ids=["dangling symlink", "under a file"])
+def test_a_bad_out_path_is_refused_before_the_work(make, drogue_folder, tmp_path, capsys):
+    out = make(tmp_path)
+    code = main(["reconstruct", str(drogue_folder(1)), "--out", str(out)])
+    captured = capsys.readouterr()
+    assert code == 2
+    assert len(captured.err.strip().splitlines()) == 1 and str(out) in captured.err
+    assert "solving" not in captured.out  # refused before the estimator was built
+    assert not list(tmp_path.glob(".cpas-out-*"))
+
+
+def test_demo_does_not_delete_a_folder_it_did_not_write(tmp_path, capsys):
+    keep = tmp_path / "demo" / "test" / "notes.txt"
+    keep.parent.mkdir(parents=True)
+    keep.write_text("mine")
+    assert main(["demo", "--out", str(tmp_path / "demo")]) == 2
+    assert "truth.json" in capsys.readouterr().err
+    assert keep.read_text() == "mine"
+
+
+def test_a_plug_in_that_exits_at_import_is_an_input_error(tmp_path, capsys):
+    plugin = tmp_path / "quits.py"
+    plugin.write_text("import sys\nsys.exit(0)\n")
+    assert main(["effects", "--plugin", str(plugin)]) == 2
+    err = capsys.readouterr().err
+    assert "quits.py" in err and "SystemExit" in err
+
+
+def test_an_internal_error_is_one_line_exit_1_with_a_log(monkeypatch, tmp_path, capsys):
+    import cpas_ocp.cli as cli
+
+    def broken(args):
+        raise RuntimeError("a defect of the tool\nsecond line")
+
+    monkeypatch.setenv("CPAS_OCP_CACHE", str(tmp_path / "cache"))
+    monkeypatch.setattr(cli, "_problems", broken)
+    assert main(["problems"]) == 1
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and err.startswith("internal error: RuntimeError")
+    log = Path(err.split("traceback is in ")[1])
+    assert "Traceback" in log.read_text() and "a defect of the tool" in log.read_text()

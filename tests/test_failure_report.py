@@ -38,5 +38,5 @@ def test_max_iter_below_one_is_bad_input(drogue_folder, tmp_path, capsys) -> Non
     out = tmp_path / "report"
     assert main(["reconstruct", str(drogue_folder(1)), "--out", str(out),
                  "--max-iter", "0"]) == 2
-    assert "--max-iter: at least 1; got 0" in capsys.readouterr().err
+    assert "--max-iter: an integer >= 1; got '0'" in capsys.readouterr().err
     assert not out.exists()

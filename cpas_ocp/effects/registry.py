@@ -136,7 +136,7 @@ def load_plugin(path: Path) -> dict[str, EffectType]:
     sys.modules[module_name] = module
     try:
         spec.loader.exec_module(module)
-    except Exception as exc:  # any failure inside the user's file is an input error
+    except (Exception, SystemExit) as exc:  # any failure inside the user's file is an input error
         sys.modules.pop(module_name, None)
         raise InputError(str(path), "(python)",
                          f"an importable file; importing it raised {type(exc).__name__}: {exc}"
