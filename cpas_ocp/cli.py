@@ -21,7 +21,8 @@
 
 Exit codes: 0 success; 1 an internal error (one line, the traceback in a log
 file); 2 bad input (one line naming file, field and expectation); 3 the solver
-did not converge (status and iteration count); 130 and 143 interrupted by
+did not converge (status and iteration count; a campaign none of whose tests
+gave a result); 130 and 143 interrupted by
 SIGINT (Ctrl-C) or SIGTERM, with nothing written.
 """
 
@@ -203,6 +204,7 @@ def _parser() -> argparse.ArgumentParser:
                         "give it twice")
     s.add_argument("--out", required=True, type=Path)
     _plugin_option(s, "a Python file whose effects the model files may name (repeatable)")
+    _model_option(s, model=False)
     _solver_options(s)
     s.set_defaults(run=_compare)
 
@@ -285,15 +287,23 @@ def _where(args: argparse.Namespace) -> str:
             else f"{args.workers} local processes")
 
 
-def _model_option(s: argparse.ArgumentParser) -> None:
-    s.add_argument("--model", type=Path, default=None, metavar="FILE",
-                   help="a JSON model block (effects, plugins, fix, free) used instead of "
-                        "the manifest's")
+def _model_option(s: argparse.ArgumentParser, model: bool = True) -> None:
+    if model:
+        s.add_argument("--model", type=Path, default=None, metavar="FILE",
+                       help="a JSON model block (effects, plugins, fix, free) used instead "
+                            "of the manifest's")
+    s.add_argument("--allow-external-plugins", action="store_true",
+                   help="run plug-ins a manifest or model file names from outside its own "
+                        "folder (plug-ins are Python code run with your rights)")
 
 
-def _spec(test: FlightTest, model_file: Path | None) -> ModelSpec:
+def _spec(test: FlightTest, args: argparse.Namespace) -> ModelSpec:
+    """The model of --model, else the manifest's, plug-ins contained as asked."""
     from .model_spec import load_model_file, spec_of_test
-    return load_model_file(model_file) if model_file is not None else spec_of_test(test)
+    allow = getattr(args, "allow_external_plugins", False)
+    model = getattr(args, "model", None)
+    return load_model_file(model, allow_external=allow) if model is not None else \
+        spec_of_test(test, allow)
 
 
 def _solver_options(s: argparse.ArgumentParser) -> None:
@@ -346,7 +356,7 @@ def _reduce(args: argparse.Namespace) -> int:
     from .flight_test import load_test
     from .reduction_report import guess_table, write_reduction
     test = load_test(args.test_dir)
-    out, model, guess = write_reduction(test, args.out, _spec(test, args.model))
+    out, model, guess = write_reduction(test, args.out, _spec(test, args))
     print(guess_table(model, guess))
     print(f"\nreduction written to {out} (reduction.csv, initial_guess.json, reduction.png)")
     return 0
@@ -355,16 +365,17 @@ def _reduce(args: argparse.Namespace) -> int:
 def _reconstruct(args: argparse.Namespace) -> int:
     from .flight_test import load_test
     test = load_test(args.test_dir)
-    _run_reconstruction(test, args, _spec(test, args.model))
+    _run_reconstruction(test, args, _spec(test, args))
     return 0
 
 
 def _whatif(args: argparse.Namespace) -> int:
     from .flight_test import load_test
-    from .whatif import parse_constraint, what_if, whatif_text
+    from .whatif import parameter_bounds, parse_constraint, what_if, whatif_text
     test = load_test(args.test_dir)
-    est = _estimator(test, args, _spec(test, args.model))
+    est = _estimator(test, args, _spec(test, args))
     constraints = [parse_constraint(text, est) for text in args.constrain]
+    parameter_bounds(constraints, est)  # contradictions are refused before the fits
     print(f"solving without the constraints: {est.size_text()} ...", flush=True)
     fit, cov = _fit_and_covariance(est, args)
     print("solving with them ...", flush=True)
@@ -378,7 +389,7 @@ def _diagnose(args: argparse.Namespace) -> int:
     from .flight_test import load_test
     test = load_test(args.test_dir)
     plugins = _plugins(args)
-    spec = _spec(test, args.model)
+    spec = _spec(test, args)
     est = _estimator(test, args, spec)
     print(f"solving: {est.size_text()} ...", flush=True)
     fit, cov = _fit_and_covariance(est, args)
@@ -401,8 +412,9 @@ def _compare(args: argparse.Namespace) -> int:
                          f"exactly two models (--model A --model B); got {len(args.model)}")
     test = load_test(args.test_dir)
     plugins = _plugins(args)
-    specs = [spec_of_test(test) if m == "manifest" else load_model_file(m, plugins)
-             for m in args.model]
+    allow = args.allow_external_plugins
+    specs = [spec_of_test(test, allow) if m == "manifest"
+             else load_model_file(m, plugins, allow) for m in args.model]
     labels = tuple(Path(m).stem if m != "manifest" else "manifest" for m in args.model)
     if labels[0] == labels[1]:
         labels = (f"A: {labels[0]}", f"B: {labels[1]}")
@@ -427,12 +439,16 @@ def _campaign(args: argparse.Namespace) -> int:
     outcomes = run_campaign(folders, args.workers, args.scheduler, progress=True)
     out = write_campaign(outcomes, args.out)
     print(campaign_text(outcomes))
+    print(f"\ncampaign written to {out} (parameters.csv, parameters.parquet, stages.csv, "
+          "failures.csv, ratios_*.csv, campaign.md)")
     failed = sum(not o.ok for o in outcomes)
+    if failed == len(outcomes):  # no result at all: a failure, its reasons in failures.csv
+        print(f"error: every one of the {failed} tests failed; why is in "
+              f"{out / 'failures.csv'}", file=sys.stderr)
+        return 3
     if failed:
         print(f"warning: {failed} of {len(outcomes)} tests failed (failures.csv)",
               file=sys.stderr)
-    print(f"\ncampaign written to {out} (parameters.csv, parameters.parquet, stages.csv, "
-          "failures.csv, ratios_*.csv, campaign.md)")
     return 0
 
 
@@ -530,7 +546,7 @@ def _flight_log(args: argparse.Namespace, card: FlightCard, log: Path) -> None:
     summary = import_flight(read_altus_log(log), card, folder / "test")
     print(summary.text())
     test = load_test(folder / "test")
-    spec = _spec(test, None)
+    spec = _spec(test, args)
     fit, cov, out = _run_reconstruction(test, args, spec, folder / "report")
     print("diagnosing the residuals ...", flush=True)
     diag = diagnose(fit, spec, progress=not args.verbose)
@@ -558,7 +574,7 @@ def _demo(args: argparse.Namespace) -> int:
     print(f"simulating the built-in 'drogue' problem (seed {args.seed}) into {test_dir}")
     test = simulate_problem(load_problem("drogue"), test_dir, args.seed)
     args.out = args.out / "report"
-    _run_reconstruction(test, args, _spec(test, None))
+    _run_reconstruction(test, args, _spec(test, args))
     return 0
 
 

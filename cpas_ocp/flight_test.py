@@ -225,6 +225,33 @@ def validate_manifest(manifest: Any, file: str = MANIFEST) -> None:
     validate_block(manifest, "manifest.schema.json", file)
 
 
+# Data a sensor may have beyond the window all sensors share, at the phase's start or end,
+# before the phase must be trimmed explicitly (s; at least 3 of the coarsest sampling
+# intervals).
+COVERAGE_SLACK_S = 1.0
+
+
+def _check_coverage(mfile: str, entries: list[dict[str, Any]], sensors: list[Sensor],
+                    check_start: bool, check_end: bool) -> None:
+    """InputError where, with the phase's start or end left to the data, one sensor's series
+    starts later or ends earlier than the others' by more than the slack: the phase would
+    silently shrink to it (a truncated file), where the manifest's `phase` should say so."""
+    coarsest = max(float(np.median(np.diff(s.time))) for s in sensors if len(s.time) > 1)
+    slack = max(COVERAGE_SLACK_S, 3.0 * coarsest)
+    checks = [("start", check_start, [s.time[0] for s in sensors], max, min),
+              ("end", check_end, [s.time[-1] for s in sensors], min, max)]
+    for edge, wanted, times, shared, widest in checks:
+        if not wanted:
+            continue
+        k = times.index(shared(times))
+        if abs(widest(times) - times[k]) > slack:
+            word = "starts" if edge == "start" else "ends"
+            raise InputError(mfile, f"sensors[{k}]", f"{entries[k]['file']} {word} at "
+                             f"{times[k]:.3f} s, {abs(widest(times) - times[k]):.2f} s from the "
+                             f"other sensors ({widest(times):.3f} s): a truncated file? Give "
+                             f"phase.{edge} to trim the phase explicitly")
+
+
 # A canopy's deployment events in the order they happen; the Main-bag events of a Pilot.
 DEPLOYMENT_ORDER = ("mortar_fire", "line_stretch", "bag_strip")
 MAIN_BAG_ORDER = ("main_bag_lift", "main_bag_strip")
@@ -355,6 +382,8 @@ def test_from_manifest(manifest: dict[str, Any], folder: Path,
     t_lo = max(s.time[0] for s in sensors)
     t_hi = min(s.time[-1] for s in sensors)
     phase = manifest.get("phase", {})
+    _check_coverage(mfile, manifest["sensors"], sensors, check_start="start" not in phase,
+                    check_end="end" not in phase)
     t_start = _si(phase["start"], "time") if "start" in phase else t_lo
     t_end = _si(phase["end"], "time") if "end" in phase else t_hi
     if not (t_lo <= t_start < t_end <= t_hi):

@@ -23,7 +23,8 @@ import numpy as np
 from scipy.signal import savgol_filter
 
 from .atmosphere import geometric_altitude
-from .flight_test import FlightTest
+from .errors import InputError
+from .flight_test import MANIFEST, FlightTest
 
 SMOOTH_S = 5.0  # Savitzky-Golay window of the vertical track (s)
 RESAMPLE_S = 0.05  # uniform grid the altitude is resampled to before smoothing (s)
@@ -63,8 +64,9 @@ def altimeter_altitude(test: FlightTest) -> tuple[np.ndarray, np.ndarray]:
     gps_alt = test.sensors_of("gps_altitude")
     if gps_alt:
         return gps_alt[0].time, gps_alt[0].data["up"].to_numpy()
-    raise ValueError(f"{test.name}: the kinematic track needs a GPS, barometric or GPS-altitude "
-                     "sensor")
+    raise InputError(str(test.path / MANIFEST) if test.path is not None else test.name,
+                     "sensors", "a GPS, barometric or GPS-altitude sensor (the kinematic track "
+                     "needs the vehicle's position)")
 
 
 def _vertical_track(test: FlightTest, t: np.ndarray) -> Track:

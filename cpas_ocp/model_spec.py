@@ -155,14 +155,25 @@ def spec_from_effects(effects: Sequence[Effect]) -> ModelSpec:
 
 
 def spec_from_block(block: dict[str, Any] | None, file: str, base_dir: Path,
-                    plugins: dict[str, EffectType] | None = None) -> ModelSpec:
+                    plugins: dict[str, EffectType] | None = None,
+                    allow_external: bool = False) -> ModelSpec:
     """Resolve a validated `model` block; plug-in paths are relative to `base_dir`;
-    `plugins` are effects registered beforehand (from files named on the command line)."""
+    `plugins` are effects registered beforehand (from files named on the command line).
+
+    A plug-in is Python code run with the user's rights, and a test folder may
+    come from anyone: a plug-in the block names must lie inside `base_dir`
+    (symbolic links resolved), unless `allow_external` (the command line's
+    --allow-external-plugins)."""
     if block is None:
         return baseline_spec()
     registry: dict[str, EffectType] = {**BUILTIN, **(plugins or {})}
     for i, rel in enumerate(block.get("plugins", [])):
-        for name, entry in load_plugin(base_dir / rel).items():
+        path = base_dir / rel
+        if not allow_external and not path.resolve().is_relative_to(base_dir.resolve()):
+            raise InputError(file, f"model.plugins[{i}]", f"a plug-in inside {base_dir} "
+                             f"(plug-ins are code run with your rights); {rel!r} lies outside "
+                             "it: give --allow-external-plugins to run it")
+        for name, entry in load_plugin(path).items():
             if name in registry:
                 raise InputError(file, f"model.plugins[{i}]",
                                  f"effects with new names; {name!r} is already "
@@ -188,17 +199,19 @@ def spec_from_block(block: dict[str, Any] | None, file: str, base_dir: Path,
                      file, dict(block.get("priors", {})))
 
 
-def spec_of_test(test: FlightTest) -> ModelSpec:
-    """The model a test folder's manifest declares (the baseline when it declares none)."""
+def spec_of_test(test: FlightTest, allow_external: bool = False) -> ModelSpec:
+    """The model a test folder's manifest declares (the baseline when it declares none);
+    `allow_external` as in `spec_from_block`."""
     base = test.path if test.path is not None else Path()
-    return spec_from_block(test.manifest.get("model"), str(base / MANIFEST), base)
+    return spec_from_block(test.manifest.get("model"), str(base / MANIFEST), base,
+                           allow_external=allow_external)
 
 
-def load_model_file(path: str | Path, plugins: dict[str, EffectType] | None = None
-                    ) -> ModelSpec:
+def load_model_file(path: str | Path, plugins: dict[str, EffectType] | None = None,
+                    allow_external: bool = False) -> ModelSpec:
     """A model block stored on its own in a JSON file (`cpas-ocp reconstruct --model FILE`);
-    `plugins` as in `spec_from_block`."""
+    `plugins` and `allow_external` as in `spec_from_block`."""
     path = Path(path)
     block = read_json(path, "an existing JSON model file")
     validate_block(block, "model.schema.json", str(path), prefix="model")
-    return spec_from_block(block, str(path), path.parent, plugins)
+    return spec_from_block(block, str(path), path.parent, plugins, allow_external)

@@ -102,6 +102,30 @@ def parse_constraint(text: str, est: Estimator, source: str = "--constrain") -> 
     return Constraint(name, op, value, text.strip(), prm.unit)
 
 
+def parameter_bounds(constraints: list[Constraint], est: Estimator,
+                     source: str = "--constrain") -> dict[str, tuple[float, float]]:
+    """The free parameters' bounds (SI) under `constraints` (peak limits aside); InputError
+    where a parameter held with '==' is constrained again, or where the constraints on one
+    parameter leave no value.  Without this, the last of two '==' on a parameter was the
+    one applied while the test counted both."""
+    bounds: dict[str, tuple[float, float]] = {}
+    given: dict[str, Constraint] = {}
+    for con in constraints:
+        if con.quantity is not None:
+            continue
+        earlier = given.get(con.name)
+        if earlier is not None and "==" in (earlier.op, con.op):
+            raise InputError(source, con.text, f"one constraint on {con.name} where one holds "
+                             f"it with '=='; {earlier.text!r} constrains it already")
+        prm = est.model.parameter(con.name)
+        lo, hi = con.bounds(*bounds.get(con.name, (prm.lower, prm.upper)))
+        if lo > hi:
+            raise InputError(source, con.text, f"constraints on {con.name} that some value "
+                             f"meets; with {earlier.text if earlier else ''!r} none does")
+        bounds[con.name], given[con.name] = (lo, hi), con
+    return bounds
+
+
 def _peak_constraint(name: str, op: str, value: float, unit: str | None, text: str,
                      est: Estimator, source: str) -> Constraint:
     """``peak_load[drogue1] <= 30000 lbf``: the largest riser tension over the phase."""
@@ -203,16 +227,12 @@ def what_if(est: Estimator, fit: Fit, cov: Covariance | None,
     estimator of the same test, model and grid (its decision vector is laid
     out alike, so it starts from `fit`).
     """
-    bounds = {}
+    bounds = parameter_bounds(constraints, est)
     limits: dict[str, tuple[float, float]] = {}
     for con in constraints:
         if con.quantity is not None:
             lo, hi = limits.get(con.quantity, (-np.inf, np.inf))
             limits[con.quantity] = (lo, min(hi, con.value))
-            continue
-        prm = est.model.parameter(con.name)
-        lo, hi = bounds.get(con.name, (prm.lower, prm.upper))
-        bounds[con.name] = con.bounds(lo, hi)
     solver = est
     if limits:
         solver = Estimator(est.test, est.spec, replace(est.settings, free=list(est.free),

@@ -68,6 +68,8 @@ CASES = {
                           "manifest.json", "is the same event"),
     "disreef before its mortar fire": (lambda f: _manifest(f, _disreef_first), "manifest.json",
                                        "out of order"),
+    "truncated series": (lambda f: _csv(f, "imu.csv", lambda d: d.iloc[: len(d) // 2]),
+                         "imu.csv", "truncated"),
     "binary manifest": (lambda f: (f / "manifest.json").write_bytes(b"\x89PNG\r\n\x1a\n\xff\x00"),
                         "manifest.json", "byte 0"),
     "UTF-16 manifest": (lambda f: (f / "manifest.json").write_bytes(

@@ -85,3 +85,14 @@ def test_no_test_folders_is_one_line_exit_2(tmp_path, capsys) -> None:
     assert main(["campaign", str(tmp_path), "--out", str(tmp_path / "out")]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "manifest.json" in err
+
+
+def test_a_campaign_without_one_result_is_a_failure(tests_root, tmp_path, capsys) -> None:
+    """Every test failing is no campaign: exit 3 with one line, the reasons in failures.csv."""
+    only = tmp_path / "tests"
+    shutil.copytree(tests_root / "broken", only / "broken")
+    out = tmp_path / "out"
+    assert main(["campaign", str(only), "--out", str(out), "--workers", "1"]) == 3
+    err = capsys.readouterr().err.strip()
+    assert err.splitlines()[-1].startswith("error: every one of the 1 tests failed"), err
+    assert list(pd.read_csv(out / "failures.csv").test) == ["broken"]

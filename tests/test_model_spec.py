@@ -111,6 +111,8 @@ BAD_BLOCKS = {
         "model.effects"),
     "plug-in that does not import": ({"plugins": ["broken.py"]}, "broken.py"),
     "missing plug-in": ({"plugins": ["absent.py"]}, "absent.py"),
+    "plug-in outside the test folder": ({"plugins": ["../elsewhere.py"]}, "model.plugins[0]"),
+    "plug-in at an absolute path": ({"plugins": ["/tmp/anywhere.py"]}, "model.plugins[0]"),
     "prior on an unknown parameter": ({"priors": {"CdS[fbcp9,stage1]": {"value": 2.0,
                                                                         "sigma": 0.1}}},
                                       "model.priors.CdS[fbcp9,stage1]"),
@@ -145,3 +147,14 @@ def test_model_file_errors_name_the_file(tmp_path) -> None:
     path.write_text(json.dumps({"effects": ["gps"], "fixx": {}}))
     with pytest.raises(InputError, match=r"m\.json: model: Additional properties"):
         load_model_file(path)
+
+
+def test_an_external_plug_in_runs_only_when_allowed(problem_folder, tmp_path, capsys) -> None:
+    """A test folder may come from anyone, and a plug-in is code: one the manifest names from
+    outside its folder runs only with --allow-external-plugins."""
+    shutil.copy(Path(__file__).parent / "plugins" / "breathing.py", tmp_path / "shared.py")
+    folder = _with_model(problem_folder("fbcp", 1), tmp_path / "t", {"plugins": ["../shared.py"]})
+    command = ["reduce", str(folder), "--out", str(tmp_path / "r")]
+    assert main(command) == 2
+    assert "--allow-external-plugins" in capsys.readouterr().err
+    assert main([*command, "--allow-external-plugins"]) == 0

@@ -85,6 +85,22 @@ def test_units_and_mistakes(fbcp_study) -> None:
         assert err.value.field == field
 
 
+def test_contradictory_constraints_are_refused(fbcp_study) -> None:
+    """Two '==' on one parameter, '==' beside a bound, or bounds that cross: each is named;
+    consistent one-sided bounds combine."""
+    from cpas_ocp.whatif import parameter_bounds
+
+    est, _, _, _ = fbcp_study
+    for texts in ((f"{NAME} == 2", f"{NAME} == 3"), (f"{NAME} == 2", f"{NAME} == 2"),
+                  (f"{NAME} <= 5", f"{NAME} == 2"), (f"{NAME} <= 2", f"{NAME} >= 3")):
+        with pytest.raises(InputError) as err:
+            parameter_bounds([parse_constraint(t, est) for t in texts], est)
+        assert err.value.field == texts[1], texts
+    both = parameter_bounds([parse_constraint(f"{NAME} >= 2", est),
+                             parse_constraint(f"{NAME} <= 3", est)], est)
+    assert both[NAME] == (2.0, 3.0)
+
+
 def test_whatif_command_bad_expression_is_one_line_exit_2(problem_folder, capsys) -> None:
     code = main(["whatif", str(problem_folder("fbcp", 1)), "--constrain", "Ck[fbcp1] == 1"])
     err = capsys.readouterr().err.strip()
