@@ -1,7 +1,7 @@
-"""Long profile of the property-based input tests: many corrupted manifests, seeded.
+"""Long profile of the property-based input tests: many corrupted manifests and series.
 
-Runs `tests/test_fuzz_manifest.py` with `--examples` examples (default 2,000)
-drawn from `--seed` (the suite runs 30 fixed ones).  Every example must be
+Runs `tests/test_fuzz_manifest.py` with `--examples` examples of each kind
+(default 2,000) drawn from `--seed` (the suite runs 30 fixed ones).  Every example must be
 valid input or a one-line exit 2 with nothing written; a failure prints
 Hypothesis's smallest falsifying example.  Prints the count and the wall time.
 
@@ -32,7 +32,7 @@ def main() -> int:
                            f"--hypothesis-seed={args.seed}",
                            str(ROOT / "tests" / "test_fuzz_manifest.py")], env=env, cwd=ROOT)
     verdict = "contract held" if done.returncode == 0 else "FAILED"
-    print(f"{args.examples} corrupted manifests (seed {args.seed}) in "
+    print(f"{args.examples} corrupted manifests and series (seed {args.seed}) in "
           f"{time.perf_counter() - t0:.1f} s: {verdict}")
     return done.returncode
 

@@ -21,9 +21,9 @@
 
 Exit codes: 0 success; 1 an internal error (one line, the traceback in a log
 file); 2 bad input (one line naming file, field and expectation); 3 the solver
-did not converge (status and iteration count; a campaign none of whose tests
-gave a result); 130 and 143 interrupted by
-SIGINT (Ctrl-C) or SIGTERM, with nothing written.
+did not converge (status and iteration count; also a campaign none of whose
+tests gave a result); 130 and 143 interrupted by SIGINT (Ctrl-C) or SIGTERM,
+with nothing written.
 """
 
 from __future__ import annotations

@@ -18,8 +18,9 @@ class InputError(ValueError):
     def __init__(self, file: str, field: str, expectation: str) -> None:
         self.file = file
         self.field = field
-        self.expectation = expectation
-        super().__init__(f"{file}: {field}: {expectation}")
+        # One line, whatever a library's message carried along (pandas ends some with \n).
+        self.expectation = " ".join(expectation.split())
+        super().__init__(f"{file}: {field}: {self.expectation}")
 
 
 class SolverFailure(RuntimeError):

@@ -236,7 +236,8 @@ def _check_coverage(mfile: str, entries: list[dict[str, Any]], sensors: list[Sen
     """InputError where, with the phase's start or end left to the data, one sensor's series
     starts later or ends earlier than the others' by more than the slack: the phase would
     silently shrink to it (a truncated file), where the manifest's `phase` should say so."""
-    coarsest = max(float(np.median(np.diff(s.time))) for s in sensors if len(s.time) > 1)
+    coarsest = max((float(np.median(np.diff(s.time))) for s in sensors if len(s.time) > 1),
+                   default=0.0)
     slack = max(COVERAGE_SLACK_S, 3.0 * coarsest)
     checks = [("start", check_start, [s.time[0] for s in sensors], max, min),
               ("end", check_end, [s.time[-1] for s in sensors], min, max)]

@@ -1,4 +1,4 @@
-"""Property-based: any corruption of a manifest is valid input or one line with exit 2.
+"""Property-based: any corruption of a manifest or a series is valid input or one line, exit 2.
 
 Hypothesis picks a node of the `fbcp` manifest (a value, a list, an object) and
 deletes it or replaces it with a value of another kind or an extreme one
@@ -89,4 +89,42 @@ def test_a_corrupted_manifest_is_valid_or_one_line_exit_2(data, fbcp, tmp_path, 
     shutil.copytree(fbcp, folder)
     (folder / "manifest.json").write_text(json.dumps(corrupt(manifest, path, replacement,
                                                               delete)))
+    check_contract(folder, work / "out", capsys)
+
+
+CELLS = st.sampled_from(["", "nan", "inf", "-inf", "1e300", "-1", "x", "0x1F", "1,2",
+                         "\"", "\x00", "1e-300"])
+
+
+@settings(max_examples=EXAMPLES, deadline=None, derandomize=not SEEDED,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(data=st.data())
+def test_a_corrupted_series_is_valid_or_one_line_exit_2(data, fbcp, tmp_path, capsys):
+    """A sensor CSV with a cell replaced, rows dropped or repeated, its header damaged, or
+    cut off mid-line: valid input or one line with exit 2."""
+    files = sorted(p.name for p in fbcp.glob("*.csv"))
+    name = data.draw(st.sampled_from(files), label="file")
+    lines = (fbcp / name).read_text().splitlines()
+    kind = data.draw(st.sampled_from(["cell", "drop", "repeat", "header", "cut"]),
+                     label="corruption")
+    row = data.draw(st.integers(1, len(lines) - 1), label="row")
+    if kind == "cell":
+        cells = lines[row].split(",")
+        col = data.draw(st.integers(0, len(cells) - 1), label="column")
+        cells[col] = data.draw(CELLS, label="value")
+        lines[row] = ",".join(cells)
+    elif kind == "drop":
+        del lines[row:row + data.draw(st.integers(1, 50), label="rows")]
+    elif kind == "repeat":
+        lines.insert(row, lines[row])
+    elif kind == "header":
+        lines[0] = data.draw(st.sampled_from(["", "time", lines[0].upper(), "a,b,c"]),
+                             label="header")
+    else:
+        lines = [*lines[:row], lines[row][: len(lines[row]) // 2]]
+    work = tmp_path / f"case{abs(hash((name, kind, row, tuple(lines[:2]))))}"
+    folder = work / "test"
+    shutil.rmtree(work, ignore_errors=True)
+    shutil.copytree(fbcp, folder)
+    (folder / name).write_text("\n".join(lines) + "\n")
     check_contract(folder, work / "out", capsys)
