@@ -574,7 +574,11 @@ def _demo(args: argparse.Namespace) -> int:
     print(f"simulating the built-in 'drogue' problem (seed {args.seed}) into {test_dir}")
     test = simulate_problem(load_problem("drogue"), test_dir, args.seed)
     args.out = args.out / "report"
-    _run_reconstruction(test, args, _spec(test, args))
+    try:
+        _run_reconstruction(test, args, _spec(test, args))
+    except (interrupts.Interrupted, KeyboardInterrupt):
+        shutil.rmtree(test_dir, ignore_errors=True)  # an interrupted demo leaves nothing
+        raise
     return 0
 
 

@@ -43,7 +43,7 @@ def test_a_signal_mid_solve_leaves_nothing_and_says_interrupted(sig, code, tmp_p
     assert proc.returncode == code, err
     assert err.strip().splitlines()[-1].startswith("interrupted"), err
     assert "Traceback" not in err and "solver failed" not in err
-    assert not (out / "report").exists()
+    assert not (out / "report").exists() and not (out / "test").exists()
     assert not list(Path(out).glob(".cpas-out-*")) and not list(tmp_path.glob(".cpas-out-*"))
 
 
