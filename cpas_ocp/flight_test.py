@@ -223,6 +223,31 @@ def validate_block(obj: Any, schema: str, file: str, prefix: str = "") -> None:
 def validate_manifest(manifest: Any, file: str = MANIFEST) -> None:
     """Validate a manifest object against the JSON Schema; raise InputError on the first problem."""
     validate_block(manifest, "manifest.schema.json", file)
+    _check_magnitudes(manifest, file)
+
+
+# Largest magnitude a number in a manifest may have.  No quantity of a parachute test comes
+# near it in any accepted unit (a 20,000 lb vehicle is 9e3 kg, sea-level pressure 1e5 Pa),
+# and squares of larger ones overflow: a vehicle mass of 1e300 passed the schema and ended
+# as an internal error in the covariance.
+MAX_MAGNITUDE = 1e9
+
+
+def _check_magnitudes(node: Any, file: str, path: str = "") -> None:
+    """InputError naming the first number in `node` (a manifest or part of one) that is not
+    finite or exceeds MAX_MAGNITUDE."""
+    if isinstance(node, bool):
+        return
+    if isinstance(node, int | float):
+        if not (math.isfinite(node) and abs(node) <= MAX_MAGNITUDE):
+            raise InputError(file, path or "(value)", f"a finite number of magnitude at most "
+                             f"{MAX_MAGNITUDE:g}; got {node!r}")
+        return
+    items = node.items() if isinstance(node, dict) else \
+        enumerate(node) if isinstance(node, list) else ()
+    for key, child in items:
+        where = f"{path}[{key}]" if isinstance(key, int) else f"{path}.{key}" if path else key
+        _check_magnitudes(child, file, where)
 
 
 # Data a sensor may have beyond the window all sensors share, at the phase's start or end,
@@ -491,6 +516,10 @@ def _read_columns(path: Path, units: dict[str, str], dimensions: dict[str, str],
         if bad.size:
             raise InputError(file, column, f"finite numbers; missing or non-numeric values in "
                              f"data rows {_runs(bad)} (clean the series before loading)")
+        huge = np.flatnonzero(np.abs(values) > MAX_MAGNITUDE)
+        if huge.size:
+            raise InputError(file, column, f"numbers of magnitude at most {MAX_MAGNITUDE:g}; "
+                             f"data rows {_runs(huge)} exceed it")
         out[column] = values * FACTORS[dim][units[column]]
     return out
 

@@ -36,6 +36,11 @@ def _swap_times(d: pd.DataFrame) -> pd.DataFrame:
     return d
 
 
+def _huge_reading(d: pd.DataFrame) -> pd.DataFrame:
+    d.iloc[5:7, 1] = 1e300
+    return d
+
+
 def _disreef_first(m: dict) -> None:
     """Move the first disreef to 0.5 s before its canopy's mortar fire."""
     disreef = next(e for e in m["events"] if e["name"] == "disreef")
@@ -70,6 +75,9 @@ CASES = {
                                        "out of order"),
     "truncated series": (lambda f: _csv(f, "imu.csv", lambda d: d.iloc[: len(d) // 2]),
                          "imu.csv", "truncated"),
+    "huge mass": (lambda f: _manifest(f, _set(["vehicle", "mass", "value"], 1e300)),
+                  "manifest.json", "vehicle.mass.value"),
+    "huge reading": (lambda f: _csv(f, "gps.csv", _huge_reading), "gps.csv", "rows 6-7"),
     "binary manifest": (lambda f: (f / "manifest.json").write_bytes(b"\x89PNG\r\n\x1a\n\xff\x00"),
                         "manifest.json", "byte 0"),
     "UTF-16 manifest": (lambda f: (f / "manifest.json").write_bytes(
