@@ -165,6 +165,19 @@ def write_dispersions(models: list[DispersionModel], skipped: list[str], cases: 
     return out
 
 
+def _read_table(path: Path, what: str) -> pd.DataFrame:
+    """A campaign table from Parquet or CSV (UTF-8, a byte-order mark allowed, empty cells
+    NaN); InputError saying `what` was expected where it cannot be read."""
+    from .errors import InputError
+    try:
+        if path.suffix == ".parquet":
+            return pd.read_parquet(path)
+        return pd.read_csv(path, keep_default_na=False, na_values=[""], encoding="utf-8-sig")
+    except (OSError, ValueError) as exc:  # pandas' parse and decode errors are ValueErrors
+        raise InputError(str(path), "(file)", f"{what} ({type(exc).__name__}: "
+                         f"{str(exc).splitlines()[0][:200]})") from None
+
+
 def read_stage_table(campaign: str | Path) -> pd.DataFrame | None:
     """The campaign's stages.csv (`campaign.STAGE_COLUMNS`) in its folder, or beside its
     parameter table; None where there is none (campaigns written before it existed)."""
@@ -174,11 +187,7 @@ def read_stage_table(campaign: str | Path) -> pd.DataFrame | None:
     path = (campaign if campaign.is_dir() else campaign.parent) / "stages.csv"
     if not path.is_file():
         return None
-    try:
-        stages = pd.read_csv(path, keep_default_na=False, na_values=[""], encoding="utf-8-sig")
-    except (ValueError, UnicodeDecodeError) as exc:  # pandas' parse errors too
-        raise InputError(str(path), "(file)", f"a campaign's stages table "
-                         f"({type(exc).__name__}: {str(exc).splitlines()[0][:200]})") from None
+    stages = _read_table(path, "a campaign's stages table")
     missing = [c for c in STAGE_COLUMNS if c not in stages.columns]
     if missing:
         raise InputError(str(path), ", ".join(missing), "the columns of a campaign's stages")
@@ -196,12 +205,7 @@ def read_parameter_table(path: str | Path) -> pd.DataFrame:
                      if (path / f).is_file()), path / "parameters.parquet")
     if not path.is_file():
         raise InputError(str(path), "(file)", "a campaign's parameter table (cpas-ocp campaign)")
-    try:
-        table = pd.read_parquet(path) if path.suffix == ".parquet" else pd.read_csv(
-            path, keep_default_na=False, na_values=[""], encoding="utf-8-sig")
-    except (OSError, ValueError, UnicodeDecodeError) as exc:  # pandas' parse errors too
-        raise InputError(str(path), "(file)", f"a campaign's parameter table "
-                         f"({type(exc).__name__}: {str(exc).splitlines()[0][:200]})") from None
+    table = _read_table(path, "a campaign's parameter table")
     if "line_length" not in table.columns:  # tables written before the column existed
         table["line_length"] = np.nan
     missing = [c for c in COLUMNS if c not in table.columns]

@@ -559,6 +559,7 @@ class Estimator:
             nlp, derivatives = self._ipopt.nlp, self._ipopt.options
         else:
             nlp, derivatives = self._expressions
+        self._warm = barrier is not None
         warm = {} if barrier is None else {
             "ipopt.warm_start_init_point": "yes", "ipopt.mu_init": barrier,
             "ipopt.warm_start_bound_push": 1e-9, "ipopt.warm_start_mult_bound_push": 1e-9}
@@ -983,6 +984,8 @@ class Estimator:
         t0 = time.perf_counter()
         cap = min(max_iter or self.settings.max_iter, self.settings.max_iter)
         self._fit_windows(z0)
+        if self._warm:  # an earlier solve's restart left its warm-started solver behind
+            self._make_solver()
         iterations = 0
         multipliers: dict[str, ca.DM] = {}
         descended: DescentEnd | None = None

@@ -17,6 +17,7 @@ from __future__ import annotations
 import signal
 from collections.abc import Iterator
 from contextlib import contextmanager
+from dataclasses import dataclass
 from types import FrameType
 
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
@@ -35,12 +36,18 @@ class Interrupted(BaseException):
         return 128 + self.signum
 
 
-_state: dict[str, int | None] = {"depth": 0, "pending": None}
+@dataclass
+class _Signals:
+    depth: int = 0  # nested `deferred` regions entered
+    pending: int | None = None  # the signal that arrived inside one
+
+
+_state = _Signals()
 
 
 def _handler(signum: int, frame: FrameType | None) -> None:
-    if _state["depth"]:
-        _state["pending"] = signum
+    if _state.depth:
+        _state.pending = signum
         return
     raise Interrupted(signum)
 
@@ -53,7 +60,7 @@ def handle_signals() -> None:
 
 def pending() -> bool:
     """Whether a signal arrived inside `deferred` and awaits its end."""
-    return _state["pending"] is not None
+    return _state.pending is not None
 
 
 @contextmanager
@@ -61,12 +68,12 @@ def deferred() -> Iterator[None]:
     """A region in which a signal only marks itself pending; on leaving it, a pending
     signal raises `Interrupted`.  Without `handle_signals` installed, signals keep
     their default behaviour."""
-    _state["depth"] = int(_state["depth"] or 0) + 1
+    _state.depth += 1
     try:
         yield
     finally:
-        _state["depth"] = int(_state["depth"] or 0) - 1
-        signum = _state["pending"]
-        if signum is not None and not _state["depth"]:
-            _state["pending"] = None
+        _state.depth -= 1
+        signum = _state.pending
+        if signum is not None and not _state.depth:
+            _state.pending = None
             raise Interrupted(signum)

@@ -305,7 +305,7 @@ def confirm(fit: Fit, result: ScoreTest, progress: bool = False) -> None:
         refitted: Fit | None = est.solve(progress=progress, start=z0)
     except SolverFailure as exc:
         refitted, failure = None, exc
-    origin = ""
+    origin = tried = ""
     if refitted is None or refitted.chi_square > fit.chi_square:
         # Not converged, or converged to a stationary point above the fit it extends.
         retried, tried = _retry_from_defaults(est, fit, model, result, start, progress)
@@ -328,7 +328,7 @@ def confirm(fit: Fit, result: ScoreTest, progress: bool = False) -> None:
                          f"{fit.chi_square:.1f} -> {refitted.chi_square:.1f}")
     if refitted.chi_square > fit.chi_square:
         result.refit_note += (" (above the fit: a stationary point of the extended model "
-                              "that need not be its optimum)")
+                              f"that need not be its optimum{tried})")
 
 
 # Iterations of a confirming refit's second try, from the effect's defaults.  On `drogue`

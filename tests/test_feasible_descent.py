@@ -109,3 +109,18 @@ def test_a_run_that_stops_falling_stalls_and_a_falling_one_does_not() -> None:
     monitor.reset(False, (np.full(1, -np.inf), np.full(1, np.inf)), stall=False)
     assert not any(_iterate(monitor, 1000.0) for _ in range(3 * STALL_ITERATIONS))
     assert not monitor.stalled
+
+
+def test_a_solve_never_inherits_an_earlier_solves_warm_start(problem_folder) -> None:
+    """A restart (after a stall, or with wider windows) rebuilds Ipopt warm-started at the
+    run's barrier parameter; the next solve of the same estimator starts cold again, also
+    where no windows of action rebuild the solver at its start."""
+    from cpas_ocp.estimation import Estimator, Settings
+    from cpas_ocp.flight_test import load_test
+
+    est = Estimator(load_test(problem_folder("fbcp", 1)), settings=Settings(window_margin=None))
+    cold = est.solve()
+    est._make_solver(barrier=1e-9)  # what a restart leaves behind
+    again = est.solve()
+    assert again.solver.iterations == cold.solver.iterations
+    assert again.chi_square == cold.chi_square
