@@ -46,8 +46,9 @@ class TestOutcome:
     """The reconstruction of one test folder: its table rows, or why there are none.
 
     `kind` is "ok", "input" (the folder breaks the test-folder contract),
-    "solver" (Ipopt did not converge) or "error" (anything else, with the
-    exception's type and message).  `stages` holds a row per canopy stage
+    "solver" (Ipopt did not converge), "claim" (converged, but the data press
+    parameters against guessed bounds: not a result, `result_claim`) or "error"
+    (anything else, with the exception's type and message).  `stages` holds a row per canopy stage
     (STAGE_COLUMNS).
     """
 
@@ -81,7 +82,7 @@ def find_tests(root: str | Path) -> list[Path]:
 def reconstruct_folder(folder: str) -> TestOutcome:
     """Reconstruct one test folder with its manifest's model; never raises (a picklable
     top-level function, run in a worker process)."""
-    from .continuation import solve
+    from .continuation import solve_checked
     from .estimation import Estimator
     from .flight_test import load_test
     t0 = time.perf_counter()
@@ -89,8 +90,10 @@ def reconstruct_folder(folder: str) -> TestOutcome:
     try:
         test = load_test(folder)
         name = test.name
-        est = Estimator(test)
-        fit = solve(est)
+        est, fit, claim = solve_checked(Estimator(test))
+        if not claim.is_result:
+            return TestOutcome(folder, name, "claim", "; ".join(claim.problems()),
+                               wall_s=time.perf_counter() - t0)
         cov = est.covariance(fit)
     except InputError as exc:
         return TestOutcome(folder, name, "input", str(exc), wall_s=time.perf_counter() - t0)

@@ -22,7 +22,10 @@
 Exit codes: 0 success; 1 an internal error (one line, the traceback in a log
 file); 2 bad input (one line naming file, field and expectation); 3 the solver
 did not converge (status and iteration count; also a campaign none of whose
-tests gave a result); 130 and 143 interrupted by SIGINT (Ctrl-C) or SIGTERM,
+tests gave a result); 4 the fit converged but is not a result: the data press
+parameters against bounds that are guesses, not physical limits, even after
+the start windows were moved (the report is written and says why, see
+`result_claim`); 130 and 143 interrupted by SIGINT (Ctrl-C) or SIGTERM,
 with nothing written.
 """
 
@@ -40,7 +43,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from . import interrupts
-from .errors import InputError, SolverFailure
+from .errors import InputError, NotAResult, SolverFailure
 from .output_folder import check_output
 
 if TYPE_CHECKING:
@@ -49,6 +52,7 @@ if TYPE_CHECKING:
     from .flight_log import FlightCard
     from .flight_test import FlightTest
     from .model_spec import ModelSpec
+    from .result_claim import Claim
     from .uncertainty import Covariance
 
 
@@ -72,6 +76,9 @@ def main(argv: list[str] | None = None) -> int:
     except SolverFailure as exc:
         print(f"error: {exc}; no result written", file=sys.stderr)
         return 3
+    except NotAResult as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 4
     except interrupts.Interrupted as exc:
         print(f"interrupted ({exc}); nothing written", file=sys.stderr)
         return exc.exit_code
@@ -377,7 +384,11 @@ def _whatif(args: argparse.Namespace) -> int:
     constraints = [parse_constraint(text, est) for text in args.constrain]
     parameter_bounds(constraints, est)  # contradictions are refused before the fits
     print(f"solving without the constraints: {est.size_text()} ...", flush=True)
-    fit, cov = _fit_and_covariance(est, args)
+    est, fit, cov, claim = _fit_and_covariance(est, args)
+    if not claim.is_result:
+        raise NotAResult("the fit without the constraints is not a result, so a what-if from "
+                         "it means nothing: " + "; ".join(claim.problems()))
+    constraints = [parse_constraint(text, est) for text in args.constrain]
     print("solving with them ...", flush=True)
     print(whatif_text(what_if(est, fit, cov, constraints, progress=not args.verbose)))
     return 0
@@ -392,9 +403,10 @@ def _diagnose(args: argparse.Namespace) -> int:
     spec = _spec(test, args)
     est = _estimator(test, args, spec)
     print(f"solving: {est.size_text()} ...", flush=True)
-    fit, cov = _fit_and_covariance(est, args)
+    est, fit, cov, _ = _fit_and_covariance(est, args)
     print("testing the effects the model does not use ...", flush=True)
-    diag = diagnose(fit, spec, plugins, args.confirm, args.alpha, progress=not args.verbose)
+    diag = diagnose(fit, est.spec, plugins, args.confirm, args.alpha,
+                    progress=not args.verbose)
     out = write_diagnosis(diag, cov, args.out)
     print()
     print(diag.text())
@@ -407,6 +419,7 @@ def _compare(args: argparse.Namespace) -> int:
     from .flight_test import load_test
     from .model_comparison import compare
     from .model_spec import load_model_file, spec_of_test
+    from .result_claim import start_shifts, with_start_shifts
     if len(args.model) != 2:
         raise InputError("(command line)", "--model",
                          f"exactly two models (--model A --model B); got {len(args.model)}")
@@ -420,9 +433,11 @@ def _compare(args: argparse.Namespace) -> int:
         labels = (f"A: {labels[0]}", f"B: {labels[1]}")
     est = _estimator(test, args, specs[0])
     print(f"solving {labels[0]}: {est.size_text()} ...", flush=True)
-    fit_a, cov_a = _fit_and_covariance(est, args)
+    est, fit_a, cov_a, _ = _fit_and_covariance(est, args)
+    # Start windows the first fit had to move are moved in the second model too.
+    spec_b = with_start_shifts(specs[1], start_shifts(est.spec))
     print(f"solving {labels[1]} from it ...", flush=True)
-    comparison = compare(fit_a, cov_a, specs[0], specs[1], labels, progress=not args.verbose)
+    comparison = compare(fit_a, cov_a, est.spec, spec_b, labels, progress=not args.verbose)
     out = write_comparison(comparison, args.out)
     print()
     print(comparison.text())
@@ -479,7 +494,7 @@ def _dispersions(args: argparse.Namespace) -> int:
 
 
 def _montecarlo(args: argparse.Namespace) -> int:
-    from .continuation import solve
+    from .continuation import solve_checked
     from .estimation import Estimator
     from .flight_test import load_test
     from .output_folder import atomic_folder
@@ -498,7 +513,9 @@ def _montecarlo(args: argparse.Namespace) -> int:
         est = Estimator(test)
         check_columns(est.model, stages)
         print(f"reconstructing {test.name}: {est.size_text()} ...", flush=True)
-        fit = solve(est, progress=True)
+        est, fit, claim = solve_checked(est, progress=True)
+        if not claim.is_result:  # no cases are flown through a fit that is not a result
+            raise NotAResult(f"the fit of {test.name} is not a result: {claim.problems()[0]}")
         print(f"flying {sum(len(s.cases) for s in stages):,} cases of "
               f"{', '.join(s.label for s in stages)} on {where} ...", flush=True)
         results = run_monte_carlo(fit, stages, args.workers, args.scheduler, progress=True)
@@ -546,13 +563,12 @@ def _flight_log(args: argparse.Namespace, card: FlightCard, log: Path) -> None:
     summary = import_flight(read_altus_log(log), card, folder / "test")
     print(summary.text())
     test = load_test(folder / "test")
-    spec = _spec(test, args)
-    fit, cov, out = _run_reconstruction(test, args, spec, folder / "report")
+    est, fit, cov, out = _run_reconstruction(test, args, _spec(test, args), folder / "report")
     print("diagnosing the residuals ...", flush=True)
-    diag = diagnose(fit, spec, progress=not args.verbose)
+    diag = diagnose(fit, est.spec, progress=not args.verbose)
     write_diagnosis(diag, cov, folder / "diagnosis")
     print("profiling the opening's held parameters ...", flush=True)
-    held = held_opening_profiles(fit, spec, progress=not args.verbose)
+    held = held_opening_profiles(fit, est.spec, progress=not args.verbose)
     text = flight_text(fit, cov, card.nominal, diag, held)
     (out / "flight.md").write_text(f"# {card.title}\n\n{card.label}\n\n{text}")
     print()
@@ -583,8 +599,11 @@ def _demo(args: argparse.Namespace) -> int:
 
 
 def _run_reconstruction(test: FlightTest, args: argparse.Namespace, spec: ModelSpec,
-                        out: Path | None = None) -> tuple[Fit, Covariance, Path]:
-    """Solve, write the report folder (`out`, default --out) and print the tables."""
+                        out: Path | None = None, raise_unless_result: bool = True
+                        ) -> tuple[Estimator, Fit, Covariance, Path]:
+    """Solve, write the report folder (`out`, default --out) and print the tables and the
+    fit's claim; NotAResult, after the report is written, where the fit is not a result
+    (unless not `raise_unless_result`)."""
     from .profile_likelihood import profile, require_free
     from .report import fit_summary, parameter_table, write_report
     est = _estimator(test, args, spec)
@@ -594,7 +613,7 @@ def _run_reconstruction(test: FlightTest, args: argparse.Namespace, spec: ModelS
     print(f"solving: {est.size_text()} ...", flush=True)
     target = out if out is not None else args.out
     try:
-        fit, cov = _fit_and_covariance(est, args)
+        est, fit, cov, claim = _fit_and_covariance(est, args)
     except SolverFailure as exc:
         from .failure_report import write_failure_report
         folder = write_failure_report(exc, target)
@@ -602,15 +621,19 @@ def _run_reconstruction(test: FlightTest, args: argparse.Namespace, spec: ModelS
         raise
     profiles = [profile(est, fit, cov, n, args.profile_span, args.profile_points,
                         progress=not args.verbose) for n in names]
-    out = write_report(fit, cov, target, profiles)
+    out = write_report(fit, cov, target, profiles, claim)
     print()
     print(parameter_table(fit, cov))
     print()
     print(fit_summary(fit))
     for prof in profiles:
         print(f"profile likelihood, {prof.text()}")
+    print(claim.text())
     print(f"\nreport written to {out} (result.json, parameters.csv, report.md, figures)")
-    return fit, cov, out
+    if not claim.is_result and raise_unless_result:
+        raise NotAResult(f"the fit converged but is not a result (see the claim in "
+                         f"{out / 'report.md'}): {claim.problems()[0]}")
+    return est, fit, cov, out
 
 
 def _estimator(test: FlightTest, args: argparse.Namespace, spec: ModelSpec) -> Estimator:
@@ -629,15 +652,19 @@ def _estimator(test: FlightTest, args: argparse.Namespace, spec: ModelSpec) -> E
     return est
 
 
-def _fit_and_covariance(est: Estimator, args: argparse.Namespace) -> tuple[Fit, Covariance]:
-    """Solve, and the covariance the command line asks for (a warning where the data leave
-    a parameter combination undetermined)."""
-    from .continuation import solve
-    fit = solve(est, progress=not args.verbose)
+def _fit_and_covariance(est: Estimator, args: argparse.Namespace
+                        ) -> tuple[Estimator, Fit, Covariance, Claim]:
+    """Solve, check what the fit may claim (moving start windows the data press against;
+    the estimator returned is the one that gave the fit), and the covariance the command
+    line asks for (a warning where the data leave a parameter combination undetermined)."""
+    from .continuation import solve_checked
+    est, fit, claim = solve_checked(est, progress=not args.verbose)
     if args.hessian == "exact":
         print("exact-Hessian covariance ...", flush=True)
     cov = est.covariance(fit, args.rescale_sigmas, args.hessian)
     if cov.undetermined:
         print(f"warning: the data do not determine {', '.join(cov.undetermined)} "
               f"(see the identifiability lines)", file=sys.stderr)
-    return fit, cov
+    for problem in claim.problems():
+        print(f"warning: {problem}", file=sys.stderr)
+    return est, fit, cov, claim

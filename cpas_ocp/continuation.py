@@ -26,6 +26,7 @@ converge at all.
 from __future__ import annotations
 
 import dataclasses
+import sys
 
 from .effects import Effect
 from .effects.registry import BUILTIN
@@ -33,7 +34,15 @@ from .errors import SolverFailure
 from .estimation import Estimator, Fit, Settings
 from .flight_test import FlightTest
 from .model_spec import ModelSpec
-from .restarts import restart_start_times
+from .restarts import IMPROVEMENT_CHI2, restart_start_times
+from .result_claim import (
+    MAX_WINDOW_MOVES,
+    Claim,
+    WindowMove,
+    check_claim,
+    moved_windows,
+    start_shifts,
+)
 
 
 def relaxed_spec(spec: ModelSpec, test: FlightTest) -> ModelSpec | None:
@@ -76,6 +85,62 @@ def solve(est: Estimator, progress: bool = False) -> Fit:
     restarted with the start times that misfit moved (`restarts`).  Raises
     SolverFailure as `Estimator.solve` does, for the last attempt."""
     return restart_start_times(est, _solve_from_reduction(est, progress), progress)[0]
+
+
+def solve_checked(est: Estimator, progress: bool = False
+                  ) -> tuple[Estimator, Fit, Claim]:
+    """`solve`, then what the fit may claim (`result_claim`).
+
+    Where the fit is not a plain result and start times sit at their windows'
+    edges, those windows are centred on the edges and the phase fitted again from
+    the reduction (`result_claim.moved_windows`), up to MAX_WINDOW_MOVES times,
+    while the refit lowers chi-square.  Returns the estimator of the fit kept (a
+    moved model's own), the fit and its claim, which lists the moves.
+
+    A first fit that fails is judged at its last iterate the same way (a failed
+    run is never a plain result); the first failure is raised where no window moves
+    or no moved model converges.
+    """
+    failure: SolverFailure | None = None
+    try:
+        fit = solve(est, progress)
+        claim = check_claim(est, fit)
+    except SolverFailure as exc:
+        if not isinstance(exc.last_iterate, Fit):
+            raise
+        failure, fit, claim = exc, exc.last_iterate, check_claim(est, exc.last_iterate)
+    moves: list[WindowMove] = []
+    for _ in range(MAX_WINDOW_MOVES):
+        spec = moved_windows(claim, est, fit)
+        if spec is None:
+            break
+        base = start_shifts(est.spec)
+        shifted = {n: v for n, v in start_shifts(spec).items() if base.get(n) != v}
+        if progress:
+            print(f"start times at their windows' edges ({', '.join(shifted)}) in a fit that "
+                  f"is not a plain result: moving the windows and fitting again ...",
+                  file=sys.stderr, flush=True)
+        # The grid follows the windows: its fine intervals cover each start time's window.
+        moved = Estimator(est.test, spec, dataclasses.replace(est.settings, nodes=None))
+        try:
+            refit = solve(moved, progress)
+        except SolverFailure:
+            break
+        # A failed first fit's last iterate is no optimum to improve on: any converged
+        # refit replaces it.
+        if failure is None and refit.chi_square > fit.chi_square - IMPROVEMENT_CHI2:
+            break
+        moves += [WindowMove(n, v - base.get(n, 0.0), fit.chi_square, refit.chi_square)
+                  for n, v in shifted.items()]
+        est, fit, failure = moved, refit, None
+        claim = check_claim(est, fit)
+    if failure is not None:
+        raise failure
+    claim.moves = moves
+    if moves:
+        fit.solver.start += "; " + "; ".join(f"{m.parameter}'s window moved "
+                                            f"{m.shift_s:+.2f} s" for m in moves)
+    return est, fit, claim
 
 
 def _solve_from_reduction(est: Estimator, progress: bool) -> Fit:

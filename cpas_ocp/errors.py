@@ -4,7 +4,7 @@
 carries the file, the field and what was expected, and the CLI prints it as one
 line and exits with code 2.  `SolverFailure` is an estimation that did not
 converge: it carries Ipopt's status and iteration count, and is never shown as
-a result.
+a result.  `NotAResult` is a converged fit that may not claim to be one.
 """
 
 from __future__ import annotations
@@ -21,6 +21,11 @@ class InputError(ValueError):
         # One line, whatever a library's message carried along (pandas ends some with \n).
         self.expectation = " ".join(expectation.split())
         super().__init__(f"{file}: {field}: {self.expectation}")
+
+
+class NotAResult(RuntimeError):
+    """A converged fit the data press against bounds that were only guessed
+    (`result_claim`): its report is written and says why, and the CLI exits with 4."""
 
 
 class SolverFailure(RuntimeError):

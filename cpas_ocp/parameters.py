@@ -23,6 +23,14 @@ class Parameter:
     is `estimable` but not `free_by_default` (the forebody drag area, which
     comes from the aerodynamic database; fly-out angles, which the drag scale
     factors absorb) is estimated only when a model names it in ``free``.
+
+    A bound is *physical* (`physical_lower`, `physical_upper`) where nature or
+    the data set it: an added-mass factor or a lag cannot be negative, an
+    over-inflation factor is at least 1, a start time lies within the phase.
+    The others are guesses of where a value can plausibly lie (a fill
+    constant's range, a start time's window around its observed event): a fit
+    that the data press against such a bound is not yet a result
+    (`result_claim`).
     """
 
     name: str
@@ -34,11 +42,27 @@ class Parameter:
     description: str = ""
     scale: float = 1.0
     free_by_default: bool = True
+    physical_lower: bool = False
+    physical_upper: bool = False
 
     def on_bound(self, value: float) -> bool:
         """Whether `value` is one of the bounds: a hypothesis holding the parameter there
         admits alternatives on one side only (chi-bar-squared tests)."""
         return value <= self.lower or value >= self.upper
+
+    def held_side(self, value: float, tolerance: float = 1e-6) -> str | None:
+        """"lower" or "upper" where `value` lies on that bound (within `tolerance` of the
+        range, as a solver leaves it), else None."""
+        span = (self.upper - self.lower) * tolerance
+        if value <= self.lower + span:
+            return "lower"
+        if value >= self.upper - span:
+            return "upper"
+        return None
+
+    def is_physical(self, side: str) -> bool:
+        """Whether the `side` ("lower"/"upper") bound is a physical limit, not a guess."""
+        return self.physical_lower if side == "lower" else self.physical_upper
 
     def nearer_bound(self, value: float) -> str:
         """"lower" or "upper": the bound `value` lies nearer to (for a parameter a fit left on

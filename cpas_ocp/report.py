@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
@@ -20,6 +20,9 @@ from .plots import plot_correlation, plot_drag_areas, plot_events, plot_profile,
 from .profile_likelihood import Profile
 from .uncertainty import POORLY_DETERMINED, Covariance
 from .units import FT
+
+if TYPE_CHECKING:
+    from .result_claim import Claim
 
 Z95 = float(norm.ppf(0.975))  # two-sided 95 % quantile of the standard normal
 STRONG_CORRELATION = 0.9  # |rho| from which a parameter pair is named in the terminal
@@ -191,11 +194,15 @@ def correlation_markdown(cov: Covariance, threshold: float = REPORTED_CORRELATIO
 
 
 def write_report(fit: Fit, cov: Covariance | None, out: str | Path,
-                 profiles: Sequence[Profile] = ()) -> Path:
-    """Write the report folder atomically: all of it or nothing."""
+                 profiles: Sequence[Profile] = (), claim: Claim | None = None) -> Path:
+    """Write the report folder atomically: all of it or nothing.  With `claim`, result.json
+    and report.md say what the fit may claim, a fit that is not a result first of all."""
     out = Path(out)
     with atomic_folder(out, RESULT_MARKERS) as tmp:
-        (tmp / "result.json").write_text(json.dumps(result_dict(fit, cov, profiles), indent=2))
+        result = result_dict(fit, cov, profiles)
+        if claim is not None:
+            result["claim"] = claim.as_dict()
+        (tmp / "result.json").write_text(json.dumps(result, indent=2))
         std = cov.std if cov is not None else {}
         rows = [{"parameter": n, "value": fit.parameters[n], "std": std.get(n, np.nan),
                  "unit": fit.model.parameter(n).unit} for n in fit.free]
@@ -207,9 +214,12 @@ def write_report(fit: Fit, cov: Covariance | None, out: str | Path,
             plot_correlation(cov, fit.test.name, tmp)
         for prof in profiles:
             plot_profile(prof, fit.test.name, tmp)
+        warning = ("**Not a result.** " + " ".join(f"{p}." for p in claim.problems()) + "\n\n"
+                   if claim is not None and not claim.is_result else "")
         (tmp / "report.md").write_text(
-            f"# Reconstruction of {fit.test.name}\n\n{fit.test.label}\n\n```\n"
-            f"{parameter_table(fit, cov)}\n\n{fit_summary(fit)}\n```\n\n"
+            f"# Reconstruction of {fit.test.name}\n\n{fit.test.label}\n\n{warning}```\n"
+            f"{parameter_table(fit, cov)}\n\n{fit_summary(fit)}\n"
+            + (f"{claim.text()}\n" if claim is not None else "") + "```\n\n"
             + (correlation_markdown(cov) if cov is not None else "")
             + "".join(f"Profile likelihood, {p.text()}\n\n" for p in profiles)
             + "".join(f"![{p.stem}]({p.name})\n\n" for p in sorted(tmp.glob("*.png"))))

@@ -59,13 +59,12 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy.optimize import lsq_linear
 
 from .effects.base import Effect
 from .effects.registry import BUILTIN, EffectType
 from .errors import InputError, SolverFailure
 from .estimation import POLISH_CONSTRAINT_TOL, STOP_CONSTRAINT_TOL, Estimator, Fit
-from .hypothesis_tests import chi_bar_square_sf
+from .hypothesis_tests import chi_bar_square_sf, cone_statistic
 from .model_comparison import LikelihoodRatio, nested_start
 from .model_spec import RISER_MODELS, ModelSpec
 from .process_memory import release_freed_memory
@@ -500,8 +499,6 @@ def _statistic(result: ScoreTest, model, values: dict[str, float], cov) -> None:
     index = [cov.names.index(n) for n in names]
     C = cov.matrix[np.ix_(index, index)]
     theta = np.array([values[n] - result.null[n] for n in names])
-    W = np.linalg.pinv(0.5 * (C + C.T))
-    full = float(theta @ W @ theta)
     lower = np.full(len(names), -np.inf)
     upper = np.full(len(names), np.inf)
     sided = []
@@ -514,15 +511,7 @@ def _statistic(result: ScoreTest, model, values: dict[str, float], cov) -> None:
             else:
                 upper[j] = 0.0
             sided.append(n)
-    if sided:
-        # Nearest point of the cone in W's metric: |L'(t - theta)| with W = L L'.
-        eigval, eigvec = np.linalg.eigh(W)
-        L = eigvec * np.sqrt(np.clip(eigval, 0.0, None))
-        nearest = lsq_linear(L.T, L.T @ theta, bounds=(lower, upper), method="bvls").x
-        d = nearest - theta
-        statistic = max(full - float(d @ W @ d), 0.0)
-    else:
-        statistic = full
+    statistic = cone_statistic(theta, C, lower, upper)
     result.statistic = statistic
     result.dof = len(names)
     result.one_sided = tuple(sided)

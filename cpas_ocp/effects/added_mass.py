@@ -74,7 +74,8 @@ class AddedMass(Effect):
 
     def parameters(self, test: FlightTest) -> list[Parameter]:
         return [Parameter(param_name("added_mass_factor", c.name), "1", 1.0, 0.0, 5.0,
-                          description="added mass over its nominal value", scale=1.0)
+                          description="added mass over its nominal value", scale=1.0,
+                          physical_lower=True)
                 for c in test.parachutes]
 
     def null_values(self, test: FlightTest) -> dict[str, float]:

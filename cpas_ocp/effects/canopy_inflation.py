@@ -23,7 +23,8 @@ around the jump set the start time to a precision the data do not hold.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import casadi as ca
@@ -37,7 +38,7 @@ from ..inflation import (
     smoothstep,
     stage_started,
 )
-from ..parameters import Parameter, param_name
+from ..parameters import Parameter, param_name, split_name
 from .base import Capture, Effect, EventTiming
 
 if TYPE_CHECKING:
@@ -63,13 +64,32 @@ class CanopyInflation(Effect):
     `start_window` (s): how far each inflation start time may move from its
     observed event (bag strip or disreef) when estimated; a first stage seeded
     from its canopy's mortar fire alone (no bag strip or line stretch observed)
-    never starts before that fire (less the event's sigma).
+    never starts before that fire (less the event's sigma).  `start_shifts`
+    (s, by start-time name, e.g. ``{"t_start[drogue1,stage2]": -1.0}``) moves
+    a window's centre, and the start's first guess, off its event: set where
+    the data press a start time against its window (`result_claim`), or by a
+    user who knows an event's time is off.  The phase's ends and the mortar
+    fire still bound every window.
     """
 
     start_window: float = 1.0
+    start_shifts: Mapping[str, float] = field(default_factory=dict)
     name: str = "canopy_inflation"
 
+    def __post_init__(self) -> None:
+        if not self.start_window > 0.0:
+            raise ValueError(f"start_window must be positive (s); got {self.start_window!r}")
+        for key, shift in self.start_shifts.items():
+            if split_name(key)[0] != "t_start" or not math.isfinite(shift):
+                raise ValueError(f"start_shifts maps start times t_start[P,S] to finite "
+                                 f"shifts in seconds; got {key!r}: {shift!r}")
+
     def parameters(self, test: FlightTest) -> list[Parameter]:
+        starts = {param_name("t_start", c.name, s) for c in test.parachutes for s in c.stages}
+        unknown = sorted(set(self.start_shifts) - starts)
+        if unknown:
+            raise ValueError(f"start_shifts names {', '.join(unknown)}, not a start time of "
+                             f"this test ({', '.join(sorted(starts))})")
         out = []
         for chute in test.parachutes:
             s_o = math.pi * chute.diameter**2 / 4.0
@@ -79,17 +99,20 @@ class CanopyInflation(Effect):
                 out.append(Parameter(param_name("CdS", *idx), "m^2",
                                      0.5 * s_o * (k + 1) / n_stages, 1e-3 * s_o, MAX_CD * s_o,
                                      description="steady drag area of the stage",
-                                     scale=0.5 * s_o * (k + 1) / n_stages))
+                                     scale=0.5 * s_o * (k + 1) / n_stages,
+                                     physical_lower=True))
                 if chute.inflation == "infinite_mass":
                     out += [
                         Parameter(param_name("Ck", *idx), "1", 1.3, 1.0, 3.0,
-                                  description="over-inflation factor", scale=1.0),
+                                  description="over-inflation factor", scale=1.0,
+                                  physical_lower=True),
                         Parameter(param_name("n_p", *idx), "1", 6.0, 0.3, 40.0,
                                   description="peak fill constant (diameters to peak)", scale=5.0),
                         Parameter(param_name("expopen", *idx), "1", 2.0, 0.3, 6.0,
                                   description="opening shape exponent", scale=1.0),
                         Parameter(param_name("t_k", *idx), "s", 0.3, 0.01, 3.0,
-                                  description="settling time after the peak", scale=0.3),
+                                  description="settling time after the peak", scale=0.3,
+                                  physical_lower=True),
                     ]
                 else:
                     out += [
@@ -98,16 +121,24 @@ class CanopyInflation(Effect):
                         Parameter(param_name("expopen", *idx), "1", 1.0, 0.3, 6.0,
                                   description="opening shape exponent", scale=1.0),
                     ]
-                t0 = self.observed_start(test, chute, k)
-                lo = max(test.t_start, t0 - self.start_window)
+                name = param_name("t_start", *idx)
+                observed = self.observed_start(test, chute, k)
+                # The phase's ends, and the mortar fire where it alone seeds the start, are
+                # physical limits; the window about the (shifted) event is a guess.
+                earliest = test.t_start
                 mortar = test.event("mortar_fire", chute.name) if k == 0 else None
-                if mortar is not None and t0 == mortar.time + MORTAR_TO_INFLATION_S:
+                if mortar is not None and observed == mortar.time + MORTAR_TO_INFLATION_S:
                     # Seeded from the mortar (or ejection charge) alone: the canopy does not
                     # start to inflate before it fires; the event's timing sigma is allowed.
-                    lo = max(lo, mortar.time - mortar.sigma)
+                    earliest = max(earliest, mortar.time - mortar.sigma)
+                shift = self.start_shifts.get(name, 0.0)
+                t0 = min(max(observed + shift, earliest), test.t_end) if shift else observed
+                lo = max(earliest, t0 - self.start_window)
                 hi = min(test.t_end, t0 + self.start_window)
-                out.append(Parameter(param_name("t_start", *idx), "s", t0, lo, hi,
-                                     description="inflation start time", scale=1.0))
+                out.append(Parameter(name, "s", t0, lo, hi,
+                                     description="inflation start time", scale=1.0,
+                                     physical_lower=bool(lo == earliest),
+                                     physical_upper=bool(hi == test.t_end)))
         return out
 
     def captures(self, test: FlightTest) -> list[Capture]:

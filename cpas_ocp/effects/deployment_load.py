@@ -48,7 +48,7 @@ class DeploymentLoad(Effect):
         types = dict.fromkeys(c.type for c in self._deployed(test))
         return [Parameter(param_name("deployment_load", t), "N", 2000.0, 0.0, MAX_LOAD_N,
                           description="inelastic load while lines and risers deploy",
-                          scale=2000.0) for t in types]
+                          scale=2000.0, physical_lower=True) for t in types]
 
     def null_values(self, test: FlightTest) -> dict[str, float]:
         """No deployment load: F = 0 N (the lower bound)."""

@@ -67,7 +67,7 @@ class FlyOut(Effect):
                 out.append(Parameter(param_name("flyout_angle", chute.name, stage), "rad",
                                      math.radians(angle), 0.0, math.radians(MAX_ANGLE_DEG),
                                      description="riser angle out of the drag axis",
-                                     scale=0.3, free_by_default=False))
+                                     scale=0.3, free_by_default=False, physical_lower=True))
         return out
 
     def forces(self, ctx: ModelContext) -> None:

@@ -23,7 +23,7 @@ class ForebodyDrag(Effect):
         cds = test.vehicle.forebody_cds
         return [Parameter("CdS_V", "m^2", cds, 0.0, max(4.0 * cds, 1.0),
                           description="forebody drag area", scale=max(cds, 1.0),
-                          free_by_default=False)]
+                          free_by_default=False, physical_lower=True)]
 
     def forces(self, ctx: ModelContext) -> None:
         ctx.forces.append(ctx.p["CdS_V"] * ctx.q["dynamic_pressure"] * ctx.q["drag_direction"])

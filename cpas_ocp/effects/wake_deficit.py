@@ -52,7 +52,7 @@ class WakeDeficit(Effect):
     def parameters(self, test: FlightTest) -> list[Parameter]:
         return [Parameter(param_name("prf", c.name), "1", float(self.prf.get(c.type, 1.0)),
                           MIN_PRF, 1.0, description="pressure recovery fraction in the wake",
-                          scale=1.0, free_by_default=False)
+                          scale=1.0, free_by_default=False, physical_upper=True)
                 for c in test.parachutes]
 
     def null_values(self, test: FlightTest) -> dict[str, float]:

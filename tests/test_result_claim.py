@@ -1,0 +1,137 @@
+"""A converged fit is a claim: guessed bounds the data press against are moved or reported,
+and a chi-square beyond the noise is said, never shown as a plain result."""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cpas_ocp import result_claim
+from cpas_ocp.cli import main
+from cpas_ocp.continuation import solve_checked
+from cpas_ocp.effects.canopy_inflation import CanopyInflation
+from cpas_ocp.errors import InputError
+from cpas_ocp.estimation import Estimator
+from cpas_ocp.flight_test import load_test
+from cpas_ocp.hypothesis_tests import cone_statistic
+from cpas_ocp.model_spec import spec_from_block
+from cpas_ocp.result_claim import check_claim
+
+# Every event of the test moved this late: beyond the 1 s start window about each event.
+LATE_S = 1.5
+
+
+def late_events(folder: Path, dest: Path, offset: float) -> Path:
+    """A copy of a test folder with every event `offset` s late (their order kept) and no
+    truth.json."""
+    shutil.copytree(folder, dest)
+    (dest / "truth.json").unlink()
+    manifest = json.loads((dest / "manifest.json").read_text())
+    for event in manifest["events"]:
+        event["time"]["value"] += offset
+    (dest / "manifest.json").write_text(json.dumps(manifest, indent=2))
+    return dest
+
+
+def truth_of(folder: Path) -> dict[str, float]:
+    return json.loads((folder / "truth.json").read_text())["parameters"]
+
+
+def test_the_cone_statistic_keeps_only_what_lies_beyond_the_bound() -> None:
+    one = np.eye(1)
+    beyond, inside = np.array([3.0]), np.array([-3.0])
+    zero, inf = np.zeros(1), np.full(1, np.inf)
+    assert cone_statistic(beyond, one, zero, inf) == pytest.approx(9.0)
+    assert cone_statistic(inside, one, zero, inf) == pytest.approx(0.0, abs=1e-12)
+    assert cone_statistic(inside, one, -inf, inf) == pytest.approx(9.0)
+    # Correlated: the second coordinate's estimate inside its bound lowers what the first
+    # offers, and the decrease is that of the constrained optimum t = (t1, 0).
+    C = np.array([[1.0, 0.8], [0.8, 1.0]])
+    theta = np.array([2.0, -1.0])
+    W = np.linalg.inv(C)
+    t1 = theta[0] + W[0, 1] / W[0, 0] * theta[1]  # minimiser of (t - theta)'W(t - theta), t2=0
+    d = np.array([t1, 0.0]) - theta
+    expected = theta @ W @ theta - d @ W @ d
+    assert cone_statistic(theta, C, np.zeros(2), np.full(2, np.inf)) == pytest.approx(expected)
+
+
+def test_start_windows_move_with_their_shift_and_stop_at_the_phase(drogue_folder) -> None:
+    test = load_test(drogue_folder(1))
+    name = "t_start[drogue1,stage2]"
+    plain = {p.name: p for p in CanopyInflation().parameters(test)}
+    moved = {p.name: p for p in CanopyInflation(start_shifts={name: -1.0}).parameters(test)}
+    assert moved[name].default == pytest.approx(plain[name].default - 1.0)
+    assert (moved[name].lower, moved[name].upper) == pytest.approx(
+        (plain[name].lower - 1.0, plain[name].upper - 1.0))
+    assert not plain[name].physical_lower and not plain[name].physical_upper
+    # A window pushed past the phase's start is cut there, and that bound is physical.
+    first = "t_start[drogue1,stage1]"
+    early = {p.name: p for p in
+             CanopyInflation(start_shifts={first: -100.0}).parameters(test)}[first]
+    assert early.lower == test.t_start and early.physical_lower
+    assert early.held_side(early.lower) == "lower" and early.is_physical("lower")
+
+
+@pytest.mark.parametrize("block, field", [
+    ({"effects": [{"effect": "canopy_inflation", "start_shifts": {"t_start[nope,stage1]": 1}},
+                  "rigid_riser"]}, "model.effects"),
+    ({"effects": [{"effect": "canopy_inflation", "start_shifts": {"CdS[drogue1,stage1]": 1}},
+                  "rigid_riser"]}, "model.effects[0]"),
+    ({"effects": [{"effect": "canopy_inflation", "start_window": 0}, "rigid_riser"]},
+     "model.effects[0]"),
+])
+def test_bad_window_options_are_input_errors(drogue_folder, block, field) -> None:
+    test = load_test(drogue_folder(1))
+    with pytest.raises(InputError) as info:
+        spec_from_block(block, "model.json", Path()).model(test)
+    assert info.value.field == field
+
+
+def test_a_fit_of_the_right_model_is_a_result(drogue_fit) -> None:
+    fit, _, _ = drogue_fit(1)
+    est = Estimator(fit.test)
+    claim = check_claim(est, fit)
+    assert claim.is_result and claim.fits_noise and not claim.pressed
+    assert claim.problems() == []
+    assert claim.fit_p_value > result_claim.ALPHA
+
+
+def test_events_later_than_the_window_are_recovered_by_moving_the_windows(
+        drogue_folder, tmp_path) -> None:
+    folder = drogue_folder(1)
+    truth = truth_of(folder)
+    test = load_test(late_events(folder, tmp_path / "late", LATE_S))
+    est, fit, claim = solve_checked(Estimator(test))
+    assert claim.moves and all(m.shift_s < 0 for m in claim.moves)
+    assert claim.is_result and claim.fits_noise, claim.text()
+    # The truth basin: every start time within 4 sigma of the truth (4 sigma: 24 start
+    # times and shape parameters at once; a chance miss has p < 1e-3).
+    std = est.covariance(fit).std
+    for name in fit.free:
+        if name.startswith("t_start"):
+            assert abs(fit.parameters[name] - truth[name]) < 4.0 * std[name], name
+    assert "window moved" in fit.solver.start
+
+
+def test_a_fit_still_pressed_exits_4_with_its_report_saying_why(
+        drogue_folder, tmp_path, monkeypatch, capsys) -> None:
+    # Without window moves, the late events leave the start times on their windows.
+    monkeypatch.setattr("cpas_ocp.continuation.MAX_WINDOW_MOVES", 0)
+    test_dir = late_events(drogue_folder(1), tmp_path / "late", LATE_S)
+    out = tmp_path / "report"
+    code = main(["reconstruct", str(test_dir), "--out", str(out)])
+    err = capsys.readouterr().err
+    assert code == 4, err
+    assert "error: the fit converged but is not a result" in err and "t_start[" in err
+    result = json.loads((out / "result.json").read_text())
+    assert result["claim"]["result"] is False
+    assert any(h["pressed"] and h["name"].startswith("t_start")
+               for h in result["claim"]["held_bounds"])
+    assert result["claim"]["bound_p_value"] < result_claim.ALPHA
+    assert (out / "report.md").read_text().count("**Not a result.**") == 1
+    assert math.isfinite(result["claim"]["chi_square"])
