@@ -54,11 +54,13 @@ def shifted_folder(root: Path, seed: int, case: str, offset: float) -> tuple[Pat
 
 
 def start_errors(est: Estimator, fit: Fit, truth: dict) -> tuple[float, float]:
-    """Largest |t_start - truth| (s) and the largest in sigma."""
+    """Largest |t_start - truth| (s) and the largest in sigma (NaN where every start time
+    sits on a bound, without a sigma)."""
     std = est.covariance(fit).std
     names = [n for n in fit.free if n.startswith("t_start")]
     errors = {n: abs(fit.parameters[n] - truth[n]) for n in names}
-    return max(errors.values()), max(errors[n] / std[n] for n in names if std.get(n))
+    return max(errors.values()), max((errors[n] / std[n] for n in names if std.get(n)),
+                                     default=float("nan"))
 
 
 def run(folder: Path, truth: dict, checked: bool) -> str:

@@ -70,7 +70,15 @@ from scipy.signal import savgol_filter
 from .altus_metrum import AltusLog
 from .atmosphere import ISA_LAPSE_K_M, R_AIR, SiteAtmosphere, pressure_altitude
 from .errors import InputError
-from .flight_test import FORMAT, MANIFEST, load_test, read_json, validate_block
+from .flight_test import (
+    FORMAT,
+    MANIFEST,
+    check_magnitudes,
+    load_test,
+    read_json,
+    validate_block,
+    validate_manifest,
+)
 from .problems import problem_names
 from .units import FACTORS, G0
 
@@ -108,14 +116,10 @@ class FlightCard:
 
 
 def card_from_dict(raw: dict[str, Any], source: str) -> FlightCard:
-    """A card from its JSON object; InputError naming the missing field."""
-    for key in ("name", "data", "vehicle", "parachutes", "site", "model"):
-        if key not in raw:
-            raise InputError(source, key, "a flight card field (see problems/prometheus.json)")
-    for i, chute in enumerate(raw["parachutes"]):
-        if "deployment" not in chute:
-            raise InputError(source, f"parachutes[{i}].deployment",
-                             "the flight state that deploys the canopy (e.g. 'drogue', 'main')")
+    """A card from its JSON object; InputError naming the field that breaks
+    `data_schemas/flight_card.schema.json` (or whose numbers are beyond any test's)."""
+    validate_block(raw, "flight_card.schema.json", source)
+    check_magnitudes(raw, source)
     return FlightCard(raw["name"], raw.get("title", raw["name"]), raw.get("label", ""),
                       raw["data"].get("folder", ""), tuple(raw["data"].get("logs", ())),
                       raw["vehicle"], tuple(raw["parachutes"]), raw["site"], raw["model"],
@@ -381,7 +385,7 @@ def import_flight(log: AltusLog, card: FlightCard, out: str | Path) -> ImportSum
                   "end": {"value": round(t_end, 3), "unit": "s"}},
         "model": card.model,
     }
-    validate_block(manifest, "manifest.schema.json", card.source)
+    validate_manifest(manifest, card.source)
     summary = ImportSummary(
         log.recorder, (t_begin, t_end),
         {**deploy, **{f"{name} full open": t for name, (t, _) in full_open.items()},
@@ -393,13 +397,14 @@ def import_flight(log: AltusLog, card: FlightCard, out: str | Path) -> ImportSum
          "ejection_charge_samples": int((in_phase.to_numpy() & near_charge).sum()),
          "gps_repeats_between_fixes": int(d["time"].between(lo, hi).sum()
                                           - len(fixes_phase)) if log.has_gps else 0})
-    _write_folder(out, manifest, files, summary)
+    _write_folder(out, manifest, files, summary, card.source)
     return summary
 
 
 def _write_folder(out: Path, manifest: dict[str, Any], files: dict[str, pd.DataFrame],
-                  summary: ImportSummary) -> None:
-    """Write into a temporary sibling, check that it loads, then move it to `out`."""
+                  summary: ImportSummary, card_source: str) -> None:
+    """Write into a temporary sibling, check that it loads, then move it to `out`.  What the
+    loading refuses in the manifest came from the card: the error names the card."""
     if out.exists() and any(out.iterdir()):
         raise InputError(str(out), "(folder)", "a new or empty folder for the test")
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -409,7 +414,13 @@ def _write_folder(out: Path, manifest: dict[str, Any], files: dict[str, pd.DataF
             frame.to_csv(tmp / name, index=False)
         (tmp / MANIFEST).write_text(json.dumps(manifest, indent=2) + "\n")
         (tmp / "import.json").write_text(json.dumps(summary.to_dict(), indent=2) + "\n")
-        load_test(tmp)
+        try:
+            load_test(tmp)
+        except InputError as exc:
+            if Path(exc.file) != tmp / MANIFEST:
+                raise
+            raise InputError(card_source, exc.field, f"{exc.expectation} (in the manifest "
+                             f"the card makes)") from None
         if out.exists():
             out.rmdir()
         tmp.rename(out)

@@ -185,7 +185,8 @@ class FlightTest:
         return tuple(s for s in self.sensors if s.kind == kind)
 
 
-SCHEMAS = ("manifest.schema.json", "series.schema.json", "model.schema.json")
+SCHEMAS = ("manifest.schema.json", "series.schema.json", "model.schema.json",
+           "flight_card.schema.json")
 
 
 @cache
@@ -217,13 +218,18 @@ def validate_block(obj: Any, schema: str, file: str, prefix: str = "") -> None:
         # Descend to the most specific cause so the message names the leaf field.
         while error.context:
             error = jsonschema.exceptions.best_match(error.context)
-        raise InputError(file, _json_path(error.absolute_path, prefix), error.message)
+        path = list(error.absolute_path)
+        if error.validator == "required" and isinstance(error.instance, dict):
+            # A missing field is named itself, not its parent.
+            path.append(next(k for k in error.validator_value if k not in error.instance))
+            raise InputError(file, _json_path(path, prefix), "a required field, missing")
+        raise InputError(file, _json_path(path, prefix), error.message)
 
 
 def validate_manifest(manifest: Any, file: str = MANIFEST) -> None:
     """Validate a manifest object against the JSON Schema; raise InputError on the first problem."""
     validate_block(manifest, "manifest.schema.json", file)
-    _check_magnitudes(manifest, file)
+    check_magnitudes(manifest, file)
 
 
 # Largest magnitude a number in a manifest may have.  No quantity of a parachute test comes
@@ -233,7 +239,7 @@ def validate_manifest(manifest: Any, file: str = MANIFEST) -> None:
 MAX_MAGNITUDE = 1e9
 
 
-def _check_magnitudes(node: Any, file: str, path: str = "") -> None:
+def check_magnitudes(node: Any, file: str, path: str = "") -> None:
     """InputError naming the first number in `node` (a manifest or part of one) that is not
     finite or exceeds MAX_MAGNITUDE."""
     if isinstance(node, bool):
@@ -247,7 +253,7 @@ def _check_magnitudes(node: Any, file: str, path: str = "") -> None:
         enumerate(node) if isinstance(node, list) else ()
     for key, child in items:
         where = f"{path}[{key}]" if isinstance(key, int) else f"{path}.{key}" if path else key
-        _check_magnitudes(child, file, where)
+        check_magnitudes(child, file, where)
 
 
 # Data a sensor may have beyond the window all sensors share, at the phase's start or end,

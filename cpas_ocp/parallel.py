@@ -11,6 +11,7 @@ used is an `InputError` on ``--scheduler``.
 
 from __future__ import annotations
 
+import signal
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from typing import TypeVar
@@ -36,10 +37,29 @@ def _on_processes(fn: Callable[[T], R], items: Sequence[T],
     if workers <= 1 or len(items) <= 1:
         yield from enumerate(map(fn, items))
         return
-    with ProcessPoolExecutor(max_workers=min(workers, len(items))) as pool:
+    pool = ProcessPoolExecutor(max_workers=min(workers, len(items)),
+                               initializer=_worker_signals)
+    try:
         futures = {pool.submit(fn, item): i for i, item in enumerate(items)}
         for future in as_completed(futures):
             yield futures[future], future.result()
+    except BaseException:
+        # An interrupt (or any error) ends the workers now, not after their running tasks
+        # (the executor's own shutdown waits for those: minutes for a campaign).  There is
+        # no public way to do so before Python 3.14's `terminate_workers`.
+        for process in list((pool._processes or {}).values()):
+            process.terminate()
+        pool.shutdown(wait=True, cancel_futures=True)
+        raise
+    pool.shutdown()
+
+
+def _worker_signals() -> None:
+    """A local worker leaves Ctrl-C to the command, which ends it (a terminal sends SIGINT to
+    the whole process group), and dies quietly on SIGTERM: it must not run the command's
+    handlers, inherited through fork, which would print its traceback."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
 def _on_dask(fn: Callable[[T], R], items: Sequence[T],

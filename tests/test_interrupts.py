@@ -83,3 +83,57 @@ def test_a_signal_inside_a_deferred_region_waits_for_its_end() -> None:
     finally:
         for s, handler in previous.items():
             signal.signal(s, handler)
+
+
+# A campaign whose every task pauses for ten minutes, announced: a signal that waited for the
+# running tasks would hang the command.
+CAMPAIGN = """
+import sys, time
+import cpas_ocp.campaign as campaign
+def paused(folder):
+    print("task", flush=True)
+    time.sleep(600.0)
+campaign.reconstruct_folder = paused
+from cpas_ocp.cli import main
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+@pytest.mark.parametrize("sig, code, group", [(signal.SIGINT, 130, True),
+                                              (signal.SIGTERM, 143, False)])
+def test_a_signal_to_a_campaign_ends_its_workers_at_once(sig, code, group, problem_folder,
+                                                         tmp_path) -> None:
+    """Ctrl-C (to the whole process group, as a terminal sends it) or SIGTERM (to the
+    command alone) mid-campaign: the worker processes end with it, mid-task, and nothing
+    is written.  Waiting for the running tasks, as the executor's shutdown does, would
+    take their ten minutes."""
+    import os
+    import shutil
+
+    psutil = pytest.importorskip("psutil")
+    tests = tmp_path / "tests"
+    for seed in (1, 2, 3):
+        shutil.copytree(problem_folder("fbcp", 1), tests / f"fbcp{seed}")
+    out = tmp_path / "campaign"
+    proc = subprocess.Popen([sys.executable, "-u", "-c", CAMPAIGN, "campaign", str(tests),
+                             "--out", str(out), "--workers", "2"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, start_new_session=True)
+    assert proc.stdout is not None
+    started = 0
+    for line in proc.stdout:
+        started += line.startswith("task")
+        if started == 2:
+            break
+    workers = psutil.Process(proc.pid).children(recursive=True)
+    assert len(workers) >= 2, "the campaign started no workers"
+    if group:
+        os.killpg(proc.pid, sig)
+    else:
+        proc.send_signal(sig)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == code, err
+    assert err.strip().splitlines()[-1].startswith("interrupted"), err
+    assert "Traceback" not in err
+    _, alive = psutil.wait_procs(workers, timeout=30.0)
+    assert not alive, alive
+    assert not out.exists() and not list(tmp_path.glob(".cpas-out-*"))
