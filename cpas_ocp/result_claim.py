@@ -55,6 +55,7 @@ from .estimation import Estimator, Fit
 from .hypothesis_tests import chi_bar_square_sf, cone_statistic
 from .model_spec import ModelSpec
 from .parameters import split_name
+from .restarts import Restart
 
 # Level of both tests.  A fit with a parameter on a guessed bound the data do not press
 # against is flagged with at most this probability; so is a fit whose model and noise are
@@ -95,14 +96,9 @@ class HeldBound:
 
 
 @dataclass(frozen=True)
-class WindowMove:
-    """A start time's window moved by `shift_s` because the data pressed it against the
-    window's edge, and the chi-square before and after the refit."""
-
-    parameter: str
-    shift_s: float
-    chi_square_before: float
-    chi_square_after: float
+class WindowMove(Restart):
+    """A start time's window moved by `shift_s` (its start at the window's edge in a fit
+    that was not a plain result), and the chi-square before and after the refit."""
 
     def text(self) -> str:
         return (f"{self.parameter}: window moved {self.shift_s:+.2f} s from its event "
@@ -176,10 +172,16 @@ class Claim:
                 "chi_square": self.chi_square, "dof": self.dof,
                 "fit_p_value": self.fit_p_value, "misfit_factor": self.misfit_factor,
                 "bound_statistic": self.bound_statistic, "bound_p_value": self.bound_p_value,
-                "held_bounds": [vars(h) | {"physical": bool(h.physical),
-                                           "pressed": h in self.pressed} for h in self.held],
+                "held_bounds": [{**vars(h), "physical": bool(h.physical),
+                                 "beyond": _number(h.beyond), "beyond_z": _number(h.beyond_z),
+                                 "pressed": h in self.pressed} for h in self.held],
                 "window_moves": [vars(m) for m in self.moves],
                 "problems": self.problems(), "alpha": self.alpha}
+
+
+def _number(x: float) -> float | None:
+    """`x` as JSON can hold it: None for NaN (a bound the test did not reach)."""
+    return float(x) if np.isfinite(x) else None
 
 
 def check_claim(est: Estimator, fit: Fit, alpha: float = ALPHA) -> Claim:

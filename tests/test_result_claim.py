@@ -38,6 +38,10 @@ def late_events(folder: Path, dest: Path, offset: float) -> Path:
     return dest
 
 
+def _not_json(token: str) -> None:
+    raise AssertionError(f"{token} is not JSON")
+
+
 def truth_of(folder: Path) -> dict[str, float]:
     return json.loads((folder / "truth.json").read_text())["parameters"]
 
@@ -128,7 +132,7 @@ def test_a_fit_still_pressed_exits_4_with_its_report_saying_why(
     err = capsys.readouterr().err
     assert code == 4, err
     assert "error: the fit converged but is not a result" in err and "t_start[" in err
-    result = json.loads((out / "result.json").read_text())
+    result = json.loads((out / "result.json").read_text(), parse_constant=_not_json)
     assert result["claim"]["result"] is False
     assert any(h["pressed"] and h["name"].startswith("t_start")
                for h in result["claim"]["held_bounds"])
