@@ -279,9 +279,9 @@ def import_flight(log: AltusLog, card: FlightCard, out: str | Path) -> ImportSum
     for i, chute in enumerate(card.parachutes):
         state = chute["deployment"]
         if state not in log.events:
-            raise InputError(src, "state_name", f"a {state!r} flight state (deploys "
-                             f"{chute.get('name', f'parachutes[{i}]')}); the log has "
-                             f"{', '.join(log.events)}")
+            raise InputError(card.source, f"parachutes[{i}].deployment",
+                             f"a flight state of the log {src} that deploys {chute['name']} "
+                             f"({', '.join(log.events)}); got {state!r}")
         deploy[chute["name"]] = log.events[state]
     pad = d[d["time"] < 0.0]
     if pad.empty:
@@ -397,14 +397,19 @@ def import_flight(log: AltusLog, card: FlightCard, out: str | Path) -> ImportSum
          "ejection_charge_samples": int((in_phase.to_numpy() & near_charge).sum()),
          "gps_repeats_between_fixes": int(d["time"].between(lo, hi).sum()
                                           - len(fixes_phase)) if log.has_gps else 0})
-    _write_folder(out, manifest, files, summary, card.source)
+    _write_folder(out, manifest, files, summary, card.source, src)
     return summary
 
 
+# Manifest fields the import copies from the card; the others it derives from the log.
+CARD_FIELDS = ("name", "label", "vehicle", "parachutes", "model")
+
+
 def _write_folder(out: Path, manifest: dict[str, Any], files: dict[str, pd.DataFrame],
-                  summary: ImportSummary, card_source: str) -> None:
+                  summary: ImportSummary, card_source: str, log_source: str) -> None:
     """Write into a temporary sibling, check that it loads, then move it to `out`.  What the
-    loading refuses in the manifest came from the card: the error names the card."""
+    loading refuses in the manifest is named against where it came from: the card (its
+    vehicle, canopies and model) or the log (the phase, events, sensors, atmosphere)."""
     if out.exists() and any(out.iterdir()):
         raise InputError(str(out), "(folder)", "a new or empty folder for the test")
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -419,8 +424,11 @@ def _write_folder(out: Path, manifest: dict[str, Any], files: dict[str, pd.DataF
         except InputError as exc:
             if Path(exc.file) != tmp / MANIFEST:
                 raise
-            raise InputError(card_source, exc.field, f"{exc.expectation} (in the manifest "
-                             f"the card makes)") from None
+            if exc.field.startswith(CARD_FIELDS):
+                raise InputError(card_source, exc.field, f"{exc.expectation} (in the "
+                                 f"manifest the card makes)") from None
+            raise InputError(log_source, f"(imported as {exc.field})",
+                             f"{exc.expectation}") from None
         if out.exists():
             out.rmdir()
         tmp.rename(out)

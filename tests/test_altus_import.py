@@ -283,7 +283,8 @@ def test_card_errors_name_the_field(tmp_path: Path) -> None:
     _write_log(tmp_path / "log.csv", seed=4)
     log = read_altus_log(tmp_path / "log.csv")
     late = {**CARD, "parachutes": [{**CARD["parachutes"][0], "deployment": "apogee"}]}
-    with pytest.raises(InputError, match="'apogee' flight state"):
+    with pytest.raises(InputError,
+                       match=r"parachutes\[0\]\.deployment: a flight state .*got 'apogee'"):
         import_flight(log, card_from_dict(late, "card.json"), tmp_path / "t")
     assert not (tmp_path / "t").exists()
 
