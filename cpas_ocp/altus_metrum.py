@@ -33,6 +33,7 @@ import numpy as np
 import pandas as pd
 
 from .errors import InputError
+from .flight_test import MAX_MAGNITUDE
 
 REQUIRED = ("time", "state_name", "pressure", "altitude", "acceleration")
 # Columns of the sensor record: a row whose values all equal the previous row's repeats it.
@@ -137,6 +138,13 @@ def read_altus_log(path: str | Path) -> AltusLog:
         if column not in ("state_name", "call"):
             data[column] = pd.to_numeric(data[column], errors="coerce")
     data = data.replace(MISSING_SENTINEL, np.nan)
+    numbers = data.drop(columns=["state_name", "call"], errors="ignore")
+    wild = ~(numbers.abs() <= MAX_MAGNITUDE) & numbers.notna()
+    if wild.any().any():
+        row, column = next((r, c) for r, c in zip(*np.nonzero(wild.to_numpy()), strict=True))
+        raise InputError(str(path), f"line {row + 2}, {numbers.columns[column]}",
+                         f"a finite reading of magnitude at most {MAX_MAGNITUDE:g}; got "
+                         f"{numbers.iat[row, column]!r}")
     bad_time = data["time"].isna()
     if bad_time.all() or len(data) < 2:
         raise InputError(str(path), "time", "numeric sample times in at least two rows")

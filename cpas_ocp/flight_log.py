@@ -422,13 +422,14 @@ def _write_folder(out: Path, manifest: dict[str, Any], files: dict[str, pd.DataF
         try:
             load_test(tmp)
         except InputError as exc:
-            if Path(exc.file) != tmp / MANIFEST:
+            written = Path(exc.file)
+            if written.parent != tmp:
                 raise
-            if exc.field.startswith(CARD_FIELDS):
+            if written.name == MANIFEST and exc.field.startswith(CARD_FIELDS):
                 raise InputError(card_source, exc.field, f"{exc.expectation} (in the "
                                  f"manifest the card makes)") from None
-            raise InputError(log_source, f"(imported as {exc.field})",
-                             f"{exc.expectation}") from None
+            raise InputError(log_source, f"(imported as {written.name}: {exc.field})",
+                             exc.expectation) from None
         if out.exists():
             out.rmdir()
         tmp.rename(out)
