@@ -138,6 +138,13 @@ def read_altus_log(path: str | Path) -> AltusLog:
         if column not in ("state_name", "call"):
             data[column] = pd.to_numeric(data[column], errors="coerce")
     data = data.replace(MISSING_SENTINEL, np.nan)
+    states = data["state_name"].astype("string").str.strip()
+    empty = (states.fillna("") == "").to_numpy(dtype=bool)
+    if empty.any():
+        row = int(np.flatnonzero(empty)[0])
+        raise InputError(str(path), f"line {row + 2}, state_name",
+                         "a flight state in every row (AltOS writes one); this row has none")
+    data["state_name"] = states.astype(str)
     numbers = data.drop(columns=["state_name", "call"], errors="ignore")
     wild = ~(numbers.abs() <= MAX_MAGNITUDE) & numbers.notna()
     if wild.any().any():
@@ -151,7 +158,6 @@ def read_altus_log(path: str | Path) -> AltusLog:
     data = data[~bad_time].sort_values("time", kind="stable")
     repeated = data["time"].duplicated(keep="first")
     data = data[~repeated].reset_index(drop=True)
-    data["state_name"] = data["state_name"].astype(str).str.strip()
     events = {}
     for state in data["state_name"].unique():
         events[state] = float(data.loc[data["state_name"] == state, "time"].iloc[0])

@@ -457,6 +457,13 @@ class Estimator:
             self._samples.append((PRIORS, (name,), np.array([self.t[0]]),
                                   np.array([[value]]), np.array([[sigma]])))
 
+        # Effects' pseudo-observations (a process prior): residuals of the parameters alone.
+        for effect, channel, times, expr in m.penalties:
+            fn = ca.Function("penalty", [p_sx], [expr])
+            residual_pieces.append(_Piece.of(fn(pfull), z_all))
+            self._samples.append((effect, (channel,), times, np.zeros((1, times.size)),
+                                  np.ones((1, times.size))))
+
         self._z = z_all
         residual = _stack(residual_pieces, "symbolic")
         jac = _stack(residual_pieces, "jacobian")

@@ -171,6 +171,10 @@ class Model:
         self.ctx = ctx
         self.constraints: list[Constraint] = [c_ for e in self.effects
                                               for c_ in e.constraints(ctx)]
+        # (effect, channel, times, residuals in sigma) of every effect's pseudo-observations.
+        self.penalties: list[tuple[str, str, np.ndarray, ca.SX]] = [
+            (e.name, channel, np.asarray(times, dtype=float), expr) for e in self.effects
+            for channel, (times, expr) in e.penalties(ctx).items()]
         missing = [s.name for s in self.states if s.name not in ctx.xdot]
         if missing:
             raise ValueError(f"no effect defines the derivative of state(s) {missing}")

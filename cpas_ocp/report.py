@@ -55,6 +55,8 @@ def channel_unit(fit: Fit, sensor: str, channel: str) -> str:
     """SI unit of a residual channel (event times are in s, a prior in its parameter's unit)."""
     if sensor == PRIORS:
         return fit.model.parameter(channel).unit
+    if any(sensor == effect for effect, *_ in fit.model.penalties):
+        return "σ"  # a process prior's innovations, in units of their own sigma
     return "s" if sensor == EVENTS else SENSOR_UNITS.get(channel, "SI")
 
 

@@ -150,8 +150,9 @@ class ScoreTest:
 
 
 def candidate_effects(plugins: Mapping[str, EffectType] | None = None) -> dict[str, EffectType]:
-    """The library's effects and those of plug-in files, by name."""
-    return {**BUILTIN, **(plugins or {})}
+    """The library's candidate effects (`EffectType.candidate`) and those of plug-in files,
+    by name."""
+    return {**{n: e for n, e in BUILTIN.items() if e.candidate}, **(plugins or {})}
 
 
 def score_tests(fit: Fit, spec: ModelSpec,

@@ -141,6 +141,12 @@ def simulate_problem(problem: Problem, out: str | Path, seed: int,
     else:  # the truth's own effect set if the problem gives one, else the manifest's model
         block = sim.get("model", manifest.get("model"))
         model = spec_from_block(block, f"problem {problem.name}", Path()).model(test)
+    # Effects whose parameters are a random process (`simulation.drawn`: the air's
+    # motion) take them from a stream of their own, so that the sensor noise of a seed
+    # is the same with and without them.
+    for name in sim.get("drawn", []):
+        effect = next(e for e in model.effects if e.name == name)
+        truth.update(effect.draw(test, np.random.default_rng([seed, 1])))
     unknown = sorted(set(truth) - set(model.parameter_names))
     if unknown:
         raise ValueError(f"problem {problem.name}: truth names unknown parameters {unknown}")

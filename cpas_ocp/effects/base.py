@@ -150,6 +150,13 @@ class Effect:
     def constraints(self, ctx: ModelContext) -> list[Constraint]:
         return []
 
+    def penalties(self, ctx: ModelContext) -> dict[str, tuple[np.ndarray, ca.SX]]:
+        """Pseudo-observations: by channel, their times (s) and a vector of residuals in units
+        of their sigma, functions of the parameters only (``ctx.p``).  They join
+        chi-square as a sensor named after the effect: a stated prior on the effect's
+        parameters, such as a stochastic process's innovations (`wind_process`)."""
+        return {}
+
     def null_values(self, test: FlightTest) -> dict[str, float] | None:
         """Values of this effect's parameters at which it changes no prediction: the model
         without the effect is the model with it at these values (the null hypothesis of

@@ -35,16 +35,25 @@ from .sensor_bias import SensorBias
 from .sensor_lag import SensorLag
 from .sensors import BaroSensor, GpsAltitudeSensor, GpsSensor, ImuSensor, LoadCellSensor
 from .wake_deficit import WakeDeficit
+from .wind_process import WindProcess
 
 
 @dataclass(frozen=True)
 class EffectType:
-    """A registered effect: its class and the options it is built with by default."""
+    """A registered effect: its class and the options it is built with by default.
+
+    `candidate`: the diagnosis score-tests it as a missing effect.  The wind
+    process is not one yet: its score test adds a parameter per knot and
+    component, and a process that absorbs any slow residual would stand in for
+    the effects the diagnosis is meant to tell apart; it is added by a model
+    block.
+    """
 
     name: str
     cls: type[Effect]
     preset: dict[str, Any] = field(default_factory=dict)
     source: str = "cpas_ocp"
+    candidate: bool = True
 
     @property
     def summary(self) -> str:
@@ -109,6 +118,7 @@ def _builtin() -> dict[str, EffectType]:
                     {"kind": "baro", "channel": "altitude", "unit": "m", "bound": 500.0,
                      "scale": 1.0}),
         EffectType("baro_lag", SensorLag, {"kind": "baro", "max_lag": 0.5}),
+        EffectType("wind_process", WindProcess, candidate=False),
     ]
     return {e.name: e for e in entries}
 

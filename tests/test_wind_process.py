@@ -1,0 +1,105 @@
+"""The wind process: air motion estimated with the trajectory under a Gauss-Markov prior.
+
+A `drogue` test flown through gusts drawn from the process (vertical 0.5 m/s,
+horizontal 1 m/s, correlation time 5 s, knots every second) misfits its noise in
+still air; with the process the fit is within the noise and the drag areas are
+back at the truth.  In still air the fitted wind is consistent with zero.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from scipy.stats import chi2
+
+from cpas_ocp.continuation import solve_checked
+from cpas_ocp.effects.registry import BASELINE
+from cpas_ocp.effects.wind_process import WindProcess
+from cpas_ocp.errors import InputError
+from cpas_ocp.estimation import Estimator
+from cpas_ocp.flight_test import load_test
+from cpas_ocp.model_spec import spec_from_block
+from cpas_ocp.problems import load_problem
+from cpas_ocp.simulate import simulate_problem
+
+WIND = {"effects": ["wind_process", *BASELINE]}
+ALPHA = 1e-3
+
+
+def _fit(test, block=None):
+    spec = None if block is None else spec_from_block(block, "model.json", Path())
+    est, fit, _ = solve_checked(Estimator(test, spec))
+    return fit, est.covariance(fit)
+
+
+def _chi2_p(fit) -> float:
+    return float(chi2.sf(fit.chi_square, fit.dof))
+
+
+@pytest.fixture(scope="module")
+def gusty(tmp_path_factory) -> tuple[Path, dict[str, float]]:
+    problem = load_problem("drogue")
+    problem = dataclasses.replace(problem, simulation={
+        **problem.simulation, "model": WIND, "drawn": ["wind_process"]})
+    folder = tmp_path_factory.mktemp("gusty") / "test"
+    simulate_problem(problem, folder, seed=1)
+    return folder, json.loads((folder / "truth.json").read_text())["parameters"]
+
+
+def test_gusts_misfit_still_air_and_fit_the_noise_with_the_process(gusty) -> None:
+    folder, truth = gusty
+    test = load_test(folder)
+    still, _ = _fit(test)
+    assert _chi2_p(still) < ALPHA  # the air moved and the model did not know it
+    fit, cov = _fit(test, WIND)
+    assert _chi2_p(fit) > ALPHA, fit.chi_square / fit.dof
+    std = cov.std
+    for name in fit.free:
+        if name.startswith("CdS"):
+            assert abs(fit.parameters[name] - truth[name]) < 4.0 * std[name], name
+    # The vertical air motion itself: closer to the truth than still air is.
+    up = [n for n in fit.free if n.startswith("wind_up")]
+    error = np.array([fit.parameters[n] - truth[n] for n in up])
+    assert np.sqrt(np.mean(error**2)) < 0.5 * np.sqrt(np.mean([truth[n] ** 2 for n in up]))
+
+
+def test_in_still_air_the_fitted_wind_is_consistent_with_zero(drogue_folder) -> None:
+    fit, cov = _fit(load_test(drogue_folder(1)), WIND)
+    names = [n for n in fit.free if n.startswith("wind")]
+    index = [cov.names.index(n) for n in names]
+    C = cov.matrix[np.ix_(index, index)]
+    w = np.array([fit.parameters[n] for n in names])
+    assert chi2.sf(float(w @ np.linalg.pinv(C) @ w), len(names)) > ALPHA
+    assert _chi2_p(fit) > ALPHA
+
+
+def test_the_drawn_process_has_its_stated_variance_and_correlation() -> None:
+    effect = WindProcess(components=("up",), knot_s=1.0, tau_s=5.0, sigma_vertical=0.5)
+    phase = SimpleNamespace(t_start=0.0, t_end=40000.0)
+    draw = effect.draw(phase, np.random.default_rng(7))
+    u = np.array([draw[f"wind_up[{k}]"] for k in range(len(draw))])
+    phi = math.exp(-1.0 / 5.0)
+    # 40,001 knots of an AR(1) with phi = 0.82: about 4,000 independent samples, so the
+    # variance is within 3 x sqrt(2/4000) = 7 % and the lag-1 correlation within 0.02.
+    assert np.var(u) == pytest.approx(0.25, rel=0.07)
+    assert np.corrcoef(u[:-1], u[1:])[0, 1] == pytest.approx(phi, abs=0.02)
+    assert effect.draw(phase, np.random.default_rng(7)) == draw  # seeded
+
+
+@pytest.mark.parametrize("block, expected", [
+    ({"effects": [*BASELINE[:1], "wind_process", *BASELINE[1:]]}, "before the effects"),
+    ({"effects": [{"effect": "wind_process", "tau_s": 0}, *BASELINE]}, "tau_s"),
+    ({"effects": [{"effect": "wind_process", "components": ["down"]}, *BASELINE]},
+     "components"),
+])
+def test_a_misplaced_or_misconfigured_wind_process_is_an_input_error(drogue_folder, block,
+                                                                     expected) -> None:
+    test = load_test(drogue_folder(1))
+    with pytest.raises(InputError, match=expected):
+        spec_from_block(block, "model.json", Path()).model(test)
