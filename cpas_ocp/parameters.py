@@ -44,6 +44,9 @@ class Parameter:
     free_by_default: bool = True
     physical_lower: bool = False
     physical_upper: bool = False
+    # A knot of a stochastic process (`wind_process`): one of many, each acting over a
+    # knot interval.  The Hessian leaves out the curvature of captured quantities in it.
+    process_knot: bool = False
 
     def on_bound(self, value: float) -> bool:
         """Whether `value` is one of the bounds: a hypothesis holding the parameter there

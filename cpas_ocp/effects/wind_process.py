@@ -95,7 +95,7 @@ class WindProcess(Effect):
 
     def parameters(self, test: FlightTest) -> list[Parameter]:
         return [Parameter(param_name(f"wind_{c}", str(k)), "m/s", 0.0, -MAX_WIND_M_S,
-                          MAX_WIND_M_S, scale=self.sigma(c),
+                          MAX_WIND_M_S, scale=self.sigma(c), process_knot=True,
                           description=f"air velocity, {c}, at t = {t:.3f} s")
                 for c in self.components for k, t in enumerate(self.knot_times(test))]
 
