@@ -310,6 +310,17 @@ UNDETERMINED_LOADING = 1e-2
 WEIGHT_SHOWN = 0.05  # smallest component of a weak combination that is named
 
 
+def log_det_information(lin: Linearization) -> float:
+    """log det of the Gauss-Newton information (J'J) of the free coordinates in the scaled
+    decision vector, on the null space of the constraints that remain after the shooting
+    gaps: the Laplace approximation's volume term.  Directions the data do not determine
+    enter at SINGULAR_RATIO of the largest curvature (a constant where they do not change
+    between the models compared)."""
+    ns = _null_space(reduce_linearization(lin))
+    floor = SINGULAR_RATIO * max(ns.largest, 1e-300)
+    return float(np.sum(np.log(np.maximum(ns.H_eigenvalues, floor))))
+
+
 def kkt_covariance(lin: Linearization, param_index: np.ndarray, param_scale: np.ndarray,
                    names: list[str], scale_by_residual: bool = False,
                    hessian_product: Callable[[np.ndarray], np.ndarray] | None = None

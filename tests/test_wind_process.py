@@ -26,6 +26,7 @@ from cpas_ocp.estimation import Estimator
 from cpas_ocp.flight_test import load_test
 from cpas_ocp.model_spec import spec_from_block
 from cpas_ocp.problems import load_problem
+from cpas_ocp.process_intensity import choose_intensity
 from cpas_ocp.simulate import simulate_problem
 
 WIND = {"effects": ["wind_process", *BASELINE]}
@@ -77,6 +78,31 @@ def test_in_still_air_the_fitted_wind_is_consistent_with_zero(drogue_folder) -> 
     w = np.array([fit.parameters[n] for n in names])
     assert chi2.sf(float(w @ np.linalg.pinv(C) @ w), len(names)) > ALPHA
     assert _chi2_p(fit) > ALPHA
+
+
+def test_the_marginal_likelihood_finds_the_gusts_intensity(gusty) -> None:
+    """The gusts were drawn at 0.5 m/s vertical: of a quarter, the same and four times that,
+    the evidence picks the same."""
+    folder, _ = gusty
+    spec = spec_from_block(WIND, "model.json", Path())
+    choice = choose_intensity(load_test(folder), spec, (0.25, 1.0, 4.0))
+    assert choice.best.sigma_vertical == pytest.approx(0.5)
+    assert all(p.evidence is not None for p in choice.points)
+
+
+def test_in_still_air_the_evidence_picks_the_weakest_process_and_the_sigmas_stay(
+        drogue_folder) -> None:
+    """The null check: in still air the smallest intensity wins, and there the drag areas'
+    sigmas are within 10 % of the still-air model's."""
+    test = load_test(drogue_folder(1))
+    choice = choose_intensity(test, spec_from_block(WIND, "model.json", Path()),
+                              (0.0625, 1.0))
+    assert choice.best.sigma_vertical == pytest.approx(0.0625 * 0.5)
+    still, still_cov = _fit(test)
+    std = choice.estimator.covariance(choice.fit).std
+    for name in still.free:
+        if name.startswith("CdS"):
+            assert std[name] < 1.1 * still_cov.std[name], name
 
 
 def test_the_drawn_process_has_its_stated_variance_and_correlation() -> None:

@@ -1,0 +1,136 @@
+"""Air motion: the reconstruction in still air against the one with the wind process.
+
+For each seed, `drogue` is flown through gusts drawn from the wind process
+(`--sigma-vertical`, horizontal twice that, tau 5 s, knots every second) and
+reconstructed twice: with the still-air model (the manifest's) and with
+`wind_process` added (the same prior the gusts were drawn from).  Printed per
+seed: chi-square/dof, the largest |z| of the drag areas and start times
+against the truth, and the wall times; then, over all seeds, how often the
+95 % intervals (estimate +- 1.96 sigma) of the drag areas and start times
+cover the truth, for both models.  `--still` flies the seeds in still air
+instead (the null check: the process should cost little there).
+
+With `--flight FOLDER ...`, test folders imported from real logs
+(`cpas-ocp import-altus`) are also fitted with and without a vertical wind
+process (`--knot-s`, `--tau-s`, `--flight-sigma`), their model block taken
+from the manifest.
+
+    python benchmarks/wind_process.py [--seeds 10] [--sigma-vertical 0.5] [--still]
+                                      [--flight DIR ...]
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from cpas_ocp.continuation import solve_checked
+from cpas_ocp.effects.registry import BASELINE
+from cpas_ocp.errors import SolverFailure
+from cpas_ocp.estimation import Estimator
+from cpas_ocp.flight_test import load_test
+from cpas_ocp.model_spec import ModelSpec, spec_from_block, spec_of_test
+from cpas_ocp.problems import load_problem
+from cpas_ocp.simulate import simulate_problem
+
+Z95 = 1.959964
+
+
+def fitted(test, spec: ModelSpec | None) -> tuple:
+    t0 = time.perf_counter()
+    est, fit, _ = solve_checked(Estimator(test, spec))
+    return fit, est.covariance(fit), time.perf_counter() - t0
+
+
+def coverage_rows(fit, cov, truth: dict) -> list[tuple[str, float]]:
+    """(name, |z|) of every drag area and start time with a sigma."""
+    std = cov.std
+    return [(n, abs(fit.parameters[n] - truth[n]) / std[n]) for n in fit.free
+            if n.split("[")[0] in ("CdS", "t_start") and std.get(n)]
+
+
+def simulated(args: argparse.Namespace) -> None:
+    sigma = args.sigma_vertical
+    wind = {"effects": [{"effect": "wind_process", "sigma_vertical": sigma,
+                         "sigma_horizontal": 2.0 * sigma}, *BASELINE]}
+    problem = load_problem("drogue")
+    if not args.still:
+        problem = dataclasses.replace(problem, simulation={
+            **problem.simulation, "model": wind, "drawn": ["wind_process"]})
+    spec = spec_from_block(wind, "wind_process benchmark", Path())
+    pooled: dict[str, list[float]] = {"still air": [], "wind process": []}
+    print(f"drogue {'in still air' if args.still else f'through gusts (vertical {sigma} m/s)'}",
+          flush=True)
+    with tempfile.TemporaryDirectory() as tmp:
+        for seed in range(1, args.seeds + 1):
+            folder = Path(tmp) / f"seed{seed}"
+            simulate_problem(problem, folder, seed)
+            truth = json.loads((folder / "truth.json").read_text())["parameters"]
+            test = load_test(folder)
+            line = [f"  seed {seed:2d}"]
+            for label, model in (("still air", None), ("wind process", spec)):
+                try:
+                    fit, cov, wall = fitted(test, model)
+                except SolverFailure as exc:
+                    line.append(f"{label}: failed ({exc.status})")
+                    continue
+                rows = coverage_rows(fit, cov, truth)
+                pooled[label] += [z for _, z in rows]
+                line.append(f"{label}: chi2/dof {fit.chi_square / fit.dof:5.2f}, max |z| "
+                            f"{max(z for _, z in rows):5.1f}, {wall:5.1f} s")
+            print("  ".join(line), flush=True)
+    for label, zs in pooled.items():
+        z = np.array(zs)
+        if z.size:
+            print(f"{label}: 95 % intervals of drag areas and start times cover the truth "
+                  f"{100.0 * np.mean(z <= Z95):.1f} % ({z.size} intervals); "
+                  f"mean z^2 {np.mean(z**2):.2f}")
+
+
+def flights(args: argparse.Namespace) -> None:
+    for folder in args.flight:
+        test = load_test(folder)
+        base = spec_of_test(test)
+        wind = dataclasses.replace(base, effects=(
+            spec_from_block({"effects": [{"effect": "wind_process", "components": ["up"],
+                                          "knot_s": args.knot_s, "tau_s": args.tau_s,
+                                          "sigma_vertical": args.flight_sigma}]},
+                            "benchmark", Path()).effects[0], *base.effects))
+        for label, spec in (("still air", base), ("wind process", wind)):
+            try:
+                fit, cov, wall = fitted(test, spec)
+            except SolverFailure as exc:
+                print(f"{folder} {label}: failed ({exc.status}, {exc.iterations} iterations)")
+                continue
+            cds = ", ".join(f"{n} {fit.parameters[n]:.4g} ± {cov.std.get(n, np.nan):.2g}"
+                            for n in fit.free if n.startswith("CdS"))
+            print(f"{folder} {label}: chi2/dof {fit.chi_square / fit.dof:.2f}, {cds}, "
+                  f"{wall:.1f} s, {fit.solver.status}", flush=True)
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--seeds", type=int, default=10)
+    parser.add_argument("--sigma-vertical", type=float, default=0.5)
+    parser.add_argument("--still", action="store_true")
+    parser.add_argument("--flight", nargs="*", default=[])
+    parser.add_argument("--knot-s", type=float, default=4.0)
+    parser.add_argument("--tau-s", type=float, default=20.0)
+    parser.add_argument("--flight-sigma", type=float, default=1.0)
+    args = parser.parse_args()
+    if args.seeds:
+        simulated(args)
+    if args.flight:
+        flights(args)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

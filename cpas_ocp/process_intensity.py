@@ -1,0 +1,132 @@
+"""The wind process's intensity chosen by the data: the Laplace-approximated marginal
+likelihood over a grid of intensities.
+
+The wind process (`effects.wind_process`) puts a Gaussian prior on its knots
+u: N(0, S), S = s^2 R per component, R_ij = phi^|i-j|.  Given s, the evidence
+of the data integrates the knots out (and, with a flat prior, every other
+free coordinate).  With the knots in the estimator's scaled coordinates
+w = u / s (the knots' `Parameter.scale` is s), the prior is N(0, R) in w and
+the Laplace approximation about the fit gives
+
+    -2 log p(y | s) = chi^2_min(s) + log det R + log det(J'J)_scaled + const,
+
+chi^2_min the fit's chi-square (data and the process's innovations,
+u'S^-1 u), (J'J)_scaled the Gauss-Newton information of every free
+coordinate in the scaled decision vector on the constraints' null space
+(`uncertainty.log_det_information`), and log det R = (K - 1) log(1 - phi^2)
+per component of K knots.  The Jacobian of u = s w cancels the s^K of
+det S^1/2.  A larger s lowers chi^2_min (the wind explains more) and pays in
+the volume term (the posterior is wider than the data make it): the
+trade-off is Occam's, so s is not a free knob that absorbs everything, and
+in still air the smallest intensity of the grid wins.
+
+The vertical and horizontal intensities keep the ratio the model gives
+them; the grid scales both.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import sys
+from dataclasses import dataclass
+
+import numpy as np
+
+from .continuation import solve_checked
+from .effects.wind_process import WindProcess
+from .errors import InputError, SolverFailure
+from .estimation import Estimator, Fit
+from .flight_test import FlightTest
+from .model_spec import ModelSpec
+from .uncertainty import log_det_information
+
+
+@dataclass(frozen=True)
+class IntensityPoint:
+    """One intensity of the grid: the vertical and horizontal s (m/s), the fit's chi-square,
+    and -2 log evidence (up to a constant; None where the fit failed)."""
+
+    sigma_vertical: float
+    sigma_horizontal: float
+    chi_square: float | None
+    evidence: float | None
+    note: str = ""
+
+
+@dataclass
+class IntensityChoice:
+    """The grid, the intensity with the largest evidence, its estimator and fit."""
+
+    points: list[IntensityPoint]
+    best: IntensityPoint
+    estimator: Estimator
+    fit: Fit
+
+    def text(self) -> str:
+        lines = ["wind-process intensity by marginal likelihood (-2 log evidence, lower is "
+                 "better):"]
+        for p in self.points:
+            mark = "  <- chosen" if p is self.best else ""
+            value = (f"chi-square {p.chi_square:11.1f}, -2 log evidence {p.evidence:11.1f}"
+                     if p.evidence is not None else p.note)
+            lines.append(f"  vertical {p.sigma_vertical:6.3f} m/s, horizontal "
+                         f"{p.sigma_horizontal:6.3f} m/s: {value}{mark}")
+        return "\n".join(lines)
+
+
+def wind_effect(spec: ModelSpec) -> WindProcess:
+    """The spec's wind process; InputError where it has none."""
+    found = [e for e in spec.effects if isinstance(e, WindProcess)]
+    if not found:
+        raise InputError(spec.source, "model.effects", "a wind_process effect whose "
+                         "intensity to choose")
+    return found[0]
+
+
+def evidence(est: Estimator, fit: Fit) -> float:
+    """-2 log evidence of `fit`'s wind-process intensity, up to a constant (see the module
+    docstring)."""
+    wind = wind_effect(est.spec)
+    knots = len(wind.knot_times(est.test))
+    phi = math.exp(-wind.knot_s / wind.tau_s)
+    log_det_prior = len(wind.components) * (knots - 1) * math.log(1.0 - phi**2)
+    return fit.chi_square + log_det_prior + log_det_information(est._linearize(fit.z))
+
+
+def choose_intensity(test: FlightTest, spec: ModelSpec, factors: tuple[float, ...],
+                     progress: bool = False) -> IntensityChoice:
+    """Fit `spec` with its wind process's intensities scaled by each of `factors`; the one
+    with the largest evidence is chosen."""
+    wind = wind_effect(spec)
+    points: list[IntensityPoint] = []
+    best: tuple[float, IntensityPoint, Estimator, Fit] | None = None
+    for factor in factors:
+        scaled = dataclasses.replace(wind, sigma_vertical=factor * wind.sigma_vertical,
+                                     sigma_horizontal=factor * wind.sigma_horizontal)
+        effects = tuple(scaled if e is wind else e for e in spec.effects)
+        est = Estimator(test, dataclasses.replace(spec, effects=effects))
+        try:
+            est, fit, _ = solve_checked(est)
+        except SolverFailure as exc:
+            points.append(IntensityPoint(scaled.sigma_vertical, scaled.sigma_horizontal,
+                                         None, None, f"fit failed ({exc.status})"))
+            continue
+        value = evidence(est, fit)
+        point = IntensityPoint(scaled.sigma_vertical, scaled.sigma_horizontal,
+                               fit.chi_square, value)
+        points.append(point)
+        if progress:
+            print(f"  vertical {point.sigma_vertical:.3f} m/s: -2 log evidence {value:.1f}",
+                  file=sys.stderr, flush=True)
+        if best is None or value < best[0]:
+            best = (value, point, est, fit)
+    if best is None:
+        raise SolverFailure("every intensity's fit failed", 0)
+    return IntensityChoice(points, best[1], best[2], best[3])
+
+
+def evidence_curve(choice: IntensityChoice) -> np.ndarray:
+    """(sigma_vertical, -2 log evidence) of every point with a fit, for plots and tests."""
+    return np.array([(p.sigma_vertical, p.evidence) for p in choice.points
+                     if p.evidence is not None])
