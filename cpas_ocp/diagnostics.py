@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .estimation import PSEUDO_SENSORS, Fit, SensorResidual
+from .estimation import Fit, SensorResidual
 from .phase_windows import OUTSIDE, PhaseWindow, window_index, windows_for_sensor
 
 
@@ -110,7 +110,7 @@ def window_statistics(fit: Fit, windows: Sequence[PhaseWindow]) -> list[WindowSt
     total = fit.chi_square
     out: list[WindowStatistic] = []
     for r in fit.residuals:
-        if r.sensor in PSEUDO_SENSORS or r.t.size == 0:
+        if r.sensor in fit.pseudo_sensors or r.t.size == 0:
             continue
         applicable = windows_for_sensor(fit.test, r.sensor, windows)
         index = window_index(r.t, applicable)

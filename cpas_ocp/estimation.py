@@ -251,6 +251,12 @@ class Fit:
         """Degrees of freedom of the fit: residuals minus free parameters (at least 1)."""
         return max(self.n_samples - len(self.free), 1)
 
+    @property
+    def pseudo_sensors(self) -> tuple[str, ...]:
+        """Residual groups that are not a sensor's samples: observed event times, priors, and
+        the effects' pseudo-observations (a wind process's innovations)."""
+        return (*PSEUDO_SENSORS, *dict.fromkeys(e for e, *_ in self.model.penalties))
+
     def quantities(self) -> dict[str, np.ndarray]:
         """Every scalar model quantity (cds[P], tension[P], dynamic_pressure, ...) on the grid."""
         return self.model.quantities_along(self.t, self.x, self.parameters, self.captures)

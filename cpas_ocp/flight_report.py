@@ -32,7 +32,7 @@ import numpy as np
 from .atmosphere import density_at
 from .common_residual import BLOCK_S, combined_p_value, common_residuals
 from .diagnosis import ALPHA, Diagnosis
-from .estimation import PSEUDO_SENSORS, Fit
+from .estimation import Fit
 from .flight_log import EJECTION_EXCLUDE_S, OPENING_WINDOW_S, descent_load_factor_peak
 from .flight_test import Event, Parachute
 from .kinematic_track import altimeter_altitude
@@ -346,7 +346,7 @@ def missing_text(fit: Fit, diagnosis: Diagnosis | None) -> str:
     diagnosis's verdict on the library's effects and the residual's structure, and whether
     the altitude sensors share their residual (`common_residual`), which names the effect."""
     rms = ", ".join(f"{name} {value:.2f}" for name, value in channel_rms(fit).items()
-                    if name.split(".")[0] not in PSEUDO_SENSORS)
+                    if name.split(".")[0] not in fit.pseudo_sensors)
     lines = ["## What the model misses", "",
              f"- chi-square per degree of freedom {fit.chi_square / fit.dof:.2f}; normalised "
              f"RMS by channel: {rms}."]

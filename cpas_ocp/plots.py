@@ -17,8 +17,9 @@ import matplotlib.pyplot as plt
 import numpy as np
 from scipy.spatial import ConvexHull
 
-from .estimation import EVENTS, PSEUDO_SENSORS, Fit, SensorResidual
-from .parameters import param_name
+from .effects.wind_process import WindProcess
+from .estimation import EVENTS, Fit, SensorResidual
+from .parameters import param_name, split_name
 from .phase_windows import PhaseWindow, windows_for_sensor
 from .profile_likelihood import THRESHOLD, Profile
 from .reduction import reduce, stage_starts
@@ -44,7 +45,7 @@ def plot_sensors(fit: Fit, folder: Path) -> list[Path]:
     """One figure per sensor: each channel's data and model, normalised residuals beneath."""
     paths = []
     for sensor in dict.fromkeys(r.sensor for r in fit.residuals
-                                if r.sensor not in PSEUDO_SENSORS):
+                                if r.sensor not in fit.pseudo_sensors):
         rows = [r for r in fit.residuals if r.sensor == sensor]
         fig, axes = plt.subplots(2 * len(rows), 1, figsize=(10, 2.6 * len(rows) + 1.5),
                                  sharex=True, gridspec_kw={"height_ratios": [3, 1] * len(rows)})
@@ -113,6 +114,45 @@ def plot_drag_areas(fit: Fit, folder: Path) -> Path:
     return _save(fig, f"{fit.test.name}: canopy drag areas", folder / "drag_areas.png")
 
 
+def plot_wind(fit: Fit, cov: Covariance | None, folder: Path) -> Path | None:
+    """The wind process's estimate (`wind_process`): each component's air velocity at its
+    knots with the 95 % band (+-1.96 sigma), against time and against altitude; None
+    where the model has no process knots."""
+    components = {}
+    for name in fit.free:
+        base, index = split_name(name)
+        if fit.model.parameter(name).process_knot and base.startswith("wind_"):
+            components.setdefault(base.removeprefix("wind_"), []).append((int(index[0]), name))
+    if not components:
+        return None
+    std = cov.std if cov is not None else {}
+    q = fit.quantities()
+    fig, axes = plt.subplots(len(components), 2, figsize=(12, 2.8 * len(components) + 1.0),
+                             squeeze=False, gridspec_kw={"width_ratios": [3, 1]})
+    wind = next(e for e in fit.model.effects if isinstance(e, WindProcess))
+    knot_times = wind.knot_times(fit.test)
+    for row, (component, knots) in enumerate(components.items()):
+        names = [n for _, n in sorted(knots)]
+        t = knot_times[:len(names)]
+        u = np.array([fit.parameters[n] for n in names])
+        band = 1.96 * np.array([std.get(n, np.nan) for n in names])
+        ax = axes[row, 0]
+        ax.fill_between(t, u - band, u + band, color="C0", alpha=0.25, label="95 % band")
+        ax.plot(t, u, "-o", ms=2.5, color="C0", label="estimate at the knots")
+        ax.axhline(0.0, color="k", lw=0.5)
+        ax.set_ylabel(f"{component} air velocity [m/s]")
+        ax.legend(loc="best", fontsize=8)
+        altitude = np.interp(t, fit.t, q["altitude"])
+        ax = axes[row, 1]
+        ax.fill_betweenx(altitude, u - band, u + band, color="C0", alpha=0.25)
+        ax.plot(u, altitude, "-o", ms=2.5, color="C0")
+        ax.axvline(0.0, color="k", lw=0.5)
+        ax.set_xlabel(f"{component} [m/s]")
+        ax.set_ylabel("altitude [m]")
+    axes[-1, 0].set_xlabel("time [s]")
+    return _save(fig, f"{fit.test.name}: air motion (wind process)", folder / "wind.png")
+
+
 def plot_correlation(cov: Covariance, name: str, folder: Path) -> Path | None:
     """The parameters' correlation matrix as a map (undetermined parameters and those on a
     bound left out; None where fewer than two remain)."""
@@ -168,7 +208,7 @@ def plot_sensor_residuals(fit: Fit, windows: Sequence[PhaseWindow], folder: Path
     for a load cell) are shaded by kind, each kind labelled once."""
     paths = []
     for sensor in dict.fromkeys(r.sensor for r in fit.residuals
-                                if r.sensor not in PSEUDO_SENSORS):
+                                if r.sensor not in fit.pseudo_sensors):
         rows = [r for r in fit.residuals if r.sensor == sensor]
         shown = windows_for_sensor(fit.test, sensor, windows)
         fig, axes = plt.subplots(2 * len(rows), 1, figsize=(10, 2.8 * len(rows) + 1.5),
@@ -194,10 +234,12 @@ def plot_residual_comparison(fit_a: Fit, fit_b: Fit, labels: tuple[str, str],
     under model A (left) and model B (right), same scale, phase windows shaded, the
     normalised RMS of each in its panel's title."""
     paths = []
+    # Channels are paired by name: a model may add pseudo-observations the other lacks.
+    in_b = {(r.sensor, r.channel): r for r in fit_b.residuals}
     for sensor in dict.fromkeys(r.sensor for r in fit_a.residuals
-                                if r.sensor not in PSEUDO_SENSORS):
-        pairs = [(a, b) for a, b in zip(fit_a.residuals, fit_b.residuals, strict=True)
-                 if a.sensor == sensor]
+                                if r.sensor not in fit_a.pseudo_sensors):
+        pairs = [(a, in_b[a.sensor, a.channel]) for a in fit_a.residuals
+                 if a.sensor == sensor and (a.sensor, a.channel) in in_b]
         shown = windows_for_sensor(fit_a.test, sensor, windows)
         fig, axes = plt.subplots(len(pairs), 2, figsize=(12, 2.2 * len(pairs) + 1.2),
                                  sharex=True, sharey="row", squeeze=False)

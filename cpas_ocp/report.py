@@ -16,7 +16,14 @@ from .estimation import EVENTS, PRIORS, Fit
 from .failure_report import RESULT_MARKERS
 from .model_comparison import Criteria
 from .output_folder import atomic_folder
-from .plots import plot_correlation, plot_drag_areas, plot_events, plot_profile, plot_sensors
+from .plots import (
+    plot_correlation,
+    plot_drag_areas,
+    plot_events,
+    plot_profile,
+    plot_sensors,
+    plot_wind,
+)
 from .profile_likelihood import Profile
 from .uncertainty import POORLY_DETERMINED, Covariance
 from .units import FT
@@ -212,6 +219,7 @@ def write_report(fit: Fit, cov: Covariance | None, out: str | Path,
         plot_sensors(fit, tmp)
         plot_drag_areas(fit, tmp)
         plot_events(fit, tmp)
+        plot_wind(fit, cov, tmp)
         if cov is not None:
             plot_correlation(cov, fit.test.name, tmp)
         for prof in profiles:

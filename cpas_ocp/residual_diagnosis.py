@@ -31,7 +31,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .estimation import PSEUDO_SENSORS, Fit, SensorResidual
+from .estimation import Fit, SensorResidual
 from .phase_windows import OUTSIDE, PhaseWindow, window_index, windows_for_sensor
 from .residual_tests import lag, ljung_box, periodicity
 from .signatures import Correlation, Signature, signature_correlations, signatures
@@ -114,7 +114,7 @@ def diagnose_residuals(fit: Fit, windows: Sequence[PhaseWindow], alpha: float = 
     findings: list[Finding] = []
     tests: list[tuple[int, str, float]] = []
     for r in fit.residuals:
-        if r.sensor in PSEUDO_SENSORS or r.t.size < MIN_SAMPLES:
+        if r.sensor in fit.pseudo_sensors or r.t.size < MIN_SAMPLES:
             continue
         applicable = windows_for_sensor(fit.test, r.sensor, windows)
         index = window_index(r.t, applicable)
