@@ -1029,7 +1029,9 @@ class Estimator:
             iterations += int(st["iter_count"])
             z0 = np.asarray(sol["x"]).ravel()
             multipliers = {"lam_x0": sol["lam_x"], "lam_g0": sol["lam_g"]}
-            barrier = float(st["iterations"]["mu"][-1])
+            # No iteration record where Ipopt stopped at its first evaluation (a NaN there).
+            mu = st.get("iterations", {}).get("mu", [])
+            barrier = float(mu[-1]) if len(mu) else None
             left = self._monitor.left_at
             if self._monitor.stalled:
                 descended = self._descend(z0, (lbz, ubz), cap - iterations)

@@ -129,3 +129,27 @@ def test_a_misplaced_or_misconfigured_wind_process_is_an_input_error(drogue_fold
     test = load_test(drogue_folder(1))
     with pytest.raises(InputError, match=expected):
         spec_from_block(block, "model.json", Path()).model(test)
+
+
+def test_an_axial_accelerometer_is_a_fitted_sensor(tmp_path) -> None:
+    """`drogue` with a body-fixed axial accelerometer (100 Hz, 0.5 m/s^2) hanging at a mean
+    cosine of 0.8 to the specific force: the fit recovers the cosine and fits the
+    accelerometer to its noise."""
+    problem = load_problem("drogue")
+    manifest = {**problem.manifest, "sensors": [*problem.manifest["sensors"], {
+        "name": "accelerometer", "kind": "axial_accelerometer", "file": "accelerometer.csv",
+        "columns": {"time": "s", "acceleration": "m/s^2"},
+        "sigma": {"acceleration": {"value": 0.5, "unit": "m/s^2"}}}]}
+    model = {"effects": [*BASELINE, "axial_accelerometer"]}
+    truth = {**problem.truth, "axis_cos[drogue1]": 0.8, "axis_cos[drogue2]": 0.8}
+    simulation = {**problem.simulation, "model": model,
+                  "rates_hz": {**problem.simulation["rates_hz"], "accelerometer": 100}}
+    problem = dataclasses.replace(problem, manifest=manifest, simulation=simulation,
+                                  truth=truth)
+    simulate_problem(problem, tmp_path / "test", seed=1)
+    fit, cov = _fit(load_test(tmp_path / "test"), model)
+    assert _chi2_p(fit) > ALPHA
+    for name in ("axis_cos[drogue1]", "axis_cos[drogue2]"):
+        assert abs(fit.parameters[name] - 0.8) < 4.0 * cov.std[name], name
+    accel = next(r for r in fit.residuals if r.sensor == "accelerometer")
+    assert np.sqrt(np.mean(accel.normalized**2)) < 1.1

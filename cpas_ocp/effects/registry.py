@@ -20,6 +20,7 @@ from typing import Any
 
 from ..errors import InputError
 from .added_mass import AddedMass
+from .axial_accelerometer import AxialAccelerometer
 from .base import Effect
 from .canopy_inflation import CanopyInflation
 from .deployment_load import DeploymentLoad
@@ -119,6 +120,7 @@ def _builtin() -> dict[str, EffectType]:
                      "scale": 1.0}),
         EffectType("baro_lag", SensorLag, {"kind": "baro", "max_lag": 0.5}),
         EffectType("wind_process", WindProcess, candidate=False),
+        EffectType("axial_accelerometer", AxialAccelerometer, candidate=False),
     ]
     return {e.name: e for e in entries}
 
