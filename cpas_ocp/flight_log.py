@@ -56,7 +56,7 @@ from __future__ import annotations
 import json
 import shutil
 import tempfile
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from importlib import resources
 from itertools import pairwise
 from pathlib import Path
@@ -239,6 +239,7 @@ class ImportSummary:
     baro_sigma_m: list[float]
     samples: dict[str, int]
     dropped: dict[str, int]
+    accel_sigma: list[float] = field(default_factory=list)  # m/s^2, per canopy phase
 
     def text(self) -> str:
         """A few lines for the terminal."""
@@ -252,6 +253,9 @@ class ImportSummary:
                          f"{self.lapse_fit[1]:+.1f} m, residual sigma {self.lapse_fit[2]:.1f} m)")
         lines.append("altimeter sigma per canopy phase: "
                      + ", ".join(f"{s:.2f} m" for s in self.baro_sigma_m))
+        if self.accel_sigma:
+            lines.append("accelerometer sigma per canopy phase (the swing counted): "
+                         + ", ".join(f"{s:.2f} m/s²" for s in self.accel_sigma))
         lines.append("samples: " + ", ".join(f"{k} {v}" for k, v in self.samples.items())
                      + "; dropped: " + ", ".join(f"{k} {v}" for k, v in self.dropped.items()))
         return "\n".join(lines)
@@ -265,8 +269,8 @@ class ImportSummary:
                 "lapse_fit": None if self.lapse_fit is None else
                 {"lapse_rate_k_km": 1e3 * self.lapse_fit[0], "gps_offset_m": self.lapse_fit[1],
                  "residual_sigma_m": self.lapse_fit[2]},
-                "baro_sigma_m": self.baro_sigma_m, "samples": self.samples,
-                "dropped": self.dropped}
+                "baro_sigma_m": self.baro_sigma_m, "accel_sigma_m_s2": self.accel_sigma,
+                "samples": self.samples, "dropped": self.dropped}
 
 
 def import_flight(log: AltusLog, card: FlightCard, out: str | Path) -> ImportSummary:
@@ -339,6 +343,20 @@ def import_flight(log: AltusLog, card: FlightCard, out: str | Path) -> ImportSum
     accel = accel[(accel["time"] >= lo) & (accel["time"] <= hi)]
     full_open = {name: peak for name, t in deploy.items() if t > t_begin
                  and (peak := opening_peak(accel, t)) is not None}
+    # The accelerometer loses the same charge windows as the altimeter (the charge's jolt
+    # is no force of the flight), and gets a sigma per canopy phase from its scatter about
+    # a local trend: the body's swing about its mean attitude is noise of this sensor.
+    accel_charge = np.zeros(len(accel), dtype=bool)
+    for t_dep in deploy.values():
+        accel_charge |= ((accel["time"] >= t_dep - EVENT_SIGMA_S)
+                         & (accel["time"] <= t_dep + EJECTION_EXCLUDE_S)).to_numpy()
+    accel = accel[~accel_charge]
+    accel_sigmas = []
+    for a, b in pairwise(bounds):
+        part = accel[(accel["time"] >= a) & (accel["time"] <= b)]
+        accel_sigmas.append(max(MIN_ACCEL_SIGMA, scatter_sigma(
+            part["time"].to_numpy(), part["acceleration"].to_numpy()) if len(part) > 10
+            else second_difference_sigma(accel["acceleration"].to_numpy())))
     files = {"baro.csv": baro_phase[["time", "altitude"]],
              "accelerometer.csv": accel}
     sensors: list[dict[str, Any]] = [
@@ -350,8 +368,10 @@ def import_flight(log: AltusLog, card: FlightCard, out: str | Path) -> ImportSum
                          for t, sig in zip(bounds[1:-1], baro_sigmas[1:], strict=True)]},
         {"name": "accelerometer", "kind": "axial_accelerometer", "file": "accelerometer.csv",
          "columns": {"time": "s", "acceleration": "m/s^2"},
-         "sigma": {"acceleration": {"value": round(max(MIN_ACCEL_SIGMA, second_difference_sigma(
-             accel["acceleration"].to_numpy())), 3), "unit": "m/s^2"}}},
+         "sigma": {"acceleration": {"value": round(accel_sigmas[0], 3), "unit": "m/s^2"}},
+         "sigma_after": [{"time": {"value": round(t, 3), "unit": "s"},
+                          "sigma": {"acceleration": {"value": round(sig, 3), "unit": "m/s^2"}}}
+                         for t, sig in zip(bounds[1:-1], accel_sigmas[1:], strict=True)]},
     ]
     if lapse_fit is not None and len(fixes_phase) >= 2:
         files["gps_altitude.csv"] = fixes_phase[["time", "gps_altitude"]].rename(
@@ -395,8 +415,10 @@ def import_flight(log: AltusLog, card: FlightCard, out: str | Path) -> ImportSum
          "repeated_sensor_rows": int(d["time"].between(lo, hi).sum()
                                      - samples["time"].between(lo, hi).sum()),
          "ejection_charge_samples": int((in_phase.to_numpy() & near_charge).sum()),
+         "ejection_charge_accelerometer_samples": int(accel_charge.sum()),
          "gps_repeats_between_fixes": int(d["time"].between(lo, hi).sum()
-                                          - len(fixes_phase)) if log.has_gps else 0})
+                                          - len(fixes_phase)) if log.has_gps else 0},
+        accel_sigmas)
     _write_folder(out, manifest, files, summary, card.source, src)
     return summary
 

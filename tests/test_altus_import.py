@@ -183,6 +183,12 @@ def test_import_writes_a_loadable_test_folder(tmp_path: Path) -> None:
     assert resid == pytest.approx(3.0, rel=0.3)
     # The altimeter sigma under the main is the pressure noise, 5 Pa / (rho g) = 0.5 m.
     assert summary.baro_sigma_m[1] == pytest.approx(5.0 / (1.0 * 9.80665), rel=0.35)
+    # The accelerometer's: its 2 m/s^2 noise in each phase (no swing simulated), and its
+    # charge jolt is gone with the altimeter's charge samples.
+    assert summary.accel_sigma == pytest.approx([2.0, 2.0], rel=0.2)
+    accel = test.sensors_of("axial_accelerometer")[0]
+    assert np.abs(accel.time - events["main"]).min() > 0.05
+    assert summary.dropped["ejection_charge_accelerometer_samples"] >= 1
     manifest = json.loads((tmp_path / "test" / "manifest.json").read_text())
     assert manifest["atmosphere"]["model"] == "site"
     # The main does not start to inflate before its ejection charge (less the event's sigma),
