@@ -1,9 +1,11 @@
 """Air motion: the reconstruction in still air against the one with the wind process.
 
 For each seed, `drogue` is flown through gusts drawn from the wind process
-(`--sigma-vertical`, horizontal twice that, tau 5 s, knots every second) and
-reconstructed twice: with the still-air model (the manifest's) and with
-`wind_process` added (the same prior the gusts were drawn from).  Printed per
+(`--sigma-vertical`, horizontal twice that, tau 5 s, knots every second), or
+`--problem rocket_gusts` through its own (vertical 1 m/s, tau 10 s, knots
+every 2 s), and reconstructed twice: with the still-air model (the
+manifest's) and with `wind_process` added (the same prior the gusts were
+drawn from).  Printed per
 seed: chi-square/dof, the largest |z| of the drag areas and start times
 against the truth, and the wall times; then, over all seeds, how often the
 95 % intervals (estimate +- 1.96 sigma) of the drag areas and start times
@@ -15,7 +17,8 @@ With `--flight FOLDER ...`, test folders imported from real logs
 process (`--knot-s`, `--tau-s`, `--flight-sigma`), their model block taken
 from the manifest.
 
-    python benchmarks/wind_process.py [--seeds 10] [--sigma-vertical 0.5] [--still]
+    python benchmarks/wind_process.py [--problem drogue|rocket_gusts] [--seeds 10]
+                                      [--sigma-vertical 0.5] [--still]
                                       [--flight DIR ...]
 """
 
@@ -57,17 +60,25 @@ def coverage_rows(fit, cov, truth: dict) -> list[tuple[str, float]]:
 
 
 def simulated(args: argparse.Namespace) -> None:
-    sigma = args.sigma_vertical
-    wind = {"effects": [{"effect": "wind_process", "sigma_vertical": sigma,
-                         "sigma_horizontal": 2.0 * sigma}, *BASELINE]}
-    problem = load_problem("drogue")
-    if not args.still:
-        problem = dataclasses.replace(problem, simulation={
-            **problem.simulation, "model": wind, "drawn": ["wind_process"]})
-    spec = spec_from_block(wind, "wind_process benchmark", Path())
+    problem = load_problem(args.problem)
+    if args.problem == "drogue":  # the gusts are added to the built-in Drogue test
+        sigma = args.sigma_vertical
+        wind_block = {"effects": [{"effect": "wind_process", "sigma_vertical": sigma,
+                                   "sigma_horizontal": 2.0 * sigma}, *BASELINE]}
+        if not args.still:
+            problem = dataclasses.replace(problem, simulation={
+                **problem.simulation, "model": wind_block, "drawn": ["wind_process"]})
+    else:  # a problem flown through its own gusts: fitted with the process they came from
+        truth_block = problem.simulation["model"]
+        wind_block = {**problem.manifest["model"],
+                      "effects": [truth_block["effects"][0], *problem.manifest["model"]["effects"]]}
+        if args.still:
+            problem = dataclasses.replace(problem, simulation={
+                **problem.simulation, "drawn": [],
+                "model": {"effects": truth_block["effects"][1:]}})
+    spec = spec_from_block(wind_block, "wind_process benchmark", Path())
     pooled: dict[str, list[float]] = {"still air": [], "wind process": []}
-    print(f"drogue {'in still air' if args.still else f'through gusts (vertical {sigma} m/s)'}",
-          flush=True)
+    print(f"{args.problem} {'in still air' if args.still else 'through gusts'}", flush=True)
     with tempfile.TemporaryDirectory() as tmp:
         for seed in range(1, args.seeds + 1):
             folder = Path(tmp) / f"seed{seed}"
@@ -117,6 +128,7 @@ def flights(args: argparse.Namespace) -> None:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--problem", default="drogue", choices=["drogue", "rocket_gusts"])
     parser.add_argument("--seeds", type=int, default=10)
     parser.add_argument("--sigma-vertical", type=float, default=0.5)
     parser.add_argument("--still", action="store_true")
