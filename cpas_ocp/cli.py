@@ -329,6 +329,19 @@ def _solver_options(s: argparse.ArgumentParser) -> None:
     s.add_argument("--rescale-sigmas", action="store_true",
                    help="the sensor sigmas are not trusted: scale the covariance and the "
                         "what-if test by chi^2/dof")
+    s.add_argument("--wind-intensity", type=_factors, default=None, metavar="F,F,...",
+                   help="choose the model's wind_process intensity by the marginal "
+                        "likelihood among these multiples of its sigmas (e.g. "
+                        "0.25,0.5,1,2,4): one fit each")
+
+
+def _factors(text: str) -> tuple[float, ...]:
+    """An argparse type: comma-separated positive finite numbers."""
+    parse = _ranged(float, 0.0, low_open=True)
+    values = tuple(parse(part) for part in text.split(","))
+    if len(set(values)) != len(values):
+        raise argparse.ArgumentTypeError(f"distinct multiples; got {text!r}")
+    return values
 
 
 def _problems(args: argparse.Namespace) -> int:
@@ -658,7 +671,18 @@ def _fit_and_covariance(est: Estimator, args: argparse.Namespace
     the estimator returned is the one that gave the fit), and the covariance the command
     line asks for (a warning where the data leave a parameter combination undetermined)."""
     from .continuation import solve_checked
-    est, fit, claim = solve_checked(est, progress=not args.verbose)
+    if getattr(args, "wind_intensity", None):
+        from .process_intensity import choose_intensity
+        from .result_claim import check_claim
+        print(f"choosing the wind process's intensity ({len(args.wind_intensity)} fits) ...",
+              flush=True)
+        choice = choose_intensity(est.test, est.spec, args.wind_intensity,
+                                  progress=not args.verbose)
+        print(choice.text(), flush=True)
+        est, fit = choice.estimator, choice.fit
+        claim = check_claim(est, fit)
+    else:
+        est, fit, claim = solve_checked(est, progress=not args.verbose)
     if args.hessian == "exact":
         print("exact-Hessian covariance ...", flush=True)
     cov = est.covariance(fit, args.rescale_sigmas, args.hessian)

@@ -62,6 +62,7 @@ class IntensityChoice:
     best: IntensityPoint
     estimator: Estimator
     fit: Fit
+    horizontal: bool = True  # whether the process has horizontal components
 
     def text(self) -> str:
         lines = ["wind-process intensity by marginal likelihood (-2 log evidence, lower is "
@@ -70,8 +71,9 @@ class IntensityChoice:
             mark = "  <- chosen" if p is self.best else ""
             value = (f"chi-square {p.chi_square:11.1f}, -2 log evidence {p.evidence:11.1f}"
                      if p.evidence is not None else p.note)
-            lines.append(f"  vertical {p.sigma_vertical:6.3f} m/s, horizontal "
-                         f"{p.sigma_horizontal:6.3f} m/s: {value}{mark}")
+            horizontal = (f", horizontal {p.sigma_horizontal:6.3f} m/s" if self.horizontal
+                          else "")
+            lines.append(f"  vertical {p.sigma_vertical:6.3f} m/s{horizontal}: {value}{mark}")
         return "\n".join(lines)
 
 
@@ -123,7 +125,8 @@ def choose_intensity(test: FlightTest, spec: ModelSpec, factors: tuple[float, ..
             best = (value, point, est, fit)
     if best is None:
         raise SolverFailure("every intensity's fit failed", 0)
-    return IntensityChoice(points, best[1], best[2], best[3])
+    return IntensityChoice(points, best[1], best[2], best[3],
+                           horizontal=any(c != "up" for c in wind.components))
 
 
 def evidence_curve(choice: IntensityChoice) -> np.ndarray:

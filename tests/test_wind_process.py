@@ -177,3 +177,25 @@ def test_a_rocket_descent_through_gusts_is_reconstructed_with_the_process(tmp_pa
     for name in ("CdS[drogue,stage1]", "CdS[main,stage2]", "t_start[main,stage2]",
                  "axis_cos[drogue]", "axis_cos[main]"):
         assert abs(fit.parameters[name] - truth[name]) < 4.0 * cov.std[name], name
+
+
+def test_the_command_line_chooses_the_intensity_and_refuses_a_model_without_a_process(
+        tmp_path, capsys) -> None:
+    from cpas_ocp.cli import main
+    problem = load_problem("rocket_gusts")
+    simulate_problem(problem, tmp_path / "test", seed=1)
+    model = problem.manifest["model"]
+    wind = {**model, "effects": [problem.simulation["model"]["effects"][0], *model["effects"]]}
+    (tmp_path / "wind.json").write_text(json.dumps(wind))
+    assert main(["reconstruct", str(tmp_path / "test"), "--model", str(tmp_path / "wind.json"),
+                 "--wind-intensity", "0.5,1,2", "--out", str(tmp_path / "report")]) == 0
+    out = capsys.readouterr().out
+    # The gusts were drawn at 1 m/s: the evidence picks it.
+    assert "vertical  1.000 m/s: chi-square" in out and out.count("<- chosen") == 1
+    chosen = next(line for line in out.splitlines() if "<- chosen" in line)
+    assert "vertical  1.000 m/s" in chosen
+    assert main(["reconstruct", str(tmp_path / "test"), "--wind-intensity", "1,2",
+                 "--out", str(tmp_path / "still")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "a wind_process effect" in err[0]
+    assert not (tmp_path / "still").exists()
