@@ -681,6 +681,7 @@ def _fit_and_covariance(est: Estimator, args: argparse.Namespace
         print(choice.text(), flush=True)
         est, fit = choice.estimator, choice.fit
         claim = check_claim(est, fit)
+        claim.notes.append(choice.summary())
     else:
         est, fit, claim = solve_checked(est, progress=not args.verbose)
     if args.hessian == "exact":

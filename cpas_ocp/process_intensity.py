@@ -64,6 +64,12 @@ class IntensityChoice:
     fit: Fit
     horizontal: bool = True  # whether the process has horizontal components
 
+    def summary(self) -> str:
+        """One line: the intensity chosen, of which."""
+        grid = ", ".join(f"{p.sigma_vertical:g}" for p in self.points)
+        return (f"wind-process intensity chosen by marginal likelihood: vertical "
+                f"{self.best.sigma_vertical:g} m/s of {grid} m/s")
+
     def text(self) -> str:
         lines = ["wind-process intensity by marginal likelihood (-2 log evidence, lower is "
                  "better):"]

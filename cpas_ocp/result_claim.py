@@ -118,6 +118,8 @@ class Claim:
     bound_p_value: float = 1.0
     moves: list[WindowMove] = field(default_factory=list)
     alpha: float = ALPHA
+    # How the fit was reached beyond one solve (a process intensity chosen by evidence).
+    notes: list[str] = field(default_factory=list)
 
     @property
     def pressed(self) -> list[HeldBound]:
@@ -165,6 +167,7 @@ class Claim:
         lines = [f"claim: {verdict}"]
         lines += [f"  - {p}" for p in self.problems()]
         lines += [f"  - moved {m.text()}" for m in self.moves]
+        lines += [f"  - {note}" for note in self.notes]
         return "\n".join(lines)
 
     def as_dict(self) -> dict:
@@ -175,7 +178,7 @@ class Claim:
                 "held_bounds": [{**vars(h), "physical": bool(h.physical),
                                  "beyond": _number(h.beyond), "beyond_z": _number(h.beyond_z),
                                  "pressed": h in self.pressed} for h in self.held],
-                "window_moves": [vars(m) for m in self.moves],
+                "window_moves": [vars(m) for m in self.moves], "notes": self.notes,
                 "problems": self.problems(), "alpha": self.alpha}
 
 

@@ -194,6 +194,9 @@ def test_the_command_line_chooses_the_intensity_and_refuses_a_model_without_a_pr
     assert "vertical  1.000 m/s: chi-square" in out and out.count("<- chosen") == 1
     chosen = next(line for line in out.splitlines() if "<- chosen" in line)
     assert "vertical  1.000 m/s" in chosen
+    claim = json.loads((tmp_path / "report" / "result.json").read_text())["claim"]
+    assert claim["notes"] == ["wind-process intensity chosen by marginal likelihood: "
+                              "vertical 1 m/s of 0.5, 1, 2 m/s"]
     assert main(["reconstruct", str(tmp_path / "test"), "--wind-intensity", "1,2",
                  "--out", str(tmp_path / "still")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
