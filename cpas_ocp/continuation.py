@@ -28,6 +28,8 @@ from __future__ import annotations
 import dataclasses
 import sys
 
+import numpy as np
+
 from .effects import Effect
 from .effects.registry import BUILTIN
 from .errors import SolverFailure
@@ -108,7 +110,11 @@ def solve_checked(est: Estimator, progress: bool = False
     except SolverFailure as exc:
         if not isinstance(exc.last_iterate, Fit):
             raise
-        failure, fit, claim = exc, exc.last_iterate, check_claim(est, exc.last_iterate)
+        try:  # a last iterate can be unfit to linearise (a NaN there): the failure stands
+            claim = check_claim(est, exc.last_iterate)
+        except (ValueError, np.linalg.LinAlgError):
+            raise exc from None
+        failure, fit = exc, exc.last_iterate
     moves: list[WindowMove] = []
     for _ in range(MAX_WINDOW_MOVES):
         spec = moved_windows(claim, est, fit)
