@@ -426,3 +426,30 @@ def flight_text(fit: Fit, cov: Covariance, nominal: dict[str, dict[str, Any]],
                      "whatever the canopies opened before it lose or add to the wake.")
     lines += opening_lines(fit, cov, held)
     return "\n".join(lines) + "\n\n" + missing_text(fit, diagnosis)
+
+
+def air_motion_text(still: Fit, still_cov: Covariance, wind: Fit, wind_cov: Covariance,
+                    figure: str) -> str:
+    """The markdown section comparing the still-air fit with the one that estimates the air's
+    vertical motion (`wind_process`): chi-square/dof, each sensor's normalised RMS, the
+    drag areas and start times with their sigmas, and the wind figure."""
+    lines = ["## Air motion", "",
+             "The same log fitted again with the air's vertical motion estimated with the "
+             "trajectory (`wind_process`: a Gauss-Markov process whose innovations join "
+             "chi-square); its σ count the air's motion as well as the sensors' noise.", "",
+             "| | still air | with the air's motion |", "|---|---|---|",
+             f"| χ²/dof | {still.chi_square / still.dof:.2f} | "
+             f"{wind.chi_square / wind.dof:.2f} |"]
+    rms_still, rms_wind = channel_rms(still), channel_rms(wind)
+    for name, value in rms_still.items():
+        if name.split(".")[0] in still.pseudo_sensors or name not in rms_wind:
+            continue
+        lines.append(f"| {name}, normalised RMS | {value:.2f} | {rms_wind[name]:.2f} |")
+    for name in still.free:
+        if name in wind.parameters and split_name(name)[0] in ("CdS", "t_start"):
+            lines.append(f"| {name} | {still.parameters[name]:.4g} ± "
+                         f"{still_cov.std.get(name, float('nan')):.2g} | "
+                         f"{wind.parameters[name]:.4g} ± "
+                         f"{wind_cov.std.get(name, float('nan')):.2g} |")
+    lines += ["", f"![the air's vertical motion]({figure})", ""]
+    return "\n".join(lines)

@@ -23,6 +23,7 @@ from cpas_ocp.effects.registry import BASELINE
 from cpas_ocp.effects.wind_process import WindProcess
 from cpas_ocp.errors import InputError
 from cpas_ocp.estimation import Estimator
+from cpas_ocp.flight_report import air_motion_text
 from cpas_ocp.flight_test import load_test
 from cpas_ocp.model_spec import spec_from_block
 from cpas_ocp.problems import load_problem
@@ -177,6 +178,12 @@ def test_a_rocket_descent_through_gusts_is_reconstructed_with_the_process(tmp_pa
     for name in ("CdS[drogue,stage1]", "CdS[main,stage2]", "t_start[main,stage2]",
                  "axis_cos[drogue]", "axis_cos[main]"):
         assert abs(fit.parameters[name] - truth[name]) < 4.0 * cov.std[name], name
+    # The flight report's comparison of the two fits.
+    text = air_motion_text(still, still_cov, fit, cov, "wind.png")
+    assert (f"| χ²/dof | {still.chi_square / still.dof:.2f} | "
+            f"{fit.chi_square / fit.dof:.2f} |") in text
+    assert "| CdS[main,stage2] |" in text and "wind_process" in text
+    assert "| baro.altitude, normalised RMS |" in text and "](wind.png)" in text
 
 
 def test_the_command_line_chooses_the_intensity_and_refuses_a_model_without_a_process(

@@ -84,6 +84,13 @@ class WindProcess(Effect):
             if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
                 raise ValueError(f"{label} must be a positive number; got {value!r}")
 
+    @classmethod
+    def vertical_thermals(cls) -> WindProcess:
+        """The vertical air motion of a rocket's descent through an afternoon boundary
+        layer: thermals of about 1 m/s correlated over tens of seconds (tau 20 s), knots
+        every 4 s.  The altimeter and a GPS altitude see only the vertical component."""
+        return cls(components=("up",), knot_s=4.0, tau_s=20.0, sigma_vertical=1.0)
+
     def knot_times(self, test: FlightTest) -> np.ndarray:
         """The knot times t_k (s): every `knot_s` from the phase's start, the last at or past
         its end."""
