@@ -61,6 +61,7 @@ from .uncertainty import (
     gauss_newton_step,
     kkt_covariance,
     linearize,
+    log_det_information,
     measured_decrement,
 )
 
@@ -1350,6 +1351,12 @@ class Estimator:
         lin = self._linearize(z, release)
         cov = kkt_covariance(lin, self._param_index, self.pscale, self.free)
         return self.free_values(z + gauss_newton_step(lin)), cov
+
+    def information_log_det(self, fit: Fit) -> float:
+        """log det of the Gauss-Newton information of every free coordinate at `fit`, in the
+        scaled decision vector (`uncertainty.log_det_information`): the volume term of a
+        Laplace approximation (`process_intensity`)."""
+        return log_det_information(self._linearize(fit.z))
 
     def gauss_newton_point(self, z: np.ndarray) -> tuple[np.ndarray, float]:
         """The end of one full Gauss-Newton step from the decision vector `z` (the linearised

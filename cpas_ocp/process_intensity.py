@@ -13,7 +13,7 @@ the Laplace approximation about the fit gives
 chi^2_min the fit's chi-square (data and the process's innovations,
 u'S^-1 u), (J'J)_scaled the Gauss-Newton information of every free
 coordinate in the scaled decision vector on the constraints' null space
-(`uncertainty.log_det_information`), and log det R = (K - 1) log(1 - phi^2)
+(`Estimator.information_log_det`), and log det R = (K - 1) log(1 - phi^2)
 per component of K knots.  The Jacobian of u = s w cancels the s^K of
 det S^1/2.  A larger s lowers chi^2_min (the wind explains more) and pays in
 the volume term (the posterior is wider than the data make it): the
@@ -31,15 +31,12 @@ import math
 import sys
 from dataclasses import dataclass
 
-import numpy as np
-
 from .continuation import solve_checked
 from .effects.wind_process import WindProcess
 from .errors import InputError, SolverFailure
 from .estimation import Estimator, Fit
 from .flight_test import FlightTest
 from .model_spec import ModelSpec
-from .uncertainty import log_det_information
 
 
 @dataclass(frozen=True)
@@ -99,7 +96,7 @@ def evidence(est: Estimator, fit: Fit) -> float:
     knots = len(wind.knot_times(est.test))
     phi = math.exp(-wind.knot_s / wind.tau_s)
     log_det_prior = len(wind.components) * (knots - 1) * math.log(1.0 - phi**2)
-    return fit.chi_square + log_det_prior + log_det_information(est._linearize(fit.z))
+    return fit.chi_square + log_det_prior + est.information_log_det(fit)
 
 
 def choose_intensity(test: FlightTest, spec: ModelSpec, factors: tuple[float, ...],
@@ -109,6 +106,7 @@ def choose_intensity(test: FlightTest, spec: ModelSpec, factors: tuple[float, ..
     wind = wind_effect(spec)
     points: list[IntensityPoint] = []
     best: tuple[float, IntensityPoint, Estimator, Fit] | None = None
+    failure: SolverFailure | None = None
     for factor in factors:
         scaled = dataclasses.replace(wind, sigma_vertical=factor * wind.sigma_vertical,
                                      sigma_horizontal=factor * wind.sigma_horizontal)
@@ -117,6 +115,7 @@ def choose_intensity(test: FlightTest, spec: ModelSpec, factors: tuple[float, ..
         try:
             est, fit, _ = solve_checked(est)
         except SolverFailure as exc:
+            failure = exc
             points.append(IntensityPoint(scaled.sigma_vertical, scaled.sigma_horizontal,
                                          None, None, f"fit failed ({exc.status})"))
             continue
@@ -130,12 +129,8 @@ def choose_intensity(test: FlightTest, spec: ModelSpec, factors: tuple[float, ..
         if best is None or value < best[0]:
             best = (value, point, est, fit)
     if best is None:
-        raise SolverFailure("every intensity's fit failed", 0)
+        assert failure is not None
+        raise failure  # every intensity's fit failed: the last one's status
     return IntensityChoice(points, best[1], best[2], best[3],
                            horizontal=any(c != "up" for c in wind.components))
 
-
-def evidence_curve(choice: IntensityChoice) -> np.ndarray:
-    """(sigma_vertical, -2 log evidence) of every point with a fit, for plots and tests."""
-    return np.array([(p.sigma_vertical, p.evidence) for p in choice.points
-                     if p.evidence is not None])
