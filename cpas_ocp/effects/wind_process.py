@@ -42,7 +42,7 @@ from typing import TYPE_CHECKING
 import casadi as ca
 import numpy as np
 
-from ..parameters import Parameter, param_name, split_name
+from ..parameters import Parameter, param_name
 from .base import Effect
 
 if TYPE_CHECKING:
@@ -81,7 +81,8 @@ class WindProcess(Effect):
         for label, value in (("knot_s", self.knot_s), ("tau_s", self.tau_s),
                              ("sigma_horizontal", self.sigma_horizontal),
                              ("sigma_vertical", self.sigma_vertical)):
-            if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
+            if isinstance(value, bool) or not (isinstance(value, int | float)
+                                               and math.isfinite(value) and value > 0):
                 raise ValueError(f"{label} must be a positive number; got {value!r}")
 
     @classmethod
@@ -124,7 +125,7 @@ class WindProcess(Effect):
         return ca.vertcat(*u)
 
     def forces(self, ctx: ModelContext) -> None:
-        early = [q for q in ctx.q if split_name(q)[0] in ("drag", "cds")]
+        early = [q for q in ctx.q if q.split("[")[0] in ("drag", "cds")]
         if early:
             raise ValueError("list the wind_process effect before the effects that form "
                              f"drag: {', '.join(early)} already use the still air")
