@@ -171,13 +171,14 @@ class Claim:
         return "\n".join(lines)
 
     def as_dict(self) -> dict:
+        pressed = self.pressed
         return {"result": self.is_result, "fits_noise": self.fits_noise,
                 "chi_square": self.chi_square, "dof": self.dof,
                 "fit_p_value": self.fit_p_value, "misfit_factor": self.misfit_factor,
                 "bound_statistic": self.bound_statistic, "bound_p_value": self.bound_p_value,
                 "held_bounds": [{**vars(h), "physical": bool(h.physical),
                                  "beyond": _number(h.beyond), "beyond_z": _number(h.beyond_z),
-                                 "pressed": h in self.pressed} for h in self.held],
+                                 "pressed": h in pressed} for h in self.held],
                 "window_moves": [vars(m) for m in self.moves], "notes": self.notes,
                 "problems": self.problems(), "alpha": self.alpha}
 
