@@ -257,10 +257,6 @@ def _parser() -> argparse.ArgumentParser:
                    help="folder holding the card's logs (default ../shared/data/<card folder>)")
     s.add_argument("--log", action="append", default=[], metavar="FILE",
                    help="reconstruct only this log of the card (repeatable)")
-    s.add_argument("--wind", action="store_true",
-                   help="fit each log again with the air's vertical motion estimated "
-                        "(wind_process: thermals of 1 m/s, tau 20 s, knots every 4 s; with "
-                        "--wind-intensity, its sigma chosen by the evidence) and compare")
     _solver_options(s)
     s.set_defaults(run=_flight)
 
@@ -573,59 +569,52 @@ def _flight_log(args: argparse.Namespace, card: FlightCard, log: Path) -> None:
     from .diagnosis import diagnose
     from .discrepancy_report import write_diagnosis
     from .flight_log import import_flight
-    from .flight_report import flight_text, held_opening_profiles
+    from .flight_report import air_motion_text, flight_text, held_opening_profiles
     from .flight_test import load_test
+    from .process_intensity import without_wind
     folder = args.out / log.stem
     print(f"== {log.name}: import", flush=True)
     summary = import_flight(read_altus_log(log), card, folder / "test")
     print(summary.text())
     test = load_test(folder / "test")
-    # --wind-intensity belongs to the fit with the air's motion (--wind), not to this one.
-    still_args = argparse.Namespace(**{**vars(args), "wind_intensity": None})
-    est, fit, cov, out = _run_reconstruction(test, still_args, _spec(test, args),
-                                             folder / "report")
+    est, fit, cov, out = _run_reconstruction(test, args, _spec(test, args), folder / "report")
+    still = without_wind(est.spec, test)
+    air = None if still is None else _flight_still_air(test, args, still, folder)
     print("diagnosing the residuals ...", flush=True)
     diag = diagnose(fit, est.spec, progress=not args.verbose)
     write_diagnosis(diag, cov, folder / "diagnosis")
     print("profiling the opening's held parameters ...", flush=True)
     held = held_opening_profiles(fit, est.spec, progress=not args.verbose)
     text = flight_text(fit, cov, card.nominal, diag, held)
-    if args.wind:
-        text += "\n" + _flight_with_wind(test, args, est.spec, fit, cov, folder)
+    if still is not None:
+        text += "\n" + (air if isinstance(air, str) else
+                        air_motion_text(air[0], air[1], fit, cov, "wind.png"))
     (out / "flight.md").write_text(f"# {card.title}\n\n{card.label}\n\n{text}")
     print()
     print(text)
     print(f"flight comparison written to {out / 'flight.md'}")
 
 
-def _flight_with_wind(test: FlightTest, args: argparse.Namespace, spec: ModelSpec, fit: Fit,
-                      cov: Covariance, folder: Path) -> str:
-    """The `flight` log fitted again with the air's vertical motion (report in
-    ``report_wind``), and the markdown section comparing the two fits."""
-    import dataclasses
-
-    from .effects.wind_process import WindProcess
-    from .flight_report import air_motion_text
+def _flight_still_air(test: FlightTest, args: argparse.Namespace, spec: ModelSpec,
+                      folder: Path) -> tuple[Fit, Covariance] | str:
+    """The `flight` log fitted again without the card's wind process (report in
+    ``report_still``): the fit and its covariance, or the markdown that says it failed."""
     from .report import write_report
-    print("reconstructing with the air's vertical motion (wind_process) ...", flush=True)
-    wind_spec = dataclasses.replace(spec, effects=(WindProcess.vertical_thermals(),
-                                                   *spec.effects))
-    est = _estimator(test, args, wind_spec)
+    print("reconstructing in still air (the card's model without its wind_process) ...",
+          flush=True)
+    still_args = argparse.Namespace(**{**vars(args), "wind_intensity": None})
+    est = _estimator(test, still_args, spec)
     try:
-        est, fit_w, cov_w, claim = _fit_and_covariance(est, args)
+        est, fit, cov, claim = _fit_and_covariance(est, still_args)
     except SolverFailure as exc:
-        print(f"the fit with the air's motion did not converge: {exc}", file=sys.stderr)
-        return (f"## Air motion\n\nThe fit with the air's vertical motion estimated "
-                f"(`wind_process`) did not converge ({exc.status} after {exc.iterations} "
-                f"iterations): no result.\n")
-    out = write_report(fit_w, cov_w, folder / "report_wind", claim=claim)
-    print(claim.text())
-    print(f"with the air's motion: chi-square/dof {fit_w.chi_square / fit_w.dof:.2f} "
-          f"(still air {fit.chi_square / fit.dof:.2f}); report written to {out}")
-    text = air_motion_text(fit, cov, fit_w, cov_w, "../report_wind/wind.png")
-    if not claim.is_result:  # said where the comparison is read, not only in its report
-        text += "\n**Not a result.** " + " ".join(f"{p}." for p in claim.problems()) + "\n"
-    return text
+        print(f"the fit in still air did not converge: {exc}", file=sys.stderr)
+        return (f"## Air motion\n\nThe fit in still air (the card's model without its "
+                f"`wind_process`) did not converge ({exc.status} after {exc.iterations} "
+                "iterations): no comparison.\n")
+    out = write_report(fit, cov, folder / "report_still", claim=claim)
+    print(f"in still air: chi-square/dof {fit.chi_square / fit.dof:.2f}; report written to "
+          f"{out}")
+    return fit, cov
 
 
 def _demo(args: argparse.Namespace) -> int:

@@ -10,7 +10,10 @@ unexplained residual looks like.
    of them, by refitting the model with the effect and testing the
    likelihood ratio.  The confirmed effect with the smallest likelihood-ratio
    p-value is the diagnosis.
-3. What is not: the residual tests (whiteness, a periodic line, a lag,
+3. The air's motion: where an altimeter and a GPS share a slow wander, the
+   evidence of a wind process against still air (`wind_evidence`); the
+   process is named where its Bayes factor is decisive.
+4. What is not: the residual tests (whiteness, a periodic line, a lag,
    correlation with signatures of the fitted trajectory) per channel and
    window (`residual_diagnosis`).  When no effect is confirmed but the
    residuals carry significant structure, the report says so and describes
@@ -30,6 +33,7 @@ from .phase_windows import PhaseWindow, phase_windows
 from .process_memory import release_freed_memory
 from .residual_diagnosis import Finding, diagnose_residuals, signature_text
 from .score_test import ScoreTest, confirm, confirmed_ranking, score_tests
+from .wind_evidence import WindEvidence, wind_evidence
 
 ALPHA = 0.01  # family-wise level of the diagnosis's tests
 CONFIRM_TOP = 3  # significant score tests confirmed by a refit
@@ -46,6 +50,7 @@ class Diagnosis:
     findings: list[Finding]
     alpha: float = ALPHA
     notes: list[str] = field(default_factory=list)
+    air: WindEvidence | None = None  # the air motion's evidence, where it was asked
 
     @property
     def worst(self) -> str:
@@ -86,6 +91,11 @@ class Diagnosis:
         """One paragraph: the effect that is missing, or the signature nobody explains."""
         best = self.explanation
         unresolved = self._unresolved(best)
+        if self.air is not None and self.air.decisive:
+            also = (f"; also confirmed: {best.effect} (likelihood ratio "
+                    f"{best.refit.statistic:.1f}, p = {best.refit.p_value:.2g})"
+                    if best is not None else "")
+            return f"missing effect: {self.air.verdict()}{also}"
         if best is not None:
             lr = best.refit
             estimates = ", ".join(f"{n} = {v:.4g}" for n, v in best.refit_estimate.items())
@@ -124,6 +134,8 @@ class Diagnosis:
         refits = [t.refit_text() for t in self.effects if t.refit_text()]
         if refits:
             lines += ["", "refits with the leading effects:"] + ["  " + r for r in refits]
+        if self.air is not None:
+            lines += ["", self.air.text()]
         lines += ["", "residual structure:"]
         lines += ["  " + f.text() for f in self.structure[:8]] or ["  none significant"]
         lines += ["", self.verdict()]
@@ -141,5 +153,7 @@ def diagnose(fit: Fit, spec: ModelSpec, candidates: Mapping[str, EffectType] | N
     for t in leading:
         confirm(fit, t, progress)
         release_freed_memory()
+    air = wind_evidence(fit, spec, alpha, progress)
+    release_freed_memory()
     return Diagnosis(fit, windows, window_statistics(fit, windows), confirmed_ranking(tests),
-                     diagnose_residuals(fit, windows, alpha), alpha)
+                     diagnose_residuals(fit, windows, alpha), alpha, air=air)

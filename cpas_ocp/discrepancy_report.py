@@ -45,6 +45,12 @@ def write_diagnosis(diag: Diagnosis, cov: Covariance | None, out: str | Path) ->
             "effects": [t.as_dict() for t in diag.effects],
             "explanation": diag.explanation.effect if diag.explanation else None,
             "residual_findings": [dataclasses.asdict(f) for f in diag.findings],
+            "air_motion": None if diag.air is None else {
+                "still_minus_2_log_evidence": diag.air.still,
+                "common_residual_p": diag.air.common_p,
+                "knot_s": diag.air.process.knot_s, "tau_s": diag.air.process.tau_s,
+                "intensities": [dataclasses.asdict(p) for p in diag.air.points],
+                "two_ln_bayes_factor": diag.air.two_ln_b, "named": diag.air.decisive},
             "verdict": diag.verdict(),
         }
         (tmp / "diagnosis.json").write_text(json.dumps(result, indent=2, default=float))

@@ -22,9 +22,11 @@ and a card into a test folder:
   as a 150 m jump in one sample);
 * ``gps_altitude.csv``: GPS altitude (m MSL) at each new fix with at least
   four satellites;
-* ``accelerometer.csv``: axial acceleration (m/s^2, 1 g subtracted), for the
-  opening-shock comparison, not fitted (the hang attitude under a canopy is
-  unknown);
+* ``accelerometer.csv``: axial acceleration (m/s^2, 1 g subtracted), fitted by
+  the `axial_accelerometer` effect, less the charge samples and, in each
+  later canopy's opening, the samples above the drag ceiling
+  (`drag_ceiling`: the shock cord's snatch, which no drag model makes; the
+  largest is the full-open event below);
 * a ``full_open`` event for each later canopy whose opening the
   accelerometer shows (`opening_peak`): the time of the largest axial
   specific force in the `OPENING_WINDOW_S` after the charge, with one
@@ -45,7 +47,12 @@ and a card into a test folder:
   lapse-rate fit's residuals.  A later canopy's altimeter sigma applies from
   the time its descent has settled (`settled_time`), not from its deployment:
   until then the vehicle still falls fast and is jerked about by the opening,
-  and the static port errs as it did under the canopy before.
+  and the static port errs as it did under the canopy before.  The
+  accelerometer's sigma is the RMS of its scatter about the local trend
+  (`scatter_rms`: the swing's jolts are part of the swing), under each
+  canopy's steady descent and apart over each later canopy's opening (from
+  the charge until the descent has settled, at least `OPENING_WINDOW_S`),
+  where the shock cord bounces the body by g's within a sample.
 
 The folder is written to a temporary sibling and moved into place only once
 it loads, so a failed import leaves nothing behind.
@@ -53,6 +60,7 @@ it loads, so a failed import leaves nothing behind.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import shutil
 import tempfile
@@ -93,6 +101,7 @@ SCATTER_WINDOW_S = 8.0  # window of the local trend the altimeter's scatter is t
 SERIES_MARGIN_S = 1.5  # series extend this far beyond the phase: a 1 Hz GPS covers it (s)
 RATE_WINDOW_S = 2.0  # window of the local descent rate that tells when a canopy has settled (s)
 SETTLED_RATE_FACTOR = 1.25  # settled: the local rate within this factor of the steady one
+STEADY_RATE_S = 10.0  # the settled descent rate under a canopy is taken over this long (s)
 OPENING_WINDOW_S = 3.0  # an opening-load peak is looked for this long after the charge (s)
 OPENING_BASELINE_S = 5.0  # the steady reading before a charge is taken over this long (s)
 OPENING_PEAK_SIGMAS = 5.0  # a peak counts when this many scatter sigmas off the steady reading
@@ -174,21 +183,41 @@ def fit_lapse_rate(fixes: pd.DataFrame, pressure: pd.Series, times: pd.Series,
     return lapse, offset, float(np.std(residual(lapse), ddof=2))
 
 
+def _scatter(t: np.ndarray, values: np.ndarray) -> np.ndarray | None:
+    """`values` less their local quadratic trend over SCATTER_WINDOW_S (a Savitzky-Golay
+    filter on a uniform resampling); None where the samples span too short a time."""
+    grid = np.arange(t[0], t[-1], 0.1)
+    window = min(int(SCATTER_WINDOW_S / 0.1) // 2 * 2 + 1, len(grid) // 2 * 2 - 1)
+    if window < 5:
+        return None
+    return values - np.interp(t, grid, savgol_filter(np.interp(grid, t, values), window, 2))
+
+
 def scatter_sigma(t: np.ndarray, values: np.ndarray) -> float:
     """Robust sigma (1.4826 MAD) of `values` about their local quadratic trend over
-    SCATTER_WINDOW_S (a Savitzky-Golay filter on a uniform resampling).
+    SCATTER_WINDOW_S (`_scatter`).
 
     Unlike the second differences this counts disturbances correlated over a
     few seconds, such as the static-pressure swings of a rocket swinging under
     a fast drogue, as noise; the descent itself (speed changing over tens of
     seconds) stays in the trend."""
-    grid = np.arange(t[0], t[-1], 0.1)
-    window = min(int(SCATTER_WINDOW_S / 0.1) // 2 * 2 + 1, len(grid) // 2 * 2 - 1)
-    if window < 5:
+    r = _scatter(t, values)
+    if r is None:
         return second_difference_sigma(values)
-    trend = np.interp(t, grid, savgol_filter(np.interp(grid, t, values), window, 2))
-    r = values - trend
     return float(1.4826 * np.median(np.abs(r - np.median(r))))
+
+
+def scatter_rms(t: np.ndarray, values: np.ndarray) -> float:
+    """RMS of `values` about their local quadratic trend over SCATTER_WINDOW_S (`_scatter`):
+    the sigma of a disturbance whose tails belong to it.  An accelerometer on a body
+    swinging under its canopy reads jolts of g when the swing reverses (both Prometheus
+    recorders read +2.5 to +3 g at 148.6-148.8 s under a drogue whose median reading is
+    -1.65 g): part of the swing, not glitches, so its variance, not a robust spread of
+    its middle, is the noise (under the drogue, 4.6 m/s^2 against 3.5 robust)."""
+    r = _scatter(t, values)
+    if r is None:
+        return second_difference_sigma(values)
+    return float(np.sqrt(np.mean(r**2)))
 
 
 def second_difference_sigma(values: np.ndarray) -> float:
@@ -205,11 +234,8 @@ def settled_time(t: np.ndarray, altitude: np.ndarray, t_from: float, t_to: float
     rate over the second half of [`t_from`, `t_to`]) for a further window.  `t_from`
     where the samples are too few to tell."""
     centres = np.arange(t_from + RATE_WINDOW_S / 2, t_to - RATE_WINDOW_S / 2, RATE_WINDOW_S / 2)
-    rates = np.full(centres.size, np.nan)
-    for i, c in enumerate(centres):
-        m = np.abs(t - c) <= RATE_WINDOW_S / 2
-        if m.sum() >= 4:
-            rates[i] = np.polyfit(t[m] - c, altitude[m], 1)[0]
+    rates = np.array([_slope(t, altitude, c - RATE_WINDOW_S / 2, c + RATE_WINDOW_S / 2)
+                      for c in centres])
     late = centres >= 0.5 * (t_from + t_to)
     if not np.isfinite(rates[late]).any():
         return t_from
@@ -221,10 +247,74 @@ def settled_time(t: np.ndarray, altitude: np.ndarray, t_from: float, t_to: float
     return t_from
 
 
+def _slope(t: np.ndarray, values: np.ndarray, lo: float, hi: float) -> float:
+    """Slope (per s) of a line through the samples in [lo, hi]; NaN with fewer than 4."""
+    m = (t >= lo) & (t <= hi)
+    if m.sum() < 4:
+        return float("nan")
+    return float(np.polyfit(t[m] - lo, values[m], 1)[0])
+
+
+def drag_ceiling(t: np.ndarray, height: np.ndarray, density: np.ndarray, t_charge: float,
+                 t_settled: float, t_next: float) -> float | None:
+    """The largest axial reading (m/s^2, one g subtracted) the canopies' drag can give in
+    the opening that follows a charge at `t_charge`, from the altimeter alone.
+
+    Once settled (from `t_settled`, over STEADY_RATE_S or to `t_next`) the open
+    canopies carry the weight at the descent rate v_s, so their full drag area is
+    2 m g / (rho_s v_s^2).  No opening pulls more than that area at the speed v_c
+    the vehicle had at the charge (the rate over RATE_WINDOW_S before it): a
+    specific force of g (rho_c v_c^2) / (rho_s v_s^2), and an axial reading of
+    at most that less one g (the axis's cosine to the force is at most 1).  A
+    reading above it is the shock cord's snatch, the elastic cord giving back the
+    energy it stored as the canopy stopped ahead of the vehicle, which no drag
+    model makes.  `height` (m) and `density` (kg/m^3) are the altimeter's
+    samples at times `t`.  None where the rates cannot be told."""
+    early = t_charge - EVENT_SIGMA_S
+    v_c = -_slope(t, height, early - RATE_WINDOW_S, early)
+    end = min(t_settled + STEADY_RATE_S, t_next)
+    v_s = -_slope(t, height, t_settled, end)
+    if not (v_c > 0.0 and v_s > 0.0):
+        return None
+    at_charge = (t >= early - RATE_WINDOW_S) & (t <= early)
+    settled = (t >= t_settled) & (t <= end)
+    ratio = float(np.mean(density[at_charge]) / np.mean(density[settled]))
+    return G0 * ratio * (v_c / v_s) ** 2 - G0
+
+
 def touchdown_time(t: np.ndarray, height: np.ndarray, after: float) -> float:
     """First time (s) after `after` at which `height` (m above the pad) is below TOUCHDOWN_M."""
     low = np.flatnonzero((t > after) & (height < TOUCHDOWN_M))
     return float(t[low[0]]) if low.size else float(t[-1])
+
+
+@dataclass(frozen=True)
+class Snatch:
+    """A later canopy's opening as the accelerometer read it against the drag ceiling
+    (`drag_ceiling`): the ceiling (m/s^2, an axial reading), the samples above it left
+    out as the shock cord's snatch, and the largest of them (m/s^2) with its time (s)."""
+
+    ceiling_m_s2: float
+    samples_left_out: int
+    largest_m_s2: float | None
+    at_s: float | None
+
+    def text(self) -> str:
+        head = f"drag ceiling of the axial reading {self.ceiling_m_s2 / G0:.1f} g"
+        if self.largest_m_s2 is None:
+            return head + ", no sample above it"
+        return (head + f"; {self.samples_left_out} sample(s) above it left out as the shock "
+                f"cord's snatch, the largest {self.largest_m_s2 / G0:.1f} g at {self.at_s:.2f} s")
+
+
+def import_snatches(folder: Path | None) -> dict[str, Snatch]:
+    """The snatches an import left out of the test folder `folder` (its ``import.json``);
+    empty for a folder that was not imported or holds none."""
+    report = None if folder is None else folder / "import.json"
+    if report is None or not report.is_file():
+        return {}
+    return {name: Snatch(**fields)
+            for name, fields in json.loads(report.read_text()).get("snatch", {}).items()}
 
 
 @dataclass(frozen=True)
@@ -239,7 +329,8 @@ class ImportSummary:
     baro_sigma_m: list[float]
     samples: dict[str, int]
     dropped: dict[str, int]
-    accel_sigma: list[float] = field(default_factory=list)  # m/s^2, per canopy phase
+    accel_sigma: list[float] = field(default_factory=list)  # m/s^2, per segment
+    snatches: dict[str, Snatch] = field(default_factory=dict)  # per later canopy
 
     def text(self) -> str:
         """A few lines for the terminal."""
@@ -254,8 +345,10 @@ class ImportSummary:
         lines.append("altimeter sigma per canopy phase: "
                      + ", ".join(f"{s:.2f} m" for s in self.baro_sigma_m))
         if self.accel_sigma:
-            lines.append("accelerometer sigma per canopy phase (the swing counted): "
-                         + ", ".join(f"{s:.2f} m/s²" for s in self.accel_sigma))
+            lines.append("accelerometer sigma per steady descent and opening (the swing "
+                         "counted): " + ", ".join(f"{s:.2f} m/s²" for s in self.accel_sigma))
+        for name, snatch in self.snatches.items():
+            lines.append(f"{name}'s opening: {snatch.text()}")
         lines.append("samples: " + ", ".join(f"{k} {v}" for k, v in self.samples.items())
                      + "; dropped: " + ", ".join(f"{k} {v}" for k, v in self.dropped.items()))
         return "\n".join(lines)
@@ -270,6 +363,7 @@ class ImportSummary:
                 {"lapse_rate_k_km": 1e3 * self.lapse_fit[0], "gps_offset_m": self.lapse_fit[1],
                  "residual_sigma_m": self.lapse_fit[2]},
                 "baro_sigma_m": self.baro_sigma_m, "accel_sigma_m_s2": self.accel_sigma,
+                "snatch": {k: dataclasses.asdict(v) for k, v in self.snatches.items()},
                 "samples": self.samples, "dropped": self.dropped}
 
 
@@ -344,17 +438,45 @@ def import_flight(log: AltusLog, card: FlightCard, out: str | Path) -> ImportSum
     full_open = {name: peak for name, t in deploy.items() if t > t_begin
                  and (peak := opening_peak(accel, t)) is not None}
     # The accelerometer loses the same charge windows as the altimeter (the charge's jolt
-    # is no force of the flight), and gets a sigma per canopy phase from its scatter about
-    # a local trend: the body's swing about its mean attitude is noise of this sensor.
+    # is no force of the flight) and, in each later canopy's opening, the samples above the
+    # drag ceiling (the shock cord's snatch; its time is the full-open event).
     accel_charge = np.zeros(len(accel), dtype=bool)
     for t_dep in deploy.values():
         accel_charge |= ((accel["time"] >= t_dep - EVENT_SIGMA_S)
                          & (accel["time"] <= t_dep + EJECTION_EXCLUDE_S)).to_numpy()
     accel = accel[~accel_charge]
+    density = np.asarray(site.density(site.altitude_at_pressure(
+        baro_phase["pressure"].to_numpy())), dtype=float).ravel()
+    later = sorted((t, name) for name, t in deploy.items() if t > starts[0])
+    snatches: dict[str, Snatch] = {}
+    snatch = np.zeros(len(accel), dtype=bool)
+    # A later canopy's opening lasts from its charge until its descent has settled, and at
+    # least the OPENING_WINDOW_S its load peak is looked for in.
+    opening_ends = [min(max(t_settled, t_charge + OPENING_WINDOW_S), t_next) for t_charge,
+                    t_settled, t_next in zip(starts[1:], bounds[1:-1], [*starts[2:], t_end],
+                                             strict=True)]
+    for (t_charge, name), t_settled, t_open, t_next in zip(
+            later, bounds[1:-1], opening_ends, [*starts[2:], t_end], strict=True):
+        ceiling = drag_ceiling(t_baro, h_baro, density, t_charge, t_settled, t_next)
+        if ceiling is None:
+            continue
+        above = ((accel["time"] >= t_charge) & (accel["time"] < t_open)
+                 & (accel["acceleration"] > ceiling)).to_numpy()
+        left_out = accel[above]
+        k = int(np.argmax(left_out["acceleration"])) if above.any() else None
+        snatches[name] = Snatch(ceiling, int(above.sum()),
+                                None if k is None else float(left_out["acceleration"].iloc[k]),
+                                None if k is None else float(left_out["time"].iloc[k]))
+        snatch |= above
+    accel = accel[~snatch]
+    # A sigma per segment from the scatter about a local trend (the body's swing about its
+    # mean attitude is noise of this sensor): under each canopy's steady descent, and
+    # apart in each later canopy's opening.
+    accel_bounds = [*sorted({*starts, *opening_ends} - {t_end}), t_end]
     accel_sigmas = []
-    for a, b in pairwise(bounds):
-        part = accel[(accel["time"] >= a) & (accel["time"] <= b)]
-        accel_sigmas.append(max(MIN_ACCEL_SIGMA, scatter_sigma(
+    for a, b in pairwise(accel_bounds):
+        part = accel[(accel["time"] >= a) & (accel["time"] < b)]
+        accel_sigmas.append(max(MIN_ACCEL_SIGMA, scatter_rms(
             part["time"].to_numpy(), part["acceleration"].to_numpy()) if len(part) > 10
             else second_difference_sigma(accel["acceleration"].to_numpy())))
     files = {"baro.csv": baro_phase[["time", "altitude"]],
@@ -371,7 +493,8 @@ def import_flight(log: AltusLog, card: FlightCard, out: str | Path) -> ImportSum
          "sigma": {"acceleration": {"value": round(accel_sigmas[0], 3), "unit": "m/s^2"}},
          "sigma_after": [{"time": {"value": round(t, 3), "unit": "s"},
                           "sigma": {"acceleration": {"value": round(sig, 3), "unit": "m/s^2"}}}
-                         for t, sig in zip(bounds[1:-1], accel_sigmas[1:], strict=True)]},
+                         for t, sig in zip(accel_bounds[1:-1], accel_sigmas[1:],
+                                           strict=True)]},
     ]
     if lapse_fit is not None and len(fixes_phase) >= 2:
         files["gps_altitude.csv"] = fixes_phase[["time", "gps_altitude"]].rename(
@@ -416,9 +539,10 @@ def import_flight(log: AltusLog, card: FlightCard, out: str | Path) -> ImportSum
                                      - samples["time"].between(lo, hi).sum()),
          "ejection_charge_samples": int((in_phase.to_numpy() & near_charge).sum()),
          "ejection_charge_accelerometer_samples": int(accel_charge.sum()),
+         "snatch_samples_above_drag_ceiling": int(snatch.sum()),
          "gps_repeats_between_fixes": int(d["time"].between(lo, hi).sum()
                                           - len(fixes_phase)) if log.has_gps else 0},
-        accel_sigmas)
+        accel_sigmas, snatches)
     _write_folder(out, manifest, files, summary, card.source, src)
     return summary
 

@@ -32,8 +32,14 @@ import numpy as np
 from .atmosphere import density_at
 from .common_residual import BLOCK_S, combined_p_value, common_residuals
 from .diagnosis import ALPHA, Diagnosis
+from .effects.wind_process import WindProcess
 from .estimation import Fit
-from .flight_log import EJECTION_EXCLUDE_S, OPENING_WINDOW_S, descent_load_factor_peak
+from .flight_log import (
+    EJECTION_EXCLUDE_S,
+    OPENING_WINDOW_S,
+    descent_load_factor_peak,
+    import_snatches,
+)
 from .flight_test import Event, Parachute
 from .kinematic_track import altimeter_altitude
 from .model_comparison import channel_rms
@@ -130,15 +136,35 @@ def _steady_cds(fit: Fit, canopy: str) -> str:
     return param_name("CdS", canopy, fit.test.parachute(canopy).stages[-1])
 
 
-def _implied_rate(fit: Fit, cov: Covariance, canopies: tuple[str, ...], altitude: float
-                  ) -> tuple[float, float]:
-    """Steady rate (m/s) the fitted drag areas give at `altitude` (m), and its sigma."""
+def updraft_weights(fit: Fit, t0: float, t1: float) -> dict[str, float]:
+    """The fitted air's mean vertical velocity over [t0, t1] (s) as weights of the wind
+    process's knots (`WindProcess.mean_weights`); empty in still air."""
+    for effect in fit.model.effects:
+        if isinstance(effect, WindProcess) and "up" in effect.components:
+            return effect.mean_weights(fit.test, "up", t0, t1)
+    return {}
+
+
+def mean_updraft(fit: Fit, t0: float, t1: float) -> float:
+    """The fitted air's mean vertical velocity over [t0, t1] (m/s, up positive; 0 in still
+    air)."""
+    return sum(w * fit.parameters[k] for k, w in updraft_weights(fit, t0, t1).items())
+
+
+def _implied_rate(fit: Fit, cov: Covariance, canopies: tuple[str, ...], t0: float, t1: float,
+                  altitude: float) -> tuple[float, float]:
+    """Steady rate (m/s, down) over the ground the fitted drag areas give at `altitude` (m)
+    in [t0, t1] (s), and its sigma: the rate through the air less the fitted mean updraft
+    there, which the drag areas trade against (their covariance counted)."""
     names = [_steady_cds(fit, c) for c in canopies]
     cds = sum(fit.parameters[n] for n in names) + fit.parameters.get("CdS_V", 0.0)
     v = steady_rate(fit, cds, altitude)
-    idx = [cov.names.index(n) for n in names if n in cov.names]
-    var = float(np.sum(cov.matrix[np.ix_(idx, idx)])) if idx else 0.0
-    return v, 0.5 * v * np.sqrt(max(var, 0.0)) / cds
+    weights = updraft_weights(fit, t0, t1)
+    gradient = {**{n: -0.5 * v / cds for n in names}, **{k: -w for k, w in weights.items()}}
+    idx = [cov.names.index(n) for n in gradient if n in cov.names]
+    g = np.array([gradient[cov.names[i]] for i in idx])
+    var = float(g @ cov.matrix[np.ix_(idx, idx)] @ g) if idx else 0.0
+    return v - mean_updraft(fit, t0, t1), float(np.sqrt(max(var, 0.0)))
 
 
 def descent_rates(fit: Fit, cov: Covariance) -> list[DescentRate]:
@@ -148,7 +174,7 @@ def descent_rates(fit: Fit, cov: Covariance) -> list[DescentRate]:
         if t1 - t0 < 5.0:
             continue
         measured, m_sigma, altitude = _measured_rate(fit, t0, t1)
-        implied, i_sigma = _implied_rate(fit, cov, canopies, altitude)
+        implied, i_sigma = _implied_rate(fit, cov, canopies, t0, t1, altitude)
         out.append(DescentRate(canopies, t0, t1, altitude, measured, m_sigma, implied, i_sigma))
     return out
 
@@ -186,7 +212,7 @@ def nominal_comparisons(fit: Fit, cov: Covariance, nominal: dict[str, dict[str, 
         rate = next(r for r in rates if r.canopies[-1] == canopy)
         others = sum(fit.parameters[_steady_cds(fit, c)] for c in rate.canopies if c != canopy)
         v_nom = steady_rate(fit, value + others + fit.parameters.get("CdS_V", 0.0),
-                            rate.altitude_m)
+                            rate.altitude_m) - mean_updraft(fit, rate.t0, rate.t1)
         out.append(NominalComparison(name, fit.parameters[name], cov.std.get(name, 0.0), value,
                                      spec.get("source", ""), v_nom, rate,
                                      by_rate.get(name, 0.0)))
@@ -278,7 +304,7 @@ def opening_lines(fit: Fit, cov: Covariance, held: dict[str, Profile] | None = N
     the residuals are not white; held and bounded ones said so, with the profiles `held` of
     held ones where given), the fill time, the observed full-open time, and the
     accelerometer's axial peak against the model's and against the most the drag can
-    pull."""
+    pull, and the samples above that ceiling the import left out (`import_snatches`)."""
     last, chute, inflation = last_opening(fit)
     stage = chute.stages[0]
     start = inflation[-1]
@@ -330,14 +356,18 @@ def opening_lines(fit: Fit, cov: Covariance, held: dict[str, Profile] | None = N
                   f"- model: peak load factor {model_peak:.2f} g in the same window; the "
                   f"{chute.name}'s full drag area at the start speed would pull "
                   f"{ceiling:.1f} g."]
-        if peak > ceiling:
-            lines.append(f"- the accelerometer's peak exceeds what the {chute.name}'s drag can "
-                         "pull at any time of the opening, so it is not the drag: it is the "
-                         "riser's snatch (an elastic shock cord stretched by the canopy "
-                         "stopping ahead of the vehicle, then recoiling), which a rigid "
-                         "riser cannot make. The accelerometer is therefore not fitted"
-                         + ("; only the time of its peak is used." if full is not None
-                            else "."))
+        snatch = import_snatches(fit.test.path).get(chute.name)
+        if snatch is not None and snatch.largest_m_s2 is not None:
+            lines.append(
+                f"- the import left out {snatch.samples_left_out} accelerometer sample(s) of "
+                f"the opening above {snatch.ceiling_m_s2 / G0:.1f} g, the most the canopies' "
+                "drag can pull at the speed of the charge (from the altimeter's rates; "
+                f"the largest {snatch.largest_m_s2 / G0:.1f} g at {snatch.at_s:.2f} s): that "
+                "is not the drag but the riser's snatch (an elastic shock cord stretched by "
+                "the canopy stopping ahead of the vehicle, then recoiling), which a rigid "
+                "riser cannot make"
+                + ("; the time of the peak is the full-open event." if full is not None
+                   else "."))
     return lines
 
 
@@ -409,16 +439,27 @@ def flight_text(fit: Fit, cov: Covariance, nominal: dict[str, dict[str, Any]],
                      f"{c.nominal:.3f} | {c.fitted / c.nominal:.2f} | {c.z:+.1f} | "
                      f"{c.rate_nominal:.2f} | "
                      f"{c.rate_measured.measured:.2f} ± {c.rate_measured.measured_sigma:.2f} |")
-    lines += ["", "The fit's σ treat the sensor noise as white. The descent wanders about the "
-              "model over tens of seconds (see below), so the σ that the measured rate's "
-              "scatter allows, with the residuals' autocorrelation counted, is the honest one; "
-              "the difference from the nominal value is given in the larger of the two.", ""]
+    if any(isinstance(e, WindProcess) for e in fit.model.effects):
+        lines += ["", "The fit's σ count the air's vertical motion (`wind_process`) as well "
+                  "as the sensors' noise; the σ that the measured rate's scatter allows is "
+                  "given beside them, and the difference from the nominal value is given in "
+                  "the larger of the two.", ""]
+    else:
+        lines += ["", "The fit's σ treat the sensor noise as white. The descent wanders about "
+                  "the model over tens of seconds (see below), so the σ that the measured "
+                  "rate's scatter allows, with the residuals' autocorrelation counted, is the "
+                  "honest one; the difference from the nominal value is given in the larger of "
+                  "the two.", ""]
     for c in comps:
         faster = "faster" if c.rate_nominal > c.rate_measured.measured else "slower"
+        r = c.rate_measured
+        updraft = mean_updraft(fit, r.t0, r.t1)
+        air = (f" through air rising at {updraft:+.2f} m/s on average there (the fitted "
+               "wind process)" if updraft else "")
         lines.append(f"- {c.name}: with the nominal {c.nominal:.3f} m² ({c.source}) the rocket "
                      f"would have come down at {c.rate_nominal:.2f} m/s near "
-                     f"{c.rate_measured.altitude_m:.0f} m, {faster} than the "
-                     f"{c.rate_measured.measured:.2f} m/s measured there; the measured rate "
+                     f"{r.altitude_m:.0f} m{air}, {faster} than the "
+                     f"{r.measured:.2f} m/s measured there; the measured rate "
                      f"needs {c.fitted:.3f} m². A fitted drag area is the system's: it "
                      "carries the drag of the body hanging beneath (the card fixes the "
                      "forebody drag area at "
@@ -430,13 +471,14 @@ def flight_text(fit: Fit, cov: Covariance, nominal: dict[str, dict[str, Any]],
 
 def air_motion_text(still: Fit, still_cov: Covariance, wind: Fit, wind_cov: Covariance,
                     figure: str) -> str:
-    """The markdown section comparing the still-air fit with the one that estimates the air's
-    vertical motion (`wind_process`): chi-square/dof, each sensor's normalised RMS, the
-    drag areas and start times with their sigmas, and the wind figure."""
+    """The markdown section comparing the fit that estimates the air's vertical motion
+    (`wind_process`) with the same model in still air: chi-square/dof, each sensor's
+    normalised RMS, the drag areas and start times with their sigmas, and the wind figure."""
     lines = ["## Air motion", "",
-             "The same log fitted again with the air's vertical motion estimated with the "
-             "trajectory (`wind_process`: a Gauss-Markov process whose innovations join "
-             "chi-square); its σ count the air's motion as well as the sensors' noise.", "",
+             "The model estimates the air's vertical motion with the trajectory "
+             "(`wind_process`: a Gauss-Markov process whose innovations join chi-square), so "
+             "its σ count the air's motion as well as the sensors' noise. Beside it, the same "
+             "model in still air (report in `report_still`):", "",
              "| | still air | with the air's motion |", "|---|---|---|",
              f"| χ²/dof | {still.chi_square / still.dof:.2f} | "
              f"{wind.chi_square / wind.dof:.2f} |"]

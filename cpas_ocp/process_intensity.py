@@ -89,6 +89,19 @@ def wind_effect(spec: ModelSpec) -> WindProcess:
     return found[0]
 
 
+def without_wind(spec: ModelSpec, test: FlightTest) -> ModelSpec | None:
+    """`spec` in still air (its wind process taken out); None where it has none."""
+    kept = tuple(e for e in spec.effects if not isinstance(e, WindProcess))
+    if len(kept) == len(spec.effects):
+        return None
+    names = {p.name for e in spec.effects if isinstance(e, WindProcess)
+             for p in e.parameters(test)}
+    return dataclasses.replace(
+        spec, effects=kept, fix={k: v for k, v in spec.fix.items() if k not in names},
+        free=tuple(n for n in spec.free if n not in names),
+        priors={k: v for k, v in spec.priors.items() if k not in names})
+
+
 def evidence(est: Estimator, fit: Fit) -> float:
     """-2 log evidence of `fit`'s wind-process intensity, up to a constant (see the module
     docstring)."""

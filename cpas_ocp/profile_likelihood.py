@@ -153,7 +153,8 @@ def _continue_outwards(est: Estimator, fit: Fit, start: Fit | np.ndarray, name: 
                 print(f"\rprofile {name}: {len(values) + len(failures)}/{grid.size + 1} "
                       f"points", end="", file=sys.stderr, flush=True)
             try:
-                held = est.solve(start=inner, bounds={name: (float(v), float(v))})
+                held = est.solve(start=inner, bounds={name: (float(v), float(v))},
+                                 sensitivities=False)
             except SolverFailure as exc:
                 failures.append((float(v), f"{exc.status} after {exc.iterations} iterations"))
                 continue

@@ -234,7 +234,8 @@ def score_test(fit: Fit, spec: ModelSpec, entry: EffectType,
         if null_point == "solve":
             bounds = {n: (v, v) for n, v in null.items()}
             try:
-                restricted = est.solve(start=z, bounds=bounds, max_iter=NULL_POINT_MAX_ITER)
+                restricted = est.solve(start=z, bounds=bounds, max_iter=NULL_POINT_MAX_ITER,
+                                       sensitivities=False)
             except SolverFailure as exc:
                 result.note = f"its null point did not converge: {exc}"
                 return result

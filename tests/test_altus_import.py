@@ -37,6 +37,7 @@ from cpas_ocp.flight_log import (
     settled_time,
 )
 from cpas_ocp.flight_test import load_test
+from cpas_ocp.units import G0
 
 SITE = SiteAtmosphere.from_surface_density(1401.0, 86300.0, 1.001, 0.008)
 HEADER = ("#version,serial,flight,call,time,state,state_name,acceleration,pressure,altitude,"
@@ -48,11 +49,11 @@ def _pressure_at(h: np.ndarray) -> np.ndarray:
     return np.array([float(SITE.pressure(float(x))) for x in np.atleast_1d(h)])
 
 
-def _write_log(path: Path, seed: int) -> dict[str, float]:
+def _write_log(path: Path, seed: int, peak: float = 150.0) -> dict[str, float]:
     """An AltOS-layout log of a known descent: pad, boost/coast, 30 m/s drogue descent
     from 3000 m above the pad, main at 400 m, 6 m/s to the ground.  The axial
     accelerometer reads 1 g less than the specific force with 2 m/s^2 noise; the main's
-    charge jolts it by -50 m/s^2 and its opening pulls a 150 m/s^2 peak one second later
+    charge jolts it by -50 m/s^2 and its opening pulls a `peak` (m/s^2) one second later
     (returned as ``main_open``)."""
     rng = np.random.default_rng(seed)
     t = np.concatenate([np.arange(-0.3, 0.0, 0.01), np.arange(0.0, 20.0, 0.01),
@@ -70,7 +71,7 @@ def _write_log(path: Path, seed: int) -> dict[str, float]:
     accel = -9.81 + np.random.default_rng(seed + 1).normal(0.0, 2.0, t.size)
     accel[k_main] -= 50.0
     k_open = int(np.argmin(np.abs(t - t[k_main] - 1.0)))
-    accel[k_open] += 150.0
+    accel[k_open] += peak
     fix_every = 1.0
     lines = [HEADER]
     last_fix = -10.0
@@ -183,9 +184,19 @@ def test_import_writes_a_loadable_test_folder(tmp_path: Path) -> None:
     assert resid == pytest.approx(3.0, rel=0.3)
     # The altimeter sigma under the main is the pressure noise, 5 Pa / (rho g) = 0.5 m.
     assert summary.baro_sigma_m[1] == pytest.approx(5.0 / (1.0 * 9.80665), rel=0.35)
-    # The accelerometer's: its 2 m/s^2 noise in each phase (no swing simulated), and its
-    # charge jolt is gone with the altimeter's charge samples.
-    assert summary.accel_sigma == pytest.approx([2.0, 2.0], rel=0.2)
+    # The accelerometer's: its 2 m/s^2 noise under each canopy's steady descent (no swing
+    # simulated), and apart the main's opening, whose 150 m/s^2 peak the drag can pull
+    # (30 m/s at the charge, 6 m/s settled: up to 25 g), so it stays, in the opening's
+    # sigma.  The charge jolt is gone with the altimeter's charge samples.
+    assert len(summary.accel_sigma) == 3
+    assert summary.accel_sigma[0] == pytest.approx(2.0, rel=0.2)
+    assert summary.accel_sigma[2] == pytest.approx(2.0, rel=0.2)
+    assert summary.accel_sigma[1] > 5.0 * summary.accel_sigma[0]
+    snatch = summary.snatches["main"]
+    # (30 / 6)^2 g less one g; the densities at the charge and in the settled descent, tens
+    # of metres apart, differ by well under 1 %.
+    assert snatch.ceiling_m_s2 == pytest.approx(25.0 * G0 - G0, rel=0.02)
+    assert snatch.samples_left_out == 0 and snatch.largest_m_s2 is None
     accel = test.sensors_of("axial_accelerometer")[0]
     assert np.abs(accel.time - events["main"]).min() > 0.05
     assert summary.dropped["ejection_charge_accelerometer_samples"] >= 1
@@ -213,6 +224,27 @@ def test_import_writes_a_loadable_test_folder(tmp_path: Path) -> None:
                                                model.capture_vector(captured))).ravel()
     fill = values["n[main,stage2]"] * test.parachute("main").diameter / v_start
     assert predicted == pytest.approx(values["t_start[main,stage2]"] + fill, rel=1e-12)
+
+
+def test_a_reading_above_the_drag_ceiling_is_left_out_as_the_snatch(tmp_path: Path) -> None:
+    """A 300 m/s^2 opening peak is more than the main's drag can pull at the charge's
+    30 m/s (about 235 m/s^2 as read, the settled 6 m/s giving the full drag area): the
+    import leaves it out of the fitted series and says so, and its time is still the
+    full-open event."""
+    events = _write_log(tmp_path / "log.csv", seed=2, peak=300.0)
+    summary = import_flight(read_altus_log(tmp_path / "log.csv"),
+                            card_from_dict(CARD, "card.json"), tmp_path / "test")
+    snatch = summary.snatches["main"]
+    assert snatch.samples_left_out == 1 and snatch.at_s == pytest.approx(events["main_open"])
+    assert snatch.largest_m_s2 > snatch.ceiling_m_s2
+    assert summary.dropped["snatch_samples_above_drag_ceiling"] == 1
+    test = load_test(tmp_path / "test")
+    accel = test.sensors_of("axial_accelerometer")[0]
+    assert np.abs(accel.time - events["main_open"]).min() > 0.05
+    assert test.event("full_open", "main").time == pytest.approx(events["main_open"])
+    report = json.loads((tmp_path / "test" / "import.json").read_text())
+    assert report["snatch"]["main"]["samples_left_out"] == 1
+    assert "left out as the shock cord's snatch" in summary.text()
 
 
 def test_opening_peak_stands_off_the_steady_reading() -> None:

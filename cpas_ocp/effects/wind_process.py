@@ -98,6 +98,17 @@ class WindProcess(Effect):
         n = math.ceil((test.t_end - test.t_start) / self.knot_s - 1e-9)
         return test.t_start + self.knot_s * np.arange(n + 1)
 
+    def mean_weights(self, test: FlightTest, component: str, t0: float, t1: float
+                     ) -> dict[str, float]:
+        """The mean of u_component over [t0, t1] (s) as weights of its knots: the hat
+        functions averaged over the window (a linear function of the knots)."""
+        knots = self.knot_times(test)
+        t = np.clip(np.linspace(t0, t1, 401), knots[0], knots[-1])
+        hats = np.maximum(0.0, 1.0 - np.abs(t[:, None] - knots[None, :]) / self.knot_s)
+        weights = hats.mean(axis=0)
+        return {param_name(f"wind_{component}", str(k)): float(w)
+                for k, w in enumerate(weights) if w > 0.0}
+
     def sigma(self, component: str) -> float:
         return self.sigma_vertical if component == "up" else self.sigma_horizontal
 
