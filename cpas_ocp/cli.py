@@ -588,7 +588,7 @@ def _flight_log(args: argparse.Namespace, card: FlightCard, log: Path) -> None:
     text = flight_text(fit, cov, card.nominal, diag, held)
     if still is not None:
         text += "\n" + (air if isinstance(air, str) else
-                        air_motion_text(air[0], air[1], fit, cov, "wind.png"))
+                        air_motion_text(air[0], air[1], fit, cov, "wind.png") + air[2])
     (out / "flight.md").write_text(f"# {card.title}\n\n{card.label}\n\n{text}")
     print()
     print(text)
@@ -596,9 +596,10 @@ def _flight_log(args: argparse.Namespace, card: FlightCard, log: Path) -> None:
 
 
 def _flight_still_air(test: FlightTest, args: argparse.Namespace, spec: ModelSpec,
-                      folder: Path) -> tuple[Fit, Covariance] | str:
+                      folder: Path) -> tuple[Fit, Covariance, str] | str:
     """The `flight` log fitted again without the card's wind process (report in
-    ``report_still``): the fit and its covariance, or the markdown that says it failed."""
+    ``report_still``): the fit, its covariance and a markdown line where it is not a
+    result, or the markdown that says it failed."""
     from .report import write_report
     print("reconstructing in still air (the card's model without its wind_process) ...",
           flush=True)
@@ -614,7 +615,10 @@ def _flight_still_air(test: FlightTest, args: argparse.Namespace, spec: ModelSpe
     out = write_report(fit, cov, folder / "report_still", claim=claim)
     print(f"in still air: chi-square/dof {fit.chi_square / fit.dof:.2f}; report written to "
           f"{out}")
-    return fit, cov
+    # Said where the comparison is read, not only in its report.
+    note = ("" if claim.is_result else "\n**The fit in still air is not a result.** "
+            + " ".join(f"{p}." for p in claim.problems()) + "\n")
+    return fit, cov, note
 
 
 def _demo(args: argparse.Namespace) -> int:

@@ -122,12 +122,14 @@ def profile(est: Estimator, fit: Fit, cov: Covariance, name: str, span: float = 
 
 
 def held_profile(fit: Fit, spec: ModelSpec, name: str, grid: np.ndarray,
-                 progress: bool = False) -> Profile:
+                 progress: bool = False, max_iter: int | None = None) -> Profile:
     """The profile of `name`, a parameter `fit` (of model `spec`) holds fixed: the model
     refitted with `name` freed and held at each value of `grid` (SI), delta chi-square
-    against `fit`.  Its std is NaN: a held parameter has no covariance."""
+    against `fit`; each refit gets `max_iter` Ipopt iterations (default: the fit's).  Its
+    std is NaN: a held parameter has no covariance."""
     fixed = {k: v for k, v in fit.settings.fixed.items() if k != name}
-    est = Estimator(fit.test, spec, replace(fit.settings, free=[*fit.free, name], fixed=fixed))
+    est = Estimator(fit.test, spec, replace(fit.settings, free=[*fit.free, name], fixed=fixed,
+                                            max_iter=max_iter or fit.settings.max_iter))
     theta = fit.parameters[name]
     grid = np.unique(np.asarray(grid, dtype=float))
     return Profile(name, est.model.parameter(name).unit, theta, float("nan"),

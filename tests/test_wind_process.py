@@ -209,3 +209,23 @@ def test_the_command_line_chooses_the_intensity_and_refuses_a_model_without_a_pr
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "a wind_process effect" in err[0]
     assert not (tmp_path / "still").exists()
+
+
+def test_a_held_profile_whose_refits_all_failed_claims_nothing() -> None:
+    """A held parameter whose every refit failed has no profile: the report says so and
+    lists the failures, and does not say the data leave it undetermined."""
+    from cpas_ocp.flight_report import held_lines
+    from cpas_ocp.profile_likelihood import Profile
+    failed = [(v, "Maximum_Iterations_Exceeded after 100 iterations") for v in (0.5, 2.0)]
+    alone = Profile("expopen[main,stage2]", "1", 1.0, float("nan"), np.array([1.0]),
+                    np.array([0.0]), failed, [{"n[main,stage2]": 4.0}])
+    [line] = held_lines(alone, 1.3, ["n[main,stage2]"])
+    assert "could not be made" in line and "do not determine" not in line
+    assert "0.5 (Maximum_Iterations_Exceeded" in line and "2 (Maximum" in line
+    # With a converged point beside the held one, the profile speaks.
+    pair = Profile("expopen[main,stage2]", "1", 1.0, float("nan"), np.array([1.0, 2.0]),
+                   np.array([0.0, 0.4]), failed[:1],
+                   [{"n[main,stage2]": 4.0}, {"n[main,stage2]": 6.0}])
+    lines = held_lines(pair, 1.3, ["n[main,stage2]"])
+    assert "these data do not determine it" in lines[0] and "from 4 to 6" in lines[0]
+    assert lines[1].strip().startswith("Points that failed: 0.5")
