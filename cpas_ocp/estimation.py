@@ -167,8 +167,11 @@ def default_grid_step(test: FlightTest) -> float:
     with the wind process and the accelerometer, Ipopt wandered for 500
     iterations at a 0.1 s lattice, converged in 282 at 0.05 s and in 135 at
     0.025 s; on the TeleMega log the 0.1 s lattice put the fill constant on its
-    0.3 bound, where 0.025 s gives n = 4.4 in 22 iterations.  The cap costs
-    little: the grid stays coarse in steady descent (1,295 nodes to 1,387).
+    0.3 bound, where 0.025 s gives n = 4.4 in 22 iterations
+    (`benchmarks/fill_resolution.py`).  The grid stays coarse in steady descent
+    (1,295 nodes to 1,387).  The cost: on `rocket_gusts` with the wind process,
+    45 of 50 seeds converge against 49 at 0.1 s; the five others wander along
+    the drogue's opening near apogee, which the data barely determine.
     """
     dt = min(float(np.median(np.diff(s.time))) for s in test.sensors if len(s.time) > 1)
     dt = min(dt, MAX_LATTICE_STEP_S)

@@ -97,7 +97,7 @@ EJECTION_EXCLUDE_S = 0.3  # altimeter samples left out after an ejection charge 
 MIN_ACCEL_SIGMA = 0.1  # floor of the accelerometer noise sigma (m/s^2)
 MIN_BARO_SIGMA_M = 0.3  # floor of the altimeter noise sigma (the pressure resolution, m)
 LAPSE_BOUNDS_K_M = (0.002, 0.0098)  # search range of a fitted lapse rate (to the dry adiabat)
-SCATTER_WINDOW_S = 8.0  # window of the local trend the altimeter's scatter is taken about (s)
+SCATTER_WINDOW_S = 8.0  # window of the local trend a sensor's scatter is taken about (s)
 SERIES_MARGIN_S = 1.5  # series extend this far beyond the phase: a 1 Hz GPS covers it (s)
 RATE_WINDOW_S = 2.0  # window of the local descent rate that tells when a canopy has settled (s)
 SETTLED_RATE_FACTOR = 1.25  # settled: the local rate within this factor of the steady one
@@ -309,12 +309,16 @@ class Snatch:
 
 def import_snatches(folder: Path | None) -> dict[str, Snatch]:
     """The snatches an import left out of the test folder `folder` (its ``import.json``);
-    empty for a folder that was not imported or holds none."""
+    empty for a folder that was not imported, holds none, or whose import report was
+    edited out of shape (the report then only lacks that line)."""
     report = None if folder is None else folder / "import.json"
     if report is None or not report.is_file():
         return {}
-    return {name: Snatch(**fields)
-            for name, fields in json.loads(report.read_text()).get("snatch", {}).items()}
+    try:
+        return {name: Snatch(**fields)
+                for name, fields in json.loads(report.read_text()).get("snatch", {}).items()}
+    except (ValueError, TypeError, AttributeError):
+        return {}
 
 
 @dataclass(frozen=True)
