@@ -1022,8 +1022,9 @@ class Estimator:
         Without `sensitivities` (a profile's points, a null point: values held, their
         multipliers unused) a run that stalls goes on by feasible Gauss-Newton steps as an
         unbounded one does: a held point of the main's expopen on the Prometheus TeleMega
-        log with the wind process took 26 iterations (7 s) that way, against 500 iterations
-        (110 s) of Ipopt cycling within 1.2 of its chi-square without.
+        log with the wind process took 26 iterations (8.9 s) that way, against 500 iterations
+        (135 s) of Ipopt cycling within 1.2 of its chi-square without
+        (`benchmarks/fill_resolution.py`; on the TeleMetrum log neither converges).
         """
         z0 = (self.initial_point() if start is None
               else start.z if isinstance(start, Fit) else np.asarray(start, dtype=float))
