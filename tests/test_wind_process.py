@@ -19,16 +19,19 @@ import pytest
 from scipy.stats import chi2
 
 from cpas_ocp.continuation import solve_checked
+from cpas_ocp.diagnosis import ALPHA as DIAGNOSIS_ALPHA
+from cpas_ocp.diagnosis import Diagnosis
 from cpas_ocp.effects.registry import BASELINE
 from cpas_ocp.effects.wind_process import WindProcess
 from cpas_ocp.errors import InputError
 from cpas_ocp.estimation import Estimator
 from cpas_ocp.flight_report import air_motion_text
 from cpas_ocp.flight_test import load_test
-from cpas_ocp.model_spec import spec_from_block
+from cpas_ocp.model_spec import spec_from_block, spec_of_test
 from cpas_ocp.problems import load_problem
 from cpas_ocp.process_intensity import choose_intensity
 from cpas_ocp.simulate import simulate_problem
+from cpas_ocp.wind_evidence import DECISIVE_2LNB, wind_evidence
 
 WIND = {"effects": ["wind_process", *BASELINE]}
 ALPHA = 1e-3
@@ -229,3 +232,36 @@ def test_a_held_profile_whose_refits_all_failed_claims_nothing() -> None:
     lines = held_lines(pair, 1.3, ["n[main,stage2]"])
     assert "these data do not determine it" in lines[0] and "from 4 to 6" in lines[0]
     assert lines[1].strip().startswith("Points that failed: 0.5")
+
+
+def _rocket(tmp_path: Path, seed: int, gusts: bool):
+    """`rocket_gusts` flown through its gusts, or in still air, and fitted in still air."""
+    problem = load_problem("rocket_gusts")
+    if not gusts:
+        truth = problem.simulation["model"]
+        problem = dataclasses.replace(problem, simulation={
+            **problem.simulation, "drawn": [], "model": {"effects": truth["effects"][1:]}})
+    simulate_problem(problem, tmp_path / f"seed{seed}", seed)
+    test = load_test(tmp_path / f"seed{seed}")
+    spec = spec_of_test(test)
+    return Estimator(test, spec).solve(), spec
+
+
+def test_the_diagnosis_names_the_air_motion_through_gusts_and_not_in_still_air(
+        tmp_path) -> None:
+    """Through gusts of 1 m/s the altimeter and the GPS share their residual, and the
+    evidence of a vertical wind process over still air is decisive (2 ln B >= 10): the
+    diagnosis's verdict names it.  In still air the altitude sensors share nothing, so the
+    question is not asked; asked anyway, the evidence does not favour the process."""
+    fit, spec = _rocket(tmp_path, 3, gusts=True)
+    air = wind_evidence(fit, spec, DIAGNOSIS_ALPHA)
+    assert air is not None and air.common_p < DIAGNOSIS_ALPHA
+    assert air.decisive and air.two_ln_b >= DECISIVE_2LNB
+    assert air.best_fit.chi_square < fit.chi_square
+    diag = Diagnosis(fit, [], [], [], [], air=air)
+    assert diag.verdict().startswith("missing effect: wind_process, the air's vertical motion")
+    assert "2 ln B" in air.text() and "sigma 1 m/s" in air.text()
+    still, still_spec = _rocket(tmp_path, 4, gusts=False)
+    assert wind_evidence(still, still_spec, DIAGNOSIS_ALPHA) is None
+    forced = wind_evidence(still, still_spec, 1.0)
+    assert forced is not None and not forced.decisive
