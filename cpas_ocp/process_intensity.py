@@ -29,6 +29,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import sys
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from .continuation import solve_checked
@@ -112,38 +113,61 @@ def evidence(est: Estimator, fit: Fit) -> float:
     return fit.chi_square + log_det_prior + est.information_log_det(fit)
 
 
-def choose_intensity(test: FlightTest, spec: ModelSpec, factors: tuple[float, ...],
-                     progress: bool = False) -> IntensityChoice:
-    """Fit `spec` with its wind process's intensities scaled by each of `factors`; the one
-    with the largest evidence is chosen."""
+FitAt = Callable[[ModelSpec, Fit | None], tuple[Estimator, Fit]]
+
+
+@dataclass
+class IntensitySweep:
+    """The grid's points in order, and the estimator and fit of the one with the largest
+    evidence (None where every fit failed, `failure` the last one's)."""
+
+    points: list[IntensityPoint]
+    best: tuple[IntensityPoint, Estimator, Fit] | None
+    failure: SolverFailure | None
+
+
+def sweep_intensity(spec: ModelSpec, factors: tuple[float, ...], fit_at: FitAt,
+                    progress: bool = False) -> IntensitySweep:
+    """Fit `spec` with its wind process's intensities scaled by each of `factors`, in order:
+    `fit_at(scaled spec, the previous intensity's fit or None)` gives each estimator and
+    fit (SolverFailure where it fails), and each is scored by its evidence."""
     wind = wind_effect(spec)
-    points: list[IntensityPoint] = []
-    best: tuple[float, IntensityPoint, Estimator, Fit] | None = None
-    failure: SolverFailure | None = None
+    horizontal = any(c != "up" for c in wind.components)
+    out = IntensitySweep([], None, None)
+    previous: Fit | None = None
     for factor in factors:
         scaled = dataclasses.replace(wind, sigma_vertical=factor * wind.sigma_vertical,
                                      sigma_horizontal=factor * wind.sigma_horizontal)
+        sigmas = (scaled.sigma_vertical, scaled.sigma_horizontal if horizontal else 0.0)
         effects = tuple(scaled if e is wind else e for e in spec.effects)
-        est = Estimator(test, dataclasses.replace(spec, effects=effects))
         try:
-            est, fit, _ = solve_checked(est)
+            est, fit = fit_at(dataclasses.replace(spec, effects=effects), previous)
         except SolverFailure as exc:
-            failure = exc
-            points.append(IntensityPoint(scaled.sigma_vertical, scaled.sigma_horizontal,
-                                         None, None, f"fit failed ({exc.status})"))
+            out.failure = exc
+            out.points.append(IntensityPoint(*sigmas, None, None, f"fit failed ({exc.status})"))
             continue
-        value = evidence(est, fit)
-        point = IntensityPoint(scaled.sigma_vertical, scaled.sigma_horizontal,
-                               fit.chi_square, value)
-        points.append(point)
+        point = IntensityPoint(*sigmas, fit.chi_square, evidence(est, fit))
+        out.points.append(point)
         if progress:
-            print(f"  vertical {point.sigma_vertical:.3f} m/s: -2 log evidence {value:.1f}",
-                  file=sys.stderr, flush=True)
-        if best is None or value < best[0]:
-            best = (value, point, est, fit)
-    if best is None:
-        assert failure is not None
-        raise failure  # every intensity's fit failed: the last one's status
-    return IntensityChoice(points, best[1], best[2], best[3],
-                           horizontal=any(c != "up" for c in wind.components))
+            print(f"  vertical {point.sigma_vertical:.3g} m/s: -2 log evidence "
+                  f"{point.evidence:.1f}", file=sys.stderr, flush=True)
+        if out.best is None or point.evidence < out.best[0].evidence:
+            out.best = (point, est, fit)
+        previous = fit
+    return out
 
+
+def choose_intensity(test: FlightTest, spec: ModelSpec, factors: tuple[float, ...],
+                     progress: bool = False) -> IntensityChoice:
+    """Fit `spec` with its wind process's intensities scaled by each of `factors`, each from
+    the offline reduction (`solve_checked`); the one with the largest evidence is chosen."""
+    def from_reduction(scaled: ModelSpec, _: Fit | None) -> tuple[Estimator, Fit]:
+        est, fit, _claim = solve_checked(Estimator(test, scaled))
+        return est, fit
+
+    found = sweep_intensity(spec, factors, from_reduction, progress)
+    if found.best is None:
+        assert found.failure is not None
+        raise found.failure  # every intensity's fit failed: the last one's status
+    return IntensityChoice(found.points, *found.best,
+                           horizontal=any(c != "up" for c in wind_effect(spec).components))

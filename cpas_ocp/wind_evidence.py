@@ -27,16 +27,14 @@ load, a sensor lag); asked everywhere, it would be named in their place.
 from __future__ import annotations
 
 import dataclasses
-import sys
 from dataclasses import dataclass
 
 from .common_residual import combined_p_value, common_residuals
 from .effects.wind_process import WindProcess
-from .errors import SolverFailure
 from .estimation import Fit
 from .model_comparison import nested_start, refit
 from .model_spec import ModelSpec
-from .process_intensity import IntensityPoint, evidence
+from .process_intensity import IntensityPoint, sweep_intensity
 
 DECISIVE_2LNB = 10.0  # 2 ln B from which the data decisively want the air's motion
 INTENSITY_GRID = (0.5, 1.0, 2.0)  # factors of the candidate's sigma tried, smallest first
@@ -118,24 +116,9 @@ def wind_evidence(fit: Fit, spec: ModelSpec, alpha: float, progress: bool = Fals
     est_still, _, _ = nested_start(fit, spec, free=list(fit.free))
     still = fit.chi_square + est_still.information_log_det(fit)
     process = candidate_process(fit)
-    result = WindEvidence(process, still, [], p_common)
-    best_value, start = None, fit
-    for factor in INTENSITY_GRID:
-        scaled = dataclasses.replace(process, sigma_vertical=factor * process.sigma_vertical)
-        wind_spec = dataclasses.replace(spec, effects=(scaled, *spec.effects))
-        try:
-            est, wind_fit = refit(start, wind_spec)
-        except SolverFailure as exc:
-            result.points.append(IntensityPoint(scaled.sigma_vertical, 0.0, None, None,
-                                                f"fit failed ({exc.status})"))
-            continue
-        value = evidence(est, wind_fit)
-        result.points.append(IntensityPoint(scaled.sigma_vertical, 0.0, wind_fit.chi_square,
-                                            value))
-        if progress:
-            print(f"  air motion, sigma {scaled.sigma_vertical:.3g} m/s: 2 ln B = "
-                  f"{still - value:.1f}", file=sys.stderr, flush=True)
-        if best_value is None or value < best_value:
-            best_value, result.best_fit = value, wind_fit
-        start = wind_fit
-    return result
+    # Each intensity's fit starts from the one before, the first from the still-air fit.
+    found = sweep_intensity(dataclasses.replace(spec, effects=(process, *spec.effects)),
+                            INTENSITY_GRID, lambda scaled, previous: refit(previous or fit,
+                                                                           scaled), progress)
+    return WindEvidence(process, still, found.points, p_common,
+                        None if found.best is None else found.best[2])
