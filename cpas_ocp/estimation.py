@@ -122,6 +122,14 @@ class Settings:
     misspecified refits it served, 8-11 steps ended the run, and a descent
     that needed 29 had ended in a worse minimum than Ipopt's.  0: Ipopt runs
     on to its limit (the earlier path, for benchmarks).
+    descent_curvature: the descent learns what the Gauss-Newton model leaves out,
+    the curvature of chi-square along the feasible curve (each failed trial's
+    parabola sets the next trial, and two trials on one parabola whose least
+    value lies within the tolerance end it: `feasible_descent`) and the
+    residuals' own curvature, from the steps taken (`structured_secant`; it
+    shapes the steps, while the test that ends the descent stays Gauss-Newton's).
+    False: Gauss-Newton steps halved where they fail, and at most 15 of them
+    (the earlier path, for benchmarks; `benchmarks/descent_finish.py`).
     """
 
     grid_step: float | None = None
@@ -142,7 +150,8 @@ class Settings:
     damping: bool = True
     levenberg: float | None = 1.0
     window_margin: float | None = 0.5
-    descent_steps: int = 15
+    descent_steps: int = 30
+    descent_curvature: bool = True
 
 
 MIN_GRID_STEP_S = 0.001
@@ -1162,7 +1171,8 @@ class Estimator:
         lower, upper = bounds
         problem = DescentProblem(self._linearize, self.feasible_point,
                                  self._points.residual_value, idx, lower[idx], upper[idx])
-        return descend(*start, problem, tol, min(self.settings.descent_steps, left))
+        learn = self.settings.descent_curvature
+        return descend(*start, problem, tol, min(self.settings.descent_steps, left), learn)
 
     @property
     def best_iterate(self) -> np.ndarray | None:

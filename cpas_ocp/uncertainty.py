@@ -477,11 +477,28 @@ class GaussNewtonStep:
     projection: np.ndarray  # the step to the feasible projection (to first order)
 
 
-def gauss_newton(lin: Linearization) -> GaussNewtonStep:
+def gauss_newton(lin: Linearization, red: ReducedProblem | None = None,
+                 curvature: tuple[np.ndarray, np.ndarray] | None = None) -> GaussNewtonStep:
     """The Gauss-Newton step, its decrement and the gaps' restoration cost, from one
-    factorisation."""
-    dz, after, projected, to_projection = _gauss_newton(lin)
-    return GaussNewtonStep(dz, max(float(projected @ projected - after @ after), 0.0),
+    factorisation (`red`: `lin` already reduced).
+
+    `curvature` = (columns, S) adds S, a second-order part of the reduced Hessian over
+    those columns of the decision vector (`structured_secant`), to (JZ)'(JZ); the
+    decrement is then the model's, -g'dw with g the reduced gradient, the slope of
+    chi-square along the step being -2 times it as without."""
+    if curvature is None:
+        dz, after, projected, to_projection, _ = _gauss_newton(lin, red)
+        return GaussNewtonStep(dz, max(float(projected @ projected - after @ after), 0.0),
+                               float(projected @ projected - lin.r @ lin.r), to_projection)
+    red = red or reduce_linearization(lin)
+    columns, S = curvature
+    at = np.searchsorted(columns, red.free)
+    known = (at < columns.size) & (columns[np.minimum(at, columns.size - 1)] == red.free)
+    extra = np.zeros((red.free.size, red.free.size))
+    extra[np.ix_(known, known)] = S[np.ix_(at[known], at[known])]
+    dz, _, projected, to_projection, decrement = _gauss_newton(lin, red,
+                                                              red.JZ.T @ red.JZ + extra)
+    return GaussNewtonStep(dz, max(decrement, 0.0),
                            float(projected @ projected - lin.r @ lin.r), to_projection)
 
 
@@ -527,14 +544,18 @@ def gauss_newton_step(lin: Linearization) -> np.ndarray:
     return _gauss_newton(lin)[0]
 
 
-def _gauss_newton(lin: Linearization
-                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def _gauss_newton(lin: Linearization, red: ReducedProblem | None = None,
+                  hessian: np.ndarray | None = None
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
     """The step dz, the weighted residuals r + J dz it predicts, those it predicts at the
-    point's feasible projection, and the step to that projection."""
-    red = reduce_linearization(lin)
-    ns = _null_space(red)
+    point's feasible projection, the step to that projection, and the chi-square fall
+    from the projection that the quadratic model with `hessian` (the reduced Hessian in
+    w, default Gauss-Newton's) predicts, -g'y with g its gradient."""
+    red = red or reduce_linearization(lin)
+    ns = _null_space(red, hessian)
     base = red.r + red.JZ @ ns.dw0
     gradient = ns.N.T @ (red.JZ.T @ base)
     y = -(ns.inverse() @ gradient)
     to_projection = red.dz_p + red.Z @ ns.dw0
-    return to_projection + red.Z @ (ns.N @ y), base + red.JZ @ (ns.N @ y), base, to_projection
+    return (to_projection + red.Z @ (ns.N @ y), base + red.JZ @ (ns.N @ y), base,
+            to_projection, -float(gradient @ y))

@@ -5,11 +5,13 @@ from __future__ import annotations
 
 import casadi as ca
 import numpy as np
+import pytest
 import scipy.sparse as sp
 from scipy.optimize import minimize_scalar
 
 from cpas_ocp.estimation import STALL_ITERATIONS, STALL_SHARE, _Monitor
 from cpas_ocp.feasible_descent import DescentProblem, bounded_step, descend
+from cpas_ocp.structured_secant import StructuredSecant
 from cpas_ocp.uncertainty import linearize
 
 
@@ -124,3 +126,75 @@ def test_a_solve_never_inherits_an_earlier_solves_warm_start(problem_folder) -> 
     again = est.solve()
     assert again.solver.iterations == cold.solver.iterations
     assert again.chi_square == cold.chi_square
+
+
+def _bent_valley(lam: float):
+    """Four residuals in two coordinates with curvature lam, least squares 4 at the origin
+    (Dennis & Schnabel's example 10.2.4 made two-dimensional and coupled): residuals
+    that stay large at the minimum, whose curvature Gauss-Newton leaves out."""
+    def residuals(z: np.ndarray) -> tuple[np.ndarray, sp.csc_matrix]:
+        x, y = z
+        r = np.array([x + 1.0, lam * (x * x + y * y) + x - 1.0, y + 1.0,
+                      lam * x * y + y - 1.0])
+        jac = np.array([[1.0, 0.0], [2.0 * lam * x + 1.0, 2.0 * lam * y], [0.0, 1.0],
+                        [lam * y, lam * x + 1.0]])
+        return r, sp.csc_matrix(jac)
+    return residuals
+
+
+def test_a_large_residual_descent_learns_the_curvature_gauss_newton_leaves_out() -> None:
+    """With lam = 0.6 Gauss-Newton converges only linearly; the steps that learn the
+    residuals' curvature (`structured_secant`) reach the same minimum in fewer than half
+    as many steps."""
+    problem = _unconstrained(_bent_valley(0.6), np.full(2, -5.0), np.full(2, 5.0))
+    z0 = np.array([1.5, -1.0])
+    ends = {learn: descend(z0, problem.feasible_point(z0)[1], problem, tol=1e-10,
+                           max_steps=200, learn=learn) for learn in (False, True)}
+    assert all(end.converged for end in ends.values())
+    for end in ends.values():
+        np.testing.assert_allclose(end.z, [0.0, 0.0], atol=1e-4)
+        assert abs(end.chi2 - 4.0) < 1e-8
+    assert 2 * ends[True].steps < ends[False].steps
+
+
+def test_the_secant_update_meets_the_structured_secant_condition() -> None:
+    """After a step s the learnt S is symmetric and S s = (G+ - G)' r+ exactly."""
+    rng = np.random.default_rng(7)
+    secant = StructuredSecant()
+    columns = np.array([0, 2, 3])
+    before = None
+    updated = 0
+    for _ in range(6):
+        z, G, r = rng.normal(size=5), rng.normal(size=(8, 3)), rng.normal(size=8)
+        secant.observe(z, columns, G, r)
+        if before is not None:
+            z0, G0, r0 = before
+            s, y = z[columns] - z0[columns], G.T @ r - G0.T @ r0
+            if y @ s > 0.0:  # else nothing is learnt from the step
+                np.testing.assert_allclose(secant.S @ s, (G - G0).T @ r, atol=1e-10)
+                updated += 1
+        np.testing.assert_allclose(secant.S, secant.S.T, atol=1e-12)
+        before = (z, G, r)
+    assert updated >= 2
+
+
+def test_a_step_along_a_steep_feasible_curve_ends_where_the_curve_offers_nothing() -> None:
+    """The residual z - 1 promises a fall of 1 from 0, but along the feasible curve chi-square
+    is (z - 1)^2 + K z^2: its least value lies 1 / (1 + K) below.  With K = 1e4 that is
+    below the tolerance, which two trials on the curve's parabola show; halving alone
+    never finds a lower point and gives up."""
+    K = 1e4
+
+    def residual(z: np.ndarray) -> tuple[np.ndarray, sp.csc_matrix]:
+        return np.array([z[0] - 1.0]), sp.csc_matrix(np.ones((1, 1)))
+
+    base = _unconstrained(residual, np.full(1, -5.0), np.full(1, 5.0))
+    steep = DescentProblem(base.linearize, lambda z: (z, (z[0] - 1.0) ** 2 + K * z[0] ** 2),
+                           base.residual_value, base.param_index, base.lower, base.upper)
+    z0 = np.zeros(1)
+    learnt = descend(z0, 1.0, steep, tol=1e-3, max_steps=10, learn=True)
+    assert learnt.converged and learnt.steps == 0
+    assert learnt.decrement == pytest.approx(1.0 / (1.0 + K), rel=1e-6)
+    np.testing.assert_array_equal(learnt.z, z0)
+    halved = descend(z0, 1.0, steep, tol=1e-3, max_steps=10, learn=False)
+    assert not halved.converged and halved.steps == 0

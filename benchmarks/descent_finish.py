@@ -1,0 +1,149 @@
+"""The finish of a stalled run: Gauss-Newton steps halved (the earlier path) against steps
+that learn the curvature Gauss-Newton leaves out, in the same process.
+
+Three configurations of `Settings`:
+
+* ``before``: `descent_curvature=False, descent_steps=15`: each failed trial
+  halved, at most 15 steps;
+* ``learnt, 15``: a failed trial's parabola along the feasible curve sets
+  the next trial and can end the descent, and the residuals' curvature is
+  learnt from the steps (`structured_secant`), at most 15 steps;
+* ``after``: the defaults, the same with at most 30 steps.
+
+Cases, each solved under each:
+
+* for each test folder given (`cpas-ocp import-altus` of the Prometheus logs
+  under the card): the card model's fit (`--still`: that model in still
+  air), and from it the main's held-expopen profile as `flight` makes it
+  (`flight_report.HELD_PROFILE_FACTORS`, each point given 100 iterations;
+  its row gives the points that converged in place of iterations, and the
+  least delta chi-square);
+* `--gusts N`: `rocket_gusts` seeds 1..N flown through their gusts and
+  fitted from the reduction with the wind process they were drawn from.
+
+Printed per case and configuration: converged or the failure, iterations,
+wall time and chi-square; then per configuration how many converged, and
+the wall-time ratios to `before` over the cases every path finished.
+
+    python benchmarks/descent_finish.py [FOLDER ...] [--still] [--gusts 10]
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from cpas_ocp.errors import SolverFailure
+from cpas_ocp.estimation import Estimator, Fit, Settings
+from cpas_ocp.flight_report import HELD_PROFILE_FACTORS as HELD_FACTORS
+from cpas_ocp.flight_report import HELD_PROFILE_MAX_ITER as HELD_MAX_ITER
+from cpas_ocp.flight_test import load_test
+from cpas_ocp.model_spec import spec_from_block, spec_of_test
+from cpas_ocp.problems import load_problem
+from cpas_ocp.process_intensity import without_wind
+from cpas_ocp.profile_likelihood import held_profile
+from cpas_ocp.simulate import simulate_problem
+
+HELD = "expopen[main,stage2]"
+PATHS = {"before": {"descent_curvature": False, "descent_steps": 15},
+         "learnt, 15": {"descent_curvature": True, "descent_steps": 15},
+         "after": {"descent_curvature": True, "descent_steps": 30}}
+
+
+Outcome = tuple[bool, int, float, float]  # converged, iterations, wall s, chi-square
+
+
+def timed(solve: Callable[[], Fit]) -> tuple[Outcome, Fit | None]:
+    """The outcome of `solve`, and its fit where it converged."""
+    t0 = time.perf_counter()
+    try:
+        fit = solve()
+        return (True, fit.solver.iterations, time.perf_counter() - t0, fit.chi_square), fit
+    except SolverFailure as exc:
+        return (False, exc.iterations, time.perf_counter() - t0, float("nan")), None
+
+
+def held_cases(folder: str, still: bool) -> dict[str, dict[str, Outcome]]:
+    """Under each path: the card model's fit and its main's held-expopen profile (as
+    `flight` makes it: walking out from the fit, each point from its neighbour)."""
+    test = load_test(folder)
+    spec = spec_of_test(test)
+    spec = without_wind(spec, test) if still else spec
+    name = Path(folder).name
+    out: dict[str, dict[str, Outcome]] = {f"{name} fit": {}, f"{name} held profile": {}}
+    for label, path in PATHS.items():
+        est = Estimator(test, spec, Settings(**path))
+        out[f"{name} fit"][label], fit = timed(est.solve)
+        if fit is None:
+            out[f"{name} held profile"][label] = (False, 0, 0.0, float("nan"))
+            continue
+        t0 = time.perf_counter()
+        prof = held_profile(fit, spec, HELD, fit.parameters[HELD] * np.array(HELD_FACTORS),
+                            max_iter=HELD_MAX_ITER)
+        converged = len(HELD_FACTORS) - len(prof.failures)
+        out[f"{name} held profile"][label] = (not prof.failures, converged,
+                                               time.perf_counter() - t0,
+                                               float(prof.delta_chi_square.min()))
+    return out
+
+
+def gust_cases(seeds: int) -> dict[str, dict[str, Outcome]]:
+    """Each rocket_gusts seed's fit with the wind process, under each path."""
+    problem = load_problem("rocket_gusts")
+    truth_block = problem.simulation["model"]
+    block = {**problem.manifest["model"],
+             "effects": [truth_block["effects"][0], *problem.manifest["model"]["effects"]]}
+    spec = spec_from_block(block, "descent_finish benchmark", Path())
+    out: dict[str, dict[str, Outcome]] = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for seed in range(1, seeds + 1):
+            folder = Path(tmp) / f"seed{seed}"
+            simulate_problem(problem, folder, seed)
+            test = load_test(folder)
+            for label, path in PATHS.items():
+                est = Estimator(test, spec, Settings(**path))
+                out.setdefault(f"rocket_gusts seed {seed}", {})[label] = timed(est.solve)[0]
+            print_case(f"rocket_gusts seed {seed}", out[f"rocket_gusts seed {seed}"])
+    return out
+
+
+def print_case(name: str, outcomes: dict[str, Outcome]) -> None:
+    cells = []
+    for label, (ok, iterations, wall, chi2) in outcomes.items():
+        cells.append(f"{label}: {'ok    ' if ok else 'FAILED'} {iterations:4d} it "
+                     f"{wall:6.1f} s chi2 {chi2:10.2f}")
+    print(f"{name:45s} " + ("\n" + " " * 46).join(cells), flush=True)
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("folders", nargs="*")
+    parser.add_argument("--still", action="store_true")
+    parser.add_argument("--gusts", type=int, default=0)
+    args = parser.parse_args()
+    cases: dict[str, dict[str, Outcome]] = {}
+    for folder in args.folders:
+        held = held_cases(folder, args.still)
+        for name, outcomes in held.items():
+            print_case(name, outcomes)
+        cases.update(held)
+    if args.gusts:
+        cases.update(gust_cases(args.gusts))
+    both = [c for c in cases.values() if all(o[0] for o in c.values())]
+    for label in PATHS:
+        print(f"{label}: {sum(c[label][0] for c in cases.values())} of {len(cases)} converged")
+    if both:
+        for label in list(PATHS)[1:]:
+            ratio = sum(c[label][2] for c in both) / sum(c["before"][2] for c in both)
+            print(f"wall time {label}/before over the {len(both)} cases all finished: "
+                  f"{ratio:.2f}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
