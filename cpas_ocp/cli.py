@@ -52,6 +52,7 @@ if TYPE_CHECKING:
     from .flight_log import FlightCard
     from .flight_test import FlightTest
     from .model_spec import ModelSpec
+    from .recorder_clocks import RecorderEstimates
     from .result_claim import Claim
     from .uncertainty import Covariance
 
@@ -557,14 +558,21 @@ def _flight(args: argparse.Namespace) -> int:
         if not (data / name).is_file():
             raise InputError(str(data / name), "(file)", f"the flight log of card {card.name!r} "
                              "(give the folder holding it with --data)")
-    for name in logs:
-        _flight_log(args, card, data / name)
+    recorders = [_flight_log(args, card, data / name) for name in logs]
+    if len(recorders) > 1:
+        from .recorder_clocks import recorders_text
+        text = recorders_text(recorders)
+        (args.out / "recorders.md").write_text(f"# {card.title}\n\n{text}")
+        print()
+        print(text)
+        print(f"recorders compared in {args.out / 'recorders.md'}")
     return 0
 
 
-def _flight_log(args: argparse.Namespace, card: FlightCard, log: Path) -> None:
+def _flight_log(args: argparse.Namespace, card: FlightCard, log: Path) -> RecorderEstimates:
     """Import, reconstruct, diagnose and compare one log of the `flight` command (a function
-    of its own so that one log's fits and refits are freed before the next log's)."""
+    of its own so that one log's fits and refits are freed before the next log's): its
+    drag areas and start times, for the recorders' comparison."""
     from .altus_metrum import read_altus_log
     from .diagnosis import diagnose
     from .discrepancy_report import write_diagnosis
@@ -572,9 +580,11 @@ def _flight_log(args: argparse.Namespace, card: FlightCard, log: Path) -> None:
     from .flight_report import air_motion_text, flight_text, held_opening_profiles
     from .flight_test import load_test
     from .process_intensity import without_wind
+    from .recorder_clocks import RecorderEstimates
     folder = args.out / log.stem
     print(f"== {log.name}: import", flush=True)
-    summary = import_flight(read_altus_log(log), card, folder / "test")
+    altus = read_altus_log(log)
+    summary = import_flight(altus, card, folder / "test")
     print(summary.text())
     test = load_test(folder / "test")
     est, fit, cov, out = _run_reconstruction(test, args, _spec(test, args), folder / "report")
@@ -593,6 +603,8 @@ def _flight_log(args: argparse.Namespace, card: FlightCard, log: Path) -> None:
     print()
     print(text)
     print(f"flight comparison written to {out / 'flight.md'}")
+    return RecorderEstimates(altus, {n: (fit.parameters[n], cov.std.get(n, float("nan")))
+                                     for n in fit.free if n.startswith(("CdS", "t_start"))})
 
 
 def _flight_still_air(test: FlightTest, args: argparse.Namespace, spec: ModelSpec,

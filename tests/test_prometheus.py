@@ -26,6 +26,7 @@ from cpas_ocp.flight_test import load_test
 from cpas_ocp.model_spec import spec_of_test
 from cpas_ocp.process_intensity import without_wind
 from cpas_ocp.profile_likelihood import THRESHOLD
+from cpas_ocp.recorder_clocks import clock_offset
 from cpas_ocp.wind_evidence import DECISIVE_2LNB, wind_evidence
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "prometheus-2022"
@@ -203,3 +204,14 @@ def test_report_of_the_opening_and_of_what_remains(mega_fit) -> None:
     assert "full open observed at" in text and "riser's snatch" in text
     assert "- the altitude sensors against each other:" in text
     assert "count the air's vertical motion" in text
+
+
+def test_the_two_recorders_clocks_are_put_on_one_time_base() -> None:
+    """Each recorder counts from its own boost detection: the offset measured on the motor's
+    burn (100 Hz) is the one measured on the drogue's opening (10 Hz, within a sample),
+    either way round, and larger than the boost's sample spacing."""
+    mega, metrum = read_altus_log(DATA / MEGA), read_altus_log(DATA / METRUM)
+    boost = clock_offset(mega, metrum)
+    assert abs(boost) > 0.02
+    assert clock_offset(metrum, mega) == pytest.approx(-boost, abs=0.002)
+    assert clock_offset(mega, metrum, window=(25.0, 35.0)) == pytest.approx(boost, abs=0.1)
