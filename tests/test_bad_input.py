@@ -189,6 +189,32 @@ def test_a_plug_in_that_exits_at_import_is_an_input_error(tmp_path, capsys):
     assert "quits.py" in err and "SystemExit" in err
 
 
+_PLUGIN_HEAD = """from dataclasses import dataclass
+
+from cpas_ocp.effects import Effect
+
+
+@dataclass(frozen=True)
+class Gust(Effect):
+    name: str = "gust"
+"""
+
+
+@pytest.mark.parametrize("body, names", [
+    ("    def force(self, ctx):\n        ctx.f = ctx.f\n", ("Gust.force", "'forces'")),
+    ("    def parameters(self, test):\n        return []\n", ("Gust", "forces, observations")),
+])
+def test_a_plug_in_that_would_contribute_nothing_is_refused(tmp_path, capsys, body,
+                                                              names) -> None:
+    """A misspelt hook, or no hook that acts, would be accepted and listed as an effect
+    that changes nothing: it is the user's mistake, named in one line."""
+    plugin = tmp_path / "gust.py"
+    plugin.write_text(_PLUGIN_HEAD + "\n" + body)
+    assert main(["effects", "--plugin", str(plugin)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "gust.py" in err[0] and all(n in err[0] for n in names)
+
+
 def test_an_internal_error_is_one_line_exit_1_with_a_log(monkeypatch, tmp_path, capsys):
     import cpas_ocp.cli as cli
 

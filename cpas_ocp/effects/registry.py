@@ -11,6 +11,7 @@ constructor arguments of the class.
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import importlib.util
 import inspect
 import sys
@@ -160,7 +161,33 @@ def load_plugin(path: Path) -> dict[str, EffectType]:
             name = getattr(obj, "name", "effect")
             if name == "effect":
                 raise InputError(str(path), obj.__name__, "an Effect subclass with its own `name`")
+            _check_hooks(path, obj)
             found[name] = EffectType(name, obj, source=str(path))
     if not found:
         raise InputError(str(path), "(python)", "at least one Effect subclass")
     return found
+
+
+# The hooks of `Effect` a model calls, and those of them through which an effect changes
+# a prediction or chi-square.
+HOOKS = ("parameters", "states", "captures", "event_timings", "state_guess", "forces",
+         "observations", "constraints", "penalties", "null_values")
+ACTING_HOOKS = ("forces", "observations", "constraints", "penalties")
+
+
+def _check_hooks(path: Path, effect: type[Effect]) -> None:
+    """Refuse a plug-in effect that would contribute nothing: one whose method names look
+    like a hook misspelt (`force` for `forces`), or that overrides none of the hooks
+    through which an effect acts.  Either way the model would accept it silently and
+    report it as an effect that changes nothing."""
+    for attr, value in vars(effect).items():
+        if attr.startswith("_") or not callable(value) or attr in HOOKS:
+            continue
+        close = difflib.get_close_matches(attr, HOOKS, n=1, cutoff=0.75)
+        if close:
+            raise InputError(str(path), f"{effect.__name__}.{attr}",
+                             f"the hook name {close[0]!r} (hooks: {', '.join(HOOKS)})")
+    if all(getattr(effect, hook) is getattr(Effect, hook) for hook in ACTING_HOOKS):
+        raise InputError(str(path), effect.__name__,
+                         f"an effect that overrides at least one of {', '.join(ACTING_HOOKS)}: "
+                         "without, it changes no prediction")
