@@ -74,7 +74,7 @@ def held_cases(folder: str, still: bool) -> dict[str, dict[str, Outcome]]:
     test = load_test(folder)
     spec = spec_of_test(test)
     spec = without_wind(spec, test) if still else spec
-    name = Path(folder).name
+    name = str(folder)
     out: dict[str, dict[str, Outcome]] = {f"{name} fit": {}, f"{name} held profile": {}}
     for label, path in PATHS.items():
         est = Estimator(test, spec, Settings(**path))
