@@ -48,6 +48,13 @@ GAP_INTERVALS = 1.5
 TOP_CORRELATIONS = 3
 # Test labels of a finding other than its signature correlations.
 LJUNG_BOX, PERIODICITY, LAG = "Ljung-Box", "periodicity", "lag"
+# A sensor's lag (its filter or its report's delay) is positive, below a second, and a
+# small part of the window it is seen in (s; share).  A residual that follows the model's
+# rate with any other "lag" (a GPS reporting 2.6 s before the event, an accelerometer
+# 5.5 s behind it over a two-minute drogue descent) is a slow misfit in step with the
+# rate, not a sensor's delay, and is described as such.
+MAX_SENSOR_LAG_S = 1.0
+MAX_LAG_WINDOW_SHARE = 0.1
 
 
 @dataclass
@@ -92,14 +99,32 @@ class Finding:
         if PERIODICITY in self.rejected:
             parts.append(f"{self.frequency_hz:.2f} Hz line (p {_p(self.periodicity_p)})")
         if LAG in self.rejected and self.lag_s is not None and self.lag_se is not None:
-            parts.append(f"lag {1e3 * self.lag_s:+.1f} ± {1e3 * self.lag_se:.1f} ms "
-                         f"(p {_p(self.lag_p or 0.0)})")
+            parts.append(f"{lag_text(self, 1)} (p {_p(self.lag_p or 0.0)})")
         parts += [f"correlates with {c.signature} r={c.r:+.2f} (p {_p(c.p_value)})"
                   for c in self.correlations if c.signature in self.rejected]
         if not parts:
             return (f"{head}: consistent with white noise (smallest corrected p "
                     f"{_p(self.p_adjusted)})")
         return f"{head}: " + "; ".join(parts)
+
+
+def plausible_lag(f: Finding) -> bool:
+    """Whether the finding's lag estimate could be a sensor's: positive, at most
+    MAX_SENSOR_LAG_S, and at most MAX_LAG_WINDOW_SHARE of its window."""
+    return f.lag_s is not None and 0.0 < f.lag_s <= min(
+        MAX_SENSOR_LAG_S, MAX_LAG_WINDOW_SHARE * (f.t1 - f.t0))
+
+
+def lag_text(f: Finding, decimals: int) -> str:
+    """The lag test's rejection in words (ms to `decimals`): a lag where it could be a
+    sensor's (`plausible_lag`), else a residual in step with the model's rate."""
+    value = f"{1e3 * (f.lag_s or 0.0):+.{decimals}f} ± {1e3 * (f.lag_se or 0.0):.{decimals}f} ms"
+    if plausible_lag(f):
+        return f"a lag of {value}"
+    why = ("negative: the sensor would report before the event" if (f.lag_s or 0.0) <= 0.0
+           else f"beyond {MAX_SENSOR_LAG_S:g} s or a tenth of the window")
+    return (f"follows the model's rate of change, not as a sensor lag (as one it would be "
+            f"{value}, {why})")
 
 
 def diagnose_residuals(fit: Fit, windows: Sequence[PhaseWindow], alpha: float = 0.01,
@@ -154,7 +179,7 @@ def signature_text(findings: Sequence[Finding], top: int = 3) -> str:
         if PERIODICITY in f.rejected:
             what.append(f"periodic at {f.frequency_hz:.2f} Hz")
         if LAG in f.rejected and f.lag_s is not None and f.lag_se is not None:
-            what.append(f"a lag of {1e3 * f.lag_s:+.0f} ± {1e3 * f.lag_se:.0f} ms")
+            what.append(lag_text(f, 0))
         corr = [c for c in f.correlations if c.signature in f.rejected]
         what += [f"correlates with {c.signature} (r {c.r:+.2f}: {c.points_to})" for c in corr]
         if LJUNG_BOX in f.rejected and not what:

@@ -44,9 +44,12 @@ from cpas_ocp.phase_windows import (
 from cpas_ocp.plots import plot_sensor_residuals
 from cpas_ocp.problems import load_problem, problem_names
 from cpas_ocp.residual_diagnosis import (
+    LAG,
     PERIODICITY,
     WHOLE_PHASE,
+    Finding,
     diagnose_residuals,
+    plausible_lag,
     signature_text,
 )
 from cpas_ocp.simulate import initial_state, simulate
@@ -265,3 +268,20 @@ def test_one_residual_figure_per_sensor(problem_fit, tmp_path: Path) -> None:
     for p in paths:
         assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert sorted(tmp_path.iterdir()) == sorted(paths)
+
+
+@pytest.mark.parametrize("lag_s, window_s, plausible", [
+    (0.25, 10.0, True),  # a GPS's quarter-second report delay
+    (-0.06, 10.0, False),  # a GPS reporting before the event
+    (2.6, 60.0, False),  # beyond a second
+    (0.8, 5.0, False),  # more than a tenth of the window
+])
+def test_a_lag_is_called_one_only_where_a_sensor_could_have_it(lag_s: float, window_s: float,
+                                                               plausible: bool) -> None:
+    finding = Finding("gps", "up", "steady", 10.0, 10.0 + window_s, 200, 3.0, 1e-9, 1.0,
+                      0.5, lag_s, 0.01, 1e-12, rejected=(LAG,), significant=True)
+    assert plausible_lag(finding) is plausible
+    line = finding.text()
+    assert ("lag of" in line) is plausible
+    assert ("not as a sensor lag" in line) is not plausible
+    assert f"{1e3 * lag_s:+.1f}" in line
