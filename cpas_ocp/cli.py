@@ -7,6 +7,7 @@
     cpas-ocp reconstruct TEST_DIR --out DIR   reconstruct a test folder, write the report
     cpas-ocp whatif TEST_DIR --constrain EXPR re-solve under constraints: cost, test, push
     cpas-ocp diagnose TEST_DIR --out DIR      fit, find where it fails, rank the missing effects
+    cpas-ocp discover TEST_DIR --out DIR      diagnose, add the confirmed effect, refit, again
     cpas-ocp compare TEST_DIR --model A --model B --out DIR
                                               fit two effect sets, test which the data prefer
     cpas-ocp campaign TESTS_DIR --out DIR     reconstruct many test folders, tabulate parameters
@@ -204,6 +205,22 @@ def _parser() -> argparse.ArgumentParser:
     _model_option(s)
     _solver_options(s)
     s.set_defaults(run=_diagnose)
+
+    s = sub.add_parser("discover", help="diagnose, add the confirmed effect, refit, and "
+                                        "again, until the residuals are noise or nothing "
+                                        "left is significant")
+    s.add_argument("test_dir", type=Path)
+    s.add_argument("--out", required=True, type=Path)
+    _plugin_option(s, "also test the effects this Python file defines (repeatable)")
+    s.add_argument("--max-steps", type=_ranged(int, 1), default=4, metavar="K",
+                   help="add at most K effects (default 4)")
+    s.add_argument("--confirm", type=_ranged(int, 0), default=3, metavar="N",
+                   help="refit with at most N significant effects per step (default 3)")
+    s.add_argument("--alpha", type=_ranged(float, 0.0, 1.0, low_open=True, high_open=True),
+                   default=0.01, help="family-wise significance level (default 0.01)")
+    _model_option(s)
+    _solver_options(s)
+    s.set_defaults(run=_discover)
 
     s = sub.add_parser("compare", help="fit two effect sets and test which the data prefer")
     s.add_argument("test_dir", type=Path)
@@ -425,6 +442,33 @@ def _diagnose(args: argparse.Namespace) -> int:
     print()
     print(diag.text())
     print(f"\ndiagnosis written to {out} (diagnosis.md, diagnosis.json, windows.csv, figures)")
+    return 0
+
+
+def _discover(args: argparse.Namespace) -> int:
+    from .discovery import DiscoveryStep, discover
+    from .discrepancy_report import write_discovery
+    from .flight_test import load_test
+    test = load_test(args.test_dir)
+    plugins = _plugins(args)
+    est = _estimator(test, args, _spec(test, args))
+    print(f"solving: {est.size_text()} ...", flush=True)
+    est, fit, _, _ = _fit_and_covariance(est, args)
+
+    def said(step: DiscoveryStep) -> None:
+        print(f"step {step.added or 'start'}: chi-square {step.fit.chi_square:.1f} "
+              f"(chi2/dof {step.fit.chi_square / step.fit.dof:.3f}); "
+              f"{step.diagnosis.verdict().splitlines()[0] if step.diagnosis else ''}",
+              flush=True)
+
+    print("diagnosing, step by step ...", flush=True)
+    found = discover(fit, est.spec, plugins, args.max_steps, args.alpha, args.confirm,
+                     progress=not args.verbose, on_step=said)
+    out = write_discovery(found, args.out, plugins)
+    print()
+    print(found.text())
+    print(f"\ndiscovery written to {out} (discovery.md, discovery.json, discovery.png, "
+          "step_K.json)")
     return 0
 
 

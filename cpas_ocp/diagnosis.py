@@ -80,6 +80,13 @@ class Diagnosis:
         """The residual findings that are significant after the multiple-test correction."""
         return [f for f in self.findings if f.significant]
 
+    @property
+    def consistent_with_noise(self) -> bool:
+        """Nothing to add: no effect confirmed or left unresolved, no air motion named, and
+        no residual structure beyond the noise."""
+        return (self.explanation is None and not (self.air is not None and self.air.decisive)
+                and not self._unresolved(None) and not self.structure)
+
     def _unresolved(self, best: ScoreTest | None) -> list[ScoreTest]:
         """Significant score tests, other than `best`, whose refits did not converge: their
         likelihood ratio is unknown or only bounded below."""

@@ -1,4 +1,4 @@
-"""The output folders of `cpas-ocp diagnose` and `cpas-ocp compare`.
+"""The output folders of `cpas-ocp diagnose`, `cpas-ocp compare` and `cpas-ocp discover`.
 
 diagnose:  diagnosis.md (the text, the window table, the figures),
            diagnosis.json (everything, SI), windows.csv (residual statistics
@@ -6,6 +6,9 @@ diagnose:  diagnosis.md (the text, the window table, the figures),
 compare:   comparison.md, comparison.json, windows.csv (both models, per
            channel and window), residuals_<label>_<sensor>.png per model and
            compare_<sensor>.png (normalised residuals side by side).
+discover:  discovery.md (the chain of models, per-channel normalised RMS after
+           each step, the last diagnosis), discovery.json, discovery.png,
+           step_<k>.json (each step's model as a model file).
 """
 
 from __future__ import annotations
@@ -19,10 +22,13 @@ import pandas as pd
 
 from .diagnosis import Diagnosis
 from .diagnostics import WindowStatistic, window_statistics
+from .discovery import Discovery
+from .effects.registry import EffectType
 from .model_comparison import Comparison
+from .model_spec import model_block
 from .output_folder import atomic_folder
 from .phase_windows import phase_windows
-from .plots import file_stem, plot_residual_comparison, plot_sensor_residuals
+from .plots import file_stem, plot_discovery, plot_residual_comparison, plot_sensor_residuals
 from .report import parameter_table
 from .uncertainty import Covariance
 
@@ -132,3 +138,45 @@ def _markdown(frame: pd.DataFrame) -> str:
     rows = ["| " + " | ".join(cell(v) for v in row) + " |" for row in frame.itertuples(False)]
     return "\n".join([head, rule, *rows])
 
+
+
+def write_discovery(discovery: Discovery, out: str | Path,
+                    plugins: dict[str, EffectType] | None = None) -> Path:
+    """Write the discovery folder atomically: discovery.md (the chain, each step's
+    normalised RMS per channel, the figure, the last diagnosis), discovery.json, and each
+    step's model as a model file (`step_K.json`, reusable with `reconstruct --model`)."""
+    out = Path(out)
+    steps = discovery.steps
+    with atomic_folder(out, "discovery.json") as tmp:
+        labels = [s.added or "start" for s in steps]
+        for k, s in enumerate(steps):
+            (tmp / f"step_{k}.json").write_text(
+                json.dumps(model_block(s.spec, plugins), indent=2) + "\n")
+        worst = [s.worst_window for s in steps]
+        plot_discovery(labels, [s.fit.chi_square / s.fit.dof for s in steps],
+                       [w[1] if w else float("nan") for w in worst], tmp / "discovery.png")
+        rms = pd.DataFrame([s.channel_rms for s in steps], index=labels).T
+        rms.columns = [f"{k}: {label}" for k, label in enumerate(labels)]
+        result = {
+            "test": steps[0].fit.test.name,
+            "steps": [{"added": s.added, "admitted_by": s.admitted_by,
+                       "model_file": f"step_{k}.json", "chi_square": s.fit.chi_square,
+                       "dof": s.fit.dof, "aic": s.criteria.aic, "bic": s.criteria.bic,
+                       "channel_normalized_rms": s.channel_rms,
+                       "worst_window": None if w is None else {"where": w[0],
+                                                               "normalized_rms": w[1]},
+                       "verdict": None if s.diagnosis is None else s.diagnosis.verdict()}
+                      for k, (s, w) in enumerate(zip(steps, worst, strict=True))],
+            "stopped": discovery.stopped,
+        }
+        (tmp / "discovery.json").write_text(json.dumps(result, indent=2, default=float))
+        last = steps[-1].diagnosis
+        (tmp / "discovery.md").write_text(
+            f"# Discovery on {steps[0].fit.test.name}\n\n```\n{discovery.text()}\n```\n\n"
+            "![the error falling step by step](discovery.png)\n\n"
+            "## Normalised RMS per sensor channel after each step\n\n"
+            + _markdown(rms.reset_index(names="channel")) + "\n\n"
+            + "Each step's model is `step_K.json` here (a model file: `cpas-ocp reconstruct "
+            "TEST --model step_K.json`, with `--plugin FILE` for a plug-in it names).\n"
+            + ("" if last is None else f"\n## The last diagnosis\n\n```\n{last.text()}\n```\n"))
+    return out

@@ -35,6 +35,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from .effects import baseline_effects
 from .effects.base import Effect
 from .effects.registry import BASELINE, BUILTIN, EffectType, load_plugin
@@ -215,3 +217,38 @@ def load_model_file(path: str | Path, plugins: dict[str, EffectType] | None = No
     block = read_json(path, "an existing JSON model file")
     validate_block(block, "model.schema.json", str(path), prefix="model")
     return spec_from_block(block, str(path), path.parent, plugins, allow_external)
+
+
+def _jsonable(value: Any) -> Any:
+    """An effect option as JSON holds it: tuples as lists, numpy scalars as numbers."""
+    if isinstance(value, tuple | list):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+def model_block(spec: ModelSpec, plugins: dict[str, EffectType] | None = None
+                ) -> dict[str, Any]:
+    """The model block that makes `spec` again (`spec_from_block`), for a model file: each
+    effect by its registered name with the options that differ from what the name alone
+    builds, and the spec's fixed values, extra free names and priors.  A plug-in effect
+    (registered from `plugins`) is named only: the file reading the block registers it
+    with --plugin."""
+    registry: dict[str, EffectType] = {**BUILTIN, **(plugins or {})}
+    items: list[Any] = []
+    for effect in spec.effects:
+        kind = registry.get(effect.name)
+        if kind is None:
+            raise ValueError(f"effect {effect.name!r} is not registered: no model file names it")
+        plain = kind.build({}, "(model block)", "effects")
+        options = {o: _jsonable(getattr(effect, o)) for o in kind.options()
+                   if getattr(effect, o) != getattr(plain, o)}
+        items.append({"effect": effect.name, **options} if options else effect.name)
+    block: dict[str, Any] = {"effects": items}
+    for key, value in (("fix", spec.fix), ("free", list(spec.free)), ("priors", spec.priors)):
+        if value:
+            block[key] = _jsonable(value)
+    return block

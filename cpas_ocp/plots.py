@@ -407,3 +407,19 @@ def plot_drag_area_envelope(env: DragAreaEnvelope, path: Path) -> Path:
                  f"V_i {c.v_start / FT:.0f} ft/s, previous stage {c.cds_prev * area:.1f} ft² "
                  "(campaign medians)", fontsize=8)
     return _save(fig, f"{env.label}: drag-area growth, Monte Carlo against flight", path)
+
+
+def plot_discovery(labels: Sequence[str], chi2_dof: Sequence[float],
+                   worst_rms: Sequence[float], path: Path) -> Path:
+    """The error falling step by step: chi-square per degree of freedom and the worst
+    window's normalised RMS of each step's model (`labels`: what each step added), with
+    the noise's value 1 marked."""
+    fig, ax = plt.subplots(figsize=(7.0, 4.0))
+    steps = np.arange(len(labels))
+    ax.plot(steps, chi2_dof, "o-", label="χ²/dof")
+    ax.plot(steps, worst_rms, "s--", label="worst window's normalised RMS")
+    ax.axhline(1.0, color="0.5", lw=0.8, label="the noise")
+    ax.set_xticks(steps, labels, rotation=20, ha="right")
+    ax.set_xlabel("model after each step")
+    ax.legend()
+    return _save(fig, "discovery: each step's model", path)

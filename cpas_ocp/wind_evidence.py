@@ -54,6 +54,7 @@ class WindEvidence:
     points: list[IntensityPoint]
     common_p: float  # Fisher's p of the altitude sensors' shared residual
     best_fit: Fit | None = None
+    best_spec: ModelSpec | None = None  # the model of `best_fit`: the process at its sigma
 
     @property
     def best(self) -> IntensityPoint | None:
@@ -121,4 +122,5 @@ def wind_evidence(fit: Fit, spec: ModelSpec, alpha: float, progress: bool = Fals
                             INTENSITY_GRID, lambda scaled, previous: refit(previous or fit,
                                                                            scaled), progress)
     return WindEvidence(process, still, found.points, p_common,
-                        None if found.best is None else found.best[2])
+                        *((None, None) if found.best is None
+                          else (found.best[2], found.best[1].spec)))

@@ -1,0 +1,137 @@
+"""Discovery: diagnose, add what the diagnosis confirms, refit from the nested fit, and again.
+
+One diagnosis names at most one missing effect, and a test may lack several:
+drogue data flown with added mass and a GPS latency are explained by neither
+alone.  `discover` repeats the diagnosis on the model each step ends with:
+
+1. diagnose the fit (`diagnosis.diagnose`: score tests of every library or
+   plug-in effect the model does not use, the leading ones confirmed by a
+   refit and a likelihood-ratio test, and the air's motion where the altitude
+   sensors share their residual);
+2. where it names a missing effect, take the confirming refit (started from
+   the fit before, so each step is nested in the last) as the next step's
+   fit and model;
+3. stop where the residuals are consistent with the noise, where nothing
+   left is significant (the last diagnosis then describes what remains: its
+   signature), where the refit that would add the effect did not converge
+   (its likelihood ratio is only a bound, and a bound is not a step), or
+   after `max_steps` steps.
+
+Every step keeps its fit, so each fall in chi-square is the likelihood ratio
+of one nested pair, tested at the diagnosis's family-wise level.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .diagnosis import ALPHA, CONFIRM_TOP, Diagnosis, diagnose
+from .effects.registry import EffectType
+from .estimation import Fit
+from .model_comparison import Criteria
+from .model_spec import ModelSpec
+
+MAX_STEPS = 4  # effects added at most, by default
+
+
+@dataclass
+class DiscoveryStep:
+    """One model of the chain: the effect it added to the one before (None for the first),
+    its spec and fit, the test that admitted the effect (a likelihood ratio, or 2 ln B
+    for the air's motion), and the diagnosis of its fit (None where none was made)."""
+
+    added: str | None
+    spec: ModelSpec
+    fit: Fit
+    admitted_by: str = ""
+    diagnosis: Diagnosis | None = None
+
+    @property
+    def criteria(self) -> Criteria:
+        return Criteria.of(self.fit)
+
+    @property
+    def channel_rms(self) -> dict[str, float]:
+        """Normalised RMS of each sensor channel ("sensor.channel"), pseudo-sensors left out."""
+        return {f"{r.sensor}.{r.channel}": float(np.sqrt(np.mean(r.normalized**2)))
+                for r in self.fit.residuals
+                if r.sensor not in self.fit.pseudo_sensors and r.t.size}
+
+    @property
+    def worst_window(self) -> tuple[str, float] | None:
+        """The diagnosed window with the largest chi-square excess and its normalised RMS."""
+        if self.diagnosis is None or not self.diagnosis.statistics:
+            return None
+        w = max(self.diagnosis.statistics, key=lambda s: s.excess)
+        return (f"{w.sensor}.{w.channel} {w.window}", w.normalized_rms)
+
+
+@dataclass
+class Discovery:
+    """The chain of models and why it ended."""
+
+    steps: list[DiscoveryStep] = field(default_factory=list)
+    stopped: str = ""
+
+    def text(self) -> str:
+        """The chain as a table, then why it stopped and the last verdict."""
+        lines = [f"{'step':>4}  {'added':22s} {'chi-square':>11s} {'chi2/dof':>8s} "
+                 f"{'AIC':>10s} {'BIC':>10s}  worst window (normalised RMS); admitted by"]
+        for k, s in enumerate(self.steps):
+            c = s.criteria
+            worst = s.worst_window
+            where = f"{worst[0]} ({worst[1]:.2f})" if worst else "not diagnosed"
+            lines.append(f"{k:4d}  {s.added or '(start)':22s} {c.chi_square:11.1f} "
+                         f"{c.chi_square / s.fit.dof:8.3f} {c.aic:10.1f} {c.bic:10.1f}  "
+                         f"{where}" + (f"; {s.admitted_by}" if s.admitted_by else ""))
+        lines += ["", f"stopped: {self.stopped}"]
+        last = self.steps[-1].diagnosis if self.steps else None
+        if last is not None:
+            lines += ["", "last diagnosis: " + last.verdict()]
+        return "\n".join(lines)
+
+
+def next_step(diag: Diagnosis) -> DiscoveryStep | str:
+    """The step the diagnosis `diag` confirms, or why there is none."""
+    air = diag.air
+    if air is not None and air.decisive and air.best_spec is not None \
+            and air.best_fit is not None:
+        return DiscoveryStep("wind_process", air.best_spec, air.best_fit,
+                             f"2 ln B = {air.two_ln_b:.1f} over still air")
+    best = diag.explanation
+    if best is None:
+        return ("the residuals are consistent with the noise" if diag.consistent_with_noise
+                else "nothing left is confirmed: the last diagnosis says what remains")
+    if best.refit is None or best.refit.lower_bound or best.refitted is None \
+            or best.spec is None:
+        return (f"the refit that would add {best.effect} did not converge: its likelihood "
+                "ratio is only a bound")
+    return DiscoveryStep(best.effect, best.spec, best.refitted[1], best.refit.text())
+
+
+def discover(fit: Fit, spec: ModelSpec, candidates: Mapping[str, EffectType] | None = None,
+             max_steps: int = MAX_STEPS, alpha: float = ALPHA, confirm_top: int = CONFIRM_TOP,
+             progress: bool = False,
+             on_step: Callable[[DiscoveryStep], None] | None = None) -> Discovery:
+    """The chain from `fit` (of `spec`): see the module docstring.  `candidates` are the
+    plug-in effects tested beside the library's; `on_step` is called with each step once
+    it is diagnosed (progress for a caller that prints)."""
+    out = Discovery([DiscoveryStep(None, spec, fit)])
+    while True:
+        step = out.steps[-1]
+        step.diagnosis = diagnose(step.fit, step.spec, candidates, confirm_top, alpha,
+                                  progress)
+        if on_step is not None:
+            on_step(step)
+        found = next_step(step.diagnosis)
+        if isinstance(found, str):
+            out.stopped = found
+            return out
+        if len(out.steps) > max_steps:
+            out.stopped = (f"{max_steps} effects added, the most asked for; the last "
+                           f"diagnosis confirms {found.added} too")
+            return out
+        out.steps.append(found)

@@ -1,0 +1,94 @@
+"""Discovery on data with two hidden effects: one step per effect, until the noise.
+
+FBCP seed 1 is flown with added mass (k_A = 1.4 per canopy) and a 0.1 s GPS
+latency, and the baseline model is fitted from the offline reduction.  One
+diagnosis confirms one effect; `discover` must add both, one per step, each
+admitted by a likelihood ratio significant at the family-wise level, stop
+because the residuals are consistent with the noise, and end at the truth
+within the noise.  Each step's model must be written as a model file that
+loads again.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import json
+
+import pytest
+from scipy.stats import chi2
+
+from cpas_ocp.cli import main
+from cpas_ocp.diagnosis import ALPHA
+from cpas_ocp.discovery import discover
+from cpas_ocp.discrepancy_report import write_discovery
+from cpas_ocp.effects import AddedMass, SensorLag, baseline_effects
+from cpas_ocp.estimation import Estimator
+from cpas_ocp.flight_test import load_test
+from cpas_ocp.model_spec import baseline_spec, load_model_file
+from cpas_ocp.problems import load_problem
+from cpas_ocp.simulate import simulate_problem
+
+from .conftest import assert_truth_within_noise
+
+HIDDEN = {**{f"added_mass_factor[{c}]": 1.4 for c in ("fbcp1", "fbcp2")}, "lag[gps]": 0.1}
+
+
+@pytest.fixture(scope="module")
+def two_hidden(tmp_path_factory):
+    """(test folder, truth, discovery, its output folder)."""
+    problem = load_problem("fbcp")
+    folder = tmp_path_factory.mktemp("two-hidden") / "test"
+    simulate_problem(dataclasses.replace(problem, truth={**problem.truth, **HIDDEN}), folder,
+                     1, effects=[*baseline_effects(), AddedMass(), SensorLag.gps()])
+    truth = json.loads((folder / "truth.json").read_text())["parameters"]
+    (folder / "truth.json").unlink()  # the estimator's folder carries no truth
+    fit = Estimator(load_test(folder), baseline_spec()).solve()
+    found = discover(fit, baseline_spec(), max_steps=3)
+    out = write_discovery(found, folder.parent / "discovery")
+    return folder, truth, found, out
+
+
+def test_each_hidden_effect_is_added_in_a_step_of_its_own(two_hidden) -> None:
+    _, truth, found, _ = two_hidden
+    steps = found.steps
+    assert [s.added for s in steps[:1]] == [None]
+    assert sorted(s.added for s in steps[1:]) == ["added_mass", "gps_lag"], found.text()
+    for before, after in itertools.pairwise(steps):
+        # Each fall is the likelihood ratio of a nested pair, significant after correcting
+        # for every effect the diagnosis before it tested.
+        diag = before.diagnosis
+        best = diag.explanation
+        assert best is not None and best.effect == after.added
+        assert best.refit.p_value < ALPHA / diag.family
+        assert after.fit.chi_square == pytest.approx(before.fit.chi_square
+                                                     - best.refit.statistic)
+    last = steps[-1]
+    assert last.diagnosis.consistent_with_noise
+    assert found.stopped == "the residuals are consistent with the noise"
+    assert last.fit.chi_square < chi2.ppf(0.999, last.fit.dof)
+    est = Estimator(last.fit.test, last.spec, last.fit.settings)
+    assert_truth_within_noise(last.fit, est.covariance(last.fit), truth)
+
+
+def test_each_step_is_a_model_file_and_the_report_shows_the_fall(two_hidden) -> None:
+    _, _, found, out = two_hidden
+    for k, step in enumerate(found.steps):
+        reloaded = load_model_file(out / f"step_{k}.json")
+        assert reloaded.effect_names == step.spec.effect_names
+    result = json.loads((out / "discovery.json").read_text())
+    chi = [s["chi_square"] for s in result["steps"]]
+    assert chi == sorted(chi, reverse=True) and len(chi) == len(found.steps)
+    assert (out / "discovery.png").stat().st_size > 0
+    text = (out / "discovery.md").read_text()
+    header = next(line for line in text.splitlines() if line.startswith("| channel"))
+    assert header.count("|") == len(found.steps) + 2  # a column per step
+    assert "stopped: the residuals are consistent with the noise" in text
+
+
+def test_discover_refuses_a_step_limit_below_one(two_hidden, tmp_path, capsys) -> None:
+    folder, *_ = two_hidden
+    assert main(["discover", str(folder), "--out", str(tmp_path / "d"),
+                 "--max-steps", "0"]) == 2
+    assert "--max-steps" in capsys.readouterr().err
+    assert not (tmp_path / "d").exists()
