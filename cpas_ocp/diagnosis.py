@@ -25,7 +25,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
-from .diagnostics import WindowStatistic, window_statistics, worst_of
+from .diagnostics import WindowStatistic, explained_share, window_statistics, worst_of
 from .effects.registry import EffectType
 from .estimation import Fit
 from .model_spec import ModelSpec
@@ -111,8 +111,11 @@ class Diagnosis:
                          f"refit did not converge, and its last iterate made feasible has "
                          f"{estimates}")
             else:
-                found = (f"likelihood ratio {lr.statistic:.1f}, p = {lr.p_value:.2g}; refit "
-                         f"estimates {estimates}")
+                share = explained_share(self.fit.chi_square, self.fit.dof,
+                                        self.fit.chi_square - lr.statistic)
+                found = (f"likelihood ratio {lr.statistic:.1f}, p = {lr.p_value:.2g}, "
+                         f"{100 * share:.0f} % of the excess chi-square; refit estimates "
+                         f"{estimates}")
             rivals = "".join(
                 f"; the refit of {t.effect} did not converge"
                 + (f" (likelihood ratio >= {t.refit.statistic:.1f})" if t.refit else "")

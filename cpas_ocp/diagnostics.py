@@ -143,3 +143,27 @@ def worst_of(stats: Sequence[WindowStatistic]) -> str:
     return (f"{w.sensor} {w.channel}, {w.window} ({w.t0:.2f}-{w.t1:.2f} s): chi-square "
             f"{w.chi_square:.1f} on {w.samples} samples (excess {w.excess:+.1f}), normalised "
             f"RMS {w.normalized_rms:.2f}, {100 * w.fraction:.1f} % of the total chi-square")
+
+
+def excess_removed(before: Sequence[WindowStatistic], after: Sequence[WindowStatistic],
+                   sigmas: float = 3.0) -> list[tuple[WindowStatistic, float]]:
+    """For each window of `before` whose chi-square excess departs from the noise (more than
+    `sigmas` times its spread sqrt(2 n)), the share of that excess the windows of `after`
+    (the same windows, another fit) no longer hold: 1 where the window came down to the
+    noise, 0 where nothing changed, negative where it grew.  Worst window first."""
+    later = {(w.sensor, w.channel, w.window): w for w in after}
+    out = []
+    for w in sorted(before, key=lambda w: w.excess, reverse=True):
+        if w.excess <= sigmas * np.sqrt(2.0 * w.samples):
+            continue
+        now = later.get((w.sensor, w.channel, w.window))
+        if now is not None:
+            out.append((w, (w.excess - now.excess) / w.excess))
+    return out
+
+
+def explained_share(chi2_before: float, dof_before: int, chi2_after: float) -> float:
+    """The share of the excess chi-square (chi^2 - dof, what the noise would not give) a
+    model change removes: 1 brings the fit to the noise on average."""
+    excess = chi2_before - dof_before
+    return (chi2_before - chi2_after) / excess if excess > 0 else float("nan")

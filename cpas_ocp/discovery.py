@@ -29,6 +29,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .diagnosis import ALPHA, CONFIRM_TOP, Diagnosis, diagnose
+from .diagnostics import (
+    WindowStatistic,
+    excess_removed,
+    explained_share,
+    window_statistics,
+)
 from .effects.registry import EffectType
 from .estimation import Fit
 from .model_comparison import Criteria
@@ -48,6 +54,10 @@ class DiscoveryStep:
     fit: Fit
     admitted_by: str = ""
     diagnosis: Diagnosis | None = None
+    # The share of the step before's excess chi-square this step removed, overall and in
+    # each window of it that departed from the noise (`diagnostics.excess_removed`).
+    explained: float = float("nan")
+    windows_explained: list[tuple[WindowStatistic, float]] = field(default_factory=list)
 
     @property
     def criteria(self) -> Criteria:
@@ -59,6 +69,15 @@ class DiscoveryStep:
         return {f"{r.sensor}.{r.channel}": float(np.sqrt(np.mean(r.normalized**2)))
                 for r in self.fit.residuals
                 if r.sensor not in self.fit.pseudo_sensors and r.t.size}
+
+    def explained_lines(self, shown: int = 3) -> list[str]:
+        """How much of the step before's misfit this step explains: overall, and in the
+        `shown` windows that departed from the noise most."""
+        lines = [f"{self.added} removes {100 * self.explained:.0f} % of the excess "
+                 "chi-square"]
+        lines += [f"  {w.sensor}.{w.channel} {w.window}: {100 * share:.0f} % of its excess "
+                  f"{w.excess:.1f}" for w, share in self.windows_explained[:shown]]
+        return lines
 
     @property
     def worst_window(self) -> tuple[str, float] | None:
@@ -87,6 +106,7 @@ class Discovery:
             lines.append(f"{k:4d}  {s.added or '(start)':22s} {c.chi_square:11.1f} "
                          f"{c.chi_square / s.fit.dof:8.3f} {c.aic:10.1f} {c.bic:10.1f}  "
                          f"{where}" + (f"; {s.admitted_by}" if s.admitted_by else ""))
+        lines += [""] + [line for s in self.steps[1:] for line in s.explained_lines()]
         lines += ["", f"stopped: {self.stopped}"]
         last = self.steps[-1].diagnosis if self.steps else None
         if last is not None:
@@ -134,4 +154,8 @@ def discover(fit: Fit, spec: ModelSpec, candidates: Mapping[str, EffectType] | N
             out.stopped = (f"{max_steps} effects added, the most asked for; the last "
                            f"diagnosis confirms {found.added} too")
             return out
+        found.explained = explained_share(step.fit.chi_square, step.fit.dof,
+                                          found.fit.chi_square)
+        found.windows_explained = excess_removed(
+            step.diagnosis.statistics, window_statistics(found.fit, step.diagnosis.windows))
         out.steps.append(found)

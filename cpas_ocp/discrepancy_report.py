@@ -163,6 +163,11 @@ def write_discovery(discovery: Discovery, out: str | Path,
                        "model_file": f"step_{k}.json", "chi_square": s.fit.chi_square,
                        "dof": s.fit.dof, "aic": s.criteria.aic, "bic": s.criteria.bic,
                        "channel_normalized_rms": s.channel_rms,
+                       "excess_chi_square_removed": s.explained,
+                       "window_excess_removed": [
+                           {"sensor": w.sensor, "channel": w.channel, "window": w.window,
+                            "excess_before": w.excess, "share": share}
+                           for w, share in s.windows_explained],
                        "worst_window": None if w is None else {"where": w[0],
                                                                "normalized_rms": w[1]},
                        "verdict": None if s.diagnosis is None else s.diagnosis.verdict()}

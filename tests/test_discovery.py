@@ -15,6 +15,7 @@ import dataclasses
 import itertools
 import json
 
+import numpy as np
 import pytest
 from scipy.stats import chi2
 
@@ -63,7 +64,14 @@ def test_each_hidden_effect_is_added_in_a_step_of_its_own(two_hidden) -> None:
         assert best.refit.p_value < ALPHA / diag.family
         assert after.fit.chi_square == pytest.approx(before.fit.chi_square
                                                      - best.refit.statistic)
-    last = steps[-1]
+    # Together the steps remove the whole excess chi-square of the first fit, to within the
+    # spread the noise leaves in the last one (3 sqrt(2 dof)).
+    first, last = steps[0], steps[-1]
+    excess = first.fit.chi_square - first.fit.dof
+    total = sum(s.explained * (b.fit.chi_square - b.fit.dof) for b, s in
+                itertools.pairwise(steps)) / excess
+    assert abs(total - 1.0) < 3.0 * np.sqrt(2.0 * last.fit.dof) / excess
+    assert all(s.explained > 0.0 and s.windows_explained for s in steps[1:])
     assert last.diagnosis.consistent_with_noise
     assert found.stopped == "the residuals are consistent with the noise"
     assert last.fit.chi_square < chi2.ppf(0.999, last.fit.dof)
