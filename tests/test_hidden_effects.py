@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -223,13 +224,16 @@ def test_the_verdict_names_a_bounded_effect_and_warns_of_unconverged_rivals() ->
                         dof=1, p_value=1e-30, refit=LikelihoodRatio(476.0, 1, lower_bound=True),
                         refit_estimate={"riser_period[d]": 0.14},
                         refit_note="the refit did not converge: ...")
-    verdict = Diagnosis(None, [], [], [bounded], []).verdict()  # type: ignore[arg-type]
+    # A fit's chi-square and degrees of freedom: 2,000 beyond what the noise would give.
+    fit = SimpleNamespace(chi_square=4000.0, dof=2000)
+    verdict = Diagnosis(fit, [], [], [bounded], []).verdict()  # type: ignore[arg-type]
     assert verdict.startswith("missing effect: elastic_riser (likelihood ratio >= 476"), verdict
     exact = ScoreTest("added_mass", "library", ("added_mass_factor[d]",), statistic=900.0,
                       dof=1, p_value=1e-40, refit=LikelihoodRatio(1411.0, 1),
                       refit_estimate={"added_mass_factor[d]": 1.3}, refit_note="37 iterations")
-    verdict = Diagnosis(None, [], [], [exact, bounded], []).verdict()  # type: ignore[arg-type]
+    verdict = Diagnosis(fit, [], [], [exact, bounded], []).verdict()  # type: ignore[arg-type]
     assert verdict.startswith("missing effect: added_mass (likelihood ratio 1411"), verdict
+    assert "71 % of the excess chi-square" in verdict  # 1,411 of the excess 2,000
     assert ("the refit of elastic_riser did not converge (likelihood ratio >= 476.0), so it "
             "may explain more") in verdict
 
