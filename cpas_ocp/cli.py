@@ -194,32 +194,15 @@ def _parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("diagnose", help="fit, then find where the model fails and which "
                                         "effect is missing")
-    s.add_argument("test_dir", type=Path)
-    s.add_argument("--out", required=True, type=Path)
-    _plugin_option(s, "also test the effects this Python file defines (repeatable)")
-    s.add_argument("--confirm", type=_ranged(int, 0), default=3, metavar="N",
-                   help="refit with at most N significant effects to confirm them (default 3)")
-    s.add_argument("--alpha", type=_ranged(float, 0.0, 1.0, low_open=True, high_open=True),
-                   default=0.01,
-                   help="family-wise significance level (default 0.01)")
-    _model_option(s)
-    _solver_options(s)
+    _diagnosis_options(s)
     s.set_defaults(run=_diagnose)
 
     s = sub.add_parser("discover", help="diagnose, add the confirmed effect, refit, and "
                                         "again, until the residuals are noise or nothing "
                                         "left is significant")
-    s.add_argument("test_dir", type=Path)
-    s.add_argument("--out", required=True, type=Path)
-    _plugin_option(s, "also test the effects this Python file defines (repeatable)")
+    _diagnosis_options(s)
     s.add_argument("--max-steps", type=_ranged(int, 1), default=4, metavar="K",
                    help="add at most K effects (default 4)")
-    s.add_argument("--confirm", type=_ranged(int, 0), default=3, metavar="N",
-                   help="refit with at most N significant effects per step (default 3)")
-    s.add_argument("--alpha", type=_ranged(float, 0.0, 1.0, low_open=True, high_open=True),
-                   default=0.01, help="family-wise significance level (default 0.01)")
-    _model_option(s)
-    _solver_options(s)
     s.set_defaults(run=_discover)
 
     s = sub.add_parser("compare", help="fit two effect sets and test which the data prefer")
@@ -443,6 +426,21 @@ def _diagnose(args: argparse.Namespace) -> int:
     print(diag.text())
     print(f"\ndiagnosis written to {out} (diagnosis.md, diagnosis.json, windows.csv, figures)")
     return 0
+
+
+def _diagnosis_options(s: argparse.ArgumentParser) -> None:
+    """The test folder, output folder, plug-ins, confirmation, level, model and solver
+    options of a command that diagnoses (`diagnose`, `discover`)."""
+    s.add_argument("test_dir", type=Path)
+    s.add_argument("--out", required=True, type=Path)
+    _plugin_option(s, "also test the effects this Python file defines (repeatable)")
+    s.add_argument("--confirm", type=_ranged(int, 0), default=3, metavar="N",
+                   help="refit with at most N significant effects to confirm them (default 3)")
+    s.add_argument("--alpha", type=_ranged(float, 0.0, 1.0, low_open=True, high_open=True),
+                   default=0.01,
+                   help="family-wise significance level (default 0.01)")
+    _model_option(s)
+    _solver_options(s)
 
 
 def _discover(args: argparse.Namespace) -> int:
