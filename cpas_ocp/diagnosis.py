@@ -25,7 +25,16 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
-from .diagnostics import WindowStatistic, explained_share, window_statistics, worst_of
+from scipy.stats import norm
+
+from .diagnostics import (
+    WindowStatistic,
+    departs,
+    excess_removed,
+    explained_share,
+    window_statistics,
+    worst_of,
+)
 from .effects.registry import EffectType
 from .estimation import Fit
 from .model_spec import ModelSpec
@@ -37,6 +46,9 @@ from .wind_evidence import WindEvidence, wind_evidence
 
 ALPHA = 0.01  # family-wise level of the diagnosis's tests
 CONFIRM_TOP = 3  # significant score tests confirmed by a refit
+# A window a confirmed effect removes at least this share of the excess chi-square from is
+# one it explains in part; if it still departs from the noise, the effect may be a stand-in.
+PARTLY_EXPLAINED = 0.1
 
 
 @dataclass
@@ -87,6 +99,36 @@ class Diagnosis:
         return (self.explanation is None and not (self.air is not None and self.air.decisive)
                 and not self._unresolved(None) and not self.structure)
 
+    @property
+    def departure_level(self) -> float:
+        """The z a window's chi-square excess must pass to depart from the noise: the normal
+        quantile at the family-wise level over the windows."""
+        return float(norm.isf(self.alpha / max(len(self.statistics), 1)))
+
+    def stand_in(self, best: ScoreTest) -> list[str]:
+        """Why the confirmed effect `best` may stand in for something it does not describe:
+        an estimate outside its plausible range (`Effect.plausible`), and each window it
+        explains in part (at least PARTLY_EXPLAINED of the excess) that still departs
+        from the noise after its refit.  Empty where neither."""
+        reasons = []
+        effect = next((e for e in best.spec.effects if e.name == best.effect), None) \
+            if best.spec is not None else None
+        if effect is not None:
+            for name, (lo, hi) in effect.plausible(self.fit.test).items():
+                value = best.refit_estimate.get(name)
+                if value is not None and not lo <= value <= hi:
+                    reasons.append(f"{name} = {value:.4g} lies outside its plausible range "
+                                   f"{lo:.4g} to {hi:.4g}")
+        if best.refitted is not None:
+            level = self.departure_level
+            after = window_statistics(best.refitted[1], self.windows)
+            for w, now, share in excess_removed(self.statistics, after, level):
+                if share >= PARTLY_EXPLAINED and departs(now, level):
+                    reasons.append(f"{w.sensor}.{w.channel} {w.window} still departs from the "
+                                   f"noise (normalised RMS {now.normalized_rms:.2f}, "
+                                   f"{100 * share:.0f} % of its excess removed)")
+        return reasons
+
     def _unresolved(self, best: ScoreTest | None) -> list[ScoreTest]:
         """Significant score tests, other than `best`, whose refits did not converge: their
         likelihood ratio is unknown or only bounded below."""
@@ -120,6 +162,10 @@ class Diagnosis:
                 f"; the refit of {t.effect} did not converge"
                 + (f" (likelihood ratio >= {t.refit.statistic:.1f})" if t.refit else "")
                 + ", so it may explain more" for t in unresolved)
+            remains = self.stand_in(best)
+            if remains:
+                return (f"partly explained by {best.effect} ({found}){rivals}; what remains: "
+                        + "; ".join(remains))
             return f"missing effect: {best.effect} ({found}){rivals}"
         if unresolved:
             signature = ("; the residual's signature:\n" + signature_text(self.structure)

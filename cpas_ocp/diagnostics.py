@@ -146,20 +146,27 @@ def worst_of(stats: Sequence[WindowStatistic]) -> str:
 
 
 def excess_removed(before: Sequence[WindowStatistic], after: Sequence[WindowStatistic],
-                   sigmas: float = 3.0) -> list[tuple[WindowStatistic, float]]:
+                   sigmas: float = 3.0
+                   ) -> list[tuple[WindowStatistic, WindowStatistic, float]]:
     """For each window of `before` whose chi-square excess departs from the noise (more than
-    `sigmas` times its spread sqrt(2 n)), the share of that excess the windows of `after`
-    (the same windows, another fit) no longer hold: 1 where the window came down to the
-    noise, 0 where nothing changed, negative where it grew.  Worst window first."""
+    `sigmas` times its spread sqrt(2 n)): that window in `after` (the same windows, another
+    fit) and the share of the excess it no longer holds (1 where it came down to the
+    noise, 0 where nothing changed, negative where it grew).  Worst window first."""
     later = {(w.sensor, w.channel, w.window): w for w in after}
     out = []
     for w in sorted(before, key=lambda w: w.excess, reverse=True):
-        if w.excess <= sigmas * np.sqrt(2.0 * w.samples):
+        if not departs(w, sigmas):
             continue
         now = later.get((w.sensor, w.channel, w.window))
         if now is not None:
-            out.append((w, (w.excess - now.excess) / w.excess))
+            out.append((w, now, (w.excess - now.excess) / w.excess))
     return out
+
+
+def departs(w: WindowStatistic, sigmas: float) -> bool:
+    """Whether a window's chi-square excess is more than `sigmas` times the spread the noise
+    gives it, sqrt(2 n)."""
+    return w.excess > sigmas * np.sqrt(2.0 * w.samples)
 
 
 def explained_share(chi2_before: float, dof_before: int, chi2_after: float) -> float:

@@ -57,7 +57,10 @@ class DiscoveryStep:
     # The share of the step before's excess chi-square this step removed, overall and in
     # each window of it that departed from the noise (`diagnostics.excess_removed`).
     explained: float = float("nan")
-    windows_explained: list[tuple[WindowStatistic, float]] = field(default_factory=list)
+    windows_explained: list[tuple[WindowStatistic, WindowStatistic, float]] = field(
+        default_factory=list)
+    # Why the effect added may be only a stand-in (`Diagnosis.stand_in`); empty where not.
+    stand_in: list[str] = field(default_factory=list)
 
     @property
     def criteria(self) -> Criteria:
@@ -74,9 +77,10 @@ class DiscoveryStep:
         """How much of the step before's misfit this step explains: overall, and in the
         `shown` windows that departed from the noise most."""
         lines = [f"{self.added} removes {100 * self.explained:.0f} % of the excess "
-                 "chi-square"]
+                 "chi-square" + (", partly: a stand-in?" if self.stand_in else "")]
         lines += [f"  {w.sensor}.{w.channel} {w.window}: {100 * share:.0f} % of its excess "
-                  f"{w.excess:.1f}" for w, share in self.windows_explained[:shown]]
+                  f"{w.excess:.1f}" for w, _, share in self.windows_explained[:shown]]
+        lines += [f"  what remains: {reason}" for reason in self.stand_in]
         return lines
 
     @property
@@ -129,7 +133,8 @@ def next_step(diag: Diagnosis) -> DiscoveryStep | str:
             or best.spec is None:
         return (f"the refit that would add {best.effect} did not converge: its likelihood "
                 "ratio is only a bound")
-    return DiscoveryStep(best.effect, best.spec, best.refitted[1], best.refit.text())
+    return DiscoveryStep(best.effect, best.spec, best.refitted[1], best.refit.text(),
+                         stand_in=diag.stand_in(best))
 
 
 def discover(fit: Fit, spec: ModelSpec, candidates: Mapping[str, EffectType] | None = None,

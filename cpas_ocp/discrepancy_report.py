@@ -167,7 +167,8 @@ def write_discovery(discovery: Discovery, out: str | Path,
                        "window_excess_removed": [
                            {"sensor": w.sensor, "channel": w.channel, "window": w.window,
                             "excess_before": w.excess, "share": share}
-                           for w, share in s.windows_explained],
+                           for w, _, share in s.windows_explained],
+                       "stand_in": s.stand_in,
                        "worst_window": None if w is None else {"where": w[0],
                                                                "normalized_rms": w[1]},
                        "verdict": None if s.diagnosis is None else s.diagnosis.verdict()}

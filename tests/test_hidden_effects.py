@@ -289,3 +289,26 @@ def test_a_refit_that_ends_above_the_fit_is_tried_again_from_the_defaults(
     assert "ended above the fit" in result.refit_note, result.refit_note
     assert result.refit is not None
     assert abs(result.refit.statistic - found.refit.statistic) < 0.1
+
+
+@pytest.mark.parametrize("lag_s, named", [(0.1, True), (-0.06, False)])
+def test_an_implausible_estimate_makes_the_effect_a_stand_in(problem_fit, lag_s: float,
+                                                             named: bool) -> None:
+    """A GPS lag confirmed at +0.1 s is named as the missing effect; at -0.06 s (the
+    receiver reporting before the event) the same likelihood ratio only "partly
+    explains" the residual, and the verdict says why."""
+    from cpas_ocp.diagnosis import Diagnosis
+    from cpas_ocp.model_comparison import LikelihoodRatio
+    from cpas_ocp.score_test import ScoreTest
+
+    fit, _, _ = problem_fit("fbcp", 1)
+    spec = dataclasses.replace(baseline_spec(),
+                               effects=(*baseline_spec().effects, SensorLag.gps()))
+    confirmed = ScoreTest("gps_lag", "library", ("lag[gps]",), statistic=60.0, dof=1,
+                          p_value=1e-14, refit=LikelihoodRatio(75.0, 1),
+                          refit_estimate={"lag[gps]": lag_s}, refit_note="12 iterations",
+                          spec=spec)
+    verdict = Diagnosis(fit, [], [], [confirmed], []).verdict()
+    assert verdict.startswith("missing effect: gps_lag" if named
+                              else "partly explained by gps_lag"), verdict
+    assert ("lag[gps] = -0.06 lies outside its plausible range 0 to 0.5" in verdict) is not named

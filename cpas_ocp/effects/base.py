@@ -157,6 +157,14 @@ class Effect:
         parameters, such as a stochastic process's innovations (`wind_process`)."""
         return {}
 
+    def plausible(self, test: FlightTest) -> dict[str, tuple[float, float]]:
+        """The range (SI) within which each named parameter's estimate is physically
+        plausible, narrower than its bounds (which only keep the solver in the model's
+        domain).  An estimate outside marks the effect a stand-in for something it does
+        not describe (a GPS lag of -0.06 s: the receiver would report before the event).
+        Parameters not named have no such range."""
+        return {}
+
     def null_values(self, test: FlightTest) -> dict[str, float] | None:
         """Values of this effect's parameters at which it changes no prediction: the model
         without the effect is the model with it at these values (the null hypothesis of

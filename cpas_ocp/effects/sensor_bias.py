@@ -12,12 +12,19 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+import numpy as np
+
 from ..parameters import Parameter, param_name
 from .base import Effect
 
 if TYPE_CHECKING:
     from ..flight_test import FlightTest
     from ..model import ModelContext
+
+# A plausible zero offset, as a share of the largest reading of the test: instruments
+# specify theirs against full scale, a load cell's typically within 0.5-1 % of it, and a
+# test's largest reading lies below full scale; twice the loosest of those is generous.
+PLAUSIBLE_BIAS_SHARE = 0.02
 
 
 @dataclass(frozen=True)
@@ -49,6 +56,18 @@ class SensorBias(Effect):
                           -self.bound, self.bound, scale=self.scale,
                           description=f"additive bias of {s.name}.{self.channel}")
                 for s in test.sensors_of(self.kind)]
+
+    def plausible(self, test: FlightTest) -> dict[str, tuple[float, float]]:
+        """A zero offset is small against what the sensor reads: within PLAUSIBLE_BIAS_SHARE
+        of the largest reading of the test.  A larger one (a load cell's 1.2 kN "bias" that
+        is a loss growing with tension) marks a stand-in."""
+        out = {}
+        for s in test.sensors_of(self.kind):
+            values = np.asarray(s.data[self.channel], dtype=float)
+            largest = float(np.nanmax(np.abs(values))) if values.size else 0.0
+            limit = PLAUSIBLE_BIAS_SHARE * largest
+            out[param_name("bias", s.name, self.channel)] = (-limit, limit)
+        return out
 
     def null_values(self, test: FlightTest) -> dict[str, float]:
         """No bias: b = 0."""

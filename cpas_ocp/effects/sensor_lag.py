@@ -57,6 +57,13 @@ class SensorLag(Effect):
                           scale=0.05, description=f"time lag of {s.name}")
                 for s in test.sensors_of(self.kind)]
 
+    def plausible(self, test: FlightTest) -> dict[str, tuple[float, float]]:
+        """A sensor's lag (its filter, its report's latency) is positive: a measurement
+        cannot trail the event by a negative time.  The estimate may go either way (so
+        that no lag is an interior point); a negative one marks a stand-in."""
+        return {param_name("lag", s.name): (0.0, self.max_lag)
+                for s in test.sensors_of(self.kind)}
+
     def null_values(self, test: FlightTest) -> dict[str, float]:
         """No lag: tau = 0 s."""
         return {param_name("lag", s.name): 0.0 for s in test.sensors_of(self.kind)}
