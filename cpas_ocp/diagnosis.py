@@ -120,13 +120,27 @@ class Diagnosis:
                     reasons.append(f"{name} = {value:.4g} lies outside its plausible range "
                                    f"{lo:.4g} to {hi:.4g}")
         if best.refitted is not None:
+            refit = best.refitted[1]
             level = self.departure_level
-            after = window_statistics(best.refitted[1], self.windows)
+            after = window_statistics(refit, self.windows)
+            acted = set()
             for w, now, share in excess_removed(self.statistics, after, level):
-                if share >= PARTLY_EXPLAINED and departs(now, level):
+                if share < PARTLY_EXPLAINED:
+                    continue
+                acted.add((w.sensor, w.channel, w.window))
+                if departs(now, level):
                     reasons.append(f"{w.sensor}.{w.channel} {w.window} still departs from the "
                                    f"noise (normalised RMS {now.normalized_rms:.2f}, "
                                    f"{100 * share:.0f} % of its excess removed)")
+            # Structure the refit leaves in the windows the effect acts in; where the effect
+            # is a stand-in, the strongest structure it leaves elsewhere too.
+            left = [f for f in diagnose_residuals(refit, self.windows, self.alpha)
+                    if f.significant]
+            inside = [f for f in left if (f.sensor, f.channel, f.window) in acted]
+            reasons += [f"structure in {f.text()}" for f in inside]
+            elsewhere = [f for f in left if f not in inside]
+            if reasons and elsewhere:
+                reasons.append(f"and elsewhere {elsewhere[0].text()}")
         return reasons
 
     def _unresolved(self, best: ScoreTest | None) -> list[ScoreTest]:

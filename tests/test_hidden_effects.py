@@ -312,3 +312,31 @@ def test_an_implausible_estimate_makes_the_effect_a_stand_in(problem_fit, lag_s:
     assert verdict.startswith("missing effect: gps_lag" if named
                               else "partly explained by gps_lag"), verdict
     assert ("lag[gps] = -0.06 lies outside its plausible range 0 to 0.5" in verdict) is not named
+
+
+def test_an_effect_the_library_lacks_is_not_named_for_one_that_partly_fits(
+        tmp_path_factory) -> None:
+    """FBCP flown with a load-cell reading loss that grows with the tension (a plug-in the
+    library lacks): the library effects that fit part of it are confirmed by their
+    likelihood ratios, but the verdict calls the best one a stand-in, says how little of
+    the excess it removes, and what remains."""
+    from pathlib import Path
+
+    from cpas_ocp.effects.registry import load_plugin
+
+    plugin = Path(__file__).parent / "plugins" / "tension_loss.py"
+    loss = load_plugin(plugin)["tension_loss"].build({}, str(plugin), "test")
+    problem = load_problem("fbcp")
+    truth = {**problem.truth, **{f"tension_loss[{c}]": 8e-6 for c in ("fbcp1", "fbcp2")}}
+    folder = tmp_path_factory.mktemp("tension-loss") / "test"
+    simulate_problem(dataclasses.replace(problem, truth=truth), folder, 1,
+                     effects=[*baseline_effects(), loss])
+    fit = Estimator(load_test(folder), baseline_spec()).solve()
+    diag = diagnose(fit, baseline_spec())
+    best = diag.explanation
+    assert best is not None  # something in the library fits part of it significantly
+    verdict = diag.verdict()
+    assert verdict.startswith(f"partly explained by {best.effect}"), verdict
+    share = best.refit.statistic / (fit.chi_square - fit.dof)
+    assert share < 0.5 and f"{100 * share:.0f} % of the excess chi-square" in verdict
+    assert "what remains: " in verdict

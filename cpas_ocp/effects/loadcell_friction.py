@@ -56,6 +56,13 @@ class LoadCellFriction(Effect):
                           "rise", scale=0.05)
                 for s in test.sensors_of("load_cell")]
 
+    def plausible(self, test: FlightTest) -> dict[str, tuple[float, float]]:
+        """Friction opposes the riser's motion through the fairlead: in a rise the load
+        cell reads less than the tension (phi >= 0).  The estimate may take either sign (so
+        that no friction is an interior point); a negative one marks a stand-in."""
+        return {param_name("friction_loss", s.parachute): (0.0, MAX_FRICTION)
+                for s in test.sensors_of("load_cell")}
+
     def null_values(self, test: FlightTest) -> dict[str, float]:
         """No friction: phi = 0 (inside the bounds; either sign is an alternative)."""
         return {param_name("friction_loss", s.parachute): 0.0
