@@ -135,11 +135,23 @@ def worst_place(fit: Fit, windows: Sequence[PhaseWindow]) -> str:
     return worst_of(window_statistics(fit, windows))
 
 
+# Fewest samples of a window that can be the worst fit: in fewer, a misfit cannot be told
+# from one outlier (a one-sample "deployment" window read as the worst place).
+MIN_RANKED_SAMPLES = 5
+
+
+def worst_window(stats: Sequence[WindowStatistic]) -> WindowStatistic | None:
+    """The window with the largest chi-square excess among those with at least
+    MIN_RANKED_SAMPLES samples (among all where none has); None without windows."""
+    ranked = [s for s in stats if s.samples >= MIN_RANKED_SAMPLES] or list(stats)
+    return max(ranked, key=lambda s: s.excess) if ranked else None
+
+
 def worst_of(stats: Sequence[WindowStatistic]) -> str:
     """The `worst_place` line from statistics already computed."""
-    if not stats:
+    w = worst_window(stats)
+    if w is None:
         return "no sensor samples to compare with the model"
-    w = max(stats, key=lambda s: s.excess)
     return (f"{w.sensor} {w.channel}, {w.window} ({w.t0:.2f}-{w.t1:.2f} s): chi-square "
             f"{w.chi_square:.1f} on {w.samples} samples (excess {w.excess:+.1f}), normalised "
             f"RMS {w.normalized_rms:.2f}, {100 * w.fraction:.1f} % of the total chi-square")

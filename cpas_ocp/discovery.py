@@ -34,6 +34,7 @@ from .diagnostics import (
     excess_removed,
     explained_share,
     window_statistics,
+    worst_window,
 )
 from .effects.registry import EffectType
 from .estimation import Fit
@@ -86,10 +87,8 @@ class DiscoveryStep:
     @property
     def worst_window(self) -> tuple[str, float] | None:
         """The diagnosed window with the largest chi-square excess and its normalised RMS."""
-        if self.diagnosis is None or not self.diagnosis.statistics:
-            return None
-        w = max(self.diagnosis.statistics, key=lambda s: s.excess)
-        return (f"{w.sensor}.{w.channel} {w.window}", w.normalized_rms)
+        w = None if self.diagnosis is None else worst_window(self.diagnosis.statistics)
+        return None if w is None else (f"{w.sensor}.{w.channel} {w.window}", w.normalized_rms)
 
 
 @dataclass

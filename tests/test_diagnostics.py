@@ -30,7 +30,12 @@ import numpy as np
 import pytest
 from scipy.stats import binom
 
-from cpas_ocp.diagnostics import window_statistics, worst_place
+from cpas_ocp.diagnostics import (
+    WindowStatistic,
+    window_statistics,
+    worst_of,
+    worst_place,
+)
 from cpas_ocp.estimation import Fit, Settings, SolverStats
 from cpas_ocp.flight_test import load_test
 from cpas_ocp.model_spec import spec_of_test
@@ -285,3 +290,14 @@ def test_a_lag_is_called_one_only_where_a_sensor_could_have_it(lag_s: float, win
     assert ("lag of" in line) is plausible
     assert ("not as a sensor lag" in line) is not plausible
     assert f"{1e3 * lag_s:+.1f}" in line
+
+
+def test_a_window_of_too_few_samples_is_not_the_worst_fit() -> None:
+    """One sample 20 sigma off in a one-sample window holds more excess (399) than a
+    600-sample window at normalised RMS 1.2 (264), but cannot be told from an outlier
+    (`MIN_RANKED_SAMPLES`):
+    the long window is the worst fit, and with no other window the short one is."""
+    one = WindowStatistic("gps", "up", "deployment", 0.0, 0.0, 1, 20.0, 20.0, 400.0, 0.2)
+    long = WindowStatistic("gps", "up", "steady", 1.0, 7.0, 600, 1.2, 1.2, 864.0, 0.4)
+    assert worst_of([one, long]).startswith("gps up, steady")
+    assert worst_of([one]).startswith("gps up, deployment")
