@@ -63,6 +63,7 @@ class Diagnosis:
     alpha: float = ALPHA
     notes: list[str] = field(default_factory=list)
     air: WindEvidence | None = None  # the air motion's evidence, where it was asked
+    _stand_in: dict[str, list[str]] = field(default_factory=dict, repr=False)
 
     @property
     def worst(self) -> str:
@@ -110,6 +111,12 @@ class Diagnosis:
         an estimate outside its plausible range (`Effect.plausible`), and each window it
         explains in part (at least PARTLY_EXPLAINED of the excess) that still departs
         from the noise after its refit.  Empty where neither."""
+        if best.effect not in self._stand_in:
+            self._stand_in[best.effect] = self._stand_in_reasons(best)
+        return self._stand_in[best.effect]
+
+    def _stand_in_reasons(self, best: ScoreTest) -> list[str]:
+        """`stand_in`, computed."""
         reasons = []
         effect = next((e for e in best.spec.effects if e.name == best.effect), None) \
             if best.spec is not None else None

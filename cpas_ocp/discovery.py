@@ -18,7 +18,12 @@ alone.  `discover` repeats the diagnosis on the model each step ends with:
    after `max_steps` steps.
 
 Every step keeps its fit, so each fall in chi-square is the likelihood ratio
-of one nested pair, tested at the diagnosis's family-wise level.
+of one nested pair, tested at the diagnosis's family-wise level.  Each step
+also says how much of the misfit before it removes (the share of the excess
+chi-square, overall and per window that departed from the noise) and, where
+the diagnosis found the effect only partly explains the residual
+(`Diagnosis.stand_in`: an implausible estimate, or windows it acts in that
+stay off the noise), what remains.
 """
 
 from __future__ import annotations
@@ -78,7 +83,8 @@ class DiscoveryStep:
         """How much of the step before's misfit this step explains: overall, and in the
         `shown` windows that departed from the noise most."""
         lines = [f"{self.added} removes {100 * self.explained:.0f} % of the excess "
-                 "chi-square" + (", partly: a stand-in?" if self.stand_in else "")]
+                 "chi-square" + (", and only partly explains it (a stand-in?)" if self.stand_in
+                                else "")]
         lines += [f"  {w.sensor}.{w.channel} {w.window}: {100 * share:.0f} % of its excess "
                   f"{w.excess:.1f}" for w, _, share in self.windows_explained[:shown]]
         lines += [f"  what remains: {reason}" for reason in self.stand_in]
