@@ -108,9 +108,11 @@ class Diagnosis:
 
     def stand_in(self, best: ScoreTest) -> list[str]:
         """Why the confirmed effect `best` may stand in for something it does not describe:
-        an estimate outside its plausible range (`Effect.plausible`), and each window it
+        an estimate outside its plausible range (`Effect.plausible`); each window it
         explains in part (at least PARTLY_EXPLAINED of the excess) that still departs
-        from the noise after its refit.  Empty where neither."""
+        from the noise after its refit; significant residual structure its refit leaves
+        in such a window; and, where any of those holds, the strongest structure the
+        refit leaves elsewhere.  Empty where none holds."""
         if best.effect not in self._stand_in:
             self._stand_in[best.effect] = self._stand_in_reasons(best)
         return self._stand_in[best.effect]

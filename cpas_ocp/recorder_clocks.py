@@ -10,10 +10,10 @@ are aligned by the shift that minimises their mean-removed squared
 difference (a least-squares cross-correlation); the result is good to
 about the samples' spacing.
 
-On the Prometheus flight the TeleMetrum's clock reads 0.078 s more than the
-TeleMega's for the same instant, from the boost (-0.3 to 6 s) and from the
-drogue's opening (25 to 35 s) alike; the GPS seconds, which each receiver
-reports with its own latency, change 0.14 s apart.
+On the Prometheus flight the TeleMetrum's clock reads 0.070 s more than the
+TeleMega's for the same instant from the boost (-0.3 to 6 s, 100 Hz), 0.071 s
+from the drogue's opening (25 to 35 s, 10 Hz); the GPS seconds, which each
+receiver reports with its own latency, change 0.14 s apart.
 """
 
 from __future__ import annotations
@@ -71,6 +71,10 @@ def recorders_text(recorders: list[RecorderEstimates]) -> str:
     first, and each shared drag area and start time with its sigma, start times in the
     first recorder's clock, and every difference from the first in units of the
     combined sigma (independent fits)."""
+    def shown(name: str, value: float, std: float) -> str:
+        return f"{value:.3f} ± {std:.3f}" if name.startswith("t_start") else \
+            f"{value:.4g} ± {std:.2g}"
+
     first = recorders[0]
     offsets = [0.0] + [clock_offset(first.log, r.log) for r in recorders[1:]]
     lines = ["## The recorders compared", "",
@@ -81,10 +85,6 @@ def recorders_text(recorders: list[RecorderEstimates]) -> str:
         lines.append(f"- {r.log.path.name} reads {offset:+.3f} s against {first.log.path.name}.")
     lines += ["", "| parameter | " + " | ".join(r.log.path.name for r in recorders) +
               " | difference / σ |", "|---" * (len(recorders) + 2) + "|"]
-    def shown(name: str, value: float, std: float) -> str:
-        return f"{value:.3f} ± {std:.3f}" if name.startswith("t_start") else \
-            f"{value:.4g} ± {std:.2g}"
-
     for name, (value0, std0) in first.estimates.items():
         cells, z = [shown(name, value0, std0)], []
         for r, offset in zip(recorders[1:], offsets[1:], strict=True):
