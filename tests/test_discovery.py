@@ -100,3 +100,19 @@ def test_discover_refuses_a_step_limit_below_one(two_hidden, tmp_path, capsys) -
                  "--max-steps", "0"]) == 2
     assert "--max-steps" in capsys.readouterr().err
     assert not (tmp_path / "d").exists()
+
+
+def test_the_command_stops_at_its_step_limit_and_says_what_is_left(two_hidden, tmp_path,
+                                                                    capsys) -> None:
+    """`cpas-ocp discover --max-steps 1` adds the first effect, diagnoses once more, and
+    stops saying that the diagnosis confirms the second."""
+    folder, _, found, _ = two_hidden
+    first, second = found.steps[1].added, found.steps[2].added
+    out = tmp_path / "d"
+    assert main(["discover", str(folder), "--out", str(out), "--max-steps", "1"]) == 0
+    printed = capsys.readouterr().out
+    result = json.loads((out / "discovery.json").read_text())
+    assert [s["added"] for s in result["steps"]] == [None, first]
+    assert result["stopped"].endswith(f"the last diagnosis confirms {second} too")
+    assert f"stopped: {result['stopped']}" in printed
+    assert (out / "step_1.json").is_file() and not (out / "step_2.json").exists()
