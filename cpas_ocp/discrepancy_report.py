@@ -8,7 +8,8 @@ compare:   comparison.md, comparison.json, windows.csv (both models, per
            compare_<sensor>.png (normalised residuals side by side).
 discover:  discovery.md (the chain of models, per-channel normalised RMS after
            each step, the last diagnosis), discovery.json, discovery.png,
-           step_<k>.json (each step's model as a model file).
+           step_<k>.json (each step's model as a model file), and the last
+           model's residuals_<sensor>.png (what remains, windows shaded).
 """
 
 from __future__ import annotations
@@ -143,8 +144,9 @@ def _markdown(frame: pd.DataFrame) -> str:
 def write_discovery(discovery: Discovery, out: str | Path,
                     plugins: dict[str, EffectType] | None = None) -> Path:
     """Write the discovery folder atomically: discovery.md (the chain, each step's
-    normalised RMS per channel, the figure, the last diagnosis), discovery.json, and each
-    step's model as a model file (`step_K.json`, reusable with `reconstruct --model`)."""
+    normalised RMS per channel, the figure, the last diagnosis with the last model's
+    residual figures), discovery.json, and each step's model as a model file
+    (`step_K.json`, reusable with `reconstruct --model`)."""
     out = Path(out)
     steps = discovery.steps
     with atomic_folder(out, "discovery.json") as tmp:
@@ -177,6 +179,7 @@ def write_discovery(discovery: Discovery, out: str | Path,
         }
         (tmp / "discovery.json").write_text(json.dumps(result, indent=2, default=float))
         last = steps[-1].diagnosis
+        figures = [] if last is None else plot_sensor_residuals(last.fit, last.windows, tmp)
         (tmp / "discovery.md").write_text(
             f"# Discovery on {steps[0].fit.test.name}\n\n```\n{discovery.text()}\n```\n\n"
             "![the error falling step by step](discovery.png)\n\n"
@@ -184,5 +187,6 @@ def write_discovery(discovery: Discovery, out: str | Path,
             + _markdown(rms.reset_index(names="channel")) + "\n\n"
             + "Each step's model is `step_K.json` here (a model file: `cpas-ocp reconstruct "
             "TEST --model step_K.json`, with `--plugin FILE` for a plug-in it names).\n"
-            + ("" if last is None else f"\n## The last diagnosis\n\n```\n{last.text()}\n```\n"))
+            + ("" if last is None else f"\n## The last diagnosis\n\n```\n{last.text()}\n```\n\n")
+            + "".join(f"![{p.stem}]({p.name})\n\n" for p in figures))
     return out

@@ -88,6 +88,10 @@ def test_each_step_is_a_model_file_and_the_report_shows_the_fall(two_hidden) -> 
     chi = [s["chi_square"] for s in result["steps"]]
     assert chi == sorted(chi, reverse=True) and len(chi) == len(found.steps)
     assert (out / "discovery.png").stat().st_size > 0
+    # What remains, drawn: the last model's residuals per sensor, each shown in the report.
+    figures = sorted(p.name for p in out.glob("residuals_*.png"))
+    assert figures and all(f"]({name})" in (out / "discovery.md").read_text()
+                           for name in figures)
     text = (out / "discovery.md").read_text()
     header = next(line for line in text.splitlines() if line.startswith("| channel"))
     assert header.count("|") == len(found.steps) + 2  # a column per step
