@@ -1035,7 +1035,8 @@ class Estimator:
         unbounded one does: a held point of the main's expopen on the Prometheus TeleMega
         log with the wind process took 26 iterations (8.9 s) that way, against 500 iterations
         (135 s) of Ipopt cycling within 1.2 of its chi-square without
-        (`benchmarks/fill_resolution.py`; on the TeleMetrum log neither converges).
+        (`benchmarks/fill_resolution.py`; on the TeleMetrum log neither converged until
+        the descent learnt the curvature, `Settings.descent_curvature`).
         """
         z0 = (self.initial_point() if start is None
               else start.z if isinstance(start, Fit) else np.asarray(start, dtype=float))

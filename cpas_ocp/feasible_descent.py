@@ -39,6 +39,7 @@ from .structured_secant import StructuredSecant
 from .uncertainty import (
     GaussNewtonStep,
     Linearization,
+    ReducedProblem,
     gauss_newton,
     measured_decrement,
     reduce_linearization,
@@ -79,14 +80,16 @@ class DescentProblem:
 
 
 def bounded_step(lin: Linearization, problem: DescentProblem,
-                 curvature: tuple[np.ndarray, np.ndarray] | None = None) -> GaussNewtonStep:
+                 curvature: tuple[np.ndarray, np.ndarray] | None = None,
+                 red: ReducedProblem | None = None) -> GaussNewtonStep:
     """The Gauss-Newton step at `lin` with each free parameter that sits on a bound held
     there where the unconstrained step would carry it outside (and every parameter
     whose bounds coincide held); with `curvature` (columns, S), S added to the
-    Gauss-Newton Hessian over those columns (`uncertainty.gauss_newton`)."""
+    Gauss-Newton Hessian over those columns (`uncertainty.gauss_newton`).  `red`: `lin`
+    already reduced with only its states held (`free_reduction`)."""
     idx = problem.param_index
     states_held = np.setdiff1d(lin.held, idx)
-    free = gauss_newton(replace(lin, held=states_held), curvature=curvature)
+    free = gauss_newton(replace(lin, held=states_held), red, curvature)
     values, span = lin.z[idx], problem.upper - problem.lower
     move = free.step[idx]
     hold = ((values <= problem.lower + ON_BOUND * span) & (move < 0.0)) \
@@ -98,13 +101,10 @@ def bounded_step(lin: Linearization, problem: DescentProblem,
                         curvature=curvature)
 
 
-def learnt_step(lin: Linearization, problem: DescentProblem, secant: StructuredSecant
-                ) -> GaussNewtonStep:
-    """The bounded step at `lin` with the residuals' curvature `secant` has learnt, once it
-    has observed `lin`'s point."""
-    red = reduce_linearization(replace(lin, held=np.setdiff1d(lin.held, problem.param_index)))
-    secant.observe(lin.z, red.free, red.JZ, lin.r)
-    return bounded_step(lin, problem, (secant.columns, secant.S))
+def free_reduction(lin: Linearization, problem: DescentProblem) -> ReducedProblem:
+    """`lin` reduced with only its states held, the free parameters all free: the
+    coordinates the learnt curvature lives in, and the first reduction of `bounded_step`."""
+    return reduce_linearization(replace(lin, held=np.setdiff1d(lin.held, problem.param_index)))
 
 
 def descend(z: np.ndarray, chi2: float, problem: DescentProblem, tol: float,
@@ -124,7 +124,8 @@ def descend(z: np.ndarray, chi2: float, problem: DescentProblem, tol: float,
     secant = StructuredSecant() if learn else None
     for k in range(max_steps + 1):
         lin = problem.linearize(z)
-        gn = bounded_step(lin, problem)
+        red = free_reduction(lin, problem)
+        gn = bounded_step(lin, problem, red=red)
         decrement = measured_decrement(problem.residual_value, lin, gn)
         if decrement < tol and abs(gn.restoration) <= tol:
             return DescentEnd(z, chi2, decrement, k, True)
@@ -135,7 +136,8 @@ def descend(z: np.ndarray, chi2: float, problem: DescentProblem, tol: float,
             # The learnt step where it measures more on offer along it than Gauss-Newton's
             # (NL2SOL likewise switches between the two models by their record): a
             # curvature learnt on the way can point the step where the valley does not go.
-            learnt = learnt_step(lin, problem, secant)
+            secant.observe(lin.z, red.free, red.JZ, lin.r)
+            learnt = bounded_step(lin, problem, (secant.columns, secant.S), red)
             measured = measured_decrement(problem.residual_value, lin, learnt)
             if measured > decrement:
                 gn, on_offer = learnt, measured

@@ -250,9 +250,10 @@ def held_opening_profiles(fit: Fit, spec: ModelSpec, progress: bool = False
     """The profile (`held_profile`) of each inflation parameter of the last canopy's opening
     that the model holds fixed, over HELD_PROFILE_FACTORS times its held value (within its
     bounds; none for a parameter held at 0), each point given HELD_PROFILE_MAX_ITER
-    iterations, then reported as not converged.  With the wind process the points that
-    converge take 22-26 iterations on the TeleMega log; on the TeleMetrum log every point
-    ran the full 500 (110 s each, `flight` 11 min 44 s for both logs), Ipopt cycling
+    iterations, then reported as not converged.  With the wind process every point of
+    both Prometheus logs converges since stalled runs' descent learns the curvature
+    (`Settings.descent_curvature`; 87 s for the TeleMetrum log's seven points); before,
+    every TeleMetrum point ran the full 500 iterations (110 s each), Ipopt cycling
     within about one of chi-square where the opening's start and fill trade."""
     out = {}
     for name in last_opening(fit)[2]:
