@@ -451,7 +451,7 @@ def _discover(args: argparse.Namespace) -> int:
     plugins = _plugins(args)
     est = _estimator(test, args, _spec(test, args))
     print(f"solving: {est.size_text()} ...", flush=True)
-    est, fit, _, _ = _fit_and_covariance(est, args)
+    est, fit, _, claim = _fit_and_covariance(est, args)
 
     def said(step: DiscoveryStep) -> None:
         print(f"step {step.added or 'start'}: chi-square {step.fit.chi_square:.1f} "
@@ -462,6 +462,11 @@ def _discover(args: argparse.Namespace) -> int:
     print("diagnosing, step by step ...", flush=True)
     found = discover(fit, est.spec, plugins, args.max_steps, args.alpha, args.confirm,
                      progress=not args.verbose, on_step=said)
+    # The chain is read from its start: a first fit the data press against guessed bounds
+    # is said so in the report, not only on the terminal (a misfit is what the chain is
+    # for, and its table shows it).
+    if not claim.is_result:
+        found.notes.append(f"the first fit is not a result: {claim.problems()[0]}")
     out = write_discovery(found, args.out, plugins)
     print()
     print(found.text())

@@ -103,6 +103,8 @@ class Discovery:
 
     steps: list[DiscoveryStep] = field(default_factory=list)
     stopped: str = ""
+    # What the reader must know about the chain's start (a first fit that is not a result).
+    notes: list[str] = field(default_factory=list)
 
     def text(self) -> str:
         """The chain as a table, then why it stopped and the last verdict."""
@@ -116,7 +118,7 @@ class Discovery:
                          f"{c.chi_square / s.fit.dof:8.3f} {c.aic:10.1f} {c.bic:10.1f}  "
                          f"{where}" + (f"; {s.admitted_by}" if s.admitted_by else ""))
         lines += [""] + [line for s in self.steps[1:] for line in s.explained_lines()]
-        lines += ["", f"stopped: {self.stopped}"]
+        lines += ["", f"stopped: {self.stopped}"] + [f"note: {n}" for n in self.notes]
         last = self.steps[-1].diagnosis if self.steps else None
         if last is not None:
             lines += ["", "last diagnosis: " + last.verdict()]

@@ -176,6 +176,7 @@ def write_discovery(discovery: Discovery, out: str | Path,
                        "verdict": None if s.diagnosis is None else s.diagnosis.verdict()}
                       for k, (s, w) in enumerate(zip(steps, worst, strict=True))],
             "stopped": discovery.stopped,
+            "notes": discovery.notes,
         }
         (tmp / "discovery.json").write_text(json.dumps(result, indent=2, default=float))
         last = steps[-1].diagnosis

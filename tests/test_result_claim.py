@@ -139,3 +139,22 @@ def test_a_fit_still_pressed_exits_4_with_its_report_saying_why(
     assert result["claim"]["bound_p_value"] < result_claim.ALPHA
     assert (out / "report.md").read_text().count("**Not a result.**") == 1
     assert math.isfinite(result["claim"]["chi_square"])
+
+
+def test_discover_says_in_its_report_that_its_first_fit_is_not_a_result(
+        drogue_folder, tmp_path, monkeypatch) -> None:
+    """A chain started from a fit the data press against guessed bounds carries that in
+    discovery.json and discovery.md (the diagnoses themselves are replaced by a chain
+    that stops at once: what is tested is the command's report of its first fit)."""
+    import cpas_ocp.discovery as discovery
+
+    monkeypatch.setattr("cpas_ocp.continuation.MAX_WINDOW_MOVES", 0)
+    monkeypatch.setattr(discovery, "discover", lambda fit, spec, *a, **k: discovery.Discovery(
+        [discovery.DiscoveryStep(None, spec, fit)], "stopped before any diagnosis"))
+    test_dir = late_events(drogue_folder(1), tmp_path / "late", LATE_S)
+    out = tmp_path / "discovery"
+    assert main(["discover", str(test_dir), "--out", str(out)]) == 0
+    notes = json.loads((out / "discovery.json").read_text())["notes"]
+    assert len(notes) == 1 and notes[0].startswith("the first fit is not a result: the data "
+                                                   "press") and "t_start[" in notes[0]
+    assert f"note: {notes[0]}" in (out / "discovery.md").read_text()
