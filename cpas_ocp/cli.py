@@ -295,11 +295,17 @@ def _where(args: argparse.Namespace) -> str:
             else f"{args.workers} local processes")
 
 
-def _model_option(s: argparse.ArgumentParser, model: bool = True) -> None:
+def _model_option(s: argparse.ArgumentParser, model: bool = True, plugin: bool = True
+                  ) -> None:
+    """--model FILE (where `model`), with --plugin FILE for the effects it names (where
+    `plugin`: a command that tests plug-ins has its own), and --allow-external-plugins."""
     if model:
         s.add_argument("--model", type=Path, default=None, metavar="FILE",
                        help="a JSON model block (effects, plugins, fix, free) used instead "
                             "of the manifest's")
+        if plugin:
+            _plugin_option(s, "a Python file whose effects the --model file may name "
+                              "(repeatable)")
     s.add_argument("--allow-external-plugins", action="store_true",
                    help="run plug-ins a manifest or model file names from outside its own "
                         "folder (plug-ins are Python code run with your rights)")
@@ -310,7 +316,8 @@ def _spec(test: FlightTest, args: argparse.Namespace) -> ModelSpec:
     from .model_spec import load_model_file, spec_of_test
     allow = getattr(args, "allow_external_plugins", False)
     model = getattr(args, "model", None)
-    return load_model_file(model, allow_external=allow) if model is not None else \
+    plugins = _plugins(args) if getattr(args, "plugin", None) else None
+    return load_model_file(model, plugins, allow) if model is not None else \
         spec_of_test(test, allow)
 
 
@@ -439,7 +446,7 @@ def _diagnosis_options(s: argparse.ArgumentParser) -> None:
     s.add_argument("--alpha", type=_ranged(float, 0.0, 1.0, low_open=True, high_open=True),
                    default=0.01,
                    help="family-wise significance level (default 0.01)")
-    _model_option(s)
+    _model_option(s, plugin=False)
     _solver_options(s)
 
 

@@ -11,7 +11,14 @@ alone.  `discover` repeats the diagnosis on the model each step ends with:
 2. where it names a missing effect, take the confirming refit (started from
    the fit before, so each step is nested in the last) as the next step's
    fit and model;
-3. stop where the residuals are consistent with the noise, where nothing
+3. where nothing library-made is confirmed but the residuals keep structure,
+   write the plug-ins its signature asks for (`candidate_plugins.propose`: a
+   periodic line, a load-cell residual that follows the load, one that
+   follows altitude), load each from its file and test it as written, like a
+   library effect (score test, confirming refit, likelihood ratio at the
+   family-wise level over the plug-ins proposed); a confirmed one is the next
+   step;
+4. stop where the residuals are consistent with the noise, where nothing
    left is significant (the last diagnosis then describes what remains: its
    signature), where the refit that would add the effect did not converge
    (its likelihood ratio is only a bound, and a bound is not a step), or
@@ -28,11 +35,14 @@ stay off the noise), what remains.
 
 from __future__ import annotations
 
+import tempfile
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
+from .candidate_plugins import Proposal, propose
 from .diagnosis import ALPHA, CONFIRM_TOP, Diagnosis, diagnose
 from .diagnostics import (
     WindowStatistic,
@@ -41,10 +51,11 @@ from .diagnostics import (
     window_statistics,
     worst_window,
 )
-from .effects.registry import EffectType
+from .effects.registry import EffectType, load_plugin
 from .estimation import Fit
 from .model_comparison import Criteria
 from .model_spec import ModelSpec
+from .score_test import ScoreTest, confirm, score_test
 
 MAX_STEPS = 4  # effects added at most, by default
 
@@ -98,13 +109,46 @@ class DiscoveryStep:
 
 
 @dataclass
+class ProposalTrial:
+    """A plug-in proposed from a signature at step `step`, and its test as written: the
+    score test at that step's fit with its confirming refit (`score_test.confirm`), and
+    whether the refit's likelihood ratio passed the family-wise level over the `tried`
+    plug-ins proposed there."""
+
+    step: int
+    proposal: Proposal
+    test: ScoreTest
+    tried: int
+    confirmed: bool = False
+
+    def text(self) -> str:
+        """One line: the plug-in, why it was proposed, and what its test found."""
+        lr = self.test.refit
+        if lr is None:
+            found = (self.test.refit_note or self.test.note
+                     or f"not significant (score statistic {self.test.statistic:.1f}, "
+                        f"p = {self.test.p_value:.2g})")
+        else:
+            estimates = ", ".join(f"{n} = {v:.4g}" for n, v in self.test.refit_estimate.items())
+            verdict = "confirmed" if self.confirmed else "not confirmed"
+            found = (f"likelihood ratio {'>= ' if lr.lower_bound else ''}{lr.statistic:.1f} on "
+                     f"{lr.dof}, p = {lr.p_value:.2g} ({verdict} over {self.tried} plug-in(s) "
+                     f"proposed); {estimates}")
+        return (f"step {self.step}: proposed/{self.proposal.file_name} for "
+                f"{self.proposal.reason}: {found}")
+
+
+@dataclass
 class Discovery:
-    """The chain of models and why it ended."""
+    """The chain of models and why it ended; the plug-ins proposed from signatures on the
+    way (`proposals`, with their tests) and their effect types by name (`plugins`)."""
 
     steps: list[DiscoveryStep] = field(default_factory=list)
     stopped: str = ""
     # What the reader must know about the chain's start (a first fit that is not a result).
     notes: list[str] = field(default_factory=list)
+    proposals: list[ProposalTrial] = field(default_factory=list)
+    plugins: dict[str, EffectType] = field(default_factory=dict)
 
     def text(self) -> str:
         """The chain as a table, then why it stopped and the last verdict."""
@@ -118,6 +162,9 @@ class Discovery:
                          f"{c.chi_square / s.fit.dof:8.3f} {c.aic:10.1f} {c.bic:10.1f}  "
                          f"{where}" + (f"; {s.admitted_by}" if s.admitted_by else ""))
         lines += [""] + [line for s in self.steps[1:] for line in s.explained_lines()]
+        if self.proposals:
+            lines += ["", "plug-ins proposed from the residual's signature, tested as written:"]
+            lines += ["  " + t.text() for t in self.proposals]
         lines += ["", f"stopped: {self.stopped}"] + [f"note: {n}" for n in self.notes]
         last = self.steps[-1].diagnosis if self.steps else None
         if last is not None:
@@ -152,22 +199,73 @@ def discover(fit: Fit, spec: ModelSpec, candidates: Mapping[str, EffectType] | N
     plug-in effects tested beside the library's; `on_step` is called with each step once
     it is diagnosed (progress for a caller that prints)."""
     out = Discovery([DiscoveryStep(None, spec, fit)])
-    while True:
-        step = out.steps[-1]
-        step.diagnosis = diagnose(step.fit, step.spec, candidates, confirm_top, alpha,
-                                  progress)
-        if on_step is not None:
-            on_step(step)
-        found = next_step(step.diagnosis)
-        if isinstance(found, str):
-            out.stopped = found
-            return out
-        if len(out.steps) > max_steps:
-            out.stopped = (f"{max_steps} effects added, the most asked for; the last "
-                           f"diagnosis confirms {found.added} too")
-            return out
-        found.explained = explained_share(step.fit.chi_square, step.fit.dof,
-                                          found.fit.chi_square)
-        found.windows_explained = excess_removed(
-            step.diagnosis.statistics, window_statistics(found.fit, step.diagnosis.windows))
-        out.steps.append(found)
+    with tempfile.TemporaryDirectory(prefix="cpas-ocp-proposed-") as folder:
+        while True:
+            step = out.steps[-1]
+            step.diagnosis = diagnose(step.fit, step.spec, candidates, confirm_top, alpha,
+                                      progress)
+            if on_step is not None:
+                on_step(step)
+            found = next_step(step.diagnosis)
+            if isinstance(found, str) and step.diagnosis.explanation is None \
+                    and step.diagnosis.structure and len(out.steps) <= max_steps:
+                tried = len(out.proposals)
+                found = _proposed_step(out, step, Path(folder), alpha, progress) or (
+                    found + ("; no plug-in proposed from its signature is confirmed (see "
+                             "proposed/)" if len(out.proposals) > tried else ""))
+            if isinstance(found, str):
+                out.stopped = found
+                return out
+            if not _extend(out, step, found, max_steps):
+                return out
+
+
+def _extend(out: Discovery, step: DiscoveryStep, found: DiscoveryStep, max_steps: int
+            ) -> bool:
+    """Append `found` after `step` with the share of the misfit it explains; False (and the
+    reason recorded) where the chain already holds `max_steps` added effects."""
+    if len(out.steps) > max_steps:
+        out.stopped = (f"{max_steps} effects added, the most asked for; the last "
+                       f"diagnosis confirms {found.added} too")
+        return False
+    found.explained = explained_share(step.fit.chi_square, step.fit.dof, found.fit.chi_square)
+    found.windows_explained = excess_removed(
+        step.diagnosis.statistics, window_statistics(found.fit, step.diagnosis.windows))
+    out.steps.append(found)
+    return True
+
+
+def _proposed_step(out: Discovery, step: DiscoveryStep, folder: Path, alpha: float,
+                   progress: bool) -> DiscoveryStep | None:
+    """Where the diagnosis of `step` confirms nothing but leaves structure: the plug-ins its
+    signature asks for that this chain has not tried, each written to `folder`, loaded
+    from there and tested as written (score test and confirming refit at `step`'s
+    fit), recorded in `out`; the step the most significant confirmed one makes, or None."""
+    diag = step.diagnosis
+    assert diag is not None
+    fresh = [p for p in propose(diag, step.spec) if p.name not in out.plugins]
+    trials = []
+    for proposal in fresh:
+        path = folder / proposal.file_name
+        path.write_text(proposal.source)
+        entry = load_plugin(path)[proposal.name]
+        out.plugins[proposal.name] = entry
+        result = score_test(step.fit, step.spec, entry)
+        if result.significant(alpha, len(fresh)):
+            confirm(step.fit, result, progress)
+        lr = result.refit
+        trial = ProposalTrial(len(out.steps) - 1, proposal, result, len(fresh))
+        trial.confirmed = (lr is not None and not lr.lower_bound and result.refitted is not None
+                           and lr.p_value < alpha / len(fresh))
+        trials.append(trial)
+    out.proposals += trials
+    confirmed = sorted((t for t in trials if t.confirmed), key=lambda t: (
+        t.test.refit.p_value, -t.test.refit.statistic))
+    if not confirmed:
+        return None
+    best = confirmed[0].test
+    assert best.spec is not None and best.refitted is not None and best.refit is not None
+    return DiscoveryStep(best.effect, best.spec, best.refitted[1],
+                         f"{best.refit.text()}; proposed/{confirmed[0].proposal.file_name}, "
+                         "written from the residual's signature",
+                         stand_in=diag.stand_in(best))

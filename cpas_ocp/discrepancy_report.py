@@ -151,9 +151,19 @@ def write_discovery(discovery: Discovery, out: str | Path,
     steps = discovery.steps
     with atomic_folder(out, "discovery.json") as tmp:
         labels = [s.added or "start" for s in steps]
+        registry = {**(plugins or {}), **discovery.plugins}
         for k, s in enumerate(steps):
-            (tmp / f"step_{k}.json").write_text(
-                json.dumps(model_block(s.spec, plugins), indent=2) + "\n")
+            block = model_block(s.spec, registry)
+            # A proposed plug-in the step's model uses is named by its file, beside it.
+            files = [f"proposed/{t.proposal.file_name}" for t in discovery.proposals
+                     if t.proposal.name in s.spec.effect_names]
+            if files:
+                block["plugins"] = files
+            (tmp / f"step_{k}.json").write_text(json.dumps(block, indent=2) + "\n")
+        if discovery.proposals:
+            (tmp / "proposed").mkdir()
+        for trial in discovery.proposals:
+            (tmp / "proposed" / trial.proposal.file_name).write_text(trial.proposal.source)
         worst = [s.worst_window for s in steps]
         plot_discovery(labels, [s.fit.chi_square / s.fit.dof for s in steps],
                        [w[1] if w else float("nan") for w in worst], tmp / "discovery.png")
@@ -175,6 +185,15 @@ def write_discovery(discovery: Discovery, out: str | Path,
                                                                "normalized_rms": w[1]},
                        "verdict": None if s.diagnosis is None else s.diagnosis.verdict()}
                       for k, (s, w) in enumerate(zip(steps, worst, strict=True))],
+            "proposals": [{"step": t.step, "effect": t.proposal.name,
+                           "file": f"proposed/{t.proposal.file_name}",
+                           "reason": t.proposal.reason, "confirmed": t.confirmed,
+                           "plugins_tried": t.tried,
+                           "test": {**t.test.as_dict(),
+                                    "source": f"proposed/{t.proposal.file_name}"},
+                           "chi_square": None if t.test.refitted is None
+                           else t.test.refitted[1].chi_square}
+                          for t in discovery.proposals],
             "stopped": discovery.stopped,
             "notes": discovery.notes,
         }
@@ -188,6 +207,9 @@ def write_discovery(discovery: Discovery, out: str | Path,
             + _markdown(rms.reset_index(names="channel")) + "\n\n"
             + "Each step's model is `step_K.json` here (a model file: `cpas-ocp reconstruct "
             "TEST --model step_K.json`, with `--plugin FILE` for a plug-in it names).\n"
+            + ("Plug-ins written from the residual's signature are in `proposed/`, each "
+               "tested as written: read them, edit them, pass them to `--plugin`.\n"
+               if discovery.proposals else "")
             + ("" if last is None else f"\n## The last diagnosis\n\n```\n{last.text()}\n```\n\n")
             + "".join(f"![{p.stem}]({p.name})\n\n" for p in figures))
     return out

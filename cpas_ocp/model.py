@@ -90,6 +90,27 @@ class ModelContext:
                              f"{', '.join(early)}: they use the canopy's drag")
         self.scale(drag, factor)
 
+    def set_air_relative_velocity(self, v_air: ca.SX) -> None:
+        """The vehicle's velocity relative to the air (m/s, east-north-up), and from it the
+        airspeed, the dynamic pressure 0.5 rho V^2 (Pa) and the drag direction."""
+        airspeed = ca.sqrt(ca.sumsqr(v_air) + 1e-6)
+        self.q["air_relative_velocity"] = v_air
+        self.q["airspeed"] = airspeed
+        self.q["dynamic_pressure"] = 0.5 * self.q["density"] * airspeed**2
+        self.q["drag_direction"] = -v_air / airspeed
+
+    def add_air_velocity(self, u: ca.SX, effect: str) -> None:
+        """Move the air at the vehicle by `u` (m/s, east-north-up) on top of the
+        atmosphere's wind, on behalf of `effect` (a gust process, a wind profile): the
+        airspeed, dynamic pressure and drag direction follow.  Only before any effect forms
+        drag, which would otherwise have used the air before the move: the order of the
+        effect list is checked, not assumed."""
+        early = [q for q in self.q if q.split("[")[0] in ("drag", "cds")]
+        if early:
+            raise ValueError(f"list the {effect} effect before the effects that form drag: "
+                             f"{', '.join(early)} already use the air before it")
+        self.set_air_relative_velocity(self.q["air_relative_velocity"] - u)
+
     def at_time_offset(self, expr: ca.SX, dt: ca.SX | float, steps: int) -> ca.SX:
         """`expr` (a function of state and time) evaluated at t + dt instead of t.
 
@@ -212,14 +233,9 @@ class Model:
         """Air-relative velocity, density and dynamic pressure at the vehicle."""
         r, v = ctx.x["position"], ctx.x["velocity"]
         atm = self.test.atmosphere
-        v_air = v - atm.wind(r[2])
-        airspeed = ca.sqrt(ca.sumsqr(v_air) + 1e-6)
-        rho = atm.density(r[2])
         ctx.q["altitude"] = r[2]
-        ctx.q["airspeed"] = airspeed
-        ctx.q["density"] = rho
-        ctx.q["dynamic_pressure"] = 0.5 * rho * airspeed**2
-        ctx.q["drag_direction"] = -v_air / airspeed
+        ctx.q["density"] = atm.density(r[2])
+        ctx.set_air_relative_velocity(v - atm.wind(r[2]))
 
     # --- helpers for the estimator, the simulator and reports ---------------------------
 

@@ -14,6 +14,10 @@ on the shooting grid, with the missing physics it points to:
   the velocity residual), the inertial load of canopy and air mass in a riser;
 * ``d(load_factor)/dt`` (g/s): an IMU lag or filter (a lag leaves -tau dh/dt),
   a compliance (riser elasticity) that delays the load;
+* ``altitude`` (m): an error that varies with height: a wind that changes
+  with altitude (shear), a wrong atmosphere (density, temperature);
+* ``tension[P]`` (N), where the model has a riser tension: a load-cell gain
+  that varies with the load (a nonlinear cell, a loss that grows with tension);
 * ``cds[P]`` (m^2): the canopy's drag area: an error in its level (steady
   CdS, drag or load-cell scale in the window);
 * ``dCdS/dt[P]`` (m^2/s): the drag area's growth rate: added (enclosed and
@@ -68,6 +72,10 @@ POINTS_TO = {
                    "inertial load of canopy and air mass)",
     "load_factor_rate": "a sensor lag or filter on the acceleration, or a compliance "
                         "that delays the load",
+    "altitude": "an error that varies with height (a wind that changes with altitude, a "
+                "wrong atmosphere)",
+    "tension": "a load-cell gain that varies with the load (a nonlinear cell, a loss that "
+               "grows with tension)",
     "cds": "an error in the level of the canopy's drag area (steady CdS, drag or "
            "load-cell scale)",
     "cds_rate": "added air mass, load-cell friction that follows the load's rate, or a "
@@ -117,7 +125,8 @@ def signatures(fit: Fit) -> list[Signature]:
     def add(name: str, unit: str, kind: str, values: np.ndarray) -> None:
         out.append(Signature(name, unit, POINTS_TO[kind], t, np.asarray(values, dtype=float)))
 
-    for name, unit in (("dynamic_pressure", "Pa"), ("airspeed", "m/s"), ("load_factor", "g")):
+    for name, unit in (("dynamic_pressure", "Pa"), ("airspeed", "m/s"), ("load_factor", "g"),
+                       ("altitude", "m")):
         if name in q:
             add(name, unit, name, q[name])
     if "load_factor" in q:
@@ -129,6 +138,7 @@ def signatures(fit: Fit) -> list[Signature]:
             add(param_name("dCdS/dt", chute.name), "m^2/s", "cds_rate", np.gradient(cds, t))
         tension = q.get(param_name("tension", chute.name))
         if tension is not None:
+            add(param_name("tension", chute.name), "N", "tension", tension)
             add(param_name("dT/dt", chute.name), "N/s", "tension_rate",
                 np.gradient(tension, t))
         stretch = q.get(param_name("stretch", chute.name))

@@ -99,3 +99,30 @@ def test_plugin_lowers_the_error_and_recovers_the_oscillation(breathing_runs) ->
     assert sorted(p.name for p in (root / "comparison").glob("compare_*.png")) == [
         "compare_gps.png", "compare_imu.png", "compare_riser_fbcp1.png",
         "compare_riser_fbcp2.png"]
+
+
+def test_discover_writes_the_modulation_from_the_signature_and_it_works_as_written(
+        breathing_runs) -> None:
+    """`discover` on the same data, without the plug-in: the periodic signature makes it
+    write a drag-area modulation plug-in, which, tested as written, is confirmed, brings
+    chi-square within 5 % of the model that made the data (fitted above by `compare`)
+    and leaves residuals consistent with the noise; its step's model file names the
+    file, so `reconstruct --model step_1.json` runs it with nothing added."""
+    root, _, _, comparison = breathing_runs
+    assert main(["discover", str(root / "test"), "--out", str(root / "discovery")]) == 0
+    found = json.loads((root / "discovery" / "discovery.json").read_text())
+    proposal = found["proposals"][0]
+    assert proposal["effect"] == "drag_area_modulation" and proposal["confirmed"]
+    assert proposal["file"] == "proposed/drag_area_modulation.py"
+    assert [s["added"] for s in found["steps"]] == [None, "drag_area_modulation"]
+    assert found["stopped"] == "the residuals are consistent with the noise"
+    truth_chi2 = comparison["models"]["breathing"]["chi_square"]
+    assert abs(found["steps"][1]["chi_square"] - truth_chi2) < 0.05 * truth_chi2
+    frequency = proposal["test"]["refit_estimate"]["modulation_frequency"]
+    assert abs(frequency - FREQUENCY_HZ) < 1.0 / 3.0  # a periodogram bin of the 3 s window
+    step = root / "discovery" / "step_1.json"
+    assert json.loads(step.read_text())["plugins"] == ["proposed/drag_area_modulation.py"]
+    assert main(["reconstruct", str(root / "test"), "--model", str(step),
+                 "--out", str(root / "as_written")]) == 0
+    written = json.loads((root / "as_written" / "result.json").read_text())
+    assert abs(written["fit"]["chi_square"] - found["steps"][1]["chi_square"]) < 1.0

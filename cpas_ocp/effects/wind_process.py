@@ -136,17 +136,8 @@ class WindProcess(Effect):
         return ca.vertcat(*u)
 
     def forces(self, ctx: ModelContext) -> None:
-        early = [q for q in ctx.q if q.split("[")[0] in ("drag", "cds")]
-        if early:
-            raise ValueError("list the wind_process effect before the effects that form "
-                             f"drag: {', '.join(early)} already use the still air")
-        v = ctx.x["velocity"]
         gust = self.air_velocity(ctx)
-        v_air = v - ctx.test.atmosphere.wind(ctx.x["position"][2]) - gust
-        airspeed = ca.sqrt(ca.sumsqr(v_air) + 1e-6)
-        ctx.q["airspeed"] = airspeed
-        ctx.q["dynamic_pressure"] = 0.5 * ctx.q["density"] * airspeed**2
-        ctx.q["drag_direction"] = -v_air / airspeed
+        ctx.add_air_velocity(gust, self.name)
         for c in self.components:
             ctx.q[f"air_velocity_{c}"] = gust[COMPONENTS.index(c)]
 
