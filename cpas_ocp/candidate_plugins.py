@@ -43,6 +43,9 @@ from .residual_diagnosis import PERIODICITY, Finding
 # Findings at frequencies within this share of the strongest line, or within one
 # frequency bin of its window, are the same line seen in another channel or window.
 SAME_LINE_SHARE = 0.1
+# Fewest cycles of a line in its window for it to be an oscillation: a "line" with a
+# period near the window's length is a drift, which any slow signature fits as well.
+MIN_CYCLES = 3.0
 # A periodic window that ends within this time of the phase's end leaves the gate open.
 OPEN_END_S = 0.5
 # Signatures of the load's level: a load-cell residual correlated with one of them asks
@@ -81,7 +84,8 @@ def _base(name: str) -> str:
 
 
 def _periodic(structure: list[Finding], fit: Fit) -> Proposal | None:
-    lines = [f for f in structure if PERIODICITY in f.rejected]
+    lines = [f for f in structure if PERIODICITY in f.rejected
+             and f.frequency_hz * (f.t1 - f.t0) >= MIN_CYCLES]
     if not lines:
         return None
     top = min(lines, key=lambda f: f.periodicity_p)

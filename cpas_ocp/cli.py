@@ -461,7 +461,7 @@ def _discover(args: argparse.Namespace) -> int:
     est, fit, _, claim = _fit_and_covariance(est, args)
 
     def said(step: DiscoveryStep) -> None:
-        print(f"step {step.added or 'start'}: chi-square {step.fit.chi_square:.1f} "
+        print(f"step {step.label}: chi-square {step.fit.chi_square:.1f} "
               f"(chi2/dof {step.fit.chi_square / step.fit.dof:.3f}); "
               f"{step.diagnosis.verdict().splitlines()[0] if step.diagnosis else ''}",
               flush=True)

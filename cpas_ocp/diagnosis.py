@@ -117,17 +117,24 @@ class Diagnosis:
             self._stand_in[best.effect] = self._stand_in_reasons(best)
         return self._stand_in[best.effect]
 
-    def _stand_in_reasons(self, best: ScoreTest) -> list[str]:
-        """`stand_in`, computed."""
-        reasons = []
+    def implausible(self, best: ScoreTest) -> list[str]:
+        """The refit estimates of `best`'s effect that lie outside the ranges it declares
+        plausible (`Effect.plausible`), each in words; empty where all lie inside."""
         effect = next((e for e in best.spec.effects if e.name == best.effect), None) \
             if best.spec is not None else None
-        if effect is not None:
-            for name, (lo, hi) in effect.plausible(self.fit.test).items():
-                value = best.refit_estimate.get(name)
-                if value is not None and not lo <= value <= hi:
-                    reasons.append(f"{name} = {value:.4g} lies outside its plausible range "
-                                   f"{lo:.4g} to {hi:.4g}")
+        if effect is None:
+            return []
+        out = []
+        for name, (lo, hi) in effect.plausible(self.fit.test).items():
+            value = best.refit_estimate.get(name)
+            if value is not None and not lo <= value <= hi:
+                out.append(f"{name} = {value:.4g} lies outside its plausible range "
+                           f"{lo:.4g} to {hi:.4g}")
+        return out
+
+    def _stand_in_reasons(self, best: ScoreTest) -> list[str]:
+        """`stand_in`, computed."""
+        reasons = self.implausible(best)
         if best.refitted is not None:
             refit = best.refitted[1]
             level = self.departure_level
@@ -223,10 +230,11 @@ class Diagnosis:
 
 def diagnose(fit: Fit, spec: ModelSpec, candidates: Mapping[str, EffectType] | None = None,
              confirm_top: int = CONFIRM_TOP, alpha: float = ALPHA,
-             progress: bool = False) -> Diagnosis:
-    """Diagnose `fit` (made with `spec`): see the module docstring."""
+             progress: bool = False, exclude: frozenset[str] = frozenset()) -> Diagnosis:
+    """Diagnose `fit` (made with `spec`): see the module docstring.  The effects named in
+    `exclude` are not tested (ones a chain of models has already dropped)."""
     windows = phase_windows(fit)
-    tests = score_tests(fit, spec, candidates, progress)
+    tests = score_tests(fit, spec, candidates, progress, exclude)
     m = max(sum(t.tested for t in tests), 1)
     leading = [t for t in tests if t.significant(alpha, m)][:confirm_top]
     for t in leading:

@@ -18,7 +18,11 @@ alone.  `discover` repeats the diagnosis on the model each step ends with:
    library effect (score test, confirming refit, likelihood ratio at the
    family-wise level over the plug-ins proposed); a confirmed one is the next
    step;
-4. stop where the residuals are consistent with the noise, where nothing
+4. after each step, drop every earlier effect added as a stand-in that the
+   model no longer needs (its removal refitted from the last fit, and
+   keeping it not significant: `_drop_stand_ins`), a step of its own, and
+   never test it again;
+5. stop where the residuals are consistent with the noise, where nothing
    left is significant (the last diagnosis then describes what remains: its
    signature), where the refit that would add the effect did not converge
    (its likelihood ratio is only a bound, and a bound is not a step), or
@@ -35,6 +39,7 @@ stay off the noise), what remains.
 
 from __future__ import annotations
 
+import dataclasses
 import tempfile
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -52,10 +57,11 @@ from .diagnostics import (
     worst_window,
 )
 from .effects.registry import EffectType, load_plugin
+from .errors import InputError, SolverFailure
 from .estimation import Fit
-from .model_comparison import Criteria
+from .model_comparison import Criteria, LikelihoodRatio, one_sided_count, refit
 from .model_spec import ModelSpec
-from .score_test import ScoreTest, confirm, score_test
+from .score_test import CONFIRM_MAX_ITER, ScoreTest, confirm, score_test
 
 MAX_STEPS = 4  # effects added at most, by default
 
@@ -78,6 +84,15 @@ class DiscoveryStep:
         default_factory=list)
     # Why the effect added may be only a stand-in (`Diagnosis.stand_in`); empty where not.
     stand_in: list[str] = field(default_factory=list)
+    # The stand-in this step drops from the model before it (None where it adds one).
+    dropped: str | None = None
+
+    @property
+    def label(self) -> str:
+        """What the step did: the effect it added, "without X" where it dropped X."""
+        if self.dropped is not None:
+            return f"without {self.dropped}"
+        return self.added or "start"
 
     @property
     def criteria(self) -> Criteria:
@@ -93,6 +108,8 @@ class DiscoveryStep:
     def explained_lines(self, shown: int = 3) -> list[str]:
         """How much of the step before's misfit this step explains: overall, and in the
         `shown` windows that departed from the noise most."""
+        if self.dropped is not None:
+            return [f"{self.dropped} dropped: with the effects added after it, {self.admitted_by}"]
         lines = [f"{self.added} removes {100 * self.explained:.0f} % of the excess "
                  "chi-square" + (", and only partly explains it (a stand-in?)" if self.stand_in
                                 else "")]
@@ -150,6 +167,16 @@ class Discovery:
     proposals: list[ProposalTrial] = field(default_factory=list)
     plugins: dict[str, EffectType] = field(default_factory=dict)
 
+    @property
+    def added(self) -> int:
+        """Steps that added an effect."""
+        return sum(s.dropped is None for s in self.steps[1:])
+
+    @property
+    def dropped(self) -> set[str]:
+        """Effects a step dropped (as stand-ins no longer needed); never tested again."""
+        return {s.dropped for s in self.steps if s.dropped is not None}
+
     def text(self) -> str:
         """The chain as a table, then why it stopped and the last verdict."""
         lines = [f"{'step':>4}  {'added':22s} {'chi-square':>11s} {'chi2/dof':>8s} "
@@ -158,7 +185,7 @@ class Discovery:
             c = s.criteria
             worst = s.worst_window
             where = f"{worst[0]} ({worst[1]:.2f})" if worst else "not diagnosed"
-            lines.append(f"{k:4d}  {s.added or '(start)':22s} {c.chi_square:11.1f} "
+            lines.append(f"{k:4d}  {s.label:22s} {c.chi_square:11.1f} "
                          f"{c.chi_square / s.fit.dof:8.3f} {c.aic:10.1f} {c.bic:10.1f}  "
                          f"{where}" + (f"; {s.admitted_by}" if s.admitted_by else ""))
         lines += [""] + [line for s in self.steps[1:] for line in s.explained_lines()]
@@ -187,6 +214,10 @@ def next_step(diag: Diagnosis) -> DiscoveryStep | str:
             or best.spec is None:
         return (f"the refit that would add {best.effect} did not converge: its likelihood "
                 "ratio is only a bound")
+    implausible = diag.implausible(best)
+    if implausible:
+        return (f"{best.effect} fits part of the residual only with an implausible estimate "
+                f"({'; '.join(implausible)}): a stand-in, not added")
     return DiscoveryStep(best.effect, best.spec, best.refitted[1], best.refit.text(),
                          stand_in=diag.stand_in(best))
 
@@ -203,12 +234,12 @@ def discover(fit: Fit, spec: ModelSpec, candidates: Mapping[str, EffectType] | N
         while True:
             step = out.steps[-1]
             step.diagnosis = diagnose(step.fit, step.spec, candidates, confirm_top, alpha,
-                                      progress)
+                                      progress, frozenset(out.dropped))
             if on_step is not None:
                 on_step(step)
             found = next_step(step.diagnosis)
-            if isinstance(found, str) and step.diagnosis.explanation is None \
-                    and step.diagnosis.structure and len(out.steps) <= max_steps:
+            if isinstance(found, str) and _unexplained(step.diagnosis) \
+                    and out.added < max_steps:
                 tried = len(out.proposals)
                 found = _proposed_step(out, step, Path(folder), alpha, progress) or (
                     found + ("; no plug-in proposed from its signature is confirmed (see "
@@ -218,13 +249,22 @@ def discover(fit: Fit, spec: ModelSpec, candidates: Mapping[str, EffectType] | N
                 return out
             if not _extend(out, step, found, max_steps):
                 return out
+            _drop_stand_ins(out, alpha, progress)
+
+
+def _unexplained(diag: Diagnosis) -> bool:
+    """Whether the residual of the diagnosed fit keeps significant structure that no library
+    effect explains with a plausible estimate (and the air's motion is not named)."""
+    best = diag.explanation
+    return bool(diag.structure) and not (diag.air is not None and diag.air.decisive) \
+        and (best is None or bool(diag.implausible(best)))
 
 
 def _extend(out: Discovery, step: DiscoveryStep, found: DiscoveryStep, max_steps: int
             ) -> bool:
     """Append `found` after `step` with the share of the misfit it explains; False (and the
     reason recorded) where the chain already holds `max_steps` added effects."""
-    if len(out.steps) > max_steps:
+    if out.added >= max_steps:
         out.stopped = (f"{max_steps} effects added, the most asked for; the last "
                        f"diagnosis confirms {found.added} too")
         return False
@@ -269,3 +309,56 @@ def _proposed_step(out: Discovery, step: DiscoveryStep, folder: Path, alpha: flo
                          f"{best.refit.text()}; proposed/{confirmed[0].proposal.file_name}, "
                          "written from the residual's signature",
                          stand_in=diag.stand_in(best))
+
+
+def _drop_stand_ins(out: Discovery, alpha: float, progress: bool) -> None:
+    """After a step, drop each earlier effect that was added as a stand-in (`stand_in`) and
+    that the model no longer needs: the most recent first, each refitted away from the
+    last model (`_without`) and appended as a step of its own, until none can go.
+
+    A stand-in fits part of a signal it does not describe; once the effect that does
+    describe it is in, the stand-in's share is gone.  On `fbcp` flown through a
+    shear layer, a GPS lag and an accelerometer bias were added as partial steps
+    before the wind profile proposed from the residual's altitude signature."""
+    while True:
+        last = out.steps[-1]
+        names = [s.added for s in out.steps[1:-1] if s.stand_in and s.added is not None
+                 and s.added in last.spec.effect_names and s.added not in out.dropped]
+        for name in reversed(names):
+            step = _without(last, name, alpha, progress)
+            if step is not None:
+                step.explained = explained_share(last.fit.chi_square, last.fit.dof,
+                                                 step.fit.chi_square)
+                out.steps.append(step)
+                break
+        else:
+            return
+
+
+def _without(last: DiscoveryStep, name: str, alpha: float, progress: bool
+             ) -> DiscoveryStep | None:
+    """The step that drops effect `name` from `last`'s model: its refit from `last`'s fit
+    where it converges and keeping the effect is not significant at `alpha` (the
+    likelihood ratio of `last` against it, on the effect's parameters); else None.
+    An effect that replaced another (an elastic riser) is not dropped."""
+    effect = next(e for e in last.spec.effects if e.name == name)
+    if effect.replaces is not None:
+        return None
+    own = {p.name for p in effect.parameters(last.fit.test)}
+    smaller = dataclasses.replace(
+        last.spec, effects=tuple(e for e in last.spec.effects if e.name != name),
+        fix={n: v for n, v in last.spec.fix.items() if n not in own},
+        free=tuple(n for n in last.spec.free if n not in own),
+        priors={n: v for n, v in last.spec.priors.items() if n not in own})
+    try:
+        _, fit = refit(last.fit, smaller, progress=progress, max_iter=CONFIRM_MAX_ITER)
+    except (SolverFailure, InputError):
+        return None
+    null = effect.null_values(last.fit.test) or {}
+    lr = LikelihoodRatio(fit.chi_square - last.fit.chi_square,
+                         len(last.fit.free) - len(fit.free),
+                         one_sided_count(last.spec, last.fit, null))
+    if lr.dof < 1 or lr.p_value < alpha:
+        return None
+    return DiscoveryStep(None, smaller, fit, f"keeping it is not significant ({lr.text()})",
+                         dropped=name)

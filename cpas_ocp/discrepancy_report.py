@@ -150,7 +150,7 @@ def write_discovery(discovery: Discovery, out: str | Path,
     out = Path(out)
     steps = discovery.steps
     with atomic_folder(out, "discovery.json") as tmp:
-        labels = [s.added or "start" for s in steps]
+        labels = [s.label for s in steps]
         registry = {**(plugins or {}), **discovery.plugins}
         for k, s in enumerate(steps):
             block = model_block(s.spec, registry)
@@ -171,7 +171,7 @@ def write_discovery(discovery: Discovery, out: str | Path,
         rms.columns = [f"{k}: {label}" for k, label in enumerate(labels)]
         result = {
             "test": steps[0].fit.test.name,
-            "steps": [{"added": s.added, "admitted_by": s.admitted_by,
+            "steps": [{"added": s.added, "dropped": s.dropped, "admitted_by": s.admitted_by,
                        "model_file": f"step_{k}.json", "chi_square": s.fit.chi_square,
                        "dof": s.fit.dof, "aic": s.criteria.aic, "bic": s.criteria.bic,
                        "channel_normalized_rms": s.channel_rms,

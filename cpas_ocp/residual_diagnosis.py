@@ -44,7 +44,7 @@ WHOLE_PHASE = "whole phase"
 MIN_TESTED_FRACTION = 0.5
 # A gap longer than this many median sampling intervals ends a run.
 GAP_INTERVALS = 1.5
-# Signature correlations kept per finding.
+# Signature correlations a finding's text names.
 TOP_CORRELATIONS = 3
 # Test labels of a finding other than its signature correlations.
 LJUNG_BOX, PERIODICITY, LAG = "Ljung-Box", "periodicity", "lag"
@@ -65,7 +65,7 @@ class Finding:
     strongest line and its Fisher g p-value; lag_s, lag_se, lag_p: the sensor
     lag (s, positive when the measurement trails the model), its standard error
     and p-value (None where the model output does not change); correlations:
-    the strongest signature correlations.  `rejected` lists the tests (by
+    every signature correlation, strongest first.  `rejected` lists the tests (by
     label or signature name) whose p-value passes the multiple-test correction,
     `p_adjusted` the smallest Holm-adjusted p-value of the finding's tests, and
     `significant` whether any passed.
@@ -101,11 +101,19 @@ class Finding:
         if LAG in self.rejected and self.lag_s is not None and self.lag_se is not None:
             parts.append(f"{lag_text(self, 1)} (p {_p(self.lag_p or 0.0)})")
         parts += [f"correlates with {c.signature} r={c.r:+.2f} (p {_p(c.p_value)})"
-                  for c in self.correlations if c.signature in self.rejected]
+                  for c in self.shown_correlations]
         if not parts:
             return (f"{head}: consistent with white noise (smallest corrected p "
                     f"{_p(self.p_adjusted)})")
         return f"{head}: " + "; ".join(parts)
+
+
+    @property
+    def shown_correlations(self) -> list[Correlation]:
+        """The TOP_CORRELATIONS strongest of the significant signature correlations: what a
+        line of text names (monotonic signatures, such as the time since an event and the
+        altitude, correlate alike with a slow drift, and naming all says no more)."""
+        return [c for c in self.correlations if c.signature in self.rejected][:TOP_CORRELATIONS]
 
 
 def plausible_lag(f: Finding) -> bool:
@@ -180,8 +188,8 @@ def signature_text(findings: Sequence[Finding], top: int = 3) -> str:
             what.append(f"periodic at {f.frequency_hz:.2f} Hz")
         if LAG in f.rejected and f.lag_s is not None and f.lag_se is not None:
             what.append(lag_text(f, 0))
-        corr = [c for c in f.correlations if c.signature in f.rejected]
-        what += [f"correlates with {c.signature} (r {c.r:+.2f}: {c.points_to})" for c in corr]
+        what += [f"correlates with {c.signature} (r {c.r:+.2f}: {c.points_to})"
+                 for c in f.shown_correlations]
         if LJUNG_BOX in f.rejected and not what:
             what.append("serially correlated, with no single frequency, lag or signature")
         lines.append(f"- {where}: {'; '.join(what) or 'not white'}")
@@ -205,7 +213,7 @@ def _examine(r: SensorResidual, window: str,
                       float(np.sqrt(np.mean(e**2))), lb.p_value, float(per.value or 0.0),
                       per.p_value, None if lg is None else lg.value,
                       None if lg is None else lg.std, None if lg is None else lg.p_value,
-                      corr[:TOP_CORRELATIONS])
+                      corr)
     p_values = [(LJUNG_BOX, lb.p_value), (PERIODICITY, per.p_value)]
     if lg is not None:
         p_values.append((LAG, lg.p_value))

@@ -68,6 +68,7 @@ from .hypothesis_tests import chi_bar_square_sf, cone_statistic
 from .model_comparison import LikelihoodRatio, nested_start
 from .model_spec import RISER_MODELS, ModelSpec
 from .process_memory import release_freed_memory
+from .uncertainty import NonFiniteCurvature
 
 if TYPE_CHECKING:
     from .model import Model
@@ -157,15 +158,16 @@ def candidate_effects(plugins: Mapping[str, EffectType] | None = None) -> dict[s
 
 def score_tests(fit: Fit, spec: ModelSpec,
                 candidates: Mapping[str, EffectType] | None = None,
-                progress: bool = False) -> list[ScoreTest]:
-    """Score-test every candidate effect the fit's model does not use; ranked, most
-    significant first, then the effects that could not be tested.
+                progress: bool = False, exclude: frozenset[str] = frozenset()
+                ) -> list[ScoreTest]:
+    """Score-test every candidate effect the fit's model does not use (and `exclude` does
+    not name); ranked, most significant first, then the effects that could not be tested.
 
     `spec` is the fitted model's spec; `candidates` defaults to the library
     (`candidate_effects`).
     """
     entries = {n: e for n, e in candidate_effects(candidates).items()
-               if n not in spec.effect_names}
+               if n not in spec.effect_names and n not in exclude}
     out = []
     for i, (name, entry) in enumerate(entries.items()):
         if progress and sys.stderr.isatty():
@@ -250,7 +252,14 @@ def score_test(fit: Fit, spec: ModelSpec, entry: EffectType,
         else:
             result.note = (f"C(alpha) score from the fit with the effect's states added "
                            f"(chi-square {fit.chi_square:.1f} -> {chi2:.1f})")
-    values, cov = est.gauss_newton_estimate(z, release=tested)
+    try:
+        values, cov = est.gauss_newton_estimate(z, release=tested)
+    except NonFiniteCurvature:
+        # A Jacobian with inf or NaN in it: on `fbcp` with a GPS lag, the elastic riser at
+        # its null (an all but rigid spring) integrated backwards over the lag blows up.
+        result.note = ("its linearisation at the null is not finite (the extended model "
+                       "overflows there); compare by refitting (cpas-ocp compare)")
+        return result
     _statistic(result, model, values, cov)
     result.spec = extended
     return result

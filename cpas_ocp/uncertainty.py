@@ -290,10 +290,17 @@ def _null_space(red: ReducedProblem, hessian: np.ndarray | None = None) -> _Null
         H = G.T @ G
     else:
         H = N.T @ hessian @ N
+    if not np.all(np.isfinite(H)):
+        raise NonFiniteCurvature("the reduced Hessian has non-finite entries")
     w, V = np.linalg.eigh(0.5 * (H + H.T))
     if not np.all(np.isfinite(w)):
-        raise ValueError("the reduced Hessian has non-finite entries")
+        raise NonFiniteCurvature("the reduced Hessian's eigenvalues are not finite")
     return _NullSpace(N, dw0, w, V)
+
+
+class NonFiniteCurvature(ValueError):
+    """The linearisation holds inf or NaN: the model overflows at the point (an extended
+    model at a singular null, such as a stiff riser integrated backwards over a lag)."""
 
 
 HESSIANS = ("gauss-newton", "exact")  # curvatures a covariance may invert
