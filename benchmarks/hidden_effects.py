@@ -1,0 +1,135 @@
+"""Benchmark: `discover` on `drogue` data with effects hidden, one seed each.
+
+The `drogue` problem (20 s, two Drogues, three stages, GPS + IMU + two load
+cells) is simulated with effects the baseline model lacks, fitted with the
+baseline model from the offline reduction, and handed to `discover`:
+
+* each library effect hidden in turn: added_mass, elastic_riser,
+  loadcell_friction, gps_lag (as `diagnosis_cost.py`), deployment_load
+  (2,000 lbf per Drogue), imu_bias (0.03 g), loadcell_bias (1 kN);
+* effects the library lacks (`tests/plugins/`): breathing (1.5 Hz, 4 % of
+  CdS), tension_loss (15 % at the peak load), wind_shear (a shear layer,
+  0.03 /s at 6,800 m);
+* two at once (gps_lag + added_mass), and none.
+
+Printed per case: the chain (each step's effect, chi-square/dof and wall time
+of the diagnosis that found it), why it stopped, the plug-ins proposed and
+the total wall time; at the end a table of all cases.
+
+    python benchmarks/hidden_effects.py [--cases added_mass breathing ...] [--seed N]
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import resource
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+from diagnosis_cost import DROGUES, hidden_cases
+
+from cpas_ocp.continuation import solve as solve_with_continuation
+from cpas_ocp.discovery import Discovery, DiscoveryStep, discover
+from cpas_ocp.effects import AddedMass, DeploymentLoad, Effect, SensorBias, SensorLag
+from cpas_ocp.effects import baseline_effects as baseline
+from cpas_ocp.effects.registry import load_plugin
+from cpas_ocp.estimation import Estimator
+from cpas_ocp.flight_test import load_test
+from cpas_ocp.model_spec import baseline_spec
+from cpas_ocp.problems import load_problem
+from cpas_ocp.simulate import simulate_problem
+from cpas_ocp.units import LBF
+
+PLUGINS = Path(__file__).parents[1] / "tests" / "plugins"
+# The Drogues' peak riser load in `drogue` (N), for a tension loss of 15 % there.
+PEAK_LOAD_N = 45_000.0
+
+
+def _plugin(name: str, **options: float) -> Effect:
+    path = PLUGINS / f"{name}.py"
+    return next(iter(load_plugin(path).values())).build(options, str(path), "benchmark")
+
+
+def cases() -> dict[str, tuple[list[Effect], dict[str, float]]]:
+    """Truth model and the hidden effects' true values, per case."""
+    base = baseline()
+    out = dict(hidden_cases())
+    out |= {
+        "deployment_load": ([*base[:3], DeploymentLoad(), *base[3:]],
+                            {"deployment_load[drogue]": 2000.0 * LBF}),
+        "imu_bias": ([*base, SensorBias.imu()], {"bias[imu,load_factor]": 0.03}),
+        "loadcell_bias": ([*base, SensorBias.load_cell()],
+                          {f"bias[riser_{c},tension]": 1000.0 for c in DROGUES}),
+        "breathing": ([base[0], _plugin("breathing", frequency=1.5), *base[1:]],
+                      {"breathing_frequency": 1.5,
+                       **{f"breathing_cos[{c}]": 0.04 for c in DROGUES}}),
+        "tension_loss": ([*base, _plugin("tension_loss")],
+                         {f"tension_loss[{c}]": 0.15 / PEAK_LOAD_N for c in DROGUES}),
+        "wind_shear": ([_plugin("wind_shear"), *base], {"shear_rate": 0.03}),
+        "gps_lag+added_mass": ([*base, AddedMass(), SensorLag.gps()],
+                               {"lag[gps]": 0.1,
+                                **{f"added_mass_factor[{c}]": 1.4 for c in DROGUES}}),
+    }
+    return out
+
+
+def run(case: str, seed: int, root: Path) -> tuple[Discovery, list[float], float]:
+    """The discovery of one case, the wall time of each step's diagnosis (s), and the
+    baseline fit's (s)."""
+    effects, values = cases()[case]
+    problem = load_problem("drogue")
+    folder = root / case
+    simulate_problem(dataclasses.replace(problem, truth={**problem.truth, **values}),
+                     folder, seed, effects=effects)
+    (folder / "truth.json").unlink()
+    t0 = time.perf_counter()
+    fit = solve_with_continuation(Estimator(load_test(folder), baseline_spec()))
+    t_fit = time.perf_counter() - t0
+    print(f"[{case}] baseline fit {t_fit:.1f} s, chi-square/dof "
+          f"{fit.chi_square / fit.dof:.3f}", flush=True)
+    times: list[float] = []
+    mark = [time.perf_counter()]
+
+    def said(step: DiscoveryStep) -> None:
+        now = time.perf_counter()
+        times.append(now - mark[0])
+        mark[0] = now
+        print(f"[{case}]   step {step.label}: chi-square/dof "
+              f"{step.fit.chi_square / step.fit.dof:.3f}, {times[-1]:.1f} s", flush=True)
+
+    found = discover(fit, baseline_spec(), on_step=said)
+    print(f"[{case}] stopped: {found.stopped}")
+    for trial in found.proposals:
+        print(f"[{case}]   {trial.text()[:300]}")
+    return found, times, t_fit
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--cases", nargs="+", default=list(cases()), choices=list(cases()))
+    parser.add_argument("--seed", type=int, default=1)
+    args = parser.parse_args()
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for case in args.cases:
+            t0 = time.perf_counter()
+            found, times, t_fit = run(case, args.seed, Path(tmp))
+            last = found.steps[-1].fit
+            rows.append((case, " > ".join(s.label for s in found.steps[1:]) or "-",
+                         last.chi_square / last.dof, found.stopped.split(":")[0][:44],
+                         t_fit, float(np.max(times)) if times else 0.0,
+                         time.perf_counter() - t0))
+    peak_gb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6
+    print(f"\n{'case':20s} {'chain':44s} {'chi2/dof':>8s} {'fit':>7s} {'longest step':>12s} "
+          f"{'total':>8s}  stopped")
+    for case, chain, chi2, stopped, t_fit, longest, total in rows:
+        print(f"{case:20s} {chain:44s} {chi2:8.3f} {t_fit:5.1f} s {longest:10.1f} s "
+              f"{total:6.0f} s  {stopped}")
+    print(f"peak memory of the process {peak_gb:.2f} GB")
+
+
+if __name__ == "__main__":
+    main()
