@@ -29,11 +29,11 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from cpas_ocp.atmosphere import StandardAtmosphere, density_at
-from cpas_ocp.estimation import Estimator
-from cpas_ocp.flight_test import FlightTest, load_test
-from cpas_ocp.problems import load_problem
-from cpas_ocp.simulate import simulate_problem
+from cpas_ocp.estimation.estimator import Estimator
+from cpas_ocp.estimation.simulate import simulate_problem
+from cpas_ocp.io.flight_test import FlightTest, load_test
+from cpas_ocp.io.problems import load_problem
+from cpas_ocp.physics.atmosphere import StandardAtmosphere, density_at
 
 
 def sounding(folder: Path, step_m: float) -> None:

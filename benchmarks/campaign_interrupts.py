@@ -25,12 +25,12 @@ from pathlib import Path
 
 import psutil
 
-from cpas_ocp.problems import load_problem
-from cpas_ocp.simulate import simulate_problem
+from cpas_ocp.estimation.simulate import simulate_problem
+from cpas_ocp.io.problems import load_problem
 
 CAMPAIGN = """
 import sys, time
-import cpas_ocp.campaign as campaign
+import cpas_ocp.campaign.campaign as campaign
 def paused(folder):
     print("task", flush=True)
     time.sleep(600.0)

@@ -12,9 +12,9 @@ import tempfile
 import time
 from pathlib import Path
 
-from cpas_ocp.campaign import run_campaign
-from cpas_ocp.problems import load_problem
-from cpas_ocp.simulate import simulate_problem
+from cpas_ocp.campaign.campaign import run_campaign
+from cpas_ocp.estimation.simulate import simulate_problem
+from cpas_ocp.io.problems import load_problem
 
 
 def main() -> None:

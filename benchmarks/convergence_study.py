@@ -30,12 +30,12 @@ from pathlib import Path
 import numpy as np
 
 from cpas_ocp.errors import SolverFailure
-from cpas_ocp.estimation import Estimator
-from cpas_ocp.flight_test import load_test
-from cpas_ocp.parameters import split_name
-from cpas_ocp.problems import load_problem
-from cpas_ocp.restarts import restart_start_times
-from cpas_ocp.simulate import simulate_problem
+from cpas_ocp.estimation.estimator import Estimator
+from cpas_ocp.estimation.simulate import simulate_problem
+from cpas_ocp.inference.restarts import restart_start_times
+from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.io.problems import load_problem
+from cpas_ocp.physics.parameters import split_name
 
 SHAPES = ("CdS", "n", "n_p", "expopen", "Ck", "t_k")  # inflation parameters scaled +-30 %
 START_SHIFT_S = 0.3

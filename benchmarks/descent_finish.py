@@ -39,15 +39,15 @@ from pathlib import Path
 import numpy as np
 
 from cpas_ocp.errors import SolverFailure
-from cpas_ocp.estimation import Estimator, Fit, Settings
-from cpas_ocp.flight_report import HELD_PROFILE_FACTORS as HELD_FACTORS
-from cpas_ocp.flight_report import HELD_PROFILE_MAX_ITER as HELD_MAX_ITER
-from cpas_ocp.flight_test import load_test
-from cpas_ocp.model_spec import spec_from_block, spec_of_test
-from cpas_ocp.problems import load_problem
-from cpas_ocp.process_intensity import without_wind
-from cpas_ocp.profile_likelihood import held_profile
-from cpas_ocp.simulate import simulate_problem
+from cpas_ocp.estimation.estimator import Estimator, Fit, Settings
+from cpas_ocp.estimation.simulate import simulate_problem
+from cpas_ocp.inference.process_intensity import without_wind
+from cpas_ocp.inference.profile_likelihood import held_profile
+from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.io.model_spec import spec_from_block, spec_of_test
+from cpas_ocp.io.problems import load_problem
+from cpas_ocp.reports.flight_report import HELD_PROFILE_FACTORS as HELD_FACTORS
+from cpas_ocp.reports.flight_report import HELD_PROFILE_MAX_ITER as HELD_MAX_ITER
 
 HELD = "expopen[main,stage2]"
 PATHS = {"before": {"descent_curvature": False, "descent_steps": 15},

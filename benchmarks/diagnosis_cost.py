@@ -29,10 +29,15 @@ import tempfile
 import time
 from pathlib import Path
 
-from cpas_ocp import diagnosis as diagnosis_module
-from cpas_ocp import score_test as score_module
-from cpas_ocp.continuation import solve as solve_with_continuation
-from cpas_ocp.effects import (
+from cpas_ocp.discrepancy import diagnosis as diagnosis_module
+from cpas_ocp.discrepancy import score_test as score_module
+from cpas_ocp.estimation.estimator import Estimator
+from cpas_ocp.estimation.simulate import simulate_problem
+from cpas_ocp.inference.continuation import solve as solve_with_continuation
+from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.io.model_spec import baseline_spec
+from cpas_ocp.io.problems import load_problem
+from cpas_ocp.physics.effects import (
     AddedMass,
     Effect,
     LoadCellFriction,
@@ -40,11 +45,6 @@ from cpas_ocp.effects import (
     baseline_effects,
     with_elastic_risers,
 )
-from cpas_ocp.estimation import Estimator
-from cpas_ocp.flight_test import load_test
-from cpas_ocp.model_spec import baseline_spec
-from cpas_ocp.problems import load_problem
-from cpas_ocp.simulate import simulate_problem
 
 DROGUES = ("drogue1", "drogue2")
 

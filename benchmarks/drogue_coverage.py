@@ -49,11 +49,11 @@ import numpy as np
 from scipy.stats import binom, chi2
 
 from cpas_ocp.errors import SolverFailure
-from cpas_ocp.estimation import Estimator
-from cpas_ocp.flight_test import load_test
-from cpas_ocp.problems import load_problem
-from cpas_ocp.simulate import simulate_problem
-from cpas_ocp.uncertainty import Covariance
+from cpas_ocp.estimation.estimator import Estimator
+from cpas_ocp.estimation.simulate import simulate_problem
+from cpas_ocp.estimation.uncertainty import Covariance
+from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.io.problems import load_problem
 
 Z95 = 1.959964  # two-sided 95 % normal quantile
 NOMINAL = 0.95

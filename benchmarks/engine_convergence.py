@@ -26,10 +26,10 @@ import tempfile
 from pathlib import Path
 
 from cpas_ocp.errors import SolverFailure
-from cpas_ocp.estimation import Estimator, Settings
-from cpas_ocp.flight_test import load_test
-from cpas_ocp.problems import load_problem
-from cpas_ocp.simulate import simulate_problem
+from cpas_ocp.estimation.estimator import Estimator, Settings
+from cpas_ocp.estimation.simulate import simulate_problem
+from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.io.problems import load_problem
 
 PATHS = {"before": Settings(watchdog_trigger=10, polish=False), "after": Settings()}
 

@@ -27,12 +27,12 @@ import tempfile
 import time
 from pathlib import Path
 
-from cpas_ocp.continuation import solve, solve_checked
 from cpas_ocp.errors import SolverFailure
-from cpas_ocp.estimation import Estimator, Fit
-from cpas_ocp.flight_test import load_test
-from cpas_ocp.problems import load_problem
-from cpas_ocp.simulate import simulate_problem
+from cpas_ocp.estimation.estimator import Estimator, Fit
+from cpas_ocp.estimation.simulate import simulate_problem
+from cpas_ocp.inference.continuation import solve, solve_checked
+from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.io.problems import load_problem
 
 
 def shifted_folder(root: Path, seed: int, case: str, offset: float) -> tuple[Path, dict]:

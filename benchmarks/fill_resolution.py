@@ -21,11 +21,11 @@ import argparse
 import dataclasses
 import time
 
-import cpas_ocp.estimation as estimation
+import cpas_ocp.estimation.estimator as estimation
 from cpas_ocp.errors import SolverFailure
-from cpas_ocp.estimation import Estimator
-from cpas_ocp.flight_test import load_test
-from cpas_ocp.model_spec import spec_of_test
+from cpas_ocp.estimation.estimator import Estimator
+from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.io.model_spec import spec_of_test
 
 HELD = "expopen[main,stage2]"
 MAIN = ("n[main,stage2]", "t_start[main,stage2]")

@@ -31,17 +31,17 @@ from pathlib import Path
 import numpy as np
 from diagnosis_cost import DROGUES, hidden_cases
 
-from cpas_ocp.continuation import solve as solve_with_continuation
-from cpas_ocp.discovery import Discovery, DiscoveryStep, discover
-from cpas_ocp.effects import AddedMass, DeploymentLoad, Effect, SensorBias, SensorLag
-from cpas_ocp.effects import baseline_effects as baseline
-from cpas_ocp.effects.registry import load_plugin
-from cpas_ocp.estimation import Estimator
-from cpas_ocp.flight_test import load_test
-from cpas_ocp.model_spec import baseline_spec
-from cpas_ocp.problems import load_problem
-from cpas_ocp.simulate import simulate_problem
-from cpas_ocp.units import LBF
+from cpas_ocp.discrepancy.discovery import Discovery, DiscoveryStep, discover
+from cpas_ocp.estimation.estimator import Estimator
+from cpas_ocp.estimation.simulate import simulate_problem
+from cpas_ocp.inference.continuation import solve as solve_with_continuation
+from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.io.model_spec import baseline_spec
+from cpas_ocp.io.problems import load_problem
+from cpas_ocp.physics.effects import AddedMass, DeploymentLoad, Effect, SensorBias, SensorLag
+from cpas_ocp.physics.effects import baseline_effects as baseline
+from cpas_ocp.physics.effects.registry import load_plugin
+from cpas_ocp.physics.units import LBF
 
 PLUGINS = Path(__file__).parents[1] / "tests" / "plugins"
 # The Drogues' peak riser load in `drogue` (N), for a tension loss of 15 % there.

@@ -28,8 +28,8 @@ from collections.abc import Callable
 import numpy as np
 from scipy.spatial import Delaunay
 
-from cpas_ocp.distributions import fit_dispersion
-from cpas_ocp.hulls import ENGINEERING_FACTOR, INSIDE_TOL, Hull, sample_in_hull
+from cpas_ocp.campaign.distributions import fit_dispersion
+from cpas_ocp.campaign.hulls import ENGINEERING_FACTOR, INSIDE_TOL, Hull, sample_in_hull
 
 TARGET_S = 2.0
 NAIVE_POINTS = 20_000

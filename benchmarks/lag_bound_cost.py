@@ -23,13 +23,13 @@ CHILD = r"""
 import dataclasses, json, resource, sys, time
 from pathlib import Path
 
-from cpas_ocp import estimation
-from cpas_ocp.effects import SensorLag, baseline_effects
+from cpas_ocp.estimation import estimator as estimation
+from cpas_ocp.physics.effects import SensorLag, baseline_effects
 from cpas_ocp.errors import SolverFailure
-from cpas_ocp.estimation import Estimator
-from cpas_ocp.flight_test import load_test
-from cpas_ocp.problems import load_problem
-from cpas_ocp.simulate import simulate_problem
+from cpas_ocp.estimation.estimator import Estimator
+from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.io.problems import load_problem
+from cpas_ocp.estimation.simulate import simulate_problem
 
 folder, bound = Path(sys.argv[1]), float(sys.argv[2])
 if not folder.exists():

@@ -7,20 +7,20 @@ infinite-mass stages each) is simulated with sensor noise drawn from
 ``--seed``.  Two methods reconstruct it from the test folder alone; the truth
 (``truth.json``) is read only at the end to score them.
 
-* Single-shot: ``cpas_ocp.estimation.Estimator(test).solve()``, the whole
+* Single-shot: ``cpas_ocp.estimation.estimator.Estimator(test).solve()``, the whole
   phase as one multiple-shooting NLP (build + solve timed).
 * Legacy (paper sections II and IV), built from the package's own pieces:
 
-  a. offline reduction (``cpas_ocp.reduction.reduce``) with the start times
+  a. offline reduction (``cpas_ocp.estimation.reduction.reduce``) with the start times
      the single-shot initial guess takes from the observed events: riser drag
      areas (Eq. 3), IMU drag area (Eq. 2) and per-stage scale factors;
   b. for each canopy and stage, the riser drag area times its stage scale is
      fitted by Nelder-Mead (CdS, Ck, n_p, expopen, t_k) with the infinite-mass
-     curve ``cpas_ocp.inflation.infinite_mass_cds`` (start time held at the
+     curve ``cpas_ocp.physics.inflation.infinite_mass_cds`` (start time held at the
      observed event, V_i = reduced airspeed at that start, the previous
      stage's fitted CdS as the stage's initial drag area);
   c. stage by stage, a bisection on one multiplier of both canopies' CdS of
-     that stage, simulating (``cpas_ocp.simulate.simulate``) from the first
+     that stage, simulating (``cpas_ocp.estimation.simulate.simulate``) from the first
      GPS state to the stage's end until the simulated altitude equals the GPS
      altitude there;
   d. simultaneous peak-load matching of every canopy and stage: Ck is scaled
@@ -64,16 +64,16 @@ import casadi as ca
 import numpy as np
 from scipy.optimize import minimize
 
-from cpas_ocp.effects import baseline_effects
-from cpas_ocp.estimation import Estimator
-from cpas_ocp.flight_test import FlightTest, Parachute
-from cpas_ocp.inflation import fill_length, infinite_mass_cds
-from cpas_ocp.kinematic_track import kinematic_track
-from cpas_ocp.model import Model
-from cpas_ocp.parameters import param_name
-from cpas_ocp.problems import load_problem
-from cpas_ocp.reduction import reduce_and_guess, stage_starts
-from cpas_ocp.simulate import Trajectory, simulate, simulate_problem
+from cpas_ocp.estimation.estimator import Estimator
+from cpas_ocp.estimation.kinematic_track import kinematic_track
+from cpas_ocp.estimation.reduction import reduce_and_guess, stage_starts
+from cpas_ocp.estimation.simulate import Trajectory, simulate, simulate_problem
+from cpas_ocp.io.flight_test import FlightTest, Parachute
+from cpas_ocp.io.problems import load_problem
+from cpas_ocp.physics.effects import baseline_effects
+from cpas_ocp.physics.inflation import fill_length, infinite_mass_cds
+from cpas_ocp.physics.model import Model
+from cpas_ocp.physics.parameters import param_name
 
 INFLATION_PARAMETERS = ("CdS", "Ck", "n_p", "expopen", "t_k")
 PEAK_WINDOW_S = 3.0  # the inflation peak is searched in [start, start + this] (and before

@@ -25,11 +25,11 @@ import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
-from cpas_ocp.estimation import Estimator
-from cpas_ocp.flight_test import load_test
-from cpas_ocp.nlp_functions import FunctionBuffer
-from cpas_ocp.problems import load_problem
-from cpas_ocp.simulate import simulate_problem
+from cpas_ocp.estimation.estimator import Estimator
+from cpas_ocp.estimation.nlp_functions import FunctionBuffer
+from cpas_ocp.estimation.simulate import simulate_problem
+from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.io.problems import load_problem
 
 
 def via_dm(fn: ca.Function, z: np.ndarray) -> list[np.ndarray | sp.csc_matrix]:

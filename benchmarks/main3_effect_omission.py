@@ -29,13 +29,13 @@ from pathlib import Path
 
 from scipy.stats import chi2
 
-from cpas_ocp.effects import RigidRiser
 from cpas_ocp.errors import SolverFailure
-from cpas_ocp.estimation import Estimator, Fit, Settings
-from cpas_ocp.flight_test import FlightTest, load_test
-from cpas_ocp.model_spec import ModelSpec, spec_of_test
-from cpas_ocp.problems import load_problem
-from cpas_ocp.simulate import simulate_problem
+from cpas_ocp.estimation.estimator import Estimator, Fit, Settings
+from cpas_ocp.estimation.simulate import simulate_problem
+from cpas_ocp.io.flight_test import FlightTest, load_test
+from cpas_ocp.io.model_spec import ModelSpec, spec_of_test
+from cpas_ocp.io.problems import load_problem
+from cpas_ocp.physics.effects import RigidRiser
 
 MAX_ITERATIONS = 200  # each fit that converges takes 100-140
 

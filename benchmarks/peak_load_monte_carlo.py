@@ -15,12 +15,12 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from cpas_ocp.estimation import Estimator
-from cpas_ocp.flight_test import load_test
-from cpas_ocp.parameters import param_name
-from cpas_ocp.peak_loads import stage_peak_loads
-from cpas_ocp.problems import load_problem
-from cpas_ocp.simulate import simulate_problem
+from cpas_ocp.campaign.peak_loads import stage_peak_loads
+from cpas_ocp.estimation.estimator import Estimator
+from cpas_ocp.estimation.simulate import simulate_problem
+from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.io.problems import load_problem
+from cpas_ocp.physics.parameters import param_name
 
 SHAPE = ("CdS", "Ck", "n_p", "expopen", "t_k")
 

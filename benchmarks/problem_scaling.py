@@ -31,10 +31,10 @@ from pathlib import Path
 
 import numpy as np
 
-from cpas_ocp.estimation import Estimator, Settings
-from cpas_ocp.flight_test import load_test
-from cpas_ocp.problems import load_problem, problem_names
-from cpas_ocp.simulate import simulate_problem
+from cpas_ocp.estimation.estimator import Estimator, Settings
+from cpas_ocp.estimation.simulate import simulate_problem
+from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.io.problems import load_problem, problem_names
 
 
 def run_one(folder: Path, grid_step: float | None, exact: bool = False) -> dict:

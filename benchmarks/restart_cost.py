@@ -27,12 +27,12 @@ from pathlib import Path
 
 from iteration_cost import make_test
 
-from cpas_ocp.estimation import Estimator, Fit
-from cpas_ocp.flight_test import load_test
-from cpas_ocp.model_spec import baseline_spec
-from cpas_ocp.problems import load_problem
-from cpas_ocp.restarts import misfit_start_times, restart_start_times
-from cpas_ocp.simulate import simulate_problem
+from cpas_ocp.estimation.estimator import Estimator, Fit
+from cpas_ocp.estimation.simulate import simulate_problem
+from cpas_ocp.inference.restarts import misfit_start_times, restart_start_times
+from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.io.model_spec import baseline_spec
+from cpas_ocp.io.problems import load_problem
 
 PILOT_START = "t_start[pilot1,stage1]"
 

@@ -27,9 +27,9 @@ CHILD = r"""
 import json, sys, time
 from pathlib import Path
 from cpas_ocp.errors import SolverFailure
-from cpas_ocp.estimation import Estimator, Settings
-from cpas_ocp.flight_test import load_test
-from cpas_ocp.model_spec import baseline_spec
+from cpas_ocp.estimation.estimator import Estimator, Settings
+from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.io.model_spec import baseline_spec
 
 folder, misspecified, max_iter = Path(sys.argv[1]), sys.argv[2] == "1", int(sys.argv[3])
 test = load_test(folder)

@@ -23,13 +23,13 @@ import tempfile
 import time
 from pathlib import Path
 
-from cpas_ocp.altus_metrum import read_altus_log
 from cpas_ocp.errors import SolverFailure
-from cpas_ocp.estimation import Estimator, Fit, Settings, default_grid_step
-from cpas_ocp.flight_log import import_flight, load_card
-from cpas_ocp.flight_test import FlightTest, load_test
-from cpas_ocp.problems import load_problem
-from cpas_ocp.simulate import simulate_problem
+from cpas_ocp.estimation.estimator import Estimator, Fit, Settings, default_grid_step
+from cpas_ocp.estimation.simulate import simulate_problem
+from cpas_ocp.io.altus_metrum import read_altus_log
+from cpas_ocp.io.flight_log import import_flight, load_card
+from cpas_ocp.io.flight_test import FlightTest, load_test
+from cpas_ocp.io.problems import load_problem
 
 
 def cases(names: list[str], seed: int, data: Path, root: Path) -> dict[str, FlightTest]:

@@ -34,14 +34,14 @@ from pathlib import Path
 
 import numpy as np
 
-from cpas_ocp.continuation import solve_checked
-from cpas_ocp.effects.registry import BASELINE
 from cpas_ocp.errors import SolverFailure
-from cpas_ocp.estimation import Estimator
-from cpas_ocp.flight_test import load_test
-from cpas_ocp.model_spec import ModelSpec, spec_from_block, spec_of_test
-from cpas_ocp.problems import load_problem
-from cpas_ocp.simulate import simulate_problem
+from cpas_ocp.estimation.estimator import Estimator
+from cpas_ocp.estimation.simulate import simulate_problem
+from cpas_ocp.inference.continuation import solve_checked
+from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.io.model_spec import ModelSpec, spec_from_block, spec_of_test
+from cpas_ocp.io.problems import load_problem
+from cpas_ocp.physics.effects.registry import BASELINE
 
 Z95 = 1.959964
 

@@ -43,19 +43,19 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from . import interrupts
-from .errors import InputError, NotAResult, SolverFailure
-from .output_folder import check_output
+from cpas_ocp import interrupts
+from cpas_ocp.errors import InputError, NotAResult, SolverFailure
+from cpas_ocp.io.output_folder import check_output
 
 if TYPE_CHECKING:
-    from .effects.registry import EffectType
-    from .estimation import Estimator, Fit
-    from .flight_log import FlightCard
-    from .flight_test import FlightTest
-    from .model_spec import ModelSpec
-    from .recorder_clocks import RecorderEstimates
-    from .result_claim import Claim
-    from .uncertainty import Covariance
+    from cpas_ocp.estimation.estimator import Estimator, Fit
+    from cpas_ocp.estimation.uncertainty import Covariance
+    from cpas_ocp.inference.result_claim import Claim
+    from cpas_ocp.io.flight_log import FlightCard
+    from cpas_ocp.io.flight_test import FlightTest
+    from cpas_ocp.io.model_spec import ModelSpec
+    from cpas_ocp.io.recorder_clocks import RecorderEstimates
+    from cpas_ocp.physics.effects.registry import EffectType
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -101,7 +101,7 @@ def main(argv: list[str] | None = None) -> int:
 def _internal_error(exc: Exception) -> int:
     """Report an error that is the tool's own, not the user's: one line on stderr, the
     traceback in a log file beside the compile cache; exit code 1."""
-    from .compiled import cache_folder
+    from cpas_ocp.estimation.compiled import cache_folder
     line = f"{type(exc).__name__}: {exc}".splitlines()[0][:300]
     log = cache_folder() / "crash" / f"{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}.log"
     try:
@@ -276,7 +276,7 @@ def _plugin_option(s: argparse.ArgumentParser, text: str) -> None:
 
 def _plugins(args: argparse.Namespace) -> dict[str, EffectType]:
     """The effects of the plug-in files given with --plugin, by name."""
-    from .effects.registry import load_plugin
+    from cpas_ocp.physics.effects.registry import load_plugin
     out: dict[str, EffectType] = {}
     for path in args.plugin:
         out.update(load_plugin(path))
@@ -313,7 +313,7 @@ def _model_option(s: argparse.ArgumentParser, model: bool = True, plugin: bool =
 
 def _spec(test: FlightTest, args: argparse.Namespace) -> ModelSpec:
     """The model of --model, else the manifest's, plug-ins contained as asked."""
-    from .model_spec import load_model_file, spec_of_test
+    from cpas_ocp.io.model_spec import load_model_file, spec_of_test
     allow = getattr(args, "allow_external_plugins", False)
     model = getattr(args, "model", None)
     plugins = _plugins(args) if getattr(args, "plugin", None) else None
@@ -322,8 +322,8 @@ def _spec(test: FlightTest, args: argparse.Namespace) -> ModelSpec:
 
 
 def _solver_options(s: argparse.ArgumentParser) -> None:
-    from .estimation import MIN_GRID_STEP_S
-    from .uncertainty import HESSIANS
+    from cpas_ocp.estimation.estimator import MIN_GRID_STEP_S
+    from cpas_ocp.estimation.uncertainty import HESSIANS
     s.add_argument("--grid-step", type=_ranged(float, MIN_GRID_STEP_S), default=None,
                    help="force a uniform shooting interval [s] (default: chosen from the "
                         "dynamics, the fastest sensor's sampling interval where the motion "
@@ -353,7 +353,7 @@ def _factors(text: str) -> tuple[float, ...]:
 
 
 def _problems(args: argparse.Namespace) -> int:
-    from .problems import load_problem, problem_names
+    from cpas_ocp.io.problems import load_problem, problem_names
     for name in problem_names():
         prob = load_problem(name)
         print(f"{name:12s} {prob.title}\n{'':12s} {prob.label}")
@@ -361,7 +361,7 @@ def _problems(args: argparse.Namespace) -> int:
 
 
 def _effects(args: argparse.Namespace) -> int:
-    from .effects.registry import BASELINE, BUILTIN
+    from cpas_ocp.physics.effects.registry import BASELINE, BUILTIN
     entries = {**BUILTIN, **_plugins(args)}
     for name, entry in entries.items():
         mark = "*" if name in BASELINE else " "
@@ -373,16 +373,16 @@ def _effects(args: argparse.Namespace) -> int:
 
 
 def _simulate(args: argparse.Namespace) -> int:
-    from .problems import load_problem
-    from .simulate import simulate_problem
+    from cpas_ocp.estimation.simulate import simulate_problem
+    from cpas_ocp.io.problems import load_problem
     test = simulate_problem(load_problem(args.name), args.out, args.seed)
     print(f"wrote test folder {args.out} ({test.name}) with truth.json")
     return 0
 
 
 def _reduce(args: argparse.Namespace) -> int:
-    from .flight_test import load_test
-    from .reduction_report import guess_table, write_reduction
+    from cpas_ocp.io.flight_test import load_test
+    from cpas_ocp.reports.reduction_report import guess_table, write_reduction
     test = load_test(args.test_dir)
     out, model, guess = write_reduction(test, args.out, _spec(test, args))
     print(guess_table(model, guess))
@@ -391,15 +391,15 @@ def _reduce(args: argparse.Namespace) -> int:
 
 
 def _reconstruct(args: argparse.Namespace) -> int:
-    from .flight_test import load_test
+    from cpas_ocp.io.flight_test import load_test
     test = load_test(args.test_dir)
     _run_reconstruction(test, args, _spec(test, args))
     return 0
 
 
 def _whatif(args: argparse.Namespace) -> int:
-    from .flight_test import load_test
-    from .whatif import parameter_bounds, parse_constraint, what_if, whatif_text
+    from cpas_ocp.inference.whatif import parameter_bounds, parse_constraint, what_if, whatif_text
+    from cpas_ocp.io.flight_test import load_test
     test = load_test(args.test_dir)
     est = _estimator(test, args, _spec(test, args))
     constraints = [parse_constraint(text, est) for text in args.constrain]
@@ -416,9 +416,9 @@ def _whatif(args: argparse.Namespace) -> int:
 
 
 def _diagnose(args: argparse.Namespace) -> int:
-    from .diagnosis import diagnose
-    from .discrepancy_report import write_diagnosis
-    from .flight_test import load_test
+    from cpas_ocp.discrepancy.diagnosis import diagnose
+    from cpas_ocp.io.flight_test import load_test
+    from cpas_ocp.reports.discrepancy_report import write_diagnosis
     test = load_test(args.test_dir)
     plugins = _plugins(args)
     spec = _spec(test, args)
@@ -451,9 +451,9 @@ def _diagnosis_options(s: argparse.ArgumentParser) -> None:
 
 
 def _discover(args: argparse.Namespace) -> int:
-    from .discovery import DiscoveryStep, discover
-    from .discrepancy_report import write_discovery
-    from .flight_test import load_test
+    from cpas_ocp.discrepancy.discovery import DiscoveryStep, discover
+    from cpas_ocp.io.flight_test import load_test
+    from cpas_ocp.reports.discrepancy_report import write_discovery
     test = load_test(args.test_dir)
     plugins = _plugins(args)
     est = _estimator(test, args, _spec(test, args))
@@ -483,11 +483,11 @@ def _discover(args: argparse.Namespace) -> int:
 
 
 def _compare(args: argparse.Namespace) -> int:
-    from .discrepancy_report import write_comparison
-    from .flight_test import load_test
-    from .model_comparison import compare
-    from .model_spec import load_model_file, spec_of_test
-    from .result_claim import start_shifts, with_start_shifts
+    from cpas_ocp.inference.model_comparison import compare
+    from cpas_ocp.inference.result_claim import start_shifts, with_start_shifts
+    from cpas_ocp.io.flight_test import load_test
+    from cpas_ocp.io.model_spec import load_model_file, spec_of_test
+    from cpas_ocp.reports.discrepancy_report import write_comparison
     if len(args.model) != 2:
         raise InputError("(command line)", "--model",
                          f"exactly two models (--model A --model B); got {len(args.model)}")
@@ -515,7 +515,7 @@ def _compare(args: argparse.Namespace) -> int:
 
 
 def _campaign(args: argparse.Namespace) -> int:
-    from .campaign import campaign_text, find_tests, run_campaign, write_campaign
+    from cpas_ocp.campaign.campaign import campaign_text, find_tests, run_campaign, write_campaign
     where = _where(args)
     folders = find_tests(args.tests_dir)
     print(f"reconstructing {len(folders)} test folders on {where} ...", flush=True)
@@ -536,7 +536,7 @@ def _campaign(args: argparse.Namespace) -> int:
 
 
 def _dispersions(args: argparse.Namespace) -> int:
-    from .dispersion_study import (
+    from cpas_ocp.campaign.dispersion_study import (
         dispersion_models,
         read_parameter_table,
         read_stage_table,
@@ -562,11 +562,7 @@ def _dispersions(args: argparse.Namespace) -> int:
 
 
 def _montecarlo(args: argparse.Namespace) -> int:
-    from .continuation import solve_checked
-    from .estimation import Estimator
-    from .flight_test import load_test
-    from .output_folder import atomic_folder
-    from .peak_load_study import (
+    from cpas_ocp.campaign.peak_load_study import (
         MARKER,
         check_columns,
         match_cases,
@@ -574,6 +570,10 @@ def _montecarlo(args: argparse.Namespace) -> int:
         summary_text,
         write_monte_carlo,
     )
+    from cpas_ocp.estimation.estimator import Estimator
+    from cpas_ocp.inference.continuation import solve_checked
+    from cpas_ocp.io.flight_test import load_test
+    from cpas_ocp.io.output_folder import atomic_folder
     where = _where(args)
     test = load_test(args.test_dir)
     stages = match_cases(test, args.cases, args.limit)
@@ -595,8 +595,8 @@ def _montecarlo(args: argparse.Namespace) -> int:
 
 
 def _import_altus(args: argparse.Namespace) -> int:
-    from .altus_metrum import read_altus_log
-    from .flight_log import import_flight, load_card
+    from cpas_ocp.io.altus_metrum import read_altus_log
+    from cpas_ocp.io.flight_log import import_flight, load_card
     summary = import_flight(read_altus_log(args.log), load_card(args.card), args.out)
     print(summary.text())
     print(f"test folder written to {args.out}")
@@ -604,7 +604,7 @@ def _import_altus(args: argparse.Namespace) -> int:
 
 
 def _flight(args: argparse.Namespace) -> int:
-    from .flight_log import load_card
+    from cpas_ocp.io.flight_log import load_card
     card = load_card(args.card)
     data = args.data if args.data is not None else Path("../shared/data") / card.data_folder
     logs = args.log or list(card.logs)
@@ -614,7 +614,7 @@ def _flight(args: argparse.Namespace) -> int:
                              "(give the folder holding it with --data)")
     recorders = [_flight_log(args, card, data / name) for name in logs]
     if len(recorders) > 1:
-        from .recorder_clocks import recorders_text
+        from cpas_ocp.io.recorder_clocks import recorders_text
         text = recorders_text(recorders)
         (args.out / "recorders.md").write_text(f"# {card.title}\n\n{text}")
         print()
@@ -627,14 +627,14 @@ def _flight_log(args: argparse.Namespace, card: FlightCard, log: Path) -> Record
     """Import, reconstruct, diagnose and compare one log of the `flight` command (a function
     of its own so that one log's fits and refits are freed before the next log's): its
     drag areas and start times, for the recorders' comparison."""
-    from .altus_metrum import read_altus_log
-    from .diagnosis import diagnose
-    from .discrepancy_report import write_diagnosis
-    from .flight_log import import_flight
-    from .flight_report import air_motion_text, flight_text, held_opening_profiles
-    from .flight_test import load_test
-    from .process_intensity import without_wind
-    from .recorder_clocks import RecorderEstimates
+    from cpas_ocp.discrepancy.diagnosis import diagnose
+    from cpas_ocp.inference.process_intensity import without_wind
+    from cpas_ocp.io.altus_metrum import read_altus_log
+    from cpas_ocp.io.flight_log import import_flight
+    from cpas_ocp.io.flight_test import load_test
+    from cpas_ocp.io.recorder_clocks import RecorderEstimates
+    from cpas_ocp.reports.discrepancy_report import write_diagnosis
+    from cpas_ocp.reports.flight_report import air_motion_text, flight_text, held_opening_profiles
     folder = args.out / log.stem
     print(f"== {log.name}: import", flush=True)
     altus = read_altus_log(log)
@@ -666,7 +666,7 @@ def _flight_still_air(test: FlightTest, args: argparse.Namespace, spec: ModelSpe
     """The `flight` log fitted again without the card's wind process (report in
     ``report_still``): the fit, its covariance and a markdown line where it is not a
     result, or the markdown that says it failed."""
-    from .report import write_report
+    from cpas_ocp.reports.report import write_report
     print("reconstructing in still air (the card's model without its wind_process) ...",
           flush=True)
     still_args = argparse.Namespace(**{**vars(args), "wind_intensity": None})
@@ -690,8 +690,8 @@ def _flight_still_air(test: FlightTest, args: argparse.Namespace, spec: ModelSpe
 def _demo(args: argparse.Namespace) -> int:
     import shutil
 
-    from .problems import load_problem
-    from .simulate import simulate_problem
+    from cpas_ocp.estimation.simulate import simulate_problem
+    from cpas_ocp.io.problems import load_problem
     test_dir = args.out / "test"
     if test_dir.is_symlink() or (test_dir.exists() and not (test_dir / "truth.json").is_file()):
         raise InputError(str(test_dir), "(folder)", "no such folder, or a test simulated by an "
@@ -714,8 +714,8 @@ def _run_reconstruction(test: FlightTest, args: argparse.Namespace, spec: ModelS
                         ) -> tuple[Estimator, Fit, Covariance, Path]:
     """Solve, write the report folder (`out`, default --out) and print the tables and the
     fit's claim; NotAResult, after the report is written, where the fit is not a result."""
-    from .profile_likelihood import profile, require_free
-    from .report import fit_summary, parameter_table, write_report
+    from cpas_ocp.inference.profile_likelihood import profile, require_free
+    from cpas_ocp.reports.report import fit_summary, parameter_table, write_report
     est = _estimator(test, args, spec)
     names = getattr(args, "profile", [])
     for name in names:
@@ -725,7 +725,7 @@ def _run_reconstruction(test: FlightTest, args: argparse.Namespace, spec: ModelS
     try:
         est, fit, cov, claim = _fit_and_covariance(est, args)
     except SolverFailure as exc:
-        from .failure_report import write_failure_report
+        from cpas_ocp.reports.failure_report import write_failure_report
         folder = write_failure_report(exc, target)
         print(f"NOT CONVERGED: why is in {folder / 'failure.md'}", file=sys.stderr)
         raise
@@ -748,8 +748,8 @@ def _run_reconstruction(test: FlightTest, args: argparse.Namespace, spec: ModelS
 
 def _estimator(test: FlightTest, args: argparse.Namespace, spec: ModelSpec) -> Estimator:
     """The NLP of a test phase with the command line's solver options (built and announced)."""
-    from .estimation import Estimator, Settings
-    from .shooting_grid import grid_text
+    from cpas_ocp.estimation.estimator import Estimator, Settings
+    from cpas_ocp.estimation.shooting_grid import grid_text
     if args.grid_step is not None and not 0.0 < args.grid_step < test.t_end - test.t_start:
         raise InputError("(command line)", "--grid-step",
                          f"a step in seconds, positive and shorter than the phase; "
@@ -767,10 +767,10 @@ def _fit_and_covariance(est: Estimator, args: argparse.Namespace
     """Solve, check what the fit may claim (moving start windows the data press against;
     the estimator returned is the one that gave the fit), and the covariance the command
     line asks for (a warning where the data leave a parameter combination undetermined)."""
-    from .continuation import solve_checked
+    from cpas_ocp.inference.continuation import solve_checked
     if getattr(args, "wind_intensity", None):
-        from .process_intensity import choose_intensity
-        from .result_claim import check_claim
+        from cpas_ocp.inference.process_intensity import choose_intensity
+        from cpas_ocp.inference.result_claim import check_claim
         print(f"choosing the wind process's intensity ({len(args.wind_intensity)} fits) ...",
               flush=True)
         choice = choose_intensity(est.test, est.spec, args.wind_intensity,

@@ -9,12 +9,12 @@ from pathlib import Path
 import pytest
 from scipy.stats import chi2
 
-from cpas_ocp.estimation import Estimator, Fit
-from cpas_ocp.flight_test import load_test
-from cpas_ocp.parameters import split_name
-from cpas_ocp.problems import load_problem
-from cpas_ocp.simulate import simulate_problem
-from cpas_ocp.uncertainty import Covariance
+from cpas_ocp.estimation.estimator import Estimator, Fit
+from cpas_ocp.estimation.simulate import simulate_problem
+from cpas_ocp.estimation.uncertainty import Covariance
+from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.io.problems import load_problem
+from cpas_ocp.physics.parameters import split_name
 
 START_GUESS_OFFSET_S = 0.3
 

@@ -9,14 +9,14 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from cpas_ocp.effects import AddedMass, baseline_effects
-from cpas_ocp.effects.added_mass import K_APPARENT, K_ENCLOSED, PROJECTED_RATIO
-from cpas_ocp.estimation import STATISTICALLY_CONVERGED, Estimator
-from cpas_ocp.flight_test import load_test
-from cpas_ocp.model import Model
-from cpas_ocp.parameters import param_name
-from cpas_ocp.problems import load_problem
-from cpas_ocp.simulate import initial_state, simulate, simulate_problem
+from cpas_ocp.estimation.estimator import STATISTICALLY_CONVERGED, Estimator
+from cpas_ocp.estimation.simulate import initial_state, simulate, simulate_problem
+from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.io.problems import load_problem
+from cpas_ocp.physics.effects import AddedMass, baseline_effects
+from cpas_ocp.physics.effects.added_mass import K_APPARENT, K_ENCLOSED, PROJECTED_RATIO
+from cpas_ocp.physics.model import Model
+from cpas_ocp.physics.parameters import param_name
 
 from .conftest import START_GUESS_OFFSET_S, offset_events
 

@@ -15,19 +15,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from cpas_ocp.altus_metrum import read_altus_log
-from cpas_ocp.atmosphere import (
-    SiteAtmosphere,
-    StandardAtmosphere,
-    density_at,
-    geometric_altitude,
-    pressure_altitude,
-)
 from cpas_ocp.cli import main
-from cpas_ocp.effects.canopy_inflation import CanopyInflation
 from cpas_ocp.errors import InputError
-from cpas_ocp.estimation import Estimator
-from cpas_ocp.flight_log import (
+from cpas_ocp.estimation.estimator import Estimator
+from cpas_ocp.io.altus_metrum import read_altus_log
+from cpas_ocp.io.flight_log import (
     card_from_dict,
     fit_lapse_rate,
     import_flight,
@@ -36,8 +28,16 @@ from cpas_ocp.flight_log import (
     second_difference_sigma,
     settled_time,
 )
-from cpas_ocp.flight_test import load_test
-from cpas_ocp.units import G0
+from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.physics.atmosphere import (
+    SiteAtmosphere,
+    StandardAtmosphere,
+    density_at,
+    geometric_altitude,
+    pressure_altitude,
+)
+from cpas_ocp.physics.effects.canopy_inflation import CanopyInflation
+from cpas_ocp.physics.units import G0
 
 SITE = SiteAtmosphere.from_surface_density(1401.0, 86300.0, 1.001, 0.008)
 HEADER = ("#version,serial,flight,call,time,state,state_name,acceleration,pressure,altitude,"

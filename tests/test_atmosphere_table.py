@@ -9,10 +9,10 @@ import shutil
 import numpy as np
 import pandas as pd
 
-from cpas_ocp.atmosphere import StandardAtmosphere, TableAtmosphere, density_at, wind_at
-from cpas_ocp.effects import baseline_effects
-from cpas_ocp.flight_test import load_test
-from cpas_ocp.model import Model
+from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.physics.atmosphere import StandardAtmosphere, TableAtmosphere, density_at, wind_at
+from cpas_ocp.physics.effects import baseline_effects
+from cpas_ocp.physics.model import Model
 
 
 def _sounding(step_m: float = 300.0) -> pd.DataFrame:

@@ -121,7 +121,7 @@ def test_missing_folder(tmp_path, capsys):
 def test_a_byte_order_mark_is_valid_input(drogue_folder, tmp_path):
     """Spreadsheet programs write UTF-8 with a byte-order mark: the manifest and the CSV
     files load as they do without one."""
-    from cpas_ocp.flight_test import load_test
+    from cpas_ocp.io.flight_test import load_test
 
     folder = tmp_path / "test"
     shutil.copytree(drogue_folder(1), folder)
@@ -191,7 +191,7 @@ def test_a_plug_in_that_exits_at_import_is_an_input_error(tmp_path, capsys):
 
 _PLUGIN_HEAD = """from dataclasses import dataclass
 
-from cpas_ocp.effects import Effect
+from cpas_ocp.physics.effects import Effect
 
 
 @dataclass(frozen=True)

@@ -20,10 +20,10 @@ import pandas as pd
 import pytest
 
 from cpas_ocp.cli import main
-from cpas_ocp.effects import baseline_effects
-from cpas_ocp.effects.registry import BASELINE, load_plugin
-from cpas_ocp.problems import load_problem
-from cpas_ocp.simulate import simulate_problem
+from cpas_ocp.estimation.simulate import simulate_problem
+from cpas_ocp.io.problems import load_problem
+from cpas_ocp.physics.effects import baseline_effects
+from cpas_ocp.physics.effects.registry import BASELINE, load_plugin
 
 PLUGIN = Path(__file__).parent / "plugins" / "breathing.py"
 FREQUENCY_HZ = 3.0

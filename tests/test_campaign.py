@@ -9,7 +9,7 @@ import shutil
 import pandas as pd
 import pytest
 
-from cpas_ocp.campaign import COLUMNS, find_tests, parameter_table, run_campaign
+from cpas_ocp.campaign.campaign import COLUMNS, find_tests, parameter_table, run_campaign
 from cpas_ocp.cli import main
 
 

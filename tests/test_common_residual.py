@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from cpas_ocp.common_residual import combined_p_value, shared_residuals
-from cpas_ocp.estimation import SensorResidual
+from cpas_ocp.discrepancy.common_residual import combined_p_value, shared_residuals
+from cpas_ocp.estimation.estimator import SensorResidual
 
 SPANS = [(0.0, 130.0), (130.0, 195.0)]  # two canopy phases (s), as in a rocket's descent
 

@@ -7,9 +7,9 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from cpas_ocp import compiled
-from cpas_ocp.estimation import Estimator, Settings
-from cpas_ocp.flight_test import load_test
+from cpas_ocp.estimation import compiled
+from cpas_ocp.estimation.estimator import Estimator, Settings
+from cpas_ocp.io.flight_test import load_test
 
 pytestmark = pytest.mark.skipif(compiled.compiler() is None, reason="no C compiler here")
 

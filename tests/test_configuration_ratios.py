@@ -6,8 +6,12 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from cpas_ocp.campaign import COLUMNS
-from cpas_ocp.configuration_ratios import campaign_ratios, drag_area_ratios, varies_within_a_stage
+from cpas_ocp.campaign.campaign import COLUMNS
+from cpas_ocp.campaign.configuration_ratios import (
+    campaign_ratios,
+    drag_area_ratios,
+    varies_within_a_stage,
+)
 
 
 def test_ratio_recovers_a_known_deficit_within_its_standard_error() -> None:

@@ -6,11 +6,11 @@ import dataclasses
 
 import pytest
 
-from cpas_ocp import continuation
-from cpas_ocp.effects import ElasticRiser
-from cpas_ocp.estimation import Estimator, Settings
-from cpas_ocp.flight_test import load_test
-from cpas_ocp.model_spec import spec_of_test
+from cpas_ocp.estimation.estimator import Estimator, Settings
+from cpas_ocp.inference import continuation
+from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.io.model_spec import spec_of_test
+from cpas_ocp.physics.effects import ElasticRiser
 
 
 @pytest.fixture(scope="module")

@@ -18,13 +18,13 @@ import dataclasses
 import pytest
 from scipy.stats import chi2
 
-from cpas_ocp.effects import DeploymentLoad, baseline_effects
 from cpas_ocp.errors import InputError
-from cpas_ocp.estimation import Estimator
-from cpas_ocp.flight_test import load_test
-from cpas_ocp.model_spec import spec_from_block
-from cpas_ocp.problems import load_problem
-from cpas_ocp.simulate import simulate_problem
+from cpas_ocp.estimation.estimator import Estimator
+from cpas_ocp.estimation.simulate import simulate_problem
+from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.io.model_spec import spec_from_block
+from cpas_ocp.io.problems import load_problem
+from cpas_ocp.physics.effects import DeploymentLoad, baseline_effects
 
 LOAD_N = 8896.4  # 2,000 lbf
 

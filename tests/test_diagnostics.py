@@ -30,25 +30,7 @@ import numpy as np
 import pytest
 from scipy.stats import binom
 
-from cpas_ocp.diagnostics import (
-    WindowStatistic,
-    window_statistics,
-    worst_of,
-    worst_place,
-)
-from cpas_ocp.estimation import Fit, Settings, SolverStats
-from cpas_ocp.flight_test import load_test
-from cpas_ocp.model_spec import spec_of_test
-from cpas_ocp.parameters import param_name
-from cpas_ocp.phase_windows import (
-    OUTSIDE,
-    PhaseWindow,
-    phase_windows,
-    window_index,
-)
-from cpas_ocp.plots import plot_sensor_residuals
-from cpas_ocp.problems import load_problem, problem_names
-from cpas_ocp.residual_diagnosis import (
+from cpas_ocp.discrepancy.residual_diagnosis import (
     LAG,
     PERIODICITY,
     WHOLE_PHASE,
@@ -57,7 +39,25 @@ from cpas_ocp.residual_diagnosis import (
     plausible_lag,
     signature_text,
 )
-from cpas_ocp.simulate import initial_state, simulate
+from cpas_ocp.estimation.estimator import Fit, Settings, SolverStats
+from cpas_ocp.estimation.simulate import initial_state, simulate
+from cpas_ocp.inference.diagnostics import (
+    WindowStatistic,
+    window_statistics,
+    worst_of,
+    worst_place,
+)
+from cpas_ocp.inference.phase_windows import (
+    OUTSIDE,
+    PhaseWindow,
+    phase_windows,
+    window_index,
+)
+from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.io.model_spec import spec_of_test
+from cpas_ocp.io.problems import load_problem, problem_names
+from cpas_ocp.physics.parameters import param_name
+from cpas_ocp.reports.plots import plot_sensor_residuals
 
 TRUTH_STEP_S = 0.01  # RK4 step of the truth trajectories: fine for drag areas over 0.1 s fills
 

@@ -20,15 +20,15 @@ import pytest
 from scipy.stats import chi2
 
 from cpas_ocp.cli import main
-from cpas_ocp.diagnosis import ALPHA
-from cpas_ocp.discovery import discover
-from cpas_ocp.discrepancy_report import write_discovery
-from cpas_ocp.effects import AddedMass, SensorLag, baseline_effects
-from cpas_ocp.estimation import Estimator
-from cpas_ocp.flight_test import load_test
-from cpas_ocp.model_spec import baseline_spec, load_model_file
-from cpas_ocp.problems import load_problem
-from cpas_ocp.simulate import simulate_problem
+from cpas_ocp.discrepancy.diagnosis import ALPHA
+from cpas_ocp.discrepancy.discovery import discover
+from cpas_ocp.estimation.estimator import Estimator
+from cpas_ocp.estimation.simulate import simulate_problem
+from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.io.model_spec import baseline_spec, load_model_file
+from cpas_ocp.io.problems import load_problem
+from cpas_ocp.physics.effects import AddedMass, SensorLag, baseline_effects
+from cpas_ocp.reports.discrepancy_report import write_discovery
 
 from .conftest import assert_truth_within_noise
 

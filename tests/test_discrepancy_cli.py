@@ -7,7 +7,7 @@ import json
 import pytest
 
 from cpas_ocp.cli import main
-from cpas_ocp.effects.registry import BASELINE
+from cpas_ocp.physics.effects.registry import BASELINE
 
 
 @pytest.mark.parametrize("argv, field", [
@@ -72,12 +72,12 @@ def test_compare_without_nesting_uses_the_criteria_only(problem_folder, tmp_path
 def test_a_failing_plugin_is_reported_among_the_candidates(problem_fit, tmp_path) -> None:
     """A user's effect whose code raises is listed as not tested, with the error; the other
     candidates are still tested."""
-    from cpas_ocp.effects.registry import load_plugin
-    from cpas_ocp.model_spec import baseline_spec
-    from cpas_ocp.score_test import score_test
+    from cpas_ocp.discrepancy.score_test import score_test
+    from cpas_ocp.io.model_spec import baseline_spec
+    from cpas_ocp.physics.effects.registry import load_plugin
     (tmp_path / "bad.py").write_text(
-        "from cpas_ocp.effects import Effect\n"
-        "from cpas_ocp.parameters import Parameter\n\n\n"
+        "from cpas_ocp.physics.effects import Effect\n"
+        "from cpas_ocp.physics.parameters import Parameter\n\n\n"
         "class Bad(Effect):\n"
         "    name = 'bad_effect'\n\n"
         "    def parameters(self, test):\n"

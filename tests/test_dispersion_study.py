@@ -9,9 +9,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from cpas_ocp.campaign import COLUMNS
+from cpas_ocp.campaign.campaign import COLUMNS
+from cpas_ocp.campaign.dispersion_study import dispersion_models
 from cpas_ocp.cli import main
-from cpas_ocp.dispersion_study import dispersion_models
 
 SEED = 11
 

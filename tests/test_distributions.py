@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from cpas_ocp.distributions import Dispersion, fit_dispersion
+from cpas_ocp.campaign.distributions import Dispersion, fit_dispersion
 
 N_LARGE = 20_000
 N_SE = 4.0  # allowed error in standard errors for asymptotically normal estimators

@@ -11,15 +11,15 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from cpas_ocp.campaign import STAGE_COLUMNS, reconstruct_folder
+from cpas_ocp.campaign.campaign import STAGE_COLUMNS, reconstruct_folder
+from cpas_ocp.campaign.dispersion_study import dispersion_models
+from cpas_ocp.campaign.drag_area_envelope import cds_curves, drag_area_envelope, stage_conditions
 from cpas_ocp.cli import main
-from cpas_ocp.dispersion_study import dispersion_models
-from cpas_ocp.drag_area_envelope import cds_curves, drag_area_envelope, stage_conditions
-from cpas_ocp.estimation import Estimator
-from cpas_ocp.flight_test import load_test
-from cpas_ocp.inflation import CORNER_S
-from cpas_ocp.model_spec import spec_of_test
-from cpas_ocp.parameters import param_name
+from cpas_ocp.estimation.estimator import Estimator
+from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.io.model_spec import spec_of_test
+from cpas_ocp.physics.inflation import CORNER_S
+from cpas_ocp.physics.parameters import param_name
 
 from .test_dispersion_study import SEED, _table
 

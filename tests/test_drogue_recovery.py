@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 
 from cpas_ocp.errors import SolverFailure
-from cpas_ocp.estimation import STATISTICALLY_CONVERGED, Estimator, Settings
-from cpas_ocp.flight_test import load_test
-from cpas_ocp.parameters import split_name
+from cpas_ocp.estimation.estimator import STATISTICALLY_CONVERGED, Estimator, Settings
+from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.physics.parameters import split_name
 
 from .conftest import START_GUESS_OFFSET_S, event_errors
 

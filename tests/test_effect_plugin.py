@@ -17,14 +17,14 @@ import numpy as np
 import pytest
 
 from cpas_ocp.cli import main
-from cpas_ocp.effects import baseline_effects
-from cpas_ocp.effects.registry import BASELINE, load_plugin
-from cpas_ocp.estimation import Estimator, Settings
-from cpas_ocp.flight_test import load_test
-from cpas_ocp.model_spec import baseline_spec
-from cpas_ocp.parameters import param_name
-from cpas_ocp.problems import load_problem
-from cpas_ocp.simulate import simulate_problem
+from cpas_ocp.estimation.estimator import Estimator, Settings
+from cpas_ocp.estimation.simulate import simulate_problem
+from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.io.model_spec import baseline_spec
+from cpas_ocp.io.problems import load_problem
+from cpas_ocp.physics.effects import baseline_effects
+from cpas_ocp.physics.effects.registry import BASELINE, load_plugin
+from cpas_ocp.physics.parameters import param_name
 
 TRUE_BIAS = 0.03  # g; three times the IMU's per-sample noise
 
@@ -32,8 +32,8 @@ PLUGIN = '''"""Constant additive bias b (g) on every IMU load-factor reading: y 
 
 from dataclasses import dataclass
 
-from cpas_ocp.effects import Effect
-from cpas_ocp.parameters import Parameter, param_name
+from cpas_ocp.physics.effects import Effect
+from cpas_ocp.physics.parameters import Parameter, param_name
 
 
 @dataclass(frozen=True)

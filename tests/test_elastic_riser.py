@@ -10,13 +10,13 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from cpas_ocp.effects import AddedMass, ElasticRiser, baseline_effects, with_elastic_risers
-from cpas_ocp.estimation import Estimator
-from cpas_ocp.flight_test import load_test
-from cpas_ocp.model import Model
-from cpas_ocp.parameters import param_name
-from cpas_ocp.problems import load_problem
-from cpas_ocp.simulate import initial_state, simulate, simulate_problem
+from cpas_ocp.estimation.estimator import Estimator
+from cpas_ocp.estimation.simulate import initial_state, simulate, simulate_problem
+from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.io.problems import load_problem
+from cpas_ocp.physics.effects import AddedMass, ElasticRiser, baseline_effects, with_elastic_risers
+from cpas_ocp.physics.model import Model
+from cpas_ocp.physics.parameters import param_name
 
 from .conftest import START_GUESS_OFFSET_S, offset_events
 
@@ -150,9 +150,9 @@ def test_a_riser_too_stiff_for_the_grid_is_not_scored(problem_folder) -> None:
     """On a grid whose steps RK4 cannot hold a 25 Hz riser on (100 ms, as on a 10 Hz rocket
     log), the start of the elastic riser's null point blows up: the score test says why it
     was not tested rather than linearising there."""
-    from cpas_ocp.estimation import Settings
-    from cpas_ocp.model_spec import baseline_spec
-    from cpas_ocp.score_test import candidate_effects, score_test
+    from cpas_ocp.discrepancy.score_test import candidate_effects, score_test
+    from cpas_ocp.estimation.estimator import Settings
+    from cpas_ocp.io.model_spec import baseline_spec
 
     test = load_test(problem_folder("fbcp", 1))
     fit = Estimator(test, baseline_spec(), Settings(grid_step=0.1, compile=False)).solve()

@@ -16,8 +16,8 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from cpas_ocp.estimation import Estimator
-from cpas_ocp.flight_test import load_test
+from cpas_ocp.estimation.estimator import Estimator
+from cpas_ocp.io.flight_test import load_test
 
 
 @pytest.fixture(scope="module")

@@ -22,10 +22,10 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from cpas_ocp.effects import baseline_effects
-from cpas_ocp.estimation import STATISTICALLY_CONVERGED, Estimator, Settings
-from cpas_ocp.flight_test import load_test
-from cpas_ocp.model import Model
+from cpas_ocp.estimation.estimator import STATISTICALLY_CONVERGED, Estimator, Settings
+from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.physics.effects import baseline_effects
+from cpas_ocp.physics.model import Model
 
 from .conftest import (
     START_GUESS_OFFSET_S,

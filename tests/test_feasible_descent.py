@@ -1,4 +1,4 @@
-"""Gauss-Newton descent through feasible points (`cpas_ocp.feasible_descent`) and the stall
+"""Gauss-Newton descent through feasible points (`estimation.feasible_descent`) and the stall
 rule that hands a creeping Ipopt run to it (`estimation._Monitor`)."""
 
 from __future__ import annotations
@@ -9,10 +9,10 @@ import pytest
 import scipy.sparse as sp
 from scipy.optimize import minimize_scalar
 
-from cpas_ocp.estimation import STALL_ITERATIONS, STALL_SHARE, _Monitor
-from cpas_ocp.feasible_descent import DescentProblem, bounded_step, descend
-from cpas_ocp.structured_secant import StructuredSecant
-from cpas_ocp.uncertainty import linearize
+from cpas_ocp.estimation.estimator import STALL_ITERATIONS, STALL_SHARE, _Monitor
+from cpas_ocp.estimation.feasible_descent import DescentProblem, bounded_step, descend
+from cpas_ocp.estimation.structured_secant import StructuredSecant
+from cpas_ocp.estimation.uncertainty import linearize
 
 
 def _rosenbrock(z: np.ndarray) -> tuple[np.ndarray, sp.csc_matrix]:
@@ -117,8 +117,8 @@ def test_a_solve_never_inherits_an_earlier_solves_warm_start(problem_folder) -> 
     """A restart (after a stall, or with wider windows) rebuilds Ipopt warm-started at the
     run's barrier parameter; the next solve of the same estimator starts cold again, also
     where no windows of action rebuild the solver at its start."""
-    from cpas_ocp.estimation import Estimator, Settings
-    from cpas_ocp.flight_test import load_test
+    from cpas_ocp.estimation.estimator import Estimator, Settings
+    from cpas_ocp.io.flight_test import load_test
 
     est = Estimator(load_test(problem_folder("fbcp", 1)), settings=Settings(window_margin=None))
     cold = est.solve()

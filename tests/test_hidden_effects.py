@@ -24,8 +24,13 @@ import numpy as np
 import pytest
 from scipy.stats import binom
 
-from cpas_ocp.diagnosis import ALPHA, diagnose
-from cpas_ocp.effects import (
+from cpas_ocp.discrepancy.diagnosis import ALPHA, diagnose
+from cpas_ocp.estimation.estimator import Estimator
+from cpas_ocp.estimation.simulate import simulate_problem
+from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.io.model_spec import ModelSpec, baseline_spec
+from cpas_ocp.io.problems import load_problem
+from cpas_ocp.physics.effects import (
     AddedMass,
     LoadCellFriction,
     SensorLag,
@@ -33,11 +38,6 @@ from cpas_ocp.effects import (
     baseline_effects,
     with_elastic_risers,
 )
-from cpas_ocp.estimation import Estimator
-from cpas_ocp.flight_test import load_test
-from cpas_ocp.model_spec import ModelSpec, baseline_spec
-from cpas_ocp.problems import load_problem
-from cpas_ocp.simulate import simulate_problem
 
 from .conftest import assert_truth_within_noise
 
@@ -119,7 +119,7 @@ def test_wake_deficit_without_priors_is_not_testable(hidden) -> None:
     diag, _ = hidden("wake_deficit")
     fit = diag.fit
     plain = Estimator(fit.test, baseline_spec()).solve()
-    from cpas_ocp.score_test import candidate_effects, score_test
+    from cpas_ocp.discrepancy.score_test import candidate_effects, score_test
     result = score_test(plain, baseline_spec(), candidate_effects()["wake_deficit"])
     assert not result.tested
     assert set(result.undetermined) == {"prf[fbcp1]", "prf[fbcp2]"}
@@ -171,8 +171,8 @@ def test_an_effects_states_integrated_through_the_fit_close_their_gaps(hidden) -
 def test_a_significant_effect_whose_refit_failed_leaves_the_verdict_undecided() -> None:
     """A score test that is significant but whose confirming refit did not converge (elastic
     risers on `drogue` with elastic risers hidden) must not read as noise."""
-    from cpas_ocp.diagnosis import Diagnosis
-    from cpas_ocp.score_test import ScoreTest
+    from cpas_ocp.discrepancy.diagnosis import Diagnosis
+    from cpas_ocp.discrepancy.score_test import ScoreTest
 
     failed = ScoreTest("elastic_riser", "library", ("riser_period[d]",), statistic=145.0,
                        dof=4, p_value=2e-31,
@@ -194,7 +194,7 @@ def test_an_unconverged_refit_bounds_the_likelihood_ratio_from_below(hidden, mon
     iterate, integrated into a feasible point of the extended model, has a chi-square at
     or above the extended optimum, so fit minus point bounds the likelihood ratio of the
     converged refit from below, and its p-value bounds the test's from above."""
-    from cpas_ocp import score_test
+    from cpas_ocp.discrepancy import score_test
 
     diag, _ = hidden("added_mass")
     converged = diag.explanation
@@ -216,9 +216,9 @@ def test_the_verdict_names_a_bounded_effect_and_warns_of_unconverged_rivals() ->
     """An effect confirmed only by a lower bound is named with the bound ('>='); an
     effect confirmed exactly is named with a warning when a significant rival's refit
     did not converge, since that rival may explain more."""
-    from cpas_ocp.diagnosis import Diagnosis
-    from cpas_ocp.model_comparison import LikelihoodRatio
-    from cpas_ocp.score_test import ScoreTest
+    from cpas_ocp.discrepancy.diagnosis import Diagnosis
+    from cpas_ocp.discrepancy.score_test import ScoreTest
+    from cpas_ocp.inference.model_comparison import LikelihoodRatio
 
     bounded = ScoreTest("elastic_riser", "library", ("riser_period[d]",), statistic=145.0,
                         dof=1, p_value=1e-30, refit=LikelihoodRatio(476.0, 1, lower_bound=True),
@@ -242,7 +242,7 @@ def test_a_refit_retried_from_the_effects_defaults_reaches_the_same_optimum(hidd
     """The second try of a confirming refit starts at the effect's defaults (8 Hz, zeta 0.3
     for an elastic riser) and ends where the refit from the score step ended; it is not
     made where the defaults are the start already tried."""
-    from cpas_ocp.score_test import RETRY_MAX_ITER, _retry_from_defaults
+    from cpas_ocp.discrepancy.score_test import RETRY_MAX_ITER, _retry_from_defaults
 
     diag, _ = hidden("elastic_riser")
     result = diag.explanation
@@ -264,7 +264,7 @@ def test_a_refit_that_ends_above_the_fit_is_tried_again_from_the_defaults(
     extended model's optimum: the second try from the effect's defaults is made and the
     lower kept.  The first refit's outcome is made to lie above the fit by doubling its
     residuals (its chi-square four times the refit's, well above the fit's)."""
-    from cpas_ocp.score_test import confirm
+    from cpas_ocp.discrepancy.score_test import confirm
 
     diag, _ = hidden("elastic_riser")
     found = diag.explanation
@@ -297,9 +297,9 @@ def test_an_implausible_estimate_makes_the_effect_a_stand_in(problem_fit, lag_s:
     """A GPS lag confirmed at +0.1 s is named as the missing effect; at -0.06 s (the
     receiver reporting before the event) the same likelihood ratio only "partly
     explains" the residual, and the verdict says why."""
-    from cpas_ocp.diagnosis import Diagnosis
-    from cpas_ocp.model_comparison import LikelihoodRatio
-    from cpas_ocp.score_test import ScoreTest
+    from cpas_ocp.discrepancy.diagnosis import Diagnosis
+    from cpas_ocp.discrepancy.score_test import ScoreTest
+    from cpas_ocp.inference.model_comparison import LikelihoodRatio
 
     fit, _, _ = problem_fit("fbcp", 1)
     spec = dataclasses.replace(baseline_spec(),
@@ -322,7 +322,7 @@ def test_an_effect_the_library_lacks_is_not_named_for_one_that_partly_fits(
     the excess it removes, and what remains."""
     from pathlib import Path
 
-    from cpas_ocp.effects.registry import load_plugin
+    from cpas_ocp.physics.effects.registry import load_plugin
 
     plugin = Path(__file__).parent / "plugins" / "tension_loss.py"
     loss = load_plugin(plugin)["tension_loss"].build({}, str(plugin), "test")

@@ -15,8 +15,8 @@ from scipy import stats
 from scipy.optimize import linprog
 from scipy.spatial import ConvexHull, Delaunay, HalfspaceIntersection
 
-from cpas_ocp.distributions import fit_dispersion
-from cpas_ocp.hulls import (
+from cpas_ocp.campaign.distributions import fit_dispersion
+from cpas_ocp.campaign.hulls import (
     CHUNK,
     ENGINEERING_FACTOR,
     PILOT_ENGINEERING_FACTOR,

@@ -21,12 +21,12 @@ import numpy as np
 import pytest
 
 from cpas_ocp.cli import main
-from cpas_ocp.estimation import Estimator, Settings
-from cpas_ocp.flight_test import load_test
-from cpas_ocp.model_spec import spec_of_test
-from cpas_ocp.problems import load_problem
-from cpas_ocp.reduction import initial_guess
-from cpas_ocp.simulate import simulate_problem
+from cpas_ocp.estimation.estimator import Estimator, Settings
+from cpas_ocp.estimation.reduction import initial_guess
+from cpas_ocp.estimation.simulate import simulate_problem
+from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.io.model_spec import spec_of_test
+from cpas_ocp.io.problems import load_problem
 
 STAGES = ("stage1", "stage2", "stage3")
 SEED = 1

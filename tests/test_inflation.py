@@ -6,7 +6,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from cpas_ocp.inflation import (
+from cpas_ocp.physics.inflation import (
     CORNER_S,
     fill_constant_from_peak,
     fill_length,
@@ -85,7 +85,7 @@ def test_growth_scaled_fill_length() -> None:
 def _largest_derivative_jump(corner_s: float) -> float:
     """Largest change of dCdS/dt_start between neighbouring start times 10 us apart,
     relative to the total change across the peak, for a sample at the peak."""
-    import cpas_ocp.inflation as inflation
+    import cpas_ocp.physics.inflation as inflation
 
     saved = inflation.CORNER_S
     inflation.CORNER_S = corner_s
@@ -130,11 +130,11 @@ def test_canopy_drag_area_is_the_law_of_its_last_started_stage(drogue_folder) ->
     Eq. 5-6 curve from CORNER_S before its start, the last stage started taking over, here
     with a third stage that starts during the second's rise and a second stage set to
     start before the first."""
-    from cpas_ocp.effects import baseline_effects
-    from cpas_ocp.flight_test import load_test
-    from cpas_ocp.model import Model
-    from cpas_ocp.parameters import param_name
-    from cpas_ocp.problems import load_problem
+    from cpas_ocp.io.flight_test import load_test
+    from cpas_ocp.io.problems import load_problem
+    from cpas_ocp.physics.effects import baseline_effects
+    from cpas_ocp.physics.model import Model
+    from cpas_ocp.physics.parameters import param_name
 
     model = Model(load_test(drogue_folder(1)), baseline_effects())
     chute = model.test.parachutes[0]

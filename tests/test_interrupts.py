@@ -13,7 +13,7 @@ import pytest
 # that the signal surely arrives inside the solver whatever the machine's load.
 RUN = """
 import sys, time
-import cpas_ocp.estimation as estimation
+import cpas_ocp.estimation.estimator as estimation
 from cpas_ocp.cli import main
 iterate = estimation._Monitor.eval
 def announced(self, arg):
@@ -52,7 +52,7 @@ def test_orphaned_temporary_folders_are_swept_by_the_next_run(tmp_path) -> None:
     written beside it removes it, and never a live process's."""
     import os
 
-    from cpas_ocp.output_folder import atomic_folder
+    from cpas_ocp.io.output_folder import atomic_folder
 
     dead = tmp_path / ".cpas-out-999999999-abc"  # no such process
     alive = tmp_path / f".cpas-out-{os.getpid()}-def"

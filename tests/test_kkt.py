@@ -9,8 +9,7 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from cpas_ocp.report import identifiability_text
-from cpas_ocp.uncertainty import (
+from cpas_ocp.estimation.uncertainty import (
     POORLY_DETERMINED,
     Linearization,
     _by_weight,
@@ -20,6 +19,7 @@ from cpas_ocp.uncertainty import (
     gauss_newton_decrement,
     kkt_covariance,
 )
+from cpas_ocp.reports.report import identifiability_text
 
 NX, NODES = 2, 6  # states per node, nodes
 

@@ -8,13 +8,13 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from cpas_ocp.effects import LoadCellFriction, baseline_effects
-from cpas_ocp.estimation import Estimator, Settings
-from cpas_ocp.flight_test import load_test
-from cpas_ocp.model import Model
-from cpas_ocp.parameters import param_name
-from cpas_ocp.problems import load_problem
-from cpas_ocp.simulate import initial_state, model_outputs, simulate, simulate_problem
+from cpas_ocp.estimation.estimator import Estimator, Settings
+from cpas_ocp.estimation.simulate import initial_state, model_outputs, simulate, simulate_problem
+from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.io.problems import load_problem
+from cpas_ocp.physics.effects import LoadCellFriction, baseline_effects
+from cpas_ocp.physics.model import Model
+from cpas_ocp.physics.parameters import param_name
 
 from .conftest import START_GUESS_OFFSET_S, offset_events
 

@@ -21,11 +21,11 @@ import math
 import numpy as np
 import pytest
 
-from cpas_ocp.flight_test import load_test
-from cpas_ocp.model_spec import spec_of_test
-from cpas_ocp.parameters import param_name
-from cpas_ocp.problems import load_problem
-from cpas_ocp.reduction import reduce, reduce_and_guess, stage_starts
+from cpas_ocp.estimation.reduction import reduce, reduce_and_guess, stage_starts
+from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.io.model_spec import spec_of_test
+from cpas_ocp.io.problems import load_problem
+from cpas_ocp.physics.parameters import param_name
 
 from .conftest import (
     START_GUESS_OFFSET_S,

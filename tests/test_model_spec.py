@@ -9,12 +9,12 @@ from pathlib import Path
 import pytest
 
 from cpas_ocp.cli import main
-from cpas_ocp.effects import ElasticRiser
-from cpas_ocp.effects.registry import BASELINE
 from cpas_ocp.errors import InputError
-from cpas_ocp.flight_test import load_test
-from cpas_ocp.model_spec import load_model_file, spec_of_test
-from cpas_ocp.units import FT
+from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.io.model_spec import load_model_file, spec_of_test
+from cpas_ocp.physics.effects import ElasticRiser
+from cpas_ocp.physics.effects.registry import BASELINE
+from cpas_ocp.physics.units import FT
 
 FULL = ["canopy_inflation", "forebody_drag", {"effect": "elastic_riser", "frequency": 12.0},
         "added_mass", "drag_scale", "loadcell_scale", "gps", "imu", "load_cell"]

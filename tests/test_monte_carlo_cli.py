@@ -12,13 +12,13 @@ import pandas as pd
 import pytest
 from scipy.stats import spearmanr
 
-from cpas_ocp.campaign import COLUMNS
+from cpas_ocp.campaign.campaign import COLUMNS
+from cpas_ocp.campaign.peak_load_study import QUANTILES, match_cases, run_monte_carlo
 from cpas_ocp.cli import main
 from cpas_ocp.errors import InputError
-from cpas_ocp.estimation import Estimator
-from cpas_ocp.flight_test import load_test
-from cpas_ocp.peak_load_study import QUANTILES, match_cases, run_monte_carlo
-from cpas_ocp.units import LBF
+from cpas_ocp.estimation.estimator import Estimator
+from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.physics.units import LBF
 
 SEED = 7
 LIMIT = 60

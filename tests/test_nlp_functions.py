@@ -11,13 +11,13 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from cpas_ocp.effects import AddedMass, baseline_effects
-from cpas_ocp.estimation import STATISTICALLY_CONVERGED, Estimator, Settings, _Monitor
-from cpas_ocp.flight_test import load_test
-from cpas_ocp.model_spec import baseline_spec
-from cpas_ocp.nlp_functions import MarquardtDamping
-from cpas_ocp.problems import load_problem
-from cpas_ocp.simulate import simulate_problem
+from cpas_ocp.estimation.estimator import STATISTICALLY_CONVERGED, Estimator, Settings, _Monitor
+from cpas_ocp.estimation.nlp_functions import MarquardtDamping
+from cpas_ocp.estimation.simulate import simulate_problem
+from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.io.model_spec import baseline_spec
+from cpas_ocp.io.problems import load_problem
+from cpas_ocp.physics.effects import AddedMass, baseline_effects
 
 FUNCTIONS = ("nlp_f", "nlp_g", "nlp_grad_f", "nlp_jac_g", "nlp_hess_l")
 
@@ -231,7 +231,7 @@ def test_a_misspecified_fit_converges(tmp_path) -> None:
 def test_a_run_whose_chi_square_explodes_stops_as_diverged() -> None:
     """A watchdog's trial step may leave the physics (chi-square 1e40): the run ends there,
     measured against its first iterate, and a new solve starts the count afresh."""
-    from cpas_ocp.estimation import DIVERGED_FACTOR
+    from cpas_ocp.estimation.estimator import DIVERGED_FACTOR
     monitor = _Monitor(1, 1, np.abs, lambda z: None, None)
 
     def iterate(chi2: float) -> int:

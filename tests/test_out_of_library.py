@@ -25,14 +25,14 @@ from pathlib import Path
 
 import pytest
 
-from cpas_ocp.discovery import discover
-from cpas_ocp.effects import baseline_effects
-from cpas_ocp.effects.registry import load_plugin
-from cpas_ocp.estimation import Estimator
-from cpas_ocp.flight_test import load_test
-from cpas_ocp.model_spec import baseline_spec
-from cpas_ocp.problems import load_problem
-from cpas_ocp.simulate import simulate_problem
+from cpas_ocp.discrepancy.discovery import discover
+from cpas_ocp.estimation.estimator import Estimator
+from cpas_ocp.estimation.simulate import simulate_problem
+from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.io.model_spec import baseline_spec
+from cpas_ocp.io.problems import load_problem
+from cpas_ocp.physics.effects import baseline_effects
+from cpas_ocp.physics.effects.registry import load_plugin
 
 PLUGINS = Path(__file__).parent / "plugins"
 

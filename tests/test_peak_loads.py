@@ -6,8 +6,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from cpas_ocp.parameters import param_name
-from cpas_ocp.peak_loads import stage_peak_loads
+from cpas_ocp.campaign.peak_loads import stage_peak_loads
+from cpas_ocp.physics.parameters import param_name
 
 SHAPE = ("CdS", "Ck", "n_p", "expopen", "t_k")
 

@@ -28,14 +28,14 @@ import pytest
 from scipy.stats import chi2
 
 from cpas_ocp.cli import main
-from cpas_ocp.effects import Effect, EventTiming
-from cpas_ocp.estimation import EVENTS, Estimator, Fit
-from cpas_ocp.flight_test import load_test
-from cpas_ocp.model import Model, timing_label
-from cpas_ocp.model_spec import spec_of_test
-from cpas_ocp.problems import load_problem
-from cpas_ocp.simulate import first_crossing, initial_state, simulate
-from cpas_ocp.uncertainty import Covariance
+from cpas_ocp.estimation.estimator import EVENTS, Estimator, Fit
+from cpas_ocp.estimation.simulate import first_crossing, initial_state, simulate
+from cpas_ocp.estimation.uncertainty import Covariance
+from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.io.model_spec import spec_of_test
+from cpas_ocp.io.problems import load_problem
+from cpas_ocp.physics.effects import Effect, EventTiming
+from cpas_ocp.physics.model import Model, timing_label
 
 SIGMA_CEILING = {"CdS[pilot1,stage1]": 0.03, "n[pilot1,stage1]": 0.05,
                  "mortar_speed[pilot1]": 0.05}  # relative

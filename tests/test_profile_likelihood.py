@@ -21,10 +21,10 @@ import numpy as np
 import pytest
 
 from cpas_ocp.cli import main
-from cpas_ocp.estimation import Estimator
-from cpas_ocp.flight_test import load_test
-from cpas_ocp.model_spec import spec_of_test
-from cpas_ocp.profile_likelihood import THRESHOLD, held_profile, profile
+from cpas_ocp.estimation.estimator import Estimator
+from cpas_ocp.inference.profile_likelihood import THRESHOLD, held_profile, profile
+from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.io.model_spec import spec_of_test
 
 # The fit stops once the Gauss-Newton step would gain less than 0.01 in chi-square
 # (`Settings.chi2_step_tol`), so a profile point may lie that much below the fit.

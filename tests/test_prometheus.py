@@ -11,23 +11,23 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cpas_ocp.altus_metrum import read_altus_log
-from cpas_ocp.common_residual import combined_p_value, common_residuals
-from cpas_ocp.diagnosis import ALPHA
-from cpas_ocp.estimation import Estimator
-from cpas_ocp.flight_log import import_flight, load_card
-from cpas_ocp.flight_report import (
+from cpas_ocp.discrepancy.common_residual import combined_p_value, common_residuals
+from cpas_ocp.discrepancy.diagnosis import ALPHA
+from cpas_ocp.discrepancy.wind_evidence import DECISIVE_2LNB, wind_evidence
+from cpas_ocp.estimation.estimator import Estimator
+from cpas_ocp.inference.process_intensity import without_wind
+from cpas_ocp.inference.profile_likelihood import THRESHOLD
+from cpas_ocp.io.altus_metrum import read_altus_log
+from cpas_ocp.io.flight_log import import_flight, load_card
+from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.io.model_spec import spec_of_test
+from cpas_ocp.io.recorder_clocks import clock_offset
+from cpas_ocp.reports.flight_report import (
     descent_rates,
     flight_text,
     held_opening_profiles,
     nominal_comparisons,
 )
-from cpas_ocp.flight_test import load_test
-from cpas_ocp.model_spec import spec_of_test
-from cpas_ocp.process_intensity import without_wind
-from cpas_ocp.profile_likelihood import THRESHOLD
-from cpas_ocp.recorder_clocks import clock_offset
-from cpas_ocp.wind_evidence import DECISIVE_2LNB, wind_evidence
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "prometheus-2022"
 MEGA = "telemega-serial-6583-flight-0003.csv"

@@ -1,4 +1,4 @@
-"""Two recorders' clocks put on one time base (`cpas_ocp.recorder_clocks`)."""
+"""Two recorders' clocks put on one time base (`cpas_ocp.io.recorder_clocks`)."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from cpas_ocp.altus_metrum import AltusLog
-from cpas_ocp.recorder_clocks import RecorderEstimates, clock_offset, recorders_text
+from cpas_ocp.io.altus_metrum import AltusLog
+from cpas_ocp.io.recorder_clocks import RecorderEstimates, clock_offset, recorders_text
 
 SHIFT_S = 0.037  # the second recorder's clock reads this much more for the same instant
 NOISE = 0.5  # accelerometer noise (m/s^2), as an Altus Metrum reads on the pad

@@ -9,12 +9,17 @@ import pandas as pd
 import pytest
 
 from cpas_ocp.cli import main
-from cpas_ocp.effects import baseline_effects
-from cpas_ocp.flight_test import Parachute, load_test
-from cpas_ocp.model import Model
-from cpas_ocp.reduction import reduce_and_guess
-from cpas_ocp.stage_curve_fit import StageData, curve_function, fit_stage_curve, fitted_names
-from cpas_ocp.units import FT
+from cpas_ocp.estimation.reduction import reduce_and_guess
+from cpas_ocp.estimation.stage_curve_fit import (
+    StageData,
+    curve_function,
+    fit_stage_curve,
+    fitted_names,
+)
+from cpas_ocp.io.flight_test import Parachute, load_test
+from cpas_ocp.physics.effects import baseline_effects
+from cpas_ocp.physics.model import Model
+from cpas_ocp.physics.units import FT
 
 from .conftest import START_GUESS_OFFSET_S, offset_events
 

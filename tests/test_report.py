@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from cpas_ocp.report import STRONG_CORRELATION, parameter_table, write_report
+from cpas_ocp.reports.report import STRONG_CORRELATION, parameter_table, write_report
 
 
 def test_report_folder_carries_values_uncertainties_and_fit_statistics(drogue_fit,

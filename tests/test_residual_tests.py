@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from scipy.stats import binom
 
-from cpas_ocp.residual_tests import lag, ljung_box, periodicity
+from cpas_ocp.discrepancy.residual_tests import lag, ljung_box, periodicity
 
 RATE_HZ = 100.0
 N = 2000

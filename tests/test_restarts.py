@@ -1,14 +1,14 @@
-"""Restarts of a fit whose start time sits in a worse minimum (`cpas_ocp.restarts`)."""
+"""Restarts of a fit whose start time sits in a worse minimum (`cpas_ocp.inference.restarts`)."""
 
 from __future__ import annotations
 
 import pytest
 
-from cpas_ocp.estimation import Estimator
-from cpas_ocp.flight_test import load_test
-from cpas_ocp.problems import load_problem
-from cpas_ocp.restarts import misfit_start_times, restart_start_times
-from cpas_ocp.simulate import simulate_problem
+from cpas_ocp.estimation.estimator import Estimator
+from cpas_ocp.estimation.simulate import simulate_problem
+from cpas_ocp.inference.restarts import misfit_start_times, restart_start_times
+from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.io.problems import load_problem
 
 START = "t_start[pilot1,stage1]"
 

@@ -11,16 +11,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cpas_ocp import result_claim
 from cpas_ocp.cli import main
-from cpas_ocp.continuation import solve_checked
-from cpas_ocp.effects.canopy_inflation import CanopyInflation
 from cpas_ocp.errors import InputError
-from cpas_ocp.estimation import Estimator
-from cpas_ocp.flight_test import load_test
-from cpas_ocp.hypothesis_tests import cone_statistic
-from cpas_ocp.model_spec import spec_from_block
-from cpas_ocp.result_claim import check_claim
+from cpas_ocp.estimation.estimator import Estimator
+from cpas_ocp.inference import result_claim
+from cpas_ocp.inference.continuation import solve_checked
+from cpas_ocp.inference.hypothesis_tests import cone_statistic
+from cpas_ocp.inference.result_claim import check_claim
+from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.io.model_spec import spec_from_block
+from cpas_ocp.physics.effects.canopy_inflation import CanopyInflation
 
 # Every event of the test moved this late: beyond the 1 s start window about each event.
 LATE_S = 1.5
@@ -125,7 +125,7 @@ def test_events_later_than_the_window_are_recovered_by_moving_the_windows(
 def test_a_fit_still_pressed_exits_4_with_its_report_saying_why(
         drogue_folder, tmp_path, monkeypatch, capsys) -> None:
     # Without window moves, the late events leave the start times on their windows.
-    monkeypatch.setattr("cpas_ocp.continuation.MAX_WINDOW_MOVES", 0)
+    monkeypatch.setattr("cpas_ocp.inference.continuation.MAX_WINDOW_MOVES", 0)
     test_dir = late_events(drogue_folder(1), tmp_path / "late", LATE_S)
     out = tmp_path / "report"
     code = main(["reconstruct", str(test_dir), "--out", str(out)])
@@ -146,9 +146,9 @@ def test_discover_says_in_its_report_that_its_first_fit_is_not_a_result(
     """A chain started from a fit the data press against guessed bounds carries that in
     discovery.json and discovery.md (the diagnoses themselves are replaced by a chain
     that stops at once: what is tested is the command's report of its first fit)."""
-    import cpas_ocp.discovery as discovery
+    import cpas_ocp.discrepancy.discovery as discovery
 
-    monkeypatch.setattr("cpas_ocp.continuation.MAX_WINDOW_MOVES", 0)
+    monkeypatch.setattr("cpas_ocp.inference.continuation.MAX_WINDOW_MOVES", 0)
     monkeypatch.setattr(discovery, "discover", lambda fit, spec, *a, **k: discovery.Discovery(
         [discovery.DiscoveryStep(None, spec, fit)], "stopped before any diagnosis"))
     test_dir = late_events(drogue_folder(1), tmp_path / "late", LATE_S)

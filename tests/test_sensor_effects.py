@@ -18,12 +18,12 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from cpas_ocp.effects import Effect, SensorBias, SensorLag, baseline_effects
-from cpas_ocp.estimation import Estimator
-from cpas_ocp.flight_test import FlightTest, load_test
-from cpas_ocp.model import Model
-from cpas_ocp.problems import load_problem
-from cpas_ocp.simulate import initial_state, simulate, simulate_problem
+from cpas_ocp.estimation.estimator import Estimator
+from cpas_ocp.estimation.simulate import initial_state, simulate, simulate_problem
+from cpas_ocp.io.flight_test import FlightTest, load_test
+from cpas_ocp.io.problems import load_problem
+from cpas_ocp.physics.effects import Effect, SensorBias, SensorLag, baseline_effects
+from cpas_ocp.physics.model import Model
 
 CASES = {
     "bias": ([SensorBias.imu(), SensorBias.load_cell()],

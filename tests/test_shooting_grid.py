@@ -9,11 +9,11 @@ import dataclasses
 import numpy as np
 import pytest
 
-from cpas_ocp.effects.registry import BUILTIN
-from cpas_ocp.estimation import Estimator, Settings, default_grid_step
-from cpas_ocp.flight_test import load_test
-from cpas_ocp.model_spec import spec_of_test
-from cpas_ocp.shooting_grid import _accuracy_levels, _nodes, _stability_levels
+from cpas_ocp.estimation.estimator import Estimator, Settings, default_grid_step
+from cpas_ocp.estimation.shooting_grid import _accuracy_levels, _nodes, _stability_levels
+from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.io.model_spec import spec_of_test
+from cpas_ocp.physics.effects.registry import BUILTIN
 
 
 def test_nodes_take_the_longest_aligned_step_every_interval_allows() -> None:

@@ -24,14 +24,14 @@ import numpy as np
 import pytest
 from scipy.stats import binom
 
-from cpas_ocp.estimation import SensorResidual
-from cpas_ocp.parameters import param_name
-from cpas_ocp.signatures import (
+from cpas_ocp.discrepancy.signatures import (
     Signature,
     correlation_p_value,
     signature_correlations,
     signatures,
 )
+from cpas_ocp.estimation.estimator import SensorResidual
+from cpas_ocp.physics.parameters import param_name
 
 RATE_HZ = 100.0
 N = 400

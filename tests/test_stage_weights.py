@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cpas_ocp.effects import baseline_effects
-from cpas_ocp.flight_test import load_test
-from cpas_ocp.model import Model
-from cpas_ocp.parameters import param_name
-from cpas_ocp.problems import load_problem
+from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.io.problems import load_problem
+from cpas_ocp.physics.effects import baseline_effects
+from cpas_ocp.physics.model import Model
+from cpas_ocp.physics.parameters import param_name
 
 SPEED = 100.0  # m/s, the captured start airspeed of every stage in this test
 

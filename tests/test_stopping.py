@@ -6,14 +6,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cpas_ocp.estimation import (
+from cpas_ocp.estimation.estimator import (
     STATISTICALLY_CONVERGED,
     STOP_CONSTRAINT_TOL,
     Estimator,
     Settings,
 )
-from cpas_ocp.flight_test import load_test
-from cpas_ocp.uncertainty import gauss_newton
+from cpas_ocp.estimation.uncertainty import gauss_newton
+from cpas_ocp.io.flight_test import load_test
 
 
 def test_the_finishing_step_gives_the_same_estimate_feasibly(problem_folder) -> None:

@@ -8,12 +8,12 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from cpas_ocp.effects import baseline_effects
-from cpas_ocp.flight_test import load_test
-from cpas_ocp.model import Model
-from cpas_ocp.problems import load_problem, problem_names
-from cpas_ocp.simulate import simulate_problem
-from cpas_ocp.units import FACTORS, FT, LBF
+from cpas_ocp.estimation.simulate import simulate_problem
+from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.io.problems import load_problem, problem_names
+from cpas_ocp.physics.effects import baseline_effects
+from cpas_ocp.physics.model import Model
+from cpas_ocp.physics.units import FACTORS, FT, LBF
 
 SCHEMAS = Path(__file__).resolve().parents[1] / "data_schemas"
 

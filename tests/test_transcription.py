@@ -13,10 +13,10 @@ import json
 
 import pytest
 
-from cpas_ocp.estimation import Estimator, Settings
-from cpas_ocp.flight_test import load_test
-from cpas_ocp.problems import load_problem
-from cpas_ocp.simulate import simulate_problem
+from cpas_ocp.estimation.estimator import Estimator, Settings
+from cpas_ocp.estimation.simulate import simulate_problem
+from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.io.problems import load_problem
 
 
 @pytest.mark.parametrize("grid_step", [0.005, 0.004])

@@ -13,12 +13,12 @@ import json
 
 import pytest
 
-from cpas_ocp.effects.registry import BASELINE
-from cpas_ocp.estimation import Estimator
-from cpas_ocp.flight_test import load_test
-from cpas_ocp.model_spec import baseline_spec
-from cpas_ocp.problems import load_problem
-from cpas_ocp.simulate import simulate_problem
+from cpas_ocp.estimation.estimator import Estimator
+from cpas_ocp.estimation.simulate import simulate_problem
+from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.io.model_spec import baseline_spec
+from cpas_ocp.io.problems import load_problem
+from cpas_ocp.physics.effects.registry import BASELINE
 
 PRF = 0.85
 

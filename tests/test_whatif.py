@@ -24,10 +24,10 @@ from scipy.stats import chi2
 
 from cpas_ocp.cli import main
 from cpas_ocp.errors import InputError
-from cpas_ocp.estimation import Estimator
-from cpas_ocp.flight_test import load_test
-from cpas_ocp.units import FT, LBF
-from cpas_ocp.whatif import parse_constraint, what_if
+from cpas_ocp.estimation.estimator import Estimator
+from cpas_ocp.inference.whatif import parse_constraint, what_if
+from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.physics.units import FT, LBF
 
 NAME = "CdS[fbcp1,stage1]"
 
@@ -88,7 +88,7 @@ def test_units_and_mistakes(fbcp_study) -> None:
 def test_contradictory_constraints_are_refused(fbcp_study) -> None:
     """Two '==' on one parameter, '==' beside a bound, or bounds that cross: each is named;
     consistent one-sided bounds combine."""
-    from cpas_ocp.whatif import parameter_bounds
+    from cpas_ocp.inference.whatif import parameter_bounds
 
     est, _, _, _ = fbcp_study
     for texts in ((f"{NAME} == 2", f"{NAME} == 3"), (f"{NAME} == 2", f"{NAME} == 2"),

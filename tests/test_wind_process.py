@@ -18,20 +18,20 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from cpas_ocp.continuation import solve_checked
-from cpas_ocp.diagnosis import ALPHA as DIAGNOSIS_ALPHA
-from cpas_ocp.diagnosis import Diagnosis
-from cpas_ocp.effects.registry import BASELINE
-from cpas_ocp.effects.wind_process import WindProcess
+from cpas_ocp.discrepancy.diagnosis import ALPHA as DIAGNOSIS_ALPHA
+from cpas_ocp.discrepancy.diagnosis import Diagnosis
+from cpas_ocp.discrepancy.wind_evidence import DECISIVE_2LNB, wind_evidence
 from cpas_ocp.errors import InputError
-from cpas_ocp.estimation import Estimator
-from cpas_ocp.flight_report import air_motion_text
-from cpas_ocp.flight_test import load_test
-from cpas_ocp.model_spec import spec_from_block, spec_of_test
-from cpas_ocp.problems import load_problem
-from cpas_ocp.process_intensity import choose_intensity
-from cpas_ocp.simulate import simulate_problem
-from cpas_ocp.wind_evidence import DECISIVE_2LNB, wind_evidence
+from cpas_ocp.estimation.estimator import Estimator
+from cpas_ocp.estimation.simulate import simulate_problem
+from cpas_ocp.inference.continuation import solve_checked
+from cpas_ocp.inference.process_intensity import choose_intensity
+from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.io.model_spec import spec_from_block, spec_of_test
+from cpas_ocp.io.problems import load_problem
+from cpas_ocp.physics.effects.registry import BASELINE
+from cpas_ocp.physics.effects.wind_process import WindProcess
+from cpas_ocp.reports.flight_report import air_motion_text
 
 WIND = {"effects": ["wind_process", *BASELINE]}
 ALPHA = 1e-3
@@ -217,8 +217,8 @@ def test_the_command_line_chooses_the_intensity_and_refuses_a_model_without_a_pr
 def test_a_held_profile_whose_refits_all_failed_claims_nothing() -> None:
     """A held parameter whose every refit failed has no profile: the report says so and
     lists the failures, and does not say the data leave it undetermined."""
-    from cpas_ocp.flight_report import held_lines
-    from cpas_ocp.profile_likelihood import Profile
+    from cpas_ocp.inference.profile_likelihood import Profile
+    from cpas_ocp.reports.flight_report import held_lines
     failed = [(v, "Maximum_Iterations_Exceeded after 100 iterations") for v in (0.5, 2.0)]
     alone = Profile("expopen[main,stage2]", "1", 1.0, float("nan"), np.array([1.0]),
                     np.array([0.0]), failed, [{"n[main,stage2]": 4.0}])

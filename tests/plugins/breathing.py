@@ -19,8 +19,8 @@ from dataclasses import dataclass
 
 import casadi as ca
 
-from cpas_ocp.effects import Effect
-from cpas_ocp.parameters import Parameter, param_name
+from cpas_ocp.physics.effects import Effect
+from cpas_ocp.physics.parameters import Parameter, param_name
 
 
 @dataclass(frozen=True)

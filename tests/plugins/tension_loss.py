@@ -9,8 +9,8 @@ the stand-in test are made with it; the library does not have it.
 
 from dataclasses import dataclass
 
-from cpas_ocp.effects import Effect
-from cpas_ocp.parameters import Parameter, param_name
+from cpas_ocp.physics.effects import Effect
+from cpas_ocp.physics.parameters import Parameter, param_name
 
 
 @dataclass(frozen=True)

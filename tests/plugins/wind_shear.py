@@ -13,8 +13,8 @@ from dataclasses import dataclass
 
 import casadi as ca
 
-from cpas_ocp.effects import Effect
-from cpas_ocp.parameters import Parameter
+from cpas_ocp.physics.effects import Effect
+from cpas_ocp.physics.parameters import Parameter
 
 H_MID_M = 6800.0  # the layer's middle (m)
 LAYER_M = 300.0  # the layer's half-thickness scale (m)

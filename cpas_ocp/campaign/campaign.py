@@ -1,0 +1,212 @@
+"""A campaign: reconstruct many test folders in parallel and tabulate their parameters.
+
+The paper's end product is not one fit but the dispersions of a campaign's
+parameters (Sections IV.C, V-VII).  `run_campaign` reconstructs every test
+folder under a root, each with the model its manifest declares, on local
+processes or, given a scheduler address, on a Dask cluster
+(dask.distributed); a test that fails (bad input, a solver that does not
+converge, anything else) is reported with its reason and does not stop the
+others.  `parameter_table` gives one row per test, canopy-indexed parameter
+and value with its standard deviation, the canopy's type and stage, the
+forebody (vehicle name), the cluster size and the canopy's suspension-line
+length, in SI.  `stage_table` gives one row per test, canopy and stage with
+what redrawing the stage's drag-area curve needs besides its parameters (the
+stage's order, inflation law, fill-length form, D_o and the captured start
+airspeed V_i), which `cpas-ocp dispersions` uses for its drag-area envelopes.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+import traceback
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from cpas_ocp.campaign.parallel import run_tasks
+from cpas_ocp.errors import InputError, SolverFailure
+from cpas_ocp.io.flight_test import MANIFEST, Parachute
+from cpas_ocp.physics.parameters import param_name, split_name
+
+COLUMNS = ["test", "parameter", "name", "parachute", "type", "stage", "forebody",
+           "cluster_size", "line_length", "value", "std", "unit"]
+# Per test, canopy and stage: what drawing the stage's drag-area curve needs beyond its
+# parameters (order, inflation law, fill-length form, D_o in m, start airspeed V_i in m/s).
+STAGE_COLUMNS = ["test", "parachute", "type", "stage", "stage_index", "inflation",
+                 "fill_length", "diameter", "line_length", "v_start"]
+
+
+@dataclass
+class TestOutcome:
+    """The reconstruction of one test folder: its table rows, or why there are none.
+
+    `kind` is "ok", "input" (the folder breaks the test-folder contract),
+    "solver" (Ipopt did not converge), "claim" (converged, but the data press
+    parameters against guessed bounds: not a result, `result_claim`) or "error"
+    (anything else, with the exception's type and message).  `stages` holds a row per canopy stage
+    (STAGE_COLUMNS).
+    """
+
+    folder: str
+    name: str
+    kind: str
+    message: str = ""
+    rows: list[dict[str, Any]] = field(default_factory=list)
+    stages: list[dict[str, Any]] = field(default_factory=list)
+    wall_s: float = 0.0
+    iterations: int = 0
+    chi_square_per_dof: float = float("nan")
+
+    @property
+    def ok(self) -> bool:
+        return self.kind == "ok"
+
+
+def find_tests(root: str | Path) -> list[Path]:
+    """Every folder under `root` (itself included) that holds a manifest, sorted by path;
+    InputError when there is none."""
+    root = Path(root)
+    if not root.is_dir():
+        raise InputError(str(root), "(folder)", "an existing folder of test folders")
+    found = sorted({p.parent for p in root.rglob(MANIFEST)})
+    if not found:
+        raise InputError(str(root), "(folder)", f"test folders, each holding a {MANIFEST}")
+    return found
+
+
+def reconstruct_folder(folder: str) -> TestOutcome:
+    """Reconstruct one test folder with its manifest's model; never raises (a picklable
+    top-level function, run in a worker process)."""
+    from cpas_ocp.estimation.estimator import Estimator
+    from cpas_ocp.inference.continuation import solve_checked
+    from cpas_ocp.io.flight_test import load_test
+    t0 = time.perf_counter()
+    name = Path(folder).name
+    try:
+        test = load_test(folder)
+        name = test.name
+        est, fit, claim = solve_checked(Estimator(test))
+        if not claim.is_result:
+            return TestOutcome(folder, name, "claim", "; ".join(claim.problems()),
+                               wall_s=time.perf_counter() - t0)
+        cov = est.covariance(fit)
+    except InputError as exc:
+        return TestOutcome(folder, name, "input", str(exc), wall_s=time.perf_counter() - t0)
+    except SolverFailure as exc:
+        return TestOutcome(folder, name, "solver", str(exc), wall_s=time.perf_counter() - t0)
+    except Exception as exc:  # a campaign reports every failure and carries on
+        where = traceback.extract_tb(exc.__traceback__)[-1]
+        return TestOutcome(folder, name, "error",
+                           f"{type(exc).__name__}: {exc} (at {Path(where.filename).name}:"
+                           f"{where.lineno})", wall_s=time.perf_counter() - t0)
+    std = cov.std
+    chutes = {c.name: c for c in test.parachutes}
+    stages = {s for c in test.parachutes for s in c.stages}
+    rows = []
+    for pname in fit.free:
+        base, index = split_name(pname)
+        chute = chutes.get(index[0]) if index else None
+        stage = next((i for i in index if i in stages), "")
+        rows.append({"test": test.name, "parameter": base, "name": pname,
+                     "parachute": chute.name if chute else "", "type": chute.type if chute else "",
+                     "stage": stage, "forebody": test.vehicle.name,
+                     "cluster_size": len(test.parachutes),
+                     "line_length": _line_length(chute),
+                     "value": fit.parameters[pname],
+                     "std": std.get(pname, np.nan), "unit": fit.model.parameter(pname).unit})
+    stage_rows = [{"test": test.name, "parachute": c.name, "type": c.type, "stage": s,
+                   "stage_index": k, "inflation": c.inflation, "fill_length": c.fill_length,
+                   "diameter": c.diameter, "line_length": _line_length(c),
+                   "v_start": fit.captures.get(param_name("V_start", c.name, s), np.nan)}
+                  for c in test.parachutes for k, s in enumerate(c.stages)]
+    return TestOutcome(folder, test.name, "ok", rows=rows, stages=stage_rows,
+                       wall_s=time.perf_counter() - t0,
+                       iterations=fit.solver.iterations,
+                       chi_square_per_dof=fit.chi_square / fit.dof)
+
+
+def _line_length(chute: Parachute | None) -> float:
+    """The canopy's suspension-line length (m), NaN where the manifest gives none; rounded to
+    0.1 mm so that lengths given in different units group together."""
+    if chute is None or chute.line_length is None:
+        return np.nan
+    return round(chute.line_length, 4)
+
+
+def run_campaign(folders: Sequence[str | Path], workers: int = 2, scheduler: str | None = None,
+                 progress: bool = False) -> list[TestOutcome]:
+    """Reconstruct `folders` on `workers` local processes, or on the Dask cluster at
+    `scheduler` (an address such as ``tcp://host:8786``); outcomes in the order of
+    `folders`.  With `progress`, a line on stderr counts finished and failed tests."""
+    paths = [str(Path(f)) for f in folders]
+    outcomes: dict[str, TestOutcome] = {}
+    for _, outcome in run_tasks(reconstruct_folder, paths, workers, scheduler):
+        outcomes[outcome.folder] = outcome
+        if progress and sys.stderr.isatty():
+            failed = sum(not o.ok for o in outcomes.values())
+            sys.stderr.write(f"\r  {len(outcomes)}/{len(paths)} tests reconstructed, "
+                             f"{failed} failed   ")
+            sys.stderr.flush()
+    if progress and sys.stderr.isatty():
+        sys.stderr.write("\n")
+    return [outcomes[p] for p in paths]
+
+
+def parameter_table(outcomes: Sequence[TestOutcome]) -> pd.DataFrame:
+    """One row per test and estimated parameter (SI), in the columns of COLUMNS."""
+    rows = [r for o in outcomes if o.ok for r in o.rows]
+    return pd.DataFrame(rows, columns=COLUMNS)
+
+
+def stage_table(outcomes: Sequence[TestOutcome]) -> pd.DataFrame:
+    """One row per reconstructed test, canopy and stage, in the columns of STAGE_COLUMNS."""
+    return pd.DataFrame([r for o in outcomes if o.ok for r in o.stages], columns=STAGE_COLUMNS)
+
+
+def failure_table(outcomes: Sequence[TestOutcome]) -> pd.DataFrame:
+    """One row per failed test: folder, name, kind of failure and its message."""
+    return pd.DataFrame([{"folder": o.folder, "test": o.name, "kind": o.kind,
+                          "message": o.message} for o in outcomes if not o.ok],
+                        columns=["folder", "test", "kind", "message"])
+
+
+def write_campaign(outcomes: Sequence[TestOutcome], out: str | Path) -> Path:
+    """Write parameters.csv and parameters.parquet (the table), stages.csv (STAGE_COLUMNS),
+    failures.csv, the drag-area ratios between configurations (ratios_forebody.csv,
+    ratios_cluster_size.csv; where the line length varies, ratios_line_length.csv and
+    ratios_cluster_size_by_line_length.csv) and campaign.md atomically."""
+    from cpas_ocp.campaign.configuration_ratios import campaign_ratios
+    from cpas_ocp.io.output_folder import atomic_folder
+    out = Path(out)
+    table = parameter_table(outcomes)
+    failures = failure_table(outcomes)
+    with atomic_folder(out, "parameters.csv") as tmp:
+        table.to_csv(tmp / "parameters.csv", index=False)
+        table.to_parquet(tmp / "parameters.parquet", index=False)
+        stage_table(outcomes).to_csv(tmp / "stages.csv", index=False)
+        failures.to_csv(tmp / "failures.csv", index=False)
+        text = campaign_text(outcomes)
+        for by, ratios in campaign_ratios(table).items():
+            ratios.to_csv(tmp / f"ratios_{by}.csv", index=False)
+            text += f"\n\nmean steady drag areas by {by}:\n" + ratios.to_string(index=False)
+        (tmp / "campaign.md").write_text(text + "\n")
+    return out
+
+
+def campaign_text(outcomes: Sequence[TestOutcome]) -> str:
+    """One line per test: status, iterations, chi^2/dof and wall time, or the failure."""
+    lines = [f"{len(outcomes)} tests, {sum(o.ok for o in outcomes)} reconstructed, "
+             f"{sum(not o.ok for o in outcomes)} failed"]
+    for o in outcomes:
+        if o.ok:
+            lines.append(f"  ok      {o.name:28s} {o.iterations:4d} iterations, chi^2/dof "
+                         f"{o.chi_square_per_dof:.3f}, {len(o.rows)} parameters, "
+                         f"{o.wall_s:.1f} s")
+        else:
+            lines.append(f"  FAILED  {o.name:28s} ({o.kind}) {o.message}")
+    return "\n".join(lines)

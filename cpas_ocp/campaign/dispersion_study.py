@@ -1,0 +1,225 @@
+"""Monte Carlo inputs from a campaign: each canopy type and stage's parameter dispersions,
+bounded by the grown convex hull of its inflation parameters.
+
+From the campaign's parameter table (`campaign.parameter_table`) the
+parameters of one parachute type and stage are pooled over the tests.  Each
+dispersed parameter gets a capped distribution (`distributions.fit_dispersion`:
+normal, lognormal or uniform by AIC, capped 10 % of the test range beyond the
+extremes).  The inflation-shape parameters that the paper bounds together,
+(Ck, n_p, expopen) for infinite-mass canopies and (n, expopen) for finite
+mass, get a convex hull of the test points grown by the engineering factor
+(10 %, 15 % for Pilots; `hulls.Hull.grow`); Monte Carlo cases draw them
+together and redraw any combination outside the grown hull
+(`hulls.sample_in_hull`), the other parameters independently.  Parameters
+that are constant over the tests (a Pilot's expopen held at 1) leave the hull;
+with fewer varying shape parameters than two, or fewer tests than the hull's
+dimension plus one, the caps alone bound the draws.
+
+Start times and the instrument factors (drag and load-cell scales, sensor
+lags and biases) belong to one test, not to the canopy, and are not dispersed.
+
+Where the campaign folder also holds its stages table (stages.csv), each
+type and stage gets the drag-area envelope of its cases against the tests'
+curves and the extreme corners (`drag_area_envelope`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from cpas_ocp.campaign.distributions import Dispersion, fit_dispersion, generator
+from cpas_ocp.campaign.hulls import (
+    ENGINEERING_FACTOR,
+    PILOT_ENGINEERING_FACTOR,
+    Hull,
+    sample_in_hull,
+)
+
+DISPERSED = ("CdS", "Ck", "n_p", "n", "expopen", "t_k")
+HULL_PARAMETERS = (("Ck", "n_p", "expopen"), ("n", "expopen"))
+# Pooled tests below which a canopy type and stage is not dispersed (a distribution fitted
+# to fewer values says little).
+MIN_TESTS = 5
+
+
+@dataclass
+class DispersionModel:
+    """The Monte Carlo input model of one parachute type and stage.
+
+    `hull` is the grown hull of `hull_names` (None where the caps alone bound
+    the draws); `tests` the number of tests pooled.
+    """
+
+    type: str
+    stage: str
+    tests: int
+    dispersions: dict[str, Dispersion]
+    hull_names: tuple[str, ...]
+    hull: Hull | None
+    test_points: pd.DataFrame
+
+    @property
+    def label(self) -> str:
+        return f"{self.type} {self.stage}"
+
+    def draw(self, n: int, seed: int) -> pd.DataFrame:
+        """`n` cases, every parameter a column (SI), reproducible by `seed`."""
+        rng = generator(seed)
+        out = {}
+        if self.hull is not None:
+            sample = sample_in_hull(self.hull, n, rng,
+                                    [self.dispersions[k] for k in self.hull_names])
+            out.update({k: sample.points[:, i] for i, k in enumerate(self.hull_names)})
+        for name, dispersion in self.dispersions.items():
+            if name not in out:
+                out[name] = dispersion.sample(n, rng)
+        return pd.DataFrame(out)[list(self.dispersions)]
+
+    def text(self) -> str:
+        lines = [f"{self.label}: {self.tests} tests"]
+        lines += ["  " + d.text() for d in self.dispersions.values()]
+        if self.hull is not None:
+            lines.append(f"  hull of ({', '.join(self.hull_names)}) grown by "
+                         f"{100 * self.hull.growth:.0f} %, {len(self.hull.vertices)} vertices")
+        else:
+            lines.append("  no hull: the caps alone bound the draws")
+        return "\n".join(lines)
+
+
+def dispersion_models(table: pd.DataFrame, min_tests: int = MIN_TESTS
+                      ) -> tuple[list[DispersionModel], list[str]]:
+    """A model per parachute type and stage with at least `min_tests` tests, and a note per
+    group left out."""
+    rows = table[table.parameter.isin(DISPERSED) & (table.parachute != "")]
+    models, skipped = [], []
+    for (kind, stage), group in rows.groupby(["type", "stage"], sort=True):
+        points = group.pivot_table(index=["test", "parachute"], columns="parameter",
+                                   values="value").dropna(axis=1)
+        if len(points) < min_tests:
+            skipped.append(f"{kind} {stage}: {len(points)} canopies, fewer than {min_tests}")
+            continue
+        varying = [c for c in points.columns if np.ptp(points[c].to_numpy()) > 0.0]
+        dispersions = {c: fit_dispersion(c, points[c].to_numpy()) for c in varying}
+        hull_names = next((h for h in HULL_PARAMETERS if set(h) <= set(varying)), ())
+        if not hull_names:
+            shape = [c for c in ("n", "n_p", "Ck", "expopen") if c in varying]
+            hull_names = tuple(shape) if len(shape) >= 2 else ()
+        hull = None
+        if hull_names and len(points) > len(hull_names):
+            factor = PILOT_ENGINEERING_FACTOR if kind == "pilot" else ENGINEERING_FACTOR
+            hull = Hull.from_points(points[list(hull_names)].to_numpy(),
+                                    list(hull_names)).grow(factor)
+        models.append(DispersionModel(str(kind), str(stage), len(points), dispersions,
+                                      tuple(hull_names) if hull else (), hull, points))
+    return models, skipped
+
+
+def write_dispersions(models: list[DispersionModel], skipped: list[str], cases: int, seed: int,
+                      out: str | Path, table: pd.DataFrame | None = None,
+                      stages: pd.DataFrame | None = None) -> Path:
+    """Per model: cases_<type>_<stage>.parquet (`cases` draws, seed `seed` + its index),
+    its hull and histogram figures and, given the campaign's parameter `table` and its
+    `stages` table, the drag-area envelope (envelope_<type>_<stage>.csv and .png);
+    dispersions.json and dispersions.md for all."""
+    from cpas_ocp.campaign.drag_area_envelope import drag_area_envelope, stage_conditions
+    from cpas_ocp.io.output_folder import atomic_folder
+    from cpas_ocp.reports.plots import (
+        plot_dispersion_histograms,
+        plot_drag_area_envelope,
+        plot_hull_projections,
+    )
+    out = Path(out)
+    summary = []
+    with atomic_folder(out, "dispersions.json") as tmp:
+        for i, model in enumerate(models):
+            draws = model.draw(cases, seed + i)
+            stem = f"{model.type}_{model.stage}"
+            draws.to_parquet(tmp / f"cases_{stem}.parquet", index=False)
+            figures = [plot_dispersion_histograms(model, draws, tmp / f"histograms_{stem}.png")]
+            if model.hull is not None:
+                figures.append(plot_hull_projections(model, draws, tmp / f"hull_{stem}.png"))
+            envelope = None
+            if table is not None and stages is not None:
+                cond = stage_conditions(stages, table, model.type, model.stage)
+                envelope = cond and drag_area_envelope(model, draws, cond)
+            if envelope is not None:
+                envelope.bands.to_csv(tmp / f"envelope_{stem}.csv", index=False)
+                figures.append(plot_drag_area_envelope(envelope, tmp / f"envelope_{stem}.png"))
+            summary.append({
+                "type": model.type, "stage": model.stage, "tests": model.tests,
+                "cases": cases, "seed": seed + i,
+                "dispersions": {k: dataclasses.asdict(d) for k, d in model.dispersions.items()},
+                "hull": None if model.hull is None else {
+                    "parameters": list(model.hull_names), "growth": model.hull.growth,
+                    "vertices": model.hull.vertices.tolist(), "volume": model.hull.volume},
+                "envelope": None if envelope is None else {
+                    "cases": envelope.cases, "conditions": dataclasses.asdict(envelope.conditions),
+                    "flight_points_inside": envelope.flight_inside(),
+                    "corners_outside_hull": [c for c, inside in zip(
+                        envelope.corner_labels, envelope.corner_inside, strict=True)
+                        if inside is False]},
+                "figures": [f.name for f in figures]})
+        (tmp / "dispersions.json").write_text(json.dumps({"models": summary, "skipped": skipped},
+                                                         indent=2, default=float))
+        (tmp / "dispersions.md").write_text(
+            "# Monte Carlo dispersions\n\n```\n" + "\n\n".join(m.text() for m in models)
+            + ("\n\nnot dispersed:\n" + "\n".join(skipped) if skipped else "") + "\n```\n\n"
+            + "".join(f"![{f}]({f})\n\n" for s in summary for f in s["figures"]))
+    return out
+
+
+def _read_table(path: Path, what: str) -> pd.DataFrame:
+    """A campaign table from Parquet or CSV (UTF-8, a byte-order mark allowed, empty cells
+    NaN); InputError saying `what` was expected where it cannot be read."""
+    from cpas_ocp.errors import InputError
+    try:
+        if path.suffix == ".parquet":
+            return pd.read_parquet(path)
+        return pd.read_csv(path, keep_default_na=False, na_values=[""], encoding="utf-8-sig")
+    except (OSError, ValueError) as exc:  # pandas' parse and decode errors are ValueErrors
+        raise InputError(str(path), "(file)", f"{what} ({type(exc).__name__}: "
+                         f"{str(exc).splitlines()[0][:200]})") from None
+
+
+def read_stage_table(campaign: str | Path) -> pd.DataFrame | None:
+    """The campaign's stages.csv (`campaign.STAGE_COLUMNS`) in its folder, or beside its
+    parameter table; None where there is none (campaigns written before it existed)."""
+    from cpas_ocp.campaign.campaign import STAGE_COLUMNS
+    from cpas_ocp.errors import InputError
+    campaign = Path(campaign)
+    path = (campaign if campaign.is_dir() else campaign.parent) / "stages.csv"
+    if not path.is_file():
+        return None
+    stages = _read_table(path, "a campaign's stages table")
+    missing = [c for c in STAGE_COLUMNS if c not in stages.columns]
+    if missing:
+        raise InputError(str(path), ", ".join(missing), "the columns of a campaign's stages")
+    stages["stage"] = stages["stage"].astype(str)
+    return stages
+
+
+def read_parameter_table(path: str | Path) -> pd.DataFrame:
+    """A campaign's parameter table from its folder (parameters.parquet, else .csv) or file."""
+    from cpas_ocp.campaign.campaign import COLUMNS
+    from cpas_ocp.errors import InputError
+    path = Path(path)
+    if path.is_dir():
+        path = next((path / f for f in ("parameters.parquet", "parameters.csv")
+                     if (path / f).is_file()), path / "parameters.parquet")
+    if not path.is_file():
+        raise InputError(str(path), "(file)", "a campaign's parameter table (cpas-ocp campaign)")
+    table = _read_table(path, "a campaign's parameter table")
+    if "line_length" not in table.columns:  # tables written before the column existed
+        table["line_length"] = np.nan
+    missing = [c for c in COLUMNS if c not in table.columns]
+    if missing:
+        raise InputError(str(path), ", ".join(missing), "the columns of a campaign's table")
+    table["stage"] = table["stage"].fillna("").astype(str)
+    table["parachute"] = table["parachute"].fillna("").astype(str)
+    return table

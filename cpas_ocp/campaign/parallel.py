@@ -1,0 +1,82 @@
+"""Independent tasks on local processes or on a Dask cluster, results as they finish.
+
+A campaign reconstructs one test folder per task; a Monte Carlo flies one
+chunk of cases per task.  Both hand a picklable top-level function and its
+inputs to `run_tasks`, which runs them in this process (one worker), on a
+`ProcessPoolExecutor` of local processes, or, given a scheduler address, on
+a Dask cluster through `distributed.Client.map` (the workers must have
+cpas-ocp installed and see the same file paths).  A scheduler that cannot be
+used is an `InputError` on ``--scheduler``.
+"""
+
+from __future__ import annotations
+
+import signal
+from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from typing import TypeVar
+
+from cpas_ocp.errors import InputError
+
+T = TypeVar("T")
+R = TypeVar("R")
+
+
+def run_tasks(fn: Callable[[T], R], items: Sequence[T], workers: int = 2,
+              scheduler: str | None = None) -> Iterator[tuple[int, R]]:
+    """(index into `items`, fn(item)) for every item, in the order the tasks finish: on the
+    Dask scheduler at `scheduler` (e.g. ``tcp://host:8786``) if given, else on `workers`
+    local processes (in this process when `workers` is 1)."""
+    if scheduler:
+        return _on_dask(fn, items, scheduler)
+    return _on_processes(fn, items, workers)
+
+
+def _on_processes(fn: Callable[[T], R], items: Sequence[T],
+                  workers: int) -> Iterator[tuple[int, R]]:
+    if workers <= 1 or len(items) <= 1:
+        yield from enumerate(map(fn, items))
+        return
+    pool = ProcessPoolExecutor(max_workers=min(workers, len(items)),
+                               initializer=_worker_signals)
+    try:
+        futures = {pool.submit(fn, item): i for i, item in enumerate(items)}
+        for future in as_completed(futures):
+            yield futures[future], future.result()
+    except BaseException:
+        # An interrupt (or any error) ends the workers now, not after their running tasks
+        # (the executor's own shutdown waits for those: minutes for a campaign).  There is
+        # no public way to do so before Python 3.14's `terminate_workers`.
+        for process in list((pool._processes or {}).values()):
+            process.terminate()
+        pool.shutdown(wait=True, cancel_futures=True)
+        raise
+    pool.shutdown()
+
+
+def _worker_signals() -> None:
+    """A local worker leaves Ctrl-C to the command, which ends it (a terminal sends SIGINT to
+    the whole process group), and dies quietly on SIGTERM: it must not run the command's
+    handlers, inherited through fork, which would print its traceback."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
+def _on_dask(fn: Callable[[T], R], items: Sequence[T],
+             scheduler: str) -> Iterator[tuple[int, R]]:
+    try:
+        from distributed import Client
+        from distributed import as_completed as dask_completed
+    except ImportError:
+        raise InputError("(command line)", "--scheduler",
+                         "dask.distributed installed (pip install 'cpas-ocp[cluster]')") from None
+    try:
+        client = Client(scheduler, timeout=30)
+    except OSError as exc:
+        raise InputError("(command line)", "--scheduler",
+                         f"a reachable Dask scheduler; {scheduler}: {exc}") from None
+    with client:
+        futures = client.map(fn, list(items), pure=False)
+        index = {future.key: i for i, future in enumerate(futures)}
+        for future in dask_completed(futures):
+            yield index[future.key], future.result()

@@ -1,0 +1,295 @@
+"""Plug-in effects written from a residual's signature, where no library effect explains it.
+
+When the diagnosis confirms nothing but the residuals keep significant
+structure (`Diagnosis.structure`), the structure's signature points to the
+kind of physics that is missing.  Three signatures have a parametric answer
+that can be written down without knowing more:
+
+* **a periodic line** at f Hz in some windows: the canopies' drag area
+  modulated at f, from the first such window's start to the last one's end
+  (canopy breathing, a coning or swinging canopy):
+  CdS (1 + g(t) (a_P cos 2 pi f (t - t0) + b_P sin 2 pi f (t - t0))), with g a
+  smooth gate and the in-phase and quadrature amplitudes a_P, b_P linear
+  (null 0); f starts at the found value and is estimated;
+* **a load-cell residual that follows the load's level** (correlated with the
+  tension, the drag area or the dynamic pressure): a load-cell gain that
+  varies with the tension, reading = T (1 + k_P T / T_ref), k_P the change of
+  gain at the phase's peak tension T_ref (null 0);
+* **a residual that follows altitude** (a GPS or an altimeter): a horizontal
+  wind that changes linearly with height on top of the atmosphere's,
+  u(h) = u_0 + u_1 (h - h_0) / H over the phase's altitude span H from its
+  start h_0, east and north (null 0).
+
+Each proposal is Python source: a plug-in file with its physics in its
+docstring and its constants at the top, for the user to read, edit and pass
+to `--plugin`.  `discovery.discover` writes each to a file, loads it as a
+plug-in and tests it the way the diagnosis tests a library effect (a score
+test at the fit and a confirming refit from it), so the file is tested
+exactly as written.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from string import Template
+
+import numpy as np
+
+from cpas_ocp.discrepancy.diagnosis import Diagnosis
+from cpas_ocp.discrepancy.residual_diagnosis import PERIODICITY, Finding
+from cpas_ocp.estimation.estimator import Fit
+from cpas_ocp.io.model_spec import ModelSpec
+
+# Findings at frequencies within this share of the strongest line, or within one
+# frequency bin of its window, are the same line seen in another channel or window.
+SAME_LINE_SHARE = 0.1
+# Fewest cycles of a line in its window for it to be an oscillation: a "line" with a
+# period near the window's length is a drift, which any slow signature fits as well.
+MIN_CYCLES = 3.0
+# A periodic window that ends within this time of the phase's end leaves the gate open.
+OPEN_END_S = 0.5
+# Signatures of the load's level: a load-cell residual correlated with one of them asks
+# for a gain that varies with the load.
+LOAD_LEVEL = ("tension", "cds", "dynamic_pressure")
+
+
+@dataclass(frozen=True)
+class Proposal:
+    """A plug-in proposed from a signature: its effect name, the finding that asked for it
+    (one line), and the plug-in file's text."""
+
+    name: str
+    reason: str
+    source: str
+
+    @property
+    def file_name(self) -> str:
+        return f"{self.name}.py"
+
+
+def propose(diagnosis: Diagnosis, spec: ModelSpec) -> list[Proposal]:
+    """The plug-ins the diagnosis's unexplained structure asks for (none where it has none):
+    a drag-area modulation, a tension-dependent load-cell gain, a wind profile, in that
+    order; effects the fitted model (`spec`) already has are not proposed."""
+    structure = diagnosis.structure
+    fit = diagnosis.fit
+    out = [p for p in (_periodic(structure, fit), _load_gain(structure, fit),
+                       _wind_profile(structure, fit)) if p is not None]
+    return [p for p in out if p.name not in spec.effect_names]
+
+
+def _base(name: str) -> str:
+    """The signature kind of a signature name: ``tension[drogue1]`` -> ``tension``."""
+    return name.split("[")[0]
+
+
+def _periodic(structure: list[Finding], fit: Fit) -> Proposal | None:
+    lines = [f for f in structure if PERIODICITY in f.rejected
+             and f.frequency_hz * (f.t1 - f.t0) >= MIN_CYCLES]
+    if not lines:
+        return None
+    top = min(lines, key=lambda f: f.periodicity_p)
+    f0 = top.frequency_hz
+    same = [f for f in lines if abs(f.frequency_hz - f0)
+            <= max(SAME_LINE_SHARE * f0, 1.0 / max(f.t1 - f.t0, 1e-9))]
+    t0 = min(f.t0 for f in same)
+    t1 = max(f.t1 for f in same)
+    end = "math.inf" if t1 >= float(fit.t[-1]) - OPEN_END_S else f"{t1:.3f}"
+    where = ", ".join(sorted({f"{f.sensor} {f.window}" for f in same}))
+    reason = (f"a {f0:.2f} Hz line in {where} (strongest: {top.text()})")
+    return Proposal("drag_area_modulation", reason, _PERIODIC.substitute(
+        frequency=f"{f0:.4f}", t_start=f"{t0:.3f}", t_end=end, reason=_wrap(reason)))
+
+
+def _load_gain(structure: list[Finding], fit: Fit) -> Proposal | None:
+    cells = {s.name for s in fit.test.sensors_of("load_cell")}
+    hits = [(f, c) for f in structure if f.sensor in cells for c in f.correlations
+            if c.signature in f.rejected and _base(c.signature) in LOAD_LEVEL]
+    if not hits:
+        return None
+    f, c = min(hits, key=lambda h: h[1].p_value)
+    q = fit.quantities()
+    peaks = [float(np.max(np.abs(q[k]))) for k in q if _base(k) == "tension"]
+    t_ref = _round_up(max(peaks, default=10_000.0))
+    reason = (f"{f.sensor} in {f.window} correlates with {c.signature} (r = {c.r:+.2f}, "
+              f"p {c.p_value:.2g})")
+    return Proposal("tension_gain", reason, _LOAD_GAIN.substitute(
+        t_ref=f"{t_ref:.0f}", reason=_wrap(reason)))
+
+
+def _wind_profile(structure: list[Finding], fit: Fit) -> Proposal | None:
+    hits = [(f, c) for f in structure for c in f.correlations
+            if c.signature in f.rejected and c.signature == "altitude"]
+    if not hits:
+        return None
+    f, c = min(hits, key=lambda h: h[1].p_value)
+    h = fit.quantities()["altitude"]
+    h0, span = float(h[0]), max(float(np.max(h) - np.min(h)), 1.0)
+    reason = (f"{f.sensor} {f.channel} in {f.window} correlates with altitude "
+              f"(r = {c.r:+.2f}, p {c.p_value:.2g})")
+    return Proposal("wind_profile", reason, _WIND_PROFILE.substitute(
+        h0=f"{h0:.1f}", span=f"{span:.1f}", reason=_wrap(reason)))
+
+
+def _round_up(value: float) -> float:
+    """`value` rounded up to two significant figures (a reference load that reads well)."""
+    magnitude = 10.0 ** (np.floor(np.log10(value)) - 1)
+    return float(np.ceil(value / magnitude) * magnitude)
+
+
+def _wrap(text: str, width: int = 76) -> str:
+    """`text` broken into lines of at most `width` characters, for a docstring."""
+    lines, line = [], ""
+    for word in text.split():
+        if line and len(line) + 1 + len(word) > width:
+            lines.append(line)
+            line = word
+        else:
+            line = f"{line} {word}" if line else word
+    return "\n".join([*lines, line])
+
+
+_HEADER = '''from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import casadi as ca
+
+from cpas_ocp.physics.effects import Effect
+from cpas_ocp.physics.parameters import Parameter, param_name
+'''
+
+_PERIODIC = Template('''"""Drag-area modulation at the residual's frequency (proposed by cpas-ocp).
+
+Proposed from the residual's signature:
+$reason
+
+Every canopy's drag area is CdS (1 + g(t) (a cos 2 pi f (t - T_START_S)
++ b sin 2 pi f (t - T_START_S))): canopy breathing, or a coning or swinging
+canopy seen through its drag.  g is a smooth gate, 0 before T_START_S and 1
+RAMP_S after it (and back to 0 over RAMP_S before T_END_S where that is
+finite).  The in-phase and quadrature amplitudes ``modulation_cos[P]`` and
+``modulation_sin[P]`` (fractions of CdS) enter linearly and vanish at the null;
+``modulation_frequency`` (Hz) starts at FREQUENCY_HZ and is estimated.  Edit
+the window or the gate to fit what you know; list the effect after
+canopy_inflation, before the riser effects.
+"""
+''' + _HEADER + '''
+FREQUENCY_HZ = $frequency  # the residual's line (Hz)
+T_START_S = $t_start  # where the line was first seen (s)
+T_END_S = $t_end  # where it was last seen (s; math.inf: to the phase's end)
+RAMP_S = 0.1  # the gate's opening time (s)
+
+
+def gate(t):
+    """0 before T_START_S, 1 from T_START_S + RAMP_S (to T_END_S - RAMP_S), smooth."""
+    opened = 0.5 * (1.0 + ca.tanh(4.0 * (t - T_START_S - 0.5 * RAMP_S) / RAMP_S))
+    if math.isinf(T_END_S):
+        return opened
+    return opened * 0.5 * (1.0 + ca.tanh(4.0 * (T_END_S - 0.5 * RAMP_S - t) / RAMP_S))
+
+
+@dataclass(frozen=True)
+class DragAreaModulation(Effect):
+    """Drag-area oscillation at ``modulation_frequency`` (Hz), amplitudes per canopy."""
+
+    name: str = "drag_area_modulation"
+
+    def parameters(self, test):
+        return [Parameter("modulation_frequency", "Hz", FREQUENCY_HZ, 0.5 * FREQUENCY_HZ,
+                          1.5 * FREQUENCY_HZ, scale=FREQUENCY_HZ,
+                          description="drag-area modulation frequency"),
+                *(Parameter(param_name(base, c.name), "1", 0.0, -0.3, 0.3, scale=0.05,
+                            description=f"{part} drag-area modulation amplitude")
+                  for c in test.parachutes
+                  for base, part in (("modulation_cos", "in-phase"),
+                                     ("modulation_sin", "quadrature")))]
+
+    def null_values(self, test):
+        return {p.name: 0.0 for p in self.parameters(test)[1:]}
+
+    def forces(self, ctx):
+        phase = 2.0 * math.pi * ctx.p["modulation_frequency"] * (ctx.t - T_START_S)
+        g = gate(ctx.t)
+        for chute in ctx.test.parachutes:
+            a = ctx.p[param_name("modulation_cos", chute.name)]
+            b = ctx.p[param_name("modulation_sin", chute.name)]
+            factor = 1.0 + g * (a * ca.cos(phase) + b * ca.sin(phase))
+            ctx.scale_drag(chute.name, factor, self.name, ("axial_fraction", "riser_force"))
+''')
+
+_LOAD_GAIN = Template('''"""A load-cell gain that varies with the load (proposed by cpas-ocp).
+
+Proposed from the residual's signature:
+$reason
+
+Each load cell reads T (1 + k T / T_REF_N): a cell (or its fairlead) whose
+gain changes with the load it carries.  ``tension_gain[P]`` = k is the
+change of gain at T_REF_N, the phase's peak tension (k = -0.1: the peak reads
+10 % low); it vanishes at the null.  Edit the law (a square, a saturation) to
+fit what you know; list the effect after the load-cell sensor.
+"""
+''' + _HEADER + '''
+T_REF_N = $t_ref  # the phase's peak tension, rounded up (N)
+
+
+@dataclass(frozen=True)
+class TensionGain(Effect):
+    """Load-cell gain 1 + k T / T_REF_N, ``tension_gain[P]`` = k per load cell."""
+
+    name: str = "tension_gain"
+
+    def parameters(self, test):
+        return [Parameter(param_name("tension_gain", s.parachute), "1", 0.0, -0.5, 0.5,
+                          scale=0.05, description="load-cell gain change at the peak tension")
+                for s in test.sensors_of("load_cell")]
+
+    def null_values(self, test):
+        return {p.name: 0.0 for p in self.parameters(test)}
+
+    def observations(self, ctx):
+        for s in ctx.test.sensors_of("load_cell"):
+            reading = ctx.y[s.name]["tension"]
+            k = ctx.p[param_name("tension_gain", s.parachute)]
+            ctx.y[s.name]["tension"] = reading * (1.0 + k * reading / T_REF_N)
+''')
+
+_WIND_PROFILE = Template('''"""A horizontal wind that changes with altitude (proposed by cpas-ocp).
+
+Proposed from the residual's signature:
+$reason
+
+On top of the atmosphere's wind, the air moves at
+u(h) = offset + shear (h - H0_M) / SPAN_M  (m/s, east and north),
+``wind_offset_east``, ``wind_offset_north`` the change at the phase's start
+altitude H0_M and ``wind_shear_east``, ``wind_shear_north`` the change across
+its altitude span SPAN_M; all vanish at the null.  Edit the profile (layers,
+a power law) to fit what you know; list the effect first, before any drag.
+"""
+''' + _HEADER + '''
+H0_M = $h0  # the phase's start altitude (m)
+SPAN_M = $span  # the phase's altitude span (m)
+LIMIT_MS = 30.0  # bound on each coefficient (m/s)
+
+
+@dataclass(frozen=True)
+class WindProfile(Effect):
+    """Horizontal wind offset + shear (h - H0_M) / SPAN_M, east and north (m/s)."""
+
+    name: str = "wind_profile"
+
+    def parameters(self, test):
+        return [Parameter(f"wind_{kind}_{axis}", "m/s", 0.0, -LIMIT_MS, LIMIT_MS, scale=1.0,
+                          description=f"{axis} wind {kind} against the atmosphere's")
+                for kind in ("offset", "shear") for axis in ("east", "north")]
+
+    def null_values(self, test):
+        return {p.name: 0.0 for p in self.parameters(test)}
+
+    def forces(self, ctx):
+        height = (ctx.x["position"][2] - H0_M) / SPAN_M
+        u = [ctx.p[f"wind_offset_{axis}"] + ctx.p[f"wind_shear_{axis}"] * height
+             for axis in ("east", "north")]
+        ctx.add_air_velocity(ca.vertcat(u[0], u[1], 0.0), self.name)
+''')

@@ -1,0 +1,246 @@
+"""Diagnosis of a fit: where the model fails, which known effect is missing, or what the
+unexplained residual looks like.
+
+1. Where: the residual chi-square per sensor channel and phase window
+   (deployment, each stage's inflation and steady state, per canopy), and
+   the one place where it exceeds the noise most (`diagnostics.worst_of`).
+2. What is known: a score test of every library (and plug-in) effect the
+   model does not use (`score_test`), ranked; the significant ones
+   (p < alpha / m for m effects tested) are confirmed, up to `confirm_top`
+   of them, by refitting the model with the effect and testing the
+   likelihood ratio.  The confirmed effect with the smallest likelihood-ratio
+   p-value is the diagnosis.
+3. The air's motion: where an altimeter and a GPS share a slow wander, the
+   evidence of a wind process against still air (`wind_evidence`); the
+   process is named where its Bayes factor is decisive.
+4. What is not: the residual tests (whiteness, a periodic line, a lag,
+   correlation with signatures of the fitted trajectory) per channel and
+   window (`residual_diagnosis`).  When no effect is confirmed but the
+   residuals carry significant structure, the report says so and describes
+   that structure: sensor, window, frequency or lag, and what it correlates with.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+from scipy.stats import norm
+
+from cpas_ocp.discrepancy.residual_diagnosis import Finding, diagnose_residuals, signature_text
+from cpas_ocp.discrepancy.score_test import ScoreTest, confirm, confirmed_ranking, score_tests
+from cpas_ocp.discrepancy.wind_evidence import WindEvidence, wind_evidence
+from cpas_ocp.estimation.estimator import Fit
+from cpas_ocp.inference.diagnostics import (
+    WindowStatistic,
+    departs,
+    excess_removed,
+    explained_share,
+    window_statistics,
+    worst_of,
+)
+from cpas_ocp.inference.phase_windows import PhaseWindow, phase_windows
+from cpas_ocp.io.model_spec import ModelSpec
+from cpas_ocp.physics.effects.registry import EffectType
+from cpas_ocp.process_memory import release_freed_memory
+
+ALPHA = 0.01  # family-wise level of the diagnosis's tests
+CONFIRM_TOP = 3  # significant score tests confirmed by a refit
+# A window a confirmed effect removes at least this share of the excess chi-square from is
+# one it explains in part; if it still departs from the noise, the effect may be a stand-in.
+PARTLY_EXPLAINED = 0.1
+
+
+@dataclass
+class Diagnosis:
+    """What `diagnose` found at one fit; `effects` in their final ranking."""
+
+    fit: Fit
+    windows: list[PhaseWindow]
+    statistics: list[WindowStatistic]
+    effects: list[ScoreTest]
+    findings: list[Finding]
+    alpha: float = ALPHA
+    notes: list[str] = field(default_factory=list)
+    air: WindEvidence | None = None  # the air motion's evidence, where it was asked
+    _stand_in: dict[str, list[str]] = field(default_factory=dict, repr=False)
+
+    @property
+    def worst(self) -> str:
+        """One line naming the channel and window with the largest chi-square excess."""
+        return worst_of(self.statistics)
+
+    @property
+    def tests_made(self) -> int:
+        return sum(t.tested for t in self.effects)
+
+    @property
+    def family(self) -> int:
+        """The number of tests the Bonferroni level alpha / m divides by (at least 1)."""
+        return max(self.tests_made, 1)
+
+    @property
+    def explanation(self) -> ScoreTest | None:
+        """The confirmed effect that explains the residual best, if any is significant."""
+        m = self.family
+        for t in self.effects:
+            if t.refit is not None and t.refit.p_value < self.alpha / m:
+                return t
+        return None
+
+    @property
+    def structure(self) -> list[Finding]:
+        """The residual findings that are significant after the multiple-test correction."""
+        return [f for f in self.findings if f.significant]
+
+    @property
+    def consistent_with_noise(self) -> bool:
+        """Nothing to add: no effect confirmed or left unresolved, no air motion named, and
+        no residual structure beyond the noise."""
+        return (self.explanation is None and not (self.air is not None and self.air.decisive)
+                and not self._unresolved(None) and not self.structure)
+
+    @property
+    def departure_level(self) -> float:
+        """The z a window's chi-square excess must pass to depart from the noise: the normal
+        quantile at the family-wise level over the windows."""
+        return float(norm.isf(self.alpha / max(len(self.statistics), 1)))
+
+    def stand_in(self, best: ScoreTest) -> list[str]:
+        """Why the confirmed effect `best` may stand in for something it does not describe:
+        an estimate outside its plausible range (`Effect.plausible`); each window it
+        explains in part (at least PARTLY_EXPLAINED of the excess) that still departs
+        from the noise after its refit; significant residual structure its refit leaves
+        in such a window; and, where any of those holds, the strongest structure the
+        refit leaves elsewhere.  Empty where none holds."""
+        if best.effect not in self._stand_in:
+            self._stand_in[best.effect] = self._stand_in_reasons(best)
+        return self._stand_in[best.effect]
+
+    def implausible(self, best: ScoreTest) -> list[str]:
+        """The refit estimates of `best`'s effect that lie outside the ranges it declares
+        plausible (`Effect.plausible`), each in words; empty where all lie inside."""
+        effect = next((e for e in best.spec.effects if e.name == best.effect), None) \
+            if best.spec is not None else None
+        if effect is None:
+            return []
+        out = []
+        for name, (lo, hi) in effect.plausible(self.fit.test).items():
+            value = best.refit_estimate.get(name)
+            if value is not None and not lo <= value <= hi:
+                out.append(f"{name} = {value:.4g} lies outside its plausible range "
+                           f"{lo:.4g} to {hi:.4g}")
+        return out
+
+    def _stand_in_reasons(self, best: ScoreTest) -> list[str]:
+        """`stand_in`, computed."""
+        reasons = self.implausible(best)
+        if best.refitted is not None:
+            refit = best.refitted[1]
+            level = self.departure_level
+            after = window_statistics(refit, self.windows)
+            acted = set()
+            for w, now, share in excess_removed(self.statistics, after, level):
+                if share < PARTLY_EXPLAINED:
+                    continue
+                acted.add((w.sensor, w.channel, w.window))
+                if departs(now, level):
+                    reasons.append(f"{w.sensor}.{w.channel} {w.window} still departs from the "
+                                   f"noise (normalised RMS {now.normalized_rms:.2f}, "
+                                   f"{100 * share:.0f} % of its excess removed)")
+            # Structure the refit leaves in the windows the effect acts in; where the effect
+            # is a stand-in, the strongest structure it leaves elsewhere too.
+            left = [f for f in diagnose_residuals(refit, self.windows, self.alpha)
+                    if f.significant]
+            inside = [f for f in left if (f.sensor, f.channel, f.window) in acted]
+            reasons += [f"structure in {f.text()}" for f in inside]
+            elsewhere = [f for f in left if f not in inside]
+            if reasons and elsewhere:
+                reasons.append(f"and elsewhere {elsewhere[0].text()}")
+        return reasons
+
+    def _unresolved(self, best: ScoreTest | None) -> list[ScoreTest]:
+        """Significant score tests, other than `best`, whose refits did not converge: their
+        likelihood ratio is unknown or only bounded below."""
+        m = self.family
+        return [t for t in self.effects if t is not best and t.significant(self.alpha, m)
+                and t.refit_note and (t.refit is None or t.refit.lower_bound)]
+
+    def verdict(self) -> str:
+        """One paragraph: the effect that is missing, or the signature nobody explains."""
+        best = self.explanation
+        unresolved = self._unresolved(best)
+        if self.air is not None and self.air.decisive:
+            also = (f"; also confirmed: {best.effect} (likelihood ratio "
+                    f"{best.refit.statistic:.1f}, p = {best.refit.p_value:.2g})"
+                    if best is not None else "")
+            return f"missing effect: {self.air.verdict()}{also}"
+        if best is not None:
+            lr = best.refit
+            estimates = ", ".join(f"{n} = {v:.4g}" for n, v in best.refit_estimate.items())
+            if lr.lower_bound:
+                found = (f"likelihood ratio >= {lr.statistic:.1f}, p <= {lr.p_value:.2g}: its "
+                         f"refit did not converge, and its last iterate made feasible has "
+                         f"{estimates}")
+            else:
+                share = explained_share(self.fit.chi_square, self.fit.dof,
+                                        self.fit.chi_square - lr.statistic)
+                found = (f"likelihood ratio {lr.statistic:.1f}, p = {lr.p_value:.2g}, "
+                         f"{100 * share:.0f} % of the excess chi-square; refit estimates "
+                         f"{estimates}")
+            rivals = "".join(
+                f"; the refit of {t.effect} did not converge"
+                + (f" (likelihood ratio >= {t.refit.statistic:.1f})" if t.refit else "")
+                + ", so it may explain more" for t in unresolved)
+            remains = self.stand_in(best)
+            if remains:
+                return (f"partly explained by {best.effect} ({found}){rivals}; what remains: "
+                        + "; ".join(remains))
+            return f"missing effect: {best.effect} ({found}){rivals}"
+        if unresolved:
+            signature = ("; the residual's signature:\n" + signature_text(self.structure)
+                         if self.structure else "")
+            return ("undecided: the score tests of " + ", ".join(t.effect for t in unresolved)
+                    + f" are significant at the family-wise level {self.alpha:g}, but their "
+                    "refits did not converge, so nothing is confirmed and nothing ruled out "
+                    "(see the refits above)" + signature)
+        if self.structure:
+            return ("no effect in the library explains the residual; its signature:\n"
+                    + signature_text(self.structure))
+        return ("the residuals are consistent with the sensor noise: no effect is significant "
+                f"at the family-wise level {self.alpha:g}")
+
+    def text(self) -> str:
+        """The diagnosis as the command line prints it."""
+        m = self.family
+        lines = [f"worst fit: {self.worst}", "",
+                 f"score tests of the effects the model does not use (significant: p < "
+                 f"{self.alpha:g}/{m}):"]
+        lines += ["  " + t.text() for t in self.effects]
+        refits = [t.refit_text() for t in self.effects if t.refit_text()]
+        if refits:
+            lines += ["", "refits with the leading effects:"] + ["  " + r for r in refits]
+        if self.air is not None:
+            lines += ["", self.air.text()]
+        lines += ["", "residual structure:"]
+        lines += ["  " + f.text() for f in self.structure[:8]] or ["  none significant"]
+        lines += ["", self.verdict()]
+        return "\n".join(lines + self.notes)
+
+
+def diagnose(fit: Fit, spec: ModelSpec, candidates: Mapping[str, EffectType] | None = None,
+             confirm_top: int = CONFIRM_TOP, alpha: float = ALPHA,
+             progress: bool = False, exclude: frozenset[str] = frozenset()) -> Diagnosis:
+    """Diagnose `fit` (made with `spec`): see the module docstring.  The effects named in
+    `exclude` are not tested (ones a chain of models has already dropped)."""
+    windows = phase_windows(fit)
+    tests = score_tests(fit, spec, candidates, progress, exclude)
+    m = max(sum(t.tested for t in tests), 1)
+    leading = [t for t in tests if t.significant(alpha, m)][:confirm_top]
+    for t in leading:
+        confirm(fit, t, progress)
+        release_freed_memory()
+    air = wind_evidence(fit, spec, alpha, progress)
+    release_freed_memory()
+    return Diagnosis(fit, windows, window_statistics(fit, windows), confirmed_ranking(tests),
+                     diagnose_residuals(fit, windows, alpha), alpha, air=air)

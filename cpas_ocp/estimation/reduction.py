@@ -1,0 +1,231 @@
+"""Offline data reduction (paper Eqs. 2-3) and the initial guess it gives.
+
+Without any simulation, on the IMU's time base:
+
+* dynamic pressure q = rho(h) |v - w|^2 / 2 from the kinematic track (GPS
+  position and velocity, or a vertical altimeter track; `kinematic_track`);
+* IMU drag area, Eq. 2:      PRF*CdS_total = W_T G / q - (CdS)_V, with the load
+  factor G from the IMU, or from the track's acceleration without one;
+* riser drag area, Eq. 3:    PRF*CdS_P = (F_P + W_p,P G) / q;
+* with neither load cells nor an IMU, a canopy's drag area is its share of the total drag
+  area less the steady drag areas of the canopies opened before it (a
+  rocket's drogue, then its main; a cluster shares equally);
+* per-stage scale factor: the time mean of the IMU drag area over the
+  stage's steady window divided by that of the summed riser drag areas
+  (each times the cosine of its fly-out angle in a cluster, Eq. 7).  It
+  is the initial guess of ``drag_scale[stage]``, since the trajectory's drag is
+  the load-cell drag times that factor.
+
+From these curves the initial guess of every canopy's inflation parameters
+follows: CdS from the scaled riser drag area in the steady window, then the
+start time and shape of every stage from a least-squares fit of the Eq. 5/6
+curve to that drag area (`stage_curve_fit`).  The guess never uses anything
+but the test folder.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from cpas_ocp.estimation.kinematic_track import kinematic_track
+from cpas_ocp.estimation.stage_curve_fit import (
+    MAX_WINDOW_S,
+    StageData,
+    fit_stage_curve,
+    fitted_names,
+)
+from cpas_ocp.io.flight_test import FlightTest, Parachute
+from cpas_ocp.physics.atmosphere import density_at, wind_at
+from cpas_ocp.physics.model import Model
+from cpas_ocp.physics.parameters import param_name
+from cpas_ocp.physics.units import G0
+
+SETTLE_S = 1.0  # time after a stage start before its drag area counts as steady (s)
+
+
+@dataclass
+class Reduction:
+    """Offline drag areas (m^2) on the time base `t` (s).
+
+    `cds_riser` holds each canopy's drag area from its load cell (Eq. 3), or,
+    in a test without load cells, attributed from the total drag area.
+    """
+
+    t: np.ndarray
+    dynamic_pressure: np.ndarray
+    airspeed: np.ndarray
+    load_factor: np.ndarray
+    cds_imu: np.ndarray
+    cds_riser: dict[str, np.ndarray]
+    stage_scale: dict[str, float]
+    stage_windows: dict[str, tuple[float, float]]
+
+
+def reduce(test: FlightTest, starts: dict[tuple[str, str], float],
+           flyout: dict[tuple[str, str], float] | None = None,
+           forebody_cds: float | None = None) -> Reduction:
+    """Offline reduction with stage start times `starts[(canopy, stage)]` (s).
+
+    `flyout[(canopy, stage)]` (rad, default 0) are the fly-out angles of a
+    cluster: the IMU drag area is matched to sum_i cos(theta_i) CdS_i (Eq. 7).
+    `forebody_cds` (m^2) replaces the manifest's forebody drag area (a model
+    that fixes ``CdS_V``).
+    """
+    flyout = flyout or {}
+    imu = test.sensors_of("imu_load_factor")
+    cells = test.sensors_of("load_cell")
+    base = imu[0] if imu else (cells[0] if cells else test.sensors[0])
+    t = base.time[(base.time >= test.t_start) & (base.time <= test.t_end)]
+    track = kinematic_track(test, t)
+    pos = track.position
+    v_air = track.velocity - wind_at(test.atmosphere, pos[:, 2])
+    airspeed = np.linalg.norm(v_air, axis=1)
+    q = 0.5 * density_at(test.atmosphere, pos[:, 2]) * airspeed**2
+    if imu:
+        G = np.interp(t, imu[0].time, imu[0].data["load_factor"])
+    else:  # specific force of the track: a - g, g pointing down
+        G = np.linalg.norm(track.acceleration + np.array([0.0, 0.0, G0]), axis=1) / G0
+    cds_imu = test.weight * G / q - (test.vehicle.forebody_cds if forebody_cds is None
+                                 else forebody_cds)
+    cds_riser = {}
+    for cell in cells:
+        chute = test.parachute(cell.parachute)
+        tension = np.interp(t, cell.time, cell.data["tension"])
+        cds_riser[chute.name] = (tension + chute.dry_mass * G0 * G) / q
+
+    windows = _steady_windows(test, starts)
+    if not cells and not imu:  # an altimeter-only log: the track is all there is
+        cds_riser = _attributed_cds(test, starts, windows, t, cds_imu)
+    scale = {}
+    for stage, (a, b) in windows.items():
+        sel = (t >= a) & (t <= b)
+        riser_sum = sum(np.cos(flyout.get((name, stage), 0.0)) * cds
+                        for name, cds in cds_riser.items())
+        if imu and cds_riser and sel.sum() > 3:
+            scale[stage] = float(np.mean(cds_imu[sel]) / np.mean(riser_sum[sel]))
+        else:
+            scale[stage] = 1.0
+    return Reduction(t, q, airspeed, G, cds_imu, cds_riser, scale, windows)
+
+
+def _attributed_cds(test: FlightTest, starts: dict[tuple[str, str], float],
+                    windows: dict[str, tuple[float, float]], t: np.ndarray,
+                    cds_total: np.ndarray) -> dict[str, np.ndarray]:
+    """Each canopy's drag area (m^2) without load cells.
+
+    Canopies whose first stage has the same name open together (a cluster)
+    and share what is theirs equally; groups opened later get the total drag
+    area less the steady drag areas (medians over their last stage's steady
+    window) of the groups opened before them.
+    """
+    groups: dict[str, list[Parachute]] = {}
+    for chute in test.parachutes:
+        groups.setdefault(chute.stages[0], []).append(chute)
+    ordered = sorted(groups.values(),
+                     key=lambda g: min(starts[(c.name, c.stages[0])] for c in g))
+    out: dict[str, np.ndarray] = {}
+    opened = 0.0
+    for group in ordered:
+        share = (cds_total - opened) / len(group)
+        a, b = windows[group[0].stages[-1]]
+        steady = (t >= a) & (t <= b)
+        for chute in group:
+            out[chute.name] = share
+        if steady.any():
+            opened += len(group) * float(np.median(share[steady]))
+    return out
+
+
+def _steady_windows(test: FlightTest, starts: dict[tuple[str, str], float]
+                    ) -> dict[str, tuple[float, float]]:
+    """Per stage name: from the last canopy's start + SETTLE_S to the first next start."""
+    stage_names = list(dict.fromkeys(s for c in test.parachutes for s in c.stages))
+    windows = {}
+    for k, stage in enumerate(stage_names):
+        begin = max(t for (c, s), t in starts.items() if s == stage) + SETTLE_S
+        later = [t for (c, s), t in starts.items() if s in stage_names[k + 1:]]
+        end = min(later) if later else test.t_end
+        windows[stage] = (begin, max(end, begin))
+    return windows
+
+
+def stage_starts(test: FlightTest, values: dict[str, float]) -> dict[tuple[str, str], float]:
+    """Start time (s) of every canopy's every stage, keyed (canopy, stage), from `values`."""
+    return {(c.name, s): values[param_name("t_start", c.name, s)]
+            for c in test.parachutes for s in c.stages}
+
+
+def initial_guess(test: FlightTest, model: Model,
+                  fixed: dict[str, float] | None = None) -> dict[str, float]:
+    """Initial values of the model parameters from the test folder alone (`fixed` held)."""
+    return reduce_and_guess(test, model, fixed)[0]
+
+
+def _fit_stage(test: FlightTest, red: Reduction, chute: Parachute, k: int,
+               starts: dict[tuple[str, str], float], guess: dict[str, float],
+               bounds: dict[str, tuple[float, float]],
+               fixed: dict[str, float]) -> dict[str, float] | None:
+    """Curve-fitted shape and start of stage k of `chute` (`stage_curve_fit`), or None.
+
+    The window runs from halfway back to the previous stage's observed start
+    (at most 1 s before this one) to just before the next stage's, at most
+    MAX_WINDOW_S after this one.
+    """
+    stage = chute.stages[k]
+    t0 = starts[(chute.name, stage)]
+    prev_start = starts[(chute.name, chute.stages[k - 1])] if k else test.t_start
+    next_start = (starts[(chute.name, chute.stages[k + 1])] if k + 1 < len(chute.stages)
+                  else test.t_end)
+    lo = max(t0 - 1.0, prev_start + 0.5 * (t0 - prev_start))
+    hi = min(t0 + MAX_WINDOW_S, next_start - 0.1)
+    sel = (red.t >= lo) & (red.t <= hi)
+    names = fitted_names(chute, stage)
+    t_lo, t_hi = bounds[names[0]]
+    fit_bounds = {**{n: bounds[n] for n in names}, names[0]: (max(t_lo, lo), min(t_hi, hi))}
+    cds_of = [guess[param_name("CdS", chute.name, s)] for s in chute.stages]
+    data = StageData(chute, stage, red.t[sel],
+                     red.stage_scale.get(stage, 1.0) * red.cds_riser[chute.name][sel],
+                     red.airspeed[sel], cds_of[k - 1] if k else 0.0, cds_of[k], cds_of[-1],
+                     fit_bounds, {n: v for n, v in fixed.items() if n in names})
+    return fit_stage_curve(data)
+
+
+def reduce_and_guess(test: FlightTest, model: Model, fixed: dict[str, float] | None = None
+                     ) -> tuple[dict[str, float], Reduction]:
+    """The initial guess and the reduction it came from (start times from the events).
+
+    Parameters in `fixed` keep their values, and the curve fits hold them.
+    """
+    fixed = dict(fixed or {})
+    guess = {p.name: p.default for p in model.parameters} | fixed
+    starts = stage_starts(test, guess)
+    flyout = {(c.name, s): guess[param_name("flyout_angle", c.name, s)]
+              for c in test.parachutes for s in c.stages
+              if param_name("flyout_angle", c.name, s) in guess}
+    red = reduce(test, starts, flyout, guess.get("CdS_V"))
+    bounds = {p.name: (p.lower, p.upper) for p in model.parameters}
+    for stage, s in red.stage_scale.items():
+        name = param_name("drag_scale", stage)
+        if name in guess and name not in fixed:
+            guess[name] = float(np.clip(s, *bounds[name]))
+    for chute in test.parachutes:
+        curve = red.cds_riser.get(chute.name)
+        if curve is None:
+            continue
+        for stage in chute.stages:
+            a, b = red.stage_windows[stage]
+            steady = (red.t >= a) & (red.t <= b)
+            cds = red.stage_scale.get(stage, 1.0) * float(np.median(curve[steady])) \
+                if steady.any() else 0.0
+            name = param_name("CdS", chute.name, stage)
+            # The riser sees PRF*CdS (wake_deficit); the model's CdS is the free-stream one.
+            prf = guess.get(param_name("prf", chute.name), 1.0)
+            if cds > 0 and name not in fixed:
+                guess[name] = cds / prf
+        for k in range(len(chute.stages)):
+            shape = _fit_stage(test, red, chute, k, starts, guess, bounds, fixed)
+            if shape is not None:
+                guess.update(shape)
+    return guess, red

@@ -1,0 +1,150 @@
+"""Offline least-squares fit of one stage's drag-area curve (paper Eqs. 5, 6).
+
+This is the legacy curve fit, done once per canopy stage on the reduced
+riser drag area (Eq. 3, scaled to the IMU by the stage's factor), and used
+only as the starting point of the single-shot estimation.  It fits the
+shape of the stage's rise with the stage's steady drag area CdS_i and the
+previous stage's CdS_{i-1} held at their steady-window values:
+
+* infinite mass: start time t_i (s), over-inflation Ck, peak fill constant
+  n_p, shape exponent expopen and settling time t_k (s);
+* finite mass: t_i, fill constant n and expopen.
+
+The fill time uses the reduction's airspeed at t_i (m/s) and the canopy's
+fill length, exactly as the model does.  The fit minimises the sum of
+squared drag-area differences (m^2) from a few starting shapes (expopen 1,
+2 and 3) and keeps the best; the start time starts where the curve first
+climbs a fifth of the way from CdS_{i-1} to CdS_i.  A stage whose data do
+not show the rise (no samples, or no climb) is left to the caller's defaults.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import casadi as ca
+import numpy as np
+from scipy.optimize import least_squares
+
+from cpas_ocp.io.flight_test import Parachute
+from cpas_ocp.physics.inflation import (
+    fill_length,
+    finite_mass_cds,
+    infinite_mass_cds,
+    stage_started,
+)
+from cpas_ocp.physics.parameters import param_name
+
+# Fraction of the climb from CdS_{i-1} to CdS_i at which the start-time search begins.
+CLIMB_FRACTION = 0.2
+# Longest stretch of data after the observed start used for one stage (s).
+MAX_WINDOW_S = 4.0
+STARTING_EXPOPEN = (1.0, 2.0, 3.0)
+
+
+@dataclass(frozen=True)
+class StageData:
+    """The reduced drag-area history (m^2) around one stage and what the fit holds fixed.
+
+    `t`, `cds` and `airspeed` (s, m^2, m/s) cover the stage's window only;
+    `bounds` maps each fitted parameter name to the model's (lower, upper);
+    `fixed` holds shape parameters the model keeps fixed (e.g. a Pilot's
+    expopen = 1), which the fit keeps too.
+    """
+
+    chute: Parachute
+    stage: str
+    t: np.ndarray
+    cds: np.ndarray
+    airspeed: np.ndarray
+    cds_prev: float
+    cds_steady: float
+    cds_full_open: float
+    bounds: dict[str, tuple[float, float]]
+    fixed: dict[str, float] = field(default_factory=dict)
+
+
+def fitted_names(chute: Parachute, stage: str) -> list[str]:
+    """Names of the parameters the curve fit returns for one stage, in its order."""
+    shape = ("Ck", "n_p", "expopen", "t_k") if chute.inflation == "infinite_mass" \
+        else ("n", "expopen")
+    return [param_name(b, chute.name, stage) for b in ("t_start", *shape)]
+
+
+def fit_stage_curve(data: StageData) -> dict[str, float] | None:
+    """Least-squares shape of one stage's drag-area curve, or None where the data show no rise."""
+    names = fitted_names(data.chute, data.stage)
+    climb = data.cds_steady - data.cds_prev
+    if data.t.size < 10 or climb <= 0:
+        return None
+    smooth = np.convolve(data.cds, np.ones(5) / 5.0, mode="same")
+    above = np.flatnonzero(smooth > data.cds_prev + CLIMB_FRACTION * climb)
+    if above.size == 0:
+        return None
+    t_cross = float(data.t[above[0]])
+    i_peak = int(np.argmax(smooth))
+    curve = curve_function(data)
+    free = np.array([n not in data.fixed for n in names])
+    held = np.array([data.fixed.get(n, np.nan) for n in names])
+    lower = np.array([data.bounds[n][0] for n in names])[free]
+    upper = np.array([data.bounds[n][1] for n in names])[free]
+
+    def full(theta: np.ndarray) -> np.ndarray:
+        out = held.copy()
+        out[free] = theta
+        return out
+
+    def residual(theta: np.ndarray) -> np.ndarray:
+        values = full(theta)
+        v_i = float(np.interp(values[0], data.t, data.airspeed))
+        return np.asarray(curve(data.t[None, :], *values, v_i)).ravel() - data.cds
+
+    if not free.any():
+        return dict(zip(names, (float(v) for v in held), strict=True))
+    expopen_name = param_name("expopen", data.chute.name, data.stage)
+    starting = (data.fixed[expopen_name],) if expopen_name in data.fixed else STARTING_EXPOPEN
+    best = None
+    for expopen in starting:
+        theta0 = _starting_point(data, t_cross, i_peak, expopen)[free]
+        theta0 = np.clip(theta0, lower + 1e-9 * (upper - lower), upper - 1e-9 * (upper - lower))
+        sol = least_squares(residual, theta0, bounds=(lower, upper), x_scale="jac")
+        if best is None or sol.cost < best.cost:
+            best = sol
+    return dict(zip(names, (float(v) for v in full(best.x)), strict=True))
+
+
+def _starting_point(data: StageData, t_cross: float, i_peak: int, expopen: float) -> np.ndarray:
+    length = float(fill_length(data.chute.fill_length, data.chute.diameter, data.cds_prev,
+                               data.cds_steady, data.cds_full_open))
+    v_i = float(np.interp(t_cross, data.t, data.airspeed))
+    # The curve has climbed CLIMB_FRACTION of its rise at t_cross; with
+    # expopen e that is CLIMB_FRACTION^(1/e) of the rise time after t_i.
+    rise = max(float(data.t[i_peak]) - t_cross, 0.05)
+    lead = CLIMB_FRACTION ** (1.0 / expopen)
+    t_fill = rise / (1.0 - lead)
+    t_i = t_cross - lead * t_fill
+    n_fill = t_fill * v_i / length
+    if data.chute.inflation == "infinite_mass":
+        ck = max(float(data.cds[i_peak]) / data.cds_steady, 1.05)
+        return np.array([t_i, ck, n_fill, expopen, 0.3])
+    return np.array([t_i, n_fill, expopen])
+
+
+def curve_function(data: StageData) -> ca.Function:
+    """CasADi curve of the stage over a vector of times: (t, *fitted, V_i) -> CdS (m^2)."""
+    t = ca.SX.sym("t")
+    v_i = ca.SX.sym("V_i")
+    theta = [ca.SX.sym(n) for n in fitted_names(data.chute, data.stage)]
+    length = fill_length(data.chute.fill_length, data.chute.diameter, data.cds_prev,
+                         data.cds_steady, data.cds_full_open)
+    if data.chute.inflation == "infinite_mass":
+        ck, n_p, expopen, t_k = theta[1:]
+        rise = infinite_mass_cds(t, theta[0], data.cds_prev, data.cds_steady, ck, n_p, expopen,
+                                 t_k, length, v_i)
+    else:
+        n_fill, expopen = theta[1:]
+        rise = finite_mass_cds(t, theta[0], data.cds_prev, data.cds_steady, n_fill, expopen,
+                               length, v_i)
+    cds = ca.if_else(stage_started(t, theta[0]), rise, data.cds_prev)
+    fn = ca.Function("stage_curve", [t, *theta, v_i], [cds])
+    return fn.map(data.t.size)

@@ -1,0 +1,178 @@
+"""Fits that bring stiff effects in by continuation when a direct start fails.
+
+Some effects change the dynamics so much that a solve from the offline
+reduction's guess can backtrack for hundreds of iterations: elastic risers
+(a spring-damper per canopy whose states the reduction can only guess).  An
+effect says so with `Effect.continuation`.  A model that has such effects is
+fitted from the reduction with at most DIRECT_ITERATIONS iterations; if that
+fails, in two steps:
+
+1. the relaxed model: each such effect replaced by the one it stands in for
+   (`Effect.replaces`: an elastic riser by the rigid one) or left out,
+   fitted from the reduction;
+2. the model itself, started from that fit (`Estimator.point_from`: the
+   shared states and parameters from it, the effect's own states from its
+   `state_guess` and its parameters at their defaults).
+
+Where the relaxed fit fails too, the direct start's failure is reported.
+
+Continuation is not tried first because it is not free: on `drogue_full`
+(elastic risers and added mass, seed 1) the direct start converges in 28
+iterations, while the rigid-riser fit takes 31 and the full fit from it 33
+more (152 s against 67 s).  On `main3_full` the direct start does not
+converge at all.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+
+import numpy as np
+
+from cpas_ocp.errors import SolverFailure
+from cpas_ocp.estimation.estimator import Estimator, Fit, Settings
+from cpas_ocp.inference.restarts import IMPROVEMENT_CHI2, restart_start_times
+from cpas_ocp.inference.result_claim import (
+    MAX_WINDOW_MOVES,
+    Claim,
+    WindowMove,
+    check_claim,
+    moved_windows,
+    start_shifts,
+)
+from cpas_ocp.io.flight_test import FlightTest
+from cpas_ocp.io.model_spec import ModelSpec
+from cpas_ocp.physics.effects import Effect
+from cpas_ocp.physics.effects.registry import BUILTIN
+
+
+def relaxed_spec(spec: ModelSpec, test: FlightTest) -> ModelSpec | None:
+    """`spec` without its continuation effects (each replaced by the effect it stands in
+    for, if any), its fixed, freed and prior parameters restricted to what remains; None
+    when `spec` has no continuation effect."""
+    if not any(effect.continuation for effect in spec.effects):
+        return None
+    effects: list[Effect] = []
+    for effect in spec.effects:
+        if not effect.continuation:
+            effects.append(effect)
+        elif effect.replaces is not None:
+            effects.append(BUILTIN[effect.replaces].build({}, spec.source, effect.replaces))
+    relaxed = dataclasses.replace(spec, effects=tuple(effects), fix={}, free=(), priors={})
+    names = set(relaxed.model(test).parameter_names)
+    return dataclasses.replace(
+        relaxed, fix={k: v for k, v in spec.fix.items() if k in names},
+        free=tuple(n for n in spec.free if n in names),
+        priors={k: v for k, v in spec.priors.items() if k in names})
+
+
+def relaxed_settings(settings: Settings, names: set[str]) -> Settings:
+    """`settings` with its free, fixed and guessed parameters restricted to `names`."""
+    return dataclasses.replace(
+        settings, free=None if settings.free is None else [n for n in settings.free
+                                                          if n in names],
+        fixed={k: v for k, v in settings.fixed.items() if k in names},
+        guess={k: v for k, v in settings.guess.items() if k in names})
+
+
+# Iterations a direct start of a model with continuation effects gets before the fit goes
+# through the relaxed model instead; direct starts that converge take 28 (`drogue_full`).
+DIRECT_ITERATIONS = 100
+
+
+def solve(est: Estimator, progress: bool = False) -> Fit:
+    """Fit `est`'s model from the reduction; where it has continuation effects and the
+    direct start fails, through its relaxed model (see the module docstring); then
+    restarted with the start times that misfit moved (`restarts`).  Raises
+    SolverFailure as `Estimator.solve` does, for the last attempt."""
+    return restart_start_times(est, _solve_from_reduction(est, progress), progress)[0]
+
+
+def solve_checked(est: Estimator, progress: bool = False
+                  ) -> tuple[Estimator, Fit, Claim]:
+    """`solve`, then what the fit may claim (`result_claim`).
+
+    Where the fit is not a plain result and start times sit at their windows'
+    edges, those windows are centred on the edges and the phase fitted again from
+    the reduction (`result_claim.moved_windows`), up to MAX_WINDOW_MOVES times,
+    while the refit lowers chi-square.  Returns the estimator of the fit kept (a
+    moved model's own), the fit and its claim, which lists the moves.
+
+    A first fit that fails is judged at its last iterate the same way (a failed
+    run is never a plain result); the first failure is raised where no window moves
+    or no moved model converges.
+    """
+    failure: SolverFailure | None = None
+    try:
+        fit = solve(est, progress)
+        claim = check_claim(est, fit)
+    except SolverFailure as exc:
+        if not isinstance(exc.last_iterate, Fit):
+            raise
+        try:  # a last iterate can be unfit to linearise (a NaN there): the failure stands
+            claim = check_claim(est, exc.last_iterate)
+        except (ValueError, np.linalg.LinAlgError):
+            raise exc from None
+        failure, fit = exc, exc.last_iterate
+    moves: list[WindowMove] = []
+    for _ in range(MAX_WINDOW_MOVES):
+        spec = moved_windows(claim, est, fit)
+        if spec is None:
+            break
+        base = start_shifts(est.spec)
+        shifted = {n: v for n, v in start_shifts(spec).items() if base.get(n) != v}
+        if progress:
+            print(f"start times at their windows' edges ({', '.join(shifted)}) in a fit that "
+                  f"is not a plain result: moving the windows and fitting again ...",
+                  file=sys.stderr, flush=True)
+        # The grid follows the windows: its fine intervals cover each start time's window.
+        moved = Estimator(est.test, spec, dataclasses.replace(est.settings, nodes=None))
+        try:
+            refit = solve(moved, progress)
+        except SolverFailure:
+            break
+        # A failed first fit's last iterate is no optimum to improve on: any converged
+        # refit replaces it.
+        if failure is None and refit.chi_square > fit.chi_square - IMPROVEMENT_CHI2:
+            break
+        moves += [WindowMove(n, v - base.get(n, 0.0), fit.chi_square, refit.chi_square)
+                  for n, v in shifted.items()]
+        est, fit, failure = moved, refit, None
+        claim = check_claim(est, fit)
+    if failure is not None:
+        raise failure
+    claim.moves = moves
+    if moves:
+        fit.solver.start += "; " + "; ".join(f"{m.parameter}'s window moved "
+                                            f"{m.shift_s:+.2f} s" for m in moves)
+    return est, fit, claim
+
+
+def _solve_from_reduction(est: Estimator, progress: bool) -> Fit:
+    relaxed = relaxed_spec(est.spec, est.test)
+    if relaxed is None:
+        return est.solve(progress=progress)
+    try:
+        return est.solve(progress=progress, max_iter=min(DIRECT_ITERATIONS,
+                                                         est.settings.max_iter))
+    except SolverFailure as exc:
+        direct = exc
+    failed = f"{direct.status} after {direct.iterations} iterations"
+    names = set(relaxed.model(est.test).parameter_names)
+    try:
+        first = Estimator(est.test, relaxed, relaxed_settings(est.settings, names)).solve(
+            progress=progress)
+    except SolverFailure:
+        raise direct from None  # the user's model's own failure, not the relaxed one's
+    fit = est.solve(progress=progress, start=est.point_from(first))
+    fit.solver.start = (f"a fit with {relaxation_text(est.spec)} ({first.solver.iterations} "
+                        f"iterations), after a start from the offline reduction failed "
+                        f"({failed})")
+    return fit
+
+
+def relaxation_text(spec: ModelSpec) -> str:
+    """What the relaxed model changes: "rigid_riser in place of elastic_riser", "no X"."""
+    return ", ".join(f"{e.replaces} in place of {e.name}" if e.replaces else f"no {e.name}"
+                     for e in spec.effects if e.continuation)

@@ -1,0 +1,624 @@
+"""Real flight logs into test folders: a flight card plus a flight-computer log.
+
+A *flight card* (JSON; the built-in ones are problems with ``"kind":
+"flight_log"``) holds what the log does not: the vehicle's descent mass and
+forebody drag area, the parachutes and the flight state that deploys each,
+the launch site (elevation, surface air density, lapse rate or ``"gps"``),
+the model block to reconstruct with, and the published nominal drag areas
+to compare against.
+
+`import_flight` turns an Altus Metrum log (`altus_metrum.read_altus_log`)
+and a card into a test folder:
+
+* phase: from the first deployment to touchdown (the first altimeter sample
+  after the last deployment within `TOUCHDOWN_M` of the pad altitude), less
+  `TOUCHDOWN_MARGIN_S`;
+* events: each deployment's flight-state change as a ``mortar_fire`` of its
+  canopy, with the state machine's timing sigma `EVENT_SIGMA_S`;
+* every series runs `SERIES_MARGIN_S` beyond the phase, so that each
+  covers it;
+* ``baro.csv``: pressure altitude (m); samples from `EVENT_SIGMA_S` before to
+  `EJECTION_EXCLUDE_S` after a deployment are left out (the ejection charge's pressure pulse reads
+  as a 150 m jump in one sample);
+* ``gps_altitude.csv``: GPS altitude (m MSL) at each new fix with at least
+  four satellites;
+* ``accelerometer.csv``: axial acceleration (m/s^2, 1 g subtracted), fitted by
+  the `axial_accelerometer` effect, less the charge samples and, in each
+  later canopy's opening, the samples above the drag ceiling
+  (`drag_ceiling`: the shock cord's snatch, which no drag model makes; the
+  largest is the full-open event below);
+* a ``full_open`` event for each later canopy whose opening the
+  accelerometer shows (`opening_peak`): the time of the largest axial
+  specific force in the `OPENING_WINDOW_S` after the charge, with one
+  accelerometer sample interval as its sigma.  On a hobby rocket that peak
+  is the snatch of the elastic shock cord, which comes when the canopy, full,
+  has stopped ahead of the vehicle: the peak marks full open to within a
+  sample (it lies anywhere between two) and needs no attitude (the axis
+  swinging against the riser scales the reading, not its timing).  The first
+  canopy's is not taken: it opens near apogee, where the load barely rises;
+* the site atmosphere (`atmosphere.SiteAtmosphere`): the pad pressure (median
+  before launch), the temperature from the card's surface density
+  (T = p / (R rho)), and the lapse rate from the card or, with ``"gps"``,
+  fitted to the GPS fixes of the descent (`fit_lapse_rate`; in boost the
+  receiver lags the vehicle by tens of metres);
+* noise sigmas from the data: the altimeter's per canopy phase, from its
+  scatter about the local trend (`scatter_sigma`; under a 30 m/s drogue the
+  static pressure swings by metres over seconds), the GPS altitude's from the
+  lapse-rate fit's residuals.  A later canopy's altimeter sigma applies from
+  the time its descent has settled (`settled_time`), not from its deployment:
+  until then the vehicle still falls fast and is jerked about by the opening,
+  and the static port errs as it did under the canopy before.  The
+  accelerometer's sigma is the RMS of its scatter about the local trend
+  (`scatter_rms`: the swing's jolts are part of the swing), under each
+  canopy's steady descent and apart over each later canopy's opening (from
+  the charge until the descent has settled, at least `OPENING_WINDOW_S`),
+  where the shock cord bounces the body by g's within a sample.
+
+The folder is written to a temporary sibling and moved into place only once
+it loads, so a failed import leaves nothing behind.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import shutil
+import tempfile
+from dataclasses import dataclass, field
+from importlib import resources
+from itertools import pairwise
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from scipy.optimize import minimize_scalar
+from scipy.signal import savgol_filter
+
+from cpas_ocp.errors import InputError
+from cpas_ocp.io.altus_metrum import AltusLog
+from cpas_ocp.io.flight_test import (
+    FORMAT,
+    MANIFEST,
+    check_magnitudes,
+    load_test,
+    read_json,
+    validate_block,
+    validate_manifest,
+)
+from cpas_ocp.io.problems import problem_names
+from cpas_ocp.physics.atmosphere import ISA_LAPSE_K_M, R_AIR, SiteAtmosphere, pressure_altitude
+from cpas_ocp.physics.units import FACTORS, G0
+
+TOUCHDOWN_M = 3.0  # altimeter height above the pad that counts as landed (m)
+TOUCHDOWN_MARGIN_S = 0.5  # phase ends this long before the detected touchdown (s)
+EVENT_SIGMA_S = 0.1  # timing sigma of a flight-state change (one descent sample, s)
+EJECTION_EXCLUDE_S = 0.3  # altimeter samples left out after an ejection charge (s)
+MIN_ACCEL_SIGMA = 0.1  # floor of the accelerometer noise sigma (m/s^2)
+MIN_BARO_SIGMA_M = 0.3  # floor of the altimeter noise sigma (the pressure resolution, m)
+LAPSE_BOUNDS_K_M = (0.002, 0.0098)  # search range of a fitted lapse rate (to the dry adiabat)
+SCATTER_WINDOW_S = 8.0  # window of the local trend a sensor's scatter is taken about (s)
+SERIES_MARGIN_S = 1.5  # series extend this far beyond the phase: a 1 Hz GPS covers it (s)
+RATE_WINDOW_S = 2.0  # window of the local descent rate that tells when a canopy has settled (s)
+SETTLED_RATE_FACTOR = 1.25  # settled: the local rate within this factor of the steady one
+STEADY_RATE_S = 10.0  # the settled descent rate under a canopy is taken over this long (s)
+OPENING_WINDOW_S = 3.0  # an opening-load peak is looked for this long after the charge (s)
+OPENING_BASELINE_S = 5.0  # the steady reading before a charge is taken over this long (s)
+OPENING_PEAK_SIGMAS = 5.0  # a peak counts when this many scatter sigmas off the steady reading
+
+
+@dataclass(frozen=True)
+class FlightCard:
+    """What a flight log does not hold; see the module docstring."""
+
+    name: str
+    title: str
+    label: str
+    data_folder: str
+    logs: tuple[str, ...]
+    vehicle: dict[str, Any]
+    parachutes: tuple[dict[str, Any], ...]
+    site: dict[str, Any]
+    model: dict[str, Any]
+    nominal: dict[str, dict[str, Any]]
+    source: str
+
+
+def card_from_dict(raw: dict[str, Any], source: str) -> FlightCard:
+    """A card from its JSON object; InputError naming the field that breaks
+    `data_schemas/flight_card.schema.json` (or whose numbers are beyond any test's)."""
+    validate_block(raw, "flight_card.schema.json", source)
+    check_magnitudes(raw, source)
+    return FlightCard(raw["name"], raw.get("title", raw["name"]), raw.get("label", ""),
+                      raw["data"].get("folder", ""), tuple(raw["data"].get("logs", ())),
+                      raw["vehicle"], tuple(raw["parachutes"]), raw["site"], raw["model"],
+                      raw.get("nominal", {}), source)
+
+
+def load_card(name_or_path: str) -> FlightCard:
+    """A built-in flight card by problem name, or a card file."""
+    path = Path(name_or_path)
+    if path.suffix == ".json":
+        return card_from_dict(read_json(path, "an existing flight-card JSON file"), str(path))
+    names = problem_names("flight_log")
+    if name_or_path not in names:
+        raise InputError("flight card", "name", f"a card file (.json) or one of "
+                         f"{', '.join(names)}; got {name_or_path!r}")
+    raw = json.loads(resources.files("cpas_ocp.problem_data")
+                     .joinpath(f"{name_or_path}.json").read_text())
+    return card_from_dict(raw, f"problems/{name_or_path}.json")
+
+
+def _si(q: dict[str, Any], dim: str, source: str, field: str) -> float:
+    unit = q.get("unit") if isinstance(q, dict) else None
+    if unit not in FACTORS[dim] or not isinstance(q.get("value"), int | float):
+        raise InputError(source, field, f"{{value, unit}} with a {dim} unit "
+                         f"({', '.join(sorted(FACTORS[dim]))})")
+    return float(q["value"]) * FACTORS[dim][unit]
+
+
+def fit_lapse_rate(fixes: pd.DataFrame, pressure: pd.Series, times: pd.Series,
+                   elevation: float, p0: float, t0: float) -> tuple[float, float, float]:
+    """The lapse rate (K/m) that makes the site atmosphere's altitude of the measured
+    pressure match the GPS altitudes, with a constant GPS offset.
+
+    Returns (lapse rate, GPS offset (m), residual standard deviation (m)).
+    Least squares over every fix; the offset is profiled out (its estimate is
+    the mean difference).
+    """
+    p_at = np.interp(fixes["time"], times, pressure)
+    h_gps = fixes["gps_altitude"].to_numpy()
+
+    def residual(lapse: float) -> np.ndarray:
+        site = SiteAtmosphere(elevation, p0, t0, lapse)
+        d = h_gps - site.altitude_at_pressure(p_at)
+        return d - d.mean()
+
+    best = minimize_scalar(lambda lapse: float(np.sum(residual(lapse) ** 2)),
+                           bounds=LAPSE_BOUNDS_K_M, method="bounded",
+                           options={"xatol": 1e-6})
+    lapse = float(best.x)
+    site = SiteAtmosphere(elevation, p0, t0, lapse)
+    offset = float(np.mean(h_gps - site.altitude_at_pressure(p_at)))
+    return lapse, offset, float(np.std(residual(lapse), ddof=2))
+
+
+def _scatter(t: np.ndarray, values: np.ndarray) -> np.ndarray | None:
+    """`values` less their local quadratic trend over SCATTER_WINDOW_S (a Savitzky-Golay
+    filter on a uniform resampling); None where the samples span too short a time."""
+    grid = np.arange(t[0], t[-1], 0.1)
+    window = min(int(SCATTER_WINDOW_S / 0.1) // 2 * 2 + 1, len(grid) // 2 * 2 - 1)
+    if window < 5:
+        return None
+    return values - np.interp(t, grid, savgol_filter(np.interp(grid, t, values), window, 2))
+
+
+def scatter_sigma(t: np.ndarray, values: np.ndarray) -> float:
+    """Robust sigma (1.4826 MAD) of `values` about their local quadratic trend over
+    SCATTER_WINDOW_S (`_scatter`).
+
+    Unlike the second differences this counts disturbances correlated over a
+    few seconds, such as the static-pressure swings of a rocket swinging under
+    a fast drogue, as noise; the descent itself (speed changing over tens of
+    seconds) stays in the trend."""
+    r = _scatter(t, values)
+    if r is None:
+        return second_difference_sigma(values)
+    return float(1.4826 * np.median(np.abs(r - np.median(r))))
+
+
+def scatter_rms(t: np.ndarray, values: np.ndarray) -> float:
+    """RMS of `values` about their local quadratic trend over SCATTER_WINDOW_S (`_scatter`):
+    the sigma of a disturbance whose tails belong to it.  An accelerometer on a body
+    swinging under its canopy reads jolts of g when the swing reverses (both Prometheus
+    recorders read +2.5 to +3 g at 148.6-148.8 s under a drogue whose median reading is
+    -1.65 g): part of the swing, not glitches, so its variance, not a robust spread of
+    its middle, is the noise (under the drogue, 4.6 m/s^2 against 3.5 robust)."""
+    r = _scatter(t, values)
+    if r is None:
+        return second_difference_sigma(values)
+    return float(np.sqrt(np.mean(r**2)))
+
+
+def second_difference_sigma(values: np.ndarray) -> float:
+    """White-noise sigma of a smooth signal's samples: 1.4826 MAD of the second
+    differences over sqrt(6) (the second difference of white noise has variance 6 s^2)."""
+    d2 = np.diff(values, 2)
+    return float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / np.sqrt(6.0))
+
+
+def settled_time(t: np.ndarray, altitude: np.ndarray, t_from: float, t_to: float) -> float:
+    """When the descent after a deployment at `t_from` has settled (s): the first time from
+    which the local descent rate (slope of a line through `RATE_WINDOW_S` of altitude
+    samples, m/s) stays within `SETTLED_RATE_FACTOR` of the steady rate (the median local
+    rate over the second half of [`t_from`, `t_to`]) for a further window.  `t_from`
+    where the samples are too few to tell."""
+    centres = np.arange(t_from + RATE_WINDOW_S / 2, t_to - RATE_WINDOW_S / 2, RATE_WINDOW_S / 2)
+    rates = np.array([_slope(t, altitude, c - RATE_WINDOW_S / 2, c + RATE_WINDOW_S / 2)
+                      for c in centres])
+    late = centres >= 0.5 * (t_from + t_to)
+    if not np.isfinite(rates[late]).any():
+        return t_from
+    steady = abs(float(np.nanmedian(rates[late])))
+    ok = np.abs(rates) <= SETTLED_RATE_FACTOR * steady
+    for i in range(centres.size - 2):
+        if ok[i] and ok[i + 1] and ok[i + 2]:
+            return float(centres[i] - RATE_WINDOW_S / 2)
+    return t_from
+
+
+def _slope(t: np.ndarray, values: np.ndarray, lo: float, hi: float) -> float:
+    """Slope (per s) of a line through the samples in [lo, hi]; NaN with fewer than 4."""
+    m = (t >= lo) & (t <= hi)
+    if m.sum() < 4:
+        return float("nan")
+    return float(np.polyfit(t[m] - lo, values[m], 1)[0])
+
+
+def drag_ceiling(t: np.ndarray, height: np.ndarray, density: np.ndarray, t_charge: float,
+                 t_settled: float, t_next: float) -> float | None:
+    """The largest axial reading (m/s^2, one g subtracted) the canopies' drag can give in
+    the opening that follows a charge at `t_charge`, from the altimeter alone.
+
+    Once settled (from `t_settled`, over STEADY_RATE_S or to `t_next`) the open
+    canopies carry the weight at the descent rate v_s, so their full drag area is
+    2 m g / (rho_s v_s^2).  No opening pulls more than that area at the speed v_c
+    the vehicle had at the charge (the rate over RATE_WINDOW_S before it): a
+    specific force of g (rho_c v_c^2) / (rho_s v_s^2), and an axial reading of
+    at most that less one g (the axis's cosine to the force is at most 1).  A
+    reading above it is the shock cord's snatch, the elastic cord giving back the
+    energy it stored as the canopy stopped ahead of the vehicle, which no drag
+    model makes.  `height` (m) and `density` (kg/m^3) are the altimeter's
+    samples at times `t`.  None where the rates cannot be told."""
+    early = t_charge - EVENT_SIGMA_S
+    v_c = -_slope(t, height, early - RATE_WINDOW_S, early)
+    end = min(t_settled + STEADY_RATE_S, t_next)
+    v_s = -_slope(t, height, t_settled, end)
+    if not (v_c > 0.0 and v_s > 0.0):
+        return None
+    at_charge = (t >= early - RATE_WINDOW_S) & (t <= early)
+    settled = (t >= t_settled) & (t <= end)
+    ratio = float(np.mean(density[at_charge]) / np.mean(density[settled]))
+    return G0 * ratio * (v_c / v_s) ** 2 - G0
+
+
+def touchdown_time(t: np.ndarray, height: np.ndarray, after: float) -> float:
+    """First time (s) after `after` at which `height` (m above the pad) is below TOUCHDOWN_M."""
+    low = np.flatnonzero((t > after) & (height < TOUCHDOWN_M))
+    return float(t[low[0]]) if low.size else float(t[-1])
+
+
+@dataclass(frozen=True)
+class Snatch:
+    """A later canopy's opening as the accelerometer read it against the drag ceiling
+    (`drag_ceiling`): the ceiling (m/s^2, an axial reading), the samples above it left
+    out as the shock cord's snatch, and the largest of them (m/s^2) with its time (s)."""
+
+    ceiling_m_s2: float
+    samples_left_out: int
+    largest_m_s2: float | None
+    at_s: float | None
+
+    def text(self) -> str:
+        head = f"drag ceiling of the axial reading {self.ceiling_m_s2 / G0:.1f} g"
+        if self.largest_m_s2 is None:
+            return head + ", no sample above it"
+        return (head + f"; {self.samples_left_out} sample(s) above it left out as the shock "
+                f"cord's snatch, the largest {self.largest_m_s2 / G0:.1f} g at {self.at_s:.2f} s")
+
+
+def import_snatches(folder: Path | None) -> dict[str, Snatch]:
+    """The snatches an import left out of the test folder `folder` (its ``import.json``);
+    empty for a folder that was not imported, holds none, or whose import report was
+    edited out of shape (the report then only lacks that line)."""
+    report = None if folder is None else folder / "import.json"
+    if report is None or not report.is_file():
+        return {}
+    try:
+        return {name: Snatch(**fields)
+                for name, fields in json.loads(report.read_text()).get("snatch", {}).items()}
+    except (ValueError, TypeError, AttributeError):
+        return {}
+
+
+@dataclass(frozen=True)
+class ImportSummary:
+    """What an import did, for the import report (`import.json`)."""
+
+    recorder: str
+    phase: tuple[float, float]
+    events: dict[str, float]
+    site: SiteAtmosphere
+    lapse_fit: tuple[float, float, float] | None
+    baro_sigma_m: list[float]
+    samples: dict[str, int]
+    dropped: dict[str, int]
+    accel_sigma: list[float] = field(default_factory=list)  # m/s^2, per segment
+    snatches: dict[str, Snatch] = field(default_factory=dict)  # per later canopy
+
+    def text(self) -> str:
+        """A few lines for the terminal."""
+        events = ", ".join(f"{k} {v:.2f} s" for k, v in self.events.items())
+        lines = [f"{self.recorder} log: phase {self.phase[0]:.2f}-{self.phase[1]:.2f} s; {events}",
+                 f"site: {self.site.elevation_m:.0f} m, {self.site.pressure_pa:.0f} Pa, "
+                 f"{self.site.temperature_k:.1f} K, lapse rate "
+                 f"{1e3 * self.site.lapse_rate_k_m:.2f} K/km"]
+        if self.lapse_fit is not None:
+            lines.append(f"  (lapse rate fitted to the GPS fixes: GPS offset "
+                         f"{self.lapse_fit[1]:+.1f} m, residual sigma {self.lapse_fit[2]:.1f} m)")
+        lines.append("altimeter sigma per canopy phase: "
+                     + ", ".join(f"{s:.2f} m" for s in self.baro_sigma_m))
+        if self.accel_sigma:
+            lines.append("accelerometer sigma per steady descent and opening (the swing "
+                         "counted): " + ", ".join(f"{s:.2f} m/s²" for s in self.accel_sigma))
+        for name, snatch in self.snatches.items():
+            lines.append(f"{name}'s opening: {snatch.text()}")
+        lines.append("samples: " + ", ".join(f"{k} {v}" for k, v in self.samples.items())
+                     + "; dropped: " + ", ".join(f"{k} {v}" for k, v in self.dropped.items()))
+        return "\n".join(lines)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"recorder": self.recorder, "phase_s": list(self.phase), "events_s": self.events,
+                "site": {"elevation_m": self.site.elevation_m,
+                         "pressure_pa": self.site.pressure_pa,
+                         "temperature_k": self.site.temperature_k,
+                         "lapse_rate_k_km": 1e3 * self.site.lapse_rate_k_m},
+                "lapse_fit": None if self.lapse_fit is None else
+                {"lapse_rate_k_km": 1e3 * self.lapse_fit[0], "gps_offset_m": self.lapse_fit[1],
+                 "residual_sigma_m": self.lapse_fit[2]},
+                "baro_sigma_m": self.baro_sigma_m, "accel_sigma_m_s2": self.accel_sigma,
+                "snatch": {k: dataclasses.asdict(v) for k, v in self.snatches.items()},
+                "samples": self.samples, "dropped": self.dropped}
+
+
+def import_flight(log: AltusLog, card: FlightCard, out: str | Path) -> ImportSummary:
+    """Write the test folder of `log` under `card` to `out` (see the module docstring)."""
+    out = Path(out)
+    d = log.data
+    samples = log.sensor_samples()
+    src = str(log.path)
+    deploy = {}
+    for i, chute in enumerate(card.parachutes):
+        state = chute["deployment"]
+        if state not in log.events:
+            raise InputError(card.source, f"parachutes[{i}].deployment",
+                             f"a flight state of the log {src} that deploys {chute['name']} "
+                             f"({', '.join(log.events)}); got {state!r}")
+        deploy[chute["name"]] = log.events[state]
+    pad = d[d["time"] < 0.0]
+    if pad.empty:
+        pad = d.iloc[:50]
+    p0 = float(pad["pressure"].median())
+    pad_altitude = float(pressure_altitude(p0))
+    t_begin = min(deploy.values())
+    t_last = max(deploy.values())
+    baro = samples[["time", "altitude", "pressure"]].dropna()
+    t_down = touchdown_time(baro["time"].to_numpy(),
+                            baro["altitude"].to_numpy() - pad_altitude, t_last)
+    t_end = t_down - TOUCHDOWN_MARGIN_S
+    # Series run SERIES_MARGIN_S beyond the phase so that every sensor covers it (the
+    # estimator uses the samples inside the phase only).
+    lo, hi = t_begin - SERIES_MARGIN_S, t_end + SERIES_MARGIN_S
+    in_phase = (baro["time"] >= lo) & (baro["time"] <= hi)
+    near_charge = np.zeros(len(baro), dtype=bool)
+    for t_dep in deploy.values():
+        near_charge |= ((baro["time"] >= t_dep - EVENT_SIGMA_S)
+                        & (baro["time"] <= t_dep + EJECTION_EXCLUDE_S)).to_numpy()
+    baro_phase = baro[in_phase.to_numpy() & ~near_charge]
+
+    site_spec = card.site
+    elevation = _si(site_spec.get("elevation"), "length", card.source, "site.elevation")
+    rho0 = _si(site_spec.get("surface_density"), "density", card.source,
+               "site.surface_density")
+    t0 = p0 / (R_AIR * rho0)
+    lapse_spec = site_spec.get("lapse_rate", {"value": 1e3 * ISA_LAPSE_K_M, "unit": "K/km"})
+    fixes = log.gps_fixes()
+    lapse_fit = None
+    if lapse_spec == "gps":
+        descent = fixes[(fixes["time"] >= t_begin) & (fixes["time"] <= t_down)]
+        if len(descent) < 10:
+            raise InputError(card.source, "site.lapse_rate", f"a value: 'gps' needs GPS "
+                             f"fixes in the descent, and {src} has {len(descent)}")
+        lapse_fit = fit_lapse_rate(descent, baro["pressure"], baro["time"], elevation, p0, t0)
+        lapse = lapse_fit[0]
+    else:
+        lapse = _si(lapse_spec, "lapse_rate", card.source, "site.lapse_rate")
+    site = SiteAtmosphere(elevation, p0, t0, lapse)
+    # One altimeter sigma per canopy phase, from the scatter about the local trend; a later
+    # phase's from the time its descent has settled.
+    t_baro, h_baro = baro_phase["time"].to_numpy(), baro_phase["altitude"].to_numpy()
+    starts = sorted(deploy.values())
+    bounds = [starts[0], *(settled_time(t_baro, h_baro, a, b)
+                           for a, b in pairwise([*starts[1:], t_end])), t_end]
+    baro_sigmas = []
+    for a, b in pairwise(bounds):
+        part = baro_phase[(baro_phase["time"] >= a) & (baro_phase["time"] <= b)]
+        baro_sigmas.append(max(MIN_BARO_SIGMA_M, scatter_sigma(part["time"].to_numpy(),
+                                                               part["altitude"].to_numpy())))
+
+    fixes_phase = fixes[(fixes["time"] >= lo) & (fixes["time"] <= hi)]
+    accel = samples[["time", "acceleration"]].dropna()
+    accel = accel[(accel["time"] >= lo) & (accel["time"] <= hi)]
+    full_open = {name: peak for name, t in deploy.items() if t > t_begin
+                 and (peak := opening_peak(accel, t)) is not None}
+    # The accelerometer loses the same charge windows as the altimeter (the charge's jolt
+    # is no force of the flight) and, in each later canopy's opening, the samples above the
+    # drag ceiling (the shock cord's snatch; its time is the full-open event).
+    accel_charge = np.zeros(len(accel), dtype=bool)
+    for t_dep in deploy.values():
+        accel_charge |= ((accel["time"] >= t_dep - EVENT_SIGMA_S)
+                         & (accel["time"] <= t_dep + EJECTION_EXCLUDE_S)).to_numpy()
+    accel = accel[~accel_charge]
+    density = np.asarray(site.density(site.altitude_at_pressure(
+        baro_phase["pressure"].to_numpy())), dtype=float).ravel()
+    later = sorted((t, name) for name, t in deploy.items() if t > starts[0])
+    snatches: dict[str, Snatch] = {}
+    snatch = np.zeros(len(accel), dtype=bool)
+    # A later canopy's opening lasts from its charge until its descent has settled, and at
+    # least the OPENING_WINDOW_S its load peak is looked for in.
+    opening_ends = [min(max(t_settled, t_charge + OPENING_WINDOW_S), t_next) for t_charge,
+                    t_settled, t_next in zip(starts[1:], bounds[1:-1], [*starts[2:], t_end],
+                                             strict=True)]
+    for (t_charge, name), t_settled, t_open, t_next in zip(
+            later, bounds[1:-1], opening_ends, [*starts[2:], t_end], strict=True):
+        ceiling = drag_ceiling(t_baro, h_baro, density, t_charge, t_settled, t_next)
+        if ceiling is None:
+            continue
+        above = ((accel["time"] >= t_charge) & (accel["time"] < t_open)
+                 & (accel["acceleration"] > ceiling)).to_numpy()
+        left_out = accel[above]
+        k = int(np.argmax(left_out["acceleration"])) if above.any() else None
+        snatches[name] = Snatch(ceiling, int(above.sum()),
+                                None if k is None else float(left_out["acceleration"].iloc[k]),
+                                None if k is None else float(left_out["time"].iloc[k]))
+        snatch |= above
+    accel = accel[~snatch]
+    # A sigma per segment from the scatter about a local trend (the body's swing about its
+    # mean attitude is noise of this sensor): under each canopy's steady descent, and
+    # apart in each later canopy's opening.
+    accel_bounds = [*sorted({*starts, *opening_ends} - {t_end}), t_end]
+    accel_sigmas = []
+    for a, b in pairwise(accel_bounds):
+        part = accel[(accel["time"] >= a) & (accel["time"] < b)]
+        accel_sigmas.append(max(MIN_ACCEL_SIGMA, scatter_rms(
+            part["time"].to_numpy(), part["acceleration"].to_numpy()) if len(part) > 10
+            else second_difference_sigma(accel["acceleration"].to_numpy())))
+    files = {"baro.csv": baro_phase[["time", "altitude"]],
+             "accelerometer.csv": accel}
+    sensors: list[dict[str, Any]] = [
+        {"name": "baro", "kind": "baro", "file": "baro.csv",
+         "columns": {"time": "s", "altitude": "m"},
+         "sigma": {"altitude": {"value": round(baro_sigmas[0], 3), "unit": "m"}},
+         "sigma_after": [{"time": {"value": round(t, 3), "unit": "s"},
+                          "sigma": {"altitude": {"value": round(sig, 3), "unit": "m"}}}
+                         for t, sig in zip(bounds[1:-1], baro_sigmas[1:], strict=True)]},
+        {"name": "accelerometer", "kind": "axial_accelerometer", "file": "accelerometer.csv",
+         "columns": {"time": "s", "acceleration": "m/s^2"},
+         "sigma": {"acceleration": {"value": round(accel_sigmas[0], 3), "unit": "m/s^2"}},
+         "sigma_after": [{"time": {"value": round(t, 3), "unit": "s"},
+                          "sigma": {"acceleration": {"value": round(sig, 3), "unit": "m/s^2"}}}
+                         for t, sig in zip(accel_bounds[1:-1], accel_sigmas[1:],
+                                           strict=True)]},
+    ]
+    if lapse_fit is not None and len(fixes_phase) >= 2:
+        files["gps_altitude.csv"] = fixes_phase[["time", "gps_altitude"]].rename(
+            columns={"gps_altitude": "up"})
+        sensors.append({"name": "gps_altitude", "kind": "gps_altitude",
+                        "file": "gps_altitude.csv", "columns": {"time": "s", "up": "m"},
+                        "sigma": {"altitude": {"value": round(lapse_fit[2], 3), "unit": "m"}}})
+    manifest = {
+        "format": FORMAT,
+        "name": card.name,
+        "description": f"{card.title}: {log.recorder} log {log.path.name}",
+        "label": card.label,
+        "vehicle": card.vehicle,
+        "parachutes": [{k: v for k, v in c.items() if k != "deployment"}
+                       for c in card.parachutes],
+        "events": [{"name": "mortar_fire", "parachute": name,
+                    "time": {"value": round(t, 3), "unit": "s"},
+                    "sigma": {"value": EVENT_SIGMA_S, "unit": "s"}}
+                   for name, t in deploy.items()]
+                  + [{"name": "full_open", "parachute": name,
+                      "time": {"value": round(t, 3), "unit": "s"},
+                      "sigma": {"value": round(sigma, 3), "unit": "s"}}
+                     for name, (t, sigma) in full_open.items()],
+        "sensors": sensors,
+        "atmosphere": {"model": "site",
+                       "elevation": {"value": elevation, "unit": "m"},
+                       "pressure": {"value": round(p0, 2), "unit": "Pa"},
+                       "temperature": {"value": round(t0, 3), "unit": "K"},
+                       "lapse_rate": {"value": round(1e3 * lapse, 4), "unit": "K/km"}},
+        "phase": {"start": {"value": t_begin, "unit": "s"},
+                  "end": {"value": round(t_end, 3), "unit": "s"}},
+        "model": card.model,
+    }
+    validate_manifest(manifest, card.source)
+    summary = ImportSummary(
+        log.recorder, (t_begin, t_end),
+        {**deploy, **{f"{name} full open": t for name, (t, _) in full_open.items()},
+         "touchdown": t_down}, site, lapse_fit,
+        baro_sigmas, {name: len(frame) for name, frame in files.items()},
+        {"repeated_time_stamps": log.duplicate_times,
+         "repeated_sensor_rows": int(d["time"].between(lo, hi).sum()
+                                     - samples["time"].between(lo, hi).sum()),
+         "ejection_charge_samples": int((in_phase.to_numpy() & near_charge).sum()),
+         "ejection_charge_accelerometer_samples": int(accel_charge.sum()),
+         "snatch_samples_above_drag_ceiling": int(snatch.sum()),
+         "gps_repeats_between_fixes": int(d["time"].between(lo, hi).sum()
+                                          - len(fixes_phase)) if log.has_gps else 0},
+        accel_sigmas, snatches)
+    _write_folder(out, manifest, files, summary, card.source, src)
+    return summary
+
+
+# Manifest fields the import copies from the card; the others it derives from the log.
+CARD_FIELDS = ("name", "label", "vehicle", "parachutes", "model")
+
+
+def _write_folder(out: Path, manifest: dict[str, Any], files: dict[str, pd.DataFrame],
+                  summary: ImportSummary, card_source: str, log_source: str) -> None:
+    """Write into a temporary sibling, check that it loads, then move it to `out`.  What the
+    loading refuses in the manifest is named against where it came from: the card (its
+    vehicle, canopies and model) or the log (the phase, events, sensors, atmosphere)."""
+    if out.exists() and any(out.iterdir()):
+        raise InputError(str(out), "(folder)", "a new or empty folder for the test")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}-", dir=out.parent))
+    try:
+        for name, frame in files.items():
+            frame.to_csv(tmp / name, index=False)
+        (tmp / MANIFEST).write_text(json.dumps(manifest, indent=2) + "\n")
+        (tmp / "import.json").write_text(json.dumps(summary.to_dict(), indent=2) + "\n")
+        try:
+            load_test(tmp)
+        except InputError as exc:
+            written = Path(exc.file)
+            if written.parent != tmp:
+                raise
+            if written.name == MANIFEST and exc.field.startswith(CARD_FIELDS):
+                raise InputError(card_source, exc.field, f"{exc.expectation} (in the "
+                                 f"manifest the card makes)") from None
+            raise InputError(log_source, f"(imported as {written.name}: {exc.field})",
+                             exc.expectation) from None
+        if out.exists():
+            out.rmdir()
+        tmp.rename(out)
+    finally:
+        if tmp.exists():
+            shutil.rmtree(tmp)
+
+
+def descent_load_factor_peak(accel: pd.DataFrame, t_from: float, t_to: float
+                             ) -> tuple[float, float]:
+    """Largest axial specific force (g) between `t_from` and `t_to` (s) and its time (s).
+
+    The logger's axial acceleration has 1 g subtracted, so the specific force
+    along the axis is (a + g0) / g0; its magnitude is a lower bound on the
+    load factor (the axis need not point along the riser)."""
+    sel = accel[(accel["time"] >= t_from) & (accel["time"] <= t_to)]
+    if sel.empty:
+        raise ValueError(f"no accelerometer samples in [{t_from}, {t_to}] s")
+    f = np.abs(sel["acceleration"].to_numpy() + G0) / G0
+    k = int(np.argmax(f))
+    return float(f[k]), float(sel["time"].iloc[k])
+
+
+def opening_peak(accel: pd.DataFrame, t_charge: float) -> tuple[float, float] | None:
+    """(time, sigma) in s of the opening-load peak after the charge at `t_charge` (s): the
+    largest axial specific force from `EJECTION_EXCLUDE_S` to `OPENING_WINDOW_S` after it
+    (`descent_load_factor_peak`; the charge's own jolt comes first), sigma the median
+    sample interval.  None where the peak stands fewer than `OPENING_PEAK_SIGMAS` scatter
+    sigmas (1.4826 MAD) off the median reading of the `OPENING_BASELINE_S` before the
+    charge, or where the accelerometer has too few samples there to tell."""
+    lo, hi = t_charge + EJECTION_EXCLUDE_S, t_charge + OPENING_WINDOW_S
+    before = accel[(accel["time"] >= t_charge - OPENING_BASELINE_S)
+                   & (accel["time"] < t_charge - EVENT_SIGMA_S)]["acceleration"].to_numpy()
+    after = accel["time"][(accel["time"] >= lo) & (accel["time"] <= hi)].to_numpy()
+    if before.size < 10 or after.size < 3:
+        return None
+    peak, t_peak = descent_load_factor_peak(accel, lo, hi)
+    steady = float(np.median(before))
+    scatter = max(MIN_ACCEL_SIGMA, 1.4826 * float(np.median(np.abs(before - steady))))
+    if abs(peak * G0 - abs(steady + G0)) < OPENING_PEAK_SIGMAS * scatter:
+        return None
+    return t_peak, float(np.median(np.diff(after)))

@@ -1,0 +1,201 @@
+"""Atmosphere models: air density (and wind) as functions of altitude.
+
+Every model returns CasADi expressions so the same code serves the estimator,
+the simulator and the sensitivities; numeric evaluation goes through
+`density_at`.  Altitude is geometric height above mean sea level in metres,
+density is in kg/m^3, pressure in Pa, wind is the air-mass velocity (east,
+north) in m/s.
+
+A barometric altimeter reports the *pressure altitude*: the altitude at which
+the standard atmosphere has the measured pressure (`pressure_altitude`).  On a
+day that is not standard it differs from the geometric altitude by tens to
+hundreds of metres; a `SiteAtmosphere` built from the launch-site pressure and
+temperature turns one into the other.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import casadi as ca
+import numpy as np
+
+from cpas_ocp.physics.units import G0
+
+R_AIR = 287.05287  # specific gas constant of dry air, J/(kg K)
+# U.S. Standard Atmosphere 1976 at sea level and its tropospheric lapse rate.
+ISA_T0_K = 288.15
+ISA_P0_PA = 101325.0
+ISA_LAPSE_K_M = 0.0065
+
+
+def pressure_altitude(p: ca.SX | ca.MX | float | np.ndarray) -> ca.SX | ca.MX | np.ndarray:
+    """Altitude (m) at which the standard troposphere has pressure `p` (Pa).
+
+    h = T0/L (1 - (p/p0)^(R L/g0)); what barometric altimeters (Altus Metrum
+    among them) report as altitude.  Valid below 11 km.
+    """
+    return ISA_T0_K / ISA_LAPSE_K_M * (1.0 - (p / ISA_P0_PA) ** (R_AIR * ISA_LAPSE_K_M / G0))
+
+
+def _troposphere_pressure(h: ca.SX | ca.MX | float, h0: float, p0: float, t0: float,
+                          lapse: float) -> ca.SX | ca.MX:
+    """Hydrostatic pressure (Pa) at altitude h (m) in a layer of constant lapse rate (K/m)
+    whose base h0 has pressure p0 (Pa) and temperature t0 (K)."""
+    return p0 * ((t0 - lapse * (h - h0)) / t0) ** (G0 / (R_AIR * lapse))
+
+
+@dataclass(frozen=True)
+class StandardAtmosphere:
+    """U.S. Standard Atmosphere 1976, troposphere and lower stratosphere (0-20 km).
+
+    Troposphere: T = 288.15 K - 6.5 K/km * h, p = p0 (T/T0)^(g0/(R L)).
+    Lower stratosphere (11-20 km): isothermal at 216.65 K, p decays exponentially.
+    Geometric and geopotential height are not distinguished (< 0.3 % in
+    density below 20 km), which is well below the spread of day-of-flight
+    profiles; use a `TableAtmosphere` when a measured profile exists.
+    """
+
+    name: str = "standard"
+
+    def pressure(self, h: ca.SX | ca.MX | float) -> ca.SX | ca.MX:
+        h11 = 11000.0
+        p_trop = _troposphere_pressure(ca.fmin(h, h11), 0.0, ISA_P0_PA, ISA_T0_K, ISA_LAPSE_K_M)
+        return p_trop * ca.exp(-G0 / (R_AIR * 216.65) * ca.fmax(h - h11, 0.0))
+
+    def altitude_at_pressure(self, p: np.ndarray | float) -> np.ndarray:
+        """Altitude (m) at pressure `p` (Pa): the pressure altitude (troposphere only)."""
+        return np.asarray(pressure_altitude(np.asarray(p, dtype=float)))
+
+    def density(self, h: ca.SX | ca.MX | float) -> ca.SX | ca.MX:
+        t_trop = ISA_T0_K - ISA_LAPSE_K_M * ca.fmin(h, 11000.0)
+        return self.pressure(h) / (R_AIR * t_trop)
+
+    def wind(self, h: ca.SX | ca.MX | float) -> ca.SX | ca.MX:
+        return ca.vertcat(0.0 * h, 0.0 * h, 0.0 * h)
+
+
+@dataclass(frozen=True)
+class TableAtmosphere:
+    """Day-of-flight density (and optionally wind) profile from a table.
+
+    Density is interpolated linearly in log(rho) between tabulated altitudes,
+    which is exact for an isothermal layer; wind components linearly.  Outside
+    the table the end values are extrapolated linearly (in log rho).
+    """
+
+    altitude_m: np.ndarray
+    density_kg_m3: np.ndarray
+    wind_east_m_s: np.ndarray | None = None
+    wind_north_m_s: np.ndarray | None = None
+    name: str = "table"
+    _log_rho: ca.Function = field(init=False, repr=False, compare=False)
+    _wind: ca.Function | None = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        h = np.asarray(self.altitude_m, dtype=float)
+        log_rho = np.log(np.asarray(self.density_kg_m3, dtype=float))
+        object.__setattr__(self, "_log_rho", _linear_function("log_rho", h, log_rho))
+        if self.wind_east_m_s is None or self.wind_north_m_s is None:
+            object.__setattr__(self, "_wind", None)
+        else:
+            we = _linear_function("wind_e", h, np.asarray(self.wind_east_m_s, dtype=float))
+            wn = _linear_function("wind_n", h, np.asarray(self.wind_north_m_s, dtype=float))
+            hs = ca.SX.sym("h")
+            object.__setattr__(
+                self, "_wind", ca.Function("wind", [hs], [ca.vertcat(we(hs), wn(hs), 0.0)])
+            )
+
+    def density(self, h: ca.SX | ca.MX | float) -> ca.SX | ca.MX:
+        return ca.exp(self._log_rho(h))
+
+    def wind(self, h: ca.SX | ca.MX | float) -> ca.SX | ca.MX:
+        if self._wind is None:
+            return ca.vertcat(0.0 * h, 0.0 * h, 0.0 * h)
+        return self._wind(h)
+
+
+@dataclass(frozen=True)
+class SiteAtmosphere:
+    """Launch-site atmosphere: one tropospheric layer through the site's measured air.
+
+    At the site elevation h0 (m) the pressure is p0 (Pa) and the temperature
+    T0 (K); temperature falls at `lapse_rate` (K/m) with height, and pressure
+    and density follow hydrostatically:
+    T = T0 - L (h - h0), p = p0 (T/T0)^(g0/(R L)), rho = p/(R T).
+    Valid within the troposphere; a sunny desert afternoon has lapse rates
+    between the standard 6.5 K/km and the dry adiabat's 9.8 K/km.  No wind.
+    """
+
+    elevation_m: float
+    pressure_pa: float
+    temperature_k: float
+    lapse_rate_k_m: float = ISA_LAPSE_K_M
+    name: str = "site"
+
+    def temperature(self, h: ca.SX | ca.MX | float) -> ca.SX | ca.MX:
+        return self.temperature_k - self.lapse_rate_k_m * (h - self.elevation_m)
+
+    def pressure(self, h: ca.SX | ca.MX | float) -> ca.SX | ca.MX:
+        return _troposphere_pressure(h, self.elevation_m, self.pressure_pa, self.temperature_k,
+                                     self.lapse_rate_k_m)
+
+    def density(self, h: ca.SX | ca.MX | float) -> ca.SX | ca.MX:
+        return self.pressure(h) / (R_AIR * self.temperature(h))
+
+    def wind(self, h: ca.SX | ca.MX | float) -> ca.SX | ca.MX:
+        return ca.vertcat(0.0 * h, 0.0 * h, 0.0 * h)
+
+    def altitude_at_pressure(self, p: np.ndarray | float) -> np.ndarray:
+        """Geometric altitude (m) at which this atmosphere has pressure `p` (Pa)."""
+        expo = R_AIR * self.lapse_rate_k_m / G0
+        return self.elevation_m + self.temperature_k / self.lapse_rate_k_m * (
+            1.0 - (np.asarray(p, dtype=float) / self.pressure_pa) ** expo)
+
+    @classmethod
+    def from_surface_density(cls, elevation_m: float, pressure_pa: float, density_kg_m3: float,
+                             lapse_rate_k_m: float = ISA_LAPSE_K_M) -> SiteAtmosphere:
+        """The site atmosphere whose surface air has this pressure and density (T = p/(R rho))."""
+        return cls(elevation_m, pressure_pa, pressure_pa / (R_AIR * density_kg_m3),
+                   lapse_rate_k_m)
+
+
+Atmosphere = StandardAtmosphere | TableAtmosphere | SiteAtmosphere
+
+
+def geometric_altitude(atmosphere: Atmosphere, p_altitude: np.ndarray) -> np.ndarray:
+    """Geometric altitude (m) from a barometric altimeter's pressure altitude (m)."""
+    p = ISA_P0_PA * (1.0 - np.asarray(p_altitude) * ISA_LAPSE_K_M / ISA_T0_K) ** (
+        G0 / (R_AIR * ISA_LAPSE_K_M))
+    invert = getattr(atmosphere, "altitude_at_pressure", None)
+    if invert is None:
+        raise TypeError("a barometric altitude needs a standard or site atmosphere (one with "
+                        "pressure)")
+    return invert(p)
+
+
+def _linear_function(name: str, x: np.ndarray, y: np.ndarray) -> ca.Function:
+    """Piecewise-linear y(x) with linear extrapolation, as a CasADi Function.
+
+    A lookup (CasADi's linear interpolant, a call node in SX graphs, with its
+    derivatives and generated code): its cost is one binary search, whatever
+    the table's length.  Written as a chain of `if_else` branches, each row
+    cost a branch in every density and wind evaluation of the model (four per
+    RK4 step), and a 111-row sounding exhausted the compiler's memory.
+    """
+    return ca.interpolant(name, "linear", [np.asarray(x, dtype=float)],
+                          np.asarray(y, dtype=float))
+
+
+def density_at(atmosphere: Atmosphere, h: np.ndarray | float) -> np.ndarray:
+    """Numeric density (kg/m^3) at altitudes `h` (m)."""
+    hs = ca.SX.sym("h")
+    f = ca.Function("rho", [hs], [atmosphere.density(hs)])
+    return np.asarray(f.map(np.size(h))(np.atleast_1d(h).reshape(1, -1))).ravel()
+
+
+def wind_at(atmosphere: Atmosphere, h: np.ndarray | float) -> np.ndarray:
+    """Numeric wind (m/s), shape (len(h), 3)."""
+    hs = ca.SX.sym("h")
+    f = ca.Function("wind", [hs], [atmosphere.wind(hs)])
+    return np.asarray(f.map(np.size(h))(np.atleast_1d(h).reshape(1, -1))).T

@@ -1,0 +1,170 @@
+"""Air motion along the flight as a Gauss-Markov process, estimated with the trajectory.
+
+Real air moves: gusts, thermals and the shear of a boundary layer change the
+airspeed a canopy sees by metres per second over seconds, and a model that
+knows only the static atmosphere explains them with every parameter it has.
+This effect adds the air's velocity u(t) (m/s, in the components named by
+`components`: east, north, up) to the atmosphere's wind profile.  Each
+component is piecewise linear in time between knots t_k = t_start + k D
+(D = `knot_s`, s), whose values ``wind_up[k]``, ``wind_east[k]``,
+``wind_north[k]`` (m/s) are free parameters: the air-relative velocity is
+
+    v_air = v - u_atm(h) - u(t),
+
+and every drag, dynamic pressure and captured airspeed sees it.
+
+The knots have a stated prior: each component is a first-order Gauss-Markov
+(Ornstein-Uhlenbeck) process, du = -u/tau dt + s sqrt(2/tau) dW, stationary
+standard deviation s (`sigma_horizontal`, `sigma_vertical`, m/s) and
+correlation time tau (`tau_s`, s).  Sampled at the knots,
+
+    u_0 ~ N(0, s^2),   u_{k+1} = phi u_k + e_k,  phi = exp(-D/tau),  e_k ~ N(0, s^2 (1 - phi^2)),
+
+so the residuals r_0 = u_0 / s and r_{k+1} = (u_{k+1} - phi u_k) / (s sqrt(1 - phi^2))
+are standard normal under the prior.  They join chi-square as the
+pseudo-sensor ``wind_process`` (`Effect.penalties`): the fit is then the
+maximum a posteriori estimate of the wind together with every parameter and
+start time (a smoother), and the wind cannot absorb more than its prior
+allows.  s and tau are given, not estimated (defaults: 1 m/s horizontal,
+0.5 m/s vertical, 5 s, for a calm to light boundary layer); the score test
+at u = 0 (`null_values`) asks whether the data want any air motion at all.
+
+The knots are as many parameters as the phase has knot intervals per
+component: D = 1 s on a 20 s phase adds 21 per component.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import casadi as ca
+import numpy as np
+
+from cpas_ocp.physics.effects.base import Effect
+from cpas_ocp.physics.parameters import Parameter, param_name
+
+if TYPE_CHECKING:
+    from cpas_ocp.io.flight_test import FlightTest
+    from cpas_ocp.physics.model import ModelContext
+
+COMPONENTS = ("east", "north", "up")
+# Quantities of the air-relative flow the model's environment writes; this effect rewrites
+# them before any drag is formed from them.
+FLOW = ("airspeed", "dynamic_pressure", "drag_direction")
+# Bound of a knot value (m/s): far beyond any gust a parachute test flies in; a bound, not a
+# prior (the prior is the process).
+MAX_WIND_M_S = 30.0
+PENALTY = "wind_process"
+
+
+@dataclass(frozen=True)
+class WindProcess(Effect):
+    """Air velocity u(t) as knots of a Gauss-Markov process (see the module docstring).
+    List it before the effects that form drag (`canopy_inflation`, `forebody_drag`)."""
+
+    components: tuple[str, ...] = COMPONENTS
+    knot_s: float = 1.0
+    tau_s: float = 5.0
+    sigma_horizontal: float = 1.0
+    sigma_vertical: float = 0.5
+    name: str = "wind_process"
+
+    def __post_init__(self) -> None:
+        components = tuple(self.components)
+        object.__setattr__(self, "components", components)
+        if not components or any(c not in COMPONENTS for c in components) \
+                or len(set(components)) != len(components):
+            raise ValueError(f"components: some of {', '.join(COMPONENTS)}, each once; "
+                             f"got {list(components)}")
+        for label, value in (("knot_s", self.knot_s), ("tau_s", self.tau_s),
+                             ("sigma_horizontal", self.sigma_horizontal),
+                             ("sigma_vertical", self.sigma_vertical)):
+            if isinstance(value, bool) or not (isinstance(value, int | float)
+                                               and math.isfinite(value) and value > 0):
+                raise ValueError(f"{label} must be a positive number; got {value!r}")
+
+    @classmethod
+    def vertical_thermals(cls) -> WindProcess:
+        """The vertical air motion of a rocket's descent through an afternoon boundary
+        layer: thermals of about 1 m/s correlated over tens of seconds (tau 20 s), knots
+        every 4 s.  The altimeter and a GPS altitude see only the vertical component."""
+        return cls(components=("up",), knot_s=4.0, tau_s=20.0, sigma_vertical=1.0)
+
+    def knot_times(self, test: FlightTest) -> np.ndarray:
+        """The knot times t_k (s): every `knot_s` from the phase's start, the last at or past
+        its end."""
+        n = math.ceil((test.t_end - test.t_start) / self.knot_s - 1e-9)
+        return test.t_start + self.knot_s * np.arange(n + 1)
+
+    def mean_weights(self, test: FlightTest, component: str, t0: float, t1: float
+                     ) -> dict[str, float]:
+        """The mean of u_component over [t0, t1] (s) as weights of its knots: the hat
+        functions averaged over the window (a linear function of the knots)."""
+        knots = self.knot_times(test)
+        t = np.clip(np.linspace(t0, t1, 401), knots[0], knots[-1])
+        hats = np.maximum(0.0, 1.0 - np.abs(t[:, None] - knots[None, :]) / self.knot_s)
+        weights = hats.mean(axis=0)
+        return {param_name(f"wind_{component}", str(k)): float(w)
+                for k, w in enumerate(weights) if w > 0.0}
+
+    def sigma(self, component: str) -> float:
+        return self.sigma_vertical if component == "up" else self.sigma_horizontal
+
+    def parameters(self, test: FlightTest) -> list[Parameter]:
+        return [Parameter(param_name(f"wind_{c}", str(k)), "m/s", 0.0, -MAX_WIND_M_S,
+                          MAX_WIND_M_S, scale=self.sigma(c), process_knot=True,
+                          description=f"air velocity, {c}, at t = {t:.3f} s")
+                for c in self.components for k, t in enumerate(self.knot_times(test))]
+
+    def null_values(self, test: FlightTest) -> dict[str, float]:
+        """Still air: every knot zero (the prior's residuals are then zero too)."""
+        return {p.name: 0.0 for p in self.parameters(test)}
+
+    def air_velocity(self, ctx: ModelContext) -> ca.SX:
+        """u(t) (m/s, east-north-up): the knots' hat functions summed (piecewise linear,
+        constant beyond the last knot)."""
+        knots = self.knot_times(ctx.test)
+        t = ca.fmin(ca.fmax(ctx.t, knots[0]), knots[-1])
+        u = [ca.SX(0.0)] * 3
+        for c in self.components:
+            axis = COMPONENTS.index(c)
+            for k, tk in enumerate(knots):
+                hat = ca.fmax(0.0, 1.0 - ca.fabs(t - tk) / self.knot_s)
+                u[axis] = u[axis] + hat * ctx.p[param_name(f"wind_{c}", str(k))]
+        return ca.vertcat(*u)
+
+    def forces(self, ctx: ModelContext) -> None:
+        gust = self.air_velocity(ctx)
+        ctx.add_air_velocity(gust, self.name)
+        for c in self.components:
+            ctx.q[f"air_velocity_{c}"] = gust[COMPONENTS.index(c)]
+
+    def penalties(self, ctx: ModelContext) -> dict[str, tuple[np.ndarray, ca.SX]]:
+        """The process prior's standardised innovations, per component at every knot."""
+        knots = self.knot_times(ctx.test)
+        phi = math.exp(-self.knot_s / self.tau_s)
+        spread = math.sqrt(1.0 - phi**2)
+        out = {}
+        for c in self.components:
+            s = self.sigma(c)
+            u = [ctx.p[param_name(f"wind_{c}", str(k))] for k in range(len(knots))]
+            innovations = [u[0] / s] + [(u[k] - phi * u[k - 1]) / (s * spread)
+                                        for k in range(1, len(knots))]
+            out[f"wind_{c}"] = (knots, ca.vertcat(*innovations))
+        return out
+
+    def draw(self, test: FlightTest, rng: np.random.Generator) -> dict[str, float]:
+        """Knot values drawn from the process (a simulated test's air motion)."""
+        knots = self.knot_times(test)
+        phi = math.exp(-self.knot_s / self.tau_s)
+        out = {}
+        for c in self.components:
+            s = self.sigma(c)
+            u = s * rng.standard_normal()
+            for k in range(len(knots)):
+                if k:
+                    u = phi * u + s * math.sqrt(1.0 - phi**2) * rng.standard_normal()
+                out[param_name(f"wind_{c}", str(k))] = float(u)
+        return out

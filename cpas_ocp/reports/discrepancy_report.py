@@ -1,0 +1,215 @@
+"""The output folders of `cpas-ocp diagnose`, `cpas-ocp compare` and `cpas-ocp discover`.
+
+diagnose:  diagnosis.md (the text, the window table, the figures),
+           diagnosis.json (everything, SI), windows.csv (residual statistics
+           per sensor channel and phase window), residuals_<sensor>.png.
+compare:   comparison.md, comparison.json, windows.csv (both models, per
+           channel and window), residuals_<label>_<sensor>.png per model and
+           compare_<sensor>.png (normalised residuals side by side).
+discover:  discovery.md (the chain of models, per-channel normalised RMS after
+           each step, the last diagnosis), discovery.json, discovery.png,
+           step_<k>.json (each step's model as a model file), and the last
+           model's residuals_<sensor>.png (what remains, windows shaded).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+from cpas_ocp.discrepancy.diagnosis import Diagnosis
+from cpas_ocp.inference.diagnostics import WindowStatistic, window_statistics
+from cpas_ocp.discrepancy.discovery import Discovery
+from cpas_ocp.physics.effects.registry import EffectType
+from cpas_ocp.inference.model_comparison import Comparison
+from cpas_ocp.io.model_spec import model_block
+from cpas_ocp.io.output_folder import atomic_folder
+from cpas_ocp.inference.phase_windows import phase_windows
+from cpas_ocp.reports.plots import file_stem, plot_discovery, plot_residual_comparison, plot_sensor_residuals
+from cpas_ocp.reports.report import parameter_table
+from cpas_ocp.estimation.uncertainty import Covariance
+
+
+def write_diagnosis(diag: Diagnosis, cov: Covariance | None, out: str | Path) -> Path:
+    """Write the diagnosis folder atomically: all of it or nothing."""
+    out = Path(out)
+    fit = diag.fit
+    with atomic_folder(out, "diagnosis.json") as tmp:
+        table = _window_frame(diag.statistics)
+        table.to_csv(tmp / "windows.csv", index=False)
+        result: dict[str, Any] = {
+            "test": fit.test.name,
+            "model": [e.name for e in fit.model.effects],
+            "chi_square": fit.chi_square, "samples": fit.n_samples,
+            "parameters": {n: fit.parameters[n] for n in fit.free},
+            "std": cov.std if cov is not None else {},
+            "worst": diag.worst,
+            "windows": [dataclasses.asdict(w) for w in diag.windows],
+            "effects": [t.as_dict() for t in diag.effects],
+            "explanation": diag.explanation.effect if diag.explanation else None,
+            "residual_findings": [dataclasses.asdict(f) for f in diag.findings],
+            "air_motion": None if diag.air is None else {
+                "still_minus_2_log_evidence": diag.air.still,
+                "common_residual_p": diag.air.common_p,
+                "knot_s": diag.air.process.knot_s, "tau_s": diag.air.process.tau_s,
+                "intensities": [dataclasses.asdict(p) for p in diag.air.points],
+                "two_ln_bayes_factor": diag.air.two_ln_b, "named": diag.air.decisive},
+            "verdict": diag.verdict(),
+        }
+        (tmp / "diagnosis.json").write_text(json.dumps(result, indent=2, default=float))
+        figures = plot_sensor_residuals(fit, diag.windows, tmp)
+        (tmp / "diagnosis.md").write_text(
+            f"# Diagnosis of {fit.test.name}\n\n{fit.test.label}\n\n"
+            f"```\n{parameter_table(fit, cov)}\n\n{diag.text()}\n```\n\n"
+            "## Residuals per sensor channel and phase window\n\n"
+            + _markdown(table) + "\n\n"
+            + "".join(f"![{p.stem}]({p.name})\n\n" for p in figures))
+    return out
+
+
+def write_comparison(comparison: Comparison, out: str | Path) -> Path:
+    """Write the comparison folder atomically."""
+    out = Path(out)
+    fit_a, fit_b = comparison.fits
+    windows = phase_windows(fit_a)
+    with atomic_folder(out, "comparison.json") as tmp:
+        frames = []
+        for label, fit in zip(comparison.labels, comparison.fits, strict=True):
+            frame = _window_frame(window_statistics(fit, windows))
+            frame.insert(0, "model", label)
+            frames.append(frame)
+        table = pd.concat(frames, ignore_index=True)
+        table.to_csv(tmp / "windows.csv", index=False)
+        wide = _before_after(table, comparison.labels)
+        a, b = comparison.criteria
+        result = {
+            "test": fit_a.test.name,
+            "models": {label: {"effects": [e.name for e in fit.model.effects],
+                               "chi_square": c.chi_square, "k": c.k, "n": c.n, "aic": c.aic,
+                               "bic": c.bic,
+                               "parameters": {n: fit.parameters[n] for n in fit.free},
+                               "std": cov.std, "undetermined": cov.undetermined,
+                               "solver": dataclasses.asdict(fit.solver)}
+                       for label, fit, cov, c in zip(comparison.labels, comparison.fits,
+                                                     comparison.covariances, (a, b),
+                                                     strict=True)},
+            "nesting": comparison.note,
+            "likelihood_ratio": None if comparison.lr is None else {
+                **dataclasses.asdict(comparison.lr), "p_value": comparison.lr.p_value},
+        }
+        (tmp / "comparison.json").write_text(json.dumps(result, indent=2, default=float))
+        figures = []
+        for label, fit in zip(comparison.labels, comparison.fits, strict=True):
+            sub = tmp / file_stem(label)
+            sub.mkdir()
+            figures += plot_sensor_residuals(fit, windows, sub)
+        side = plot_residual_comparison(fit_a, fit_b, comparison.labels, windows, tmp)
+        (tmp / "comparison.md").write_text(
+            f"# {comparison.labels[0]} against {comparison.labels[1]} on {fit_a.test.name}\n\n"
+            f"```\n{comparison.text()}\n```\n\n"
+            "## Normalised residual RMS per sensor channel and phase window\n\n"
+            + _markdown(wide) + "\n\n"
+            + "".join(f"![{p.stem}]({p.name})\n\n" for p in side)
+            + "".join(f"![{p.parent.name} {p.stem}]({p.parent.name}/{p.name})\n\n"
+                      for p in figures))
+    return out
+
+
+def _window_frame(stats: list[WindowStatistic]) -> pd.DataFrame:
+    return pd.DataFrame([{**dataclasses.asdict(s), "excess": s.excess} for s in stats])
+
+
+def _before_after(table: pd.DataFrame, labels: tuple[str, str]) -> pd.DataFrame:
+    """Normalised RMS per channel and window, one column per model."""
+    wide = table.pivot_table(index=["sensor", "channel", "window"], columns="model",
+                             values="normalized_rms", sort=False).reset_index()
+    return wide[["sensor", "channel", "window", *labels]]
+
+
+def _markdown(frame: pd.DataFrame) -> str:
+    """A Markdown table of `frame`, numbers to 4 significant digits."""
+    def cell(v: Any) -> str:
+        return f"{v:.4g}" if isinstance(v, float) else str(v)
+    head = "| " + " | ".join(map(str, frame.columns)) + " |"
+    rule = "|" + "---|" * len(frame.columns)
+    rows = ["| " + " | ".join(cell(v) for v in row) + " |" for row in frame.itertuples(False)]
+    return "\n".join([head, rule, *rows])
+
+
+
+def write_discovery(discovery: Discovery, out: str | Path,
+                    plugins: dict[str, EffectType] | None = None) -> Path:
+    """Write the discovery folder atomically: discovery.md (the chain, each step's
+    normalised RMS per channel, the figure, the last diagnosis with the last model's
+    residual figures), discovery.json, and each step's model as a model file
+    (`step_K.json`, reusable with `reconstruct --model`)."""
+    out = Path(out)
+    steps = discovery.steps
+    with atomic_folder(out, "discovery.json") as tmp:
+        labels = [s.label for s in steps]
+        registry = {**(plugins or {}), **discovery.plugins}
+        for k, s in enumerate(steps):
+            block = model_block(s.spec, registry)
+            # A proposed plug-in the step's model uses is named by its file, beside it.
+            files = [f"proposed/{t.proposal.file_name}" for t in discovery.proposals
+                     if t.proposal.name in s.spec.effect_names]
+            if files:
+                block["plugins"] = files
+            (tmp / f"step_{k}.json").write_text(json.dumps(block, indent=2) + "\n")
+        if discovery.proposals:
+            (tmp / "proposed").mkdir()
+        for trial in discovery.proposals:
+            (tmp / "proposed" / trial.proposal.file_name).write_text(trial.proposal.source)
+        worst = [s.worst_window for s in steps]
+        plot_discovery(labels, [s.fit.chi_square / s.fit.dof for s in steps],
+                       [w[1] if w else float("nan") for w in worst], tmp / "discovery.png")
+        rms = pd.DataFrame([s.channel_rms for s in steps], index=labels).T
+        rms.columns = [f"{k}: {label}" for k, label in enumerate(labels)]
+        result = {
+            "test": steps[0].fit.test.name,
+            "steps": [{"added": s.added, "dropped": s.dropped, "admitted_by": s.admitted_by,
+                       "model_file": f"step_{k}.json", "chi_square": s.fit.chi_square,
+                       "dof": s.fit.dof, "aic": s.criteria.aic, "bic": s.criteria.bic,
+                       "channel_normalized_rms": s.channel_rms,
+                       "excess_chi_square_removed": s.explained,
+                       "window_excess_removed": [
+                           {"sensor": w.sensor, "channel": w.channel, "window": w.window,
+                            "excess_before": w.excess, "share": share}
+                           for w, _, share in s.windows_explained],
+                       "stand_in": s.stand_in,
+                       "worst_window": None if w is None else {"where": w[0],
+                                                               "normalized_rms": w[1]},
+                       "verdict": None if s.diagnosis is None else s.diagnosis.verdict()}
+                      for k, (s, w) in enumerate(zip(steps, worst, strict=True))],
+            "proposals": [{"step": t.step, "effect": t.proposal.name,
+                           "file": f"proposed/{t.proposal.file_name}",
+                           "reason": t.proposal.reason, "confirmed": t.confirmed,
+                           "plugins_tried": t.tried,
+                           "test": {**t.test.as_dict(),
+                                    "source": f"proposed/{t.proposal.file_name}"},
+                           "chi_square": None if t.test.refitted is None
+                           else t.test.refitted[1].chi_square}
+                          for t in discovery.proposals],
+            "stopped": discovery.stopped,
+            "notes": discovery.notes,
+        }
+        (tmp / "discovery.json").write_text(json.dumps(result, indent=2, default=float))
+        last = steps[-1].diagnosis
+        figures = [] if last is None else plot_sensor_residuals(last.fit, last.windows, tmp)
+        (tmp / "discovery.md").write_text(
+            f"# Discovery on {steps[0].fit.test.name}\n\n```\n{discovery.text()}\n```\n\n"
+            "![the error falling step by step](discovery.png)\n\n"
+            "## Normalised RMS per sensor channel after each step\n\n"
+            + _markdown(rms.reset_index(names="channel")) + "\n\n"
+            + "Each step's model is `step_K.json` here (a model file: `cpas-ocp reconstruct "
+            "TEST --model step_K.json`, with `--plugin FILE` for a plug-in it names).\n"
+            + ("Plug-ins written from the residual's signature are in `proposed/`, each "
+               "tested as written: read them, edit them, pass them to `--plugin`.\n"
+               if discovery.proposals else "")
+            + ("" if last is None else f"\n## The last diagnosis\n\n```\n{last.text()}\n```\n\n")
+            + "".join(f"![{p.stem}]({p.name})\n\n" for p in figures))
+    return out

@@ -1,0 +1,425 @@
+"""Figures of a fit: model against measurement per sensor (also with the phase windows
+shaded), canopy drag areas, event times, parameter correlations and profile likelihoods;
+of a campaign's Monte Carlo dispersions (hull projections with the caps, histograms,
+drag-area envelopes against the flight curves); and of Monte Carlo peak loads."""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+from scipy.spatial import ConvexHull
+
+from cpas_ocp.physics.effects.wind_process import WindProcess
+from cpas_ocp.estimation.estimator import EVENTS, Fit, SensorResidual
+from cpas_ocp.physics.parameters import param_name, split_name
+from cpas_ocp.inference.phase_windows import PhaseWindow, windows_for_sensor
+from cpas_ocp.inference.profile_likelihood import THRESHOLD, Profile
+from cpas_ocp.estimation.reduction import reduce, stage_starts
+from cpas_ocp.estimation.uncertainty import Covariance
+from cpas_ocp.physics.units import FT, LBF
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+    from cpas_ocp.campaign.dispersion_study import DispersionModel
+    from cpas_ocp.campaign.drag_area_envelope import DragAreaEnvelope
+    from cpas_ocp.campaign.peak_load_study import StageLoads
+
+# Display units: the engineers' customary ones, per channel.
+DISPLAY = {
+    "east": ("ft", 1 / FT), "north": ("ft", 1 / FT), "up": ("ft", 1 / FT),
+    "v_east": ("ft/s", 1 / FT), "v_north": ("ft/s", 1 / FT), "v_up": ("ft/s", 1 / FT),
+    "load_factor": ("g", 1.0), "tension": ("lbf", 1 / LBF),
+}
+
+
+def plot_sensors(fit: Fit, folder: Path) -> list[Path]:
+    """One figure per sensor: each channel's data and model, normalised residuals beneath."""
+    paths = []
+    for sensor in dict.fromkeys(r.sensor for r in fit.residuals
+                                if r.sensor not in fit.pseudo_sensors):
+        rows = [r for r in fit.residuals if r.sensor == sensor]
+        fig, axes = plt.subplots(2 * len(rows), 1, figsize=(10, 2.6 * len(rows) + 1.5),
+                                 sharex=True, gridspec_kw={"height_ratios": [3, 1] * len(rows)})
+        for i, r in enumerate(rows):
+            unit, k = DISPLAY.get(r.channel, ("SI", 1.0))
+            ax, axr = axes[2 * i], axes[2 * i + 1]
+            ax.plot(r.t, r.measured * k, ".", ms=1.5, color="0.55", label="measured")
+            ax.plot(r.t, r.model * k, "-", lw=1.0, color="C3", label="model")
+            ax.set_ylabel(f"{r.channel} [{unit}]")
+            ax.legend(loc="best", fontsize=8)
+            axr.plot(r.t, r.normalized, ".", ms=1.5, color="C0")
+            axr.axhline(0, color="k", lw=0.5)
+            axr.set_ylabel("res/σ")
+            lim = max(4.0, float(np.percentile(np.abs(r.normalized), 99.5)))
+            axr.set_ylim(-lim, lim)
+        axes[-1].set_xlabel("time [s]")
+        paths.append(_save(fig, f"{fit.test.name}: {sensor}, model vs measurement",
+                           folder / f"sensor_{sensor}.png"))
+    return paths
+
+
+def plot_events(fit: Fit, folder: Path) -> Path | None:
+    """Observed event times (with their 1 and 2 sigma) against the model's, one row each."""
+    rows = [r for r in fit.residuals if r.sensor == EVENTS]
+    if not rows:
+        return None
+    fig, ax = plt.subplots(figsize=(10, 0.6 * len(rows) + 1.6))
+    for i, r in enumerate(rows):
+        t_obs, t_model, sigma = float(r.measured[0]), float(r.model[0]), float(r.sigma[0])
+        ax.errorbar(t_obs, i, xerr=2 * sigma, fmt="none", ecolor="0.75", elinewidth=6)
+        ax.errorbar(t_obs, i, xerr=sigma, fmt="o", color="0.35", ms=4, elinewidth=6,
+                    label="observed ±1σ, ±2σ" if i == 0 else None)
+        ax.plot(t_model, i, "|", color="C3", ms=18, mew=2, label="model" if i == 0 else None)
+        ax.annotate(f"{(t_obs - t_model) / sigma:+.2f}σ", (t_obs + 2.5 * sigma, i),
+                    va="center", fontsize=8)
+    ax.set_yticks(range(len(rows)), [r.channel for r in rows])
+    ax.set_ylim(-0.7, len(rows) - 0.3)
+    ax.set_xlabel("time [s]")
+    ax.legend(loc="lower right", fontsize=8)
+    return _save(fig, f"{fit.test.name}: observed event times against the model",
+                 folder / "events.png")
+
+
+def plot_drag_areas(fit: Fit, folder: Path) -> Path:
+    """Each canopy's reconstructed drag area against its offline (Eq. 3) reduction."""
+    q = fit.quantities()
+    starts = stage_starts(fit.test, fit.parameters)
+    red = reduce(fit.test, starts)
+    chutes = fit.test.parachutes
+    fig, axes = plt.subplots(len(chutes), 1, figsize=(10, 3.2 * len(chutes)), sharex=True,
+                             squeeze=False)
+    for ax, chute in zip(axes[:, 0], chutes, strict=True):
+        if chute.name in red.cds_riser:
+            # Load-cell drag area mapped to the trajectory frame: divided by the fitted gain.
+            gain = q.get(param_name("loadcell_gain", chute.name))
+            factor = 1.0 if gain is None else 1.0 / np.interp(red.t, fit.t, gain)
+            ax.plot(red.t, red.cds_riser[chute.name] * factor / FT**2, ".", ms=1.2,
+                    color="0.6", label="riser data, Eq. 3, with fitted scales")
+        ax.plot(fit.t, q[param_name("cds", chute.name)] / FT**2, color="C3", lw=1.2,
+                label="reconstructed CdS(t)")
+        for s in chute.stages:
+            ax.axvline(starts[(chute.name, s)], color="C2", lw=0.6, ls="--")
+        ax.set_ylabel(f"{chute.name} CdS [ft²]")
+        ax.legend(loc="best", fontsize=8)
+    axes[-1, 0].set_xlabel("time [s]  (dashed: reconstructed inflation start times)")
+    return _save(fig, f"{fit.test.name}: canopy drag areas", folder / "drag_areas.png")
+
+
+def plot_wind(fit: Fit, cov: Covariance | None, folder: Path) -> Path | None:
+    """The wind process's estimate (`wind_process`): each component's air velocity at its
+    knots with the 95 % band (+-1.96 sigma), against time and against altitude; None
+    where the model has no process knots."""
+    components = {}
+    for name in fit.free:
+        base, index = split_name(name)
+        if fit.model.parameter(name).process_knot and base.startswith("wind_"):
+            components.setdefault(base.removeprefix("wind_"), []).append((int(index[0]), name))
+    if not components:
+        return None
+    std = cov.std if cov is not None else {}
+    q = fit.quantities()
+    fig, axes = plt.subplots(len(components), 2, figsize=(12, 2.8 * len(components) + 1.0),
+                             squeeze=False, gridspec_kw={"width_ratios": [3, 1]})
+    wind = next(e for e in fit.model.effects if isinstance(e, WindProcess))
+    knot_times = wind.knot_times(fit.test)
+    for row, (component, knots) in enumerate(components.items()):
+        names = [n for _, n in sorted(knots)]
+        t = knot_times[:len(names)]
+        u = np.array([fit.parameters[n] for n in names])
+        band = 1.96 * np.array([std.get(n, np.nan) for n in names])
+        ax = axes[row, 0]
+        ax.fill_between(t, u - band, u + band, color="C0", alpha=0.25, label="95 % band")
+        ax.plot(t, u, "-o", ms=2.5, color="C0", label="estimate at the knots")
+        ax.axhline(0.0, color="k", lw=0.5)
+        ax.set_ylabel(f"{component} air velocity [m/s]")
+        ax.legend(loc="best", fontsize=8)
+        altitude = np.interp(t, fit.t, q["altitude"])
+        ax = axes[row, 1]
+        ax.fill_betweenx(altitude, u - band, u + band, color="C0", alpha=0.25)
+        ax.plot(u, altitude, "-o", ms=2.5, color="C0")
+        ax.axvline(0.0, color="k", lw=0.5)
+        ax.set_xlabel(f"{component} [m/s]")
+        ax.set_ylabel("altitude [m]")
+    axes[-1, 0].set_xlabel("time [s]")
+    return _save(fig, f"{fit.test.name}: air motion (wind process)", folder / "wind.png")
+
+
+def plot_correlation(cov: Covariance, name: str, folder: Path) -> Path | None:
+    """The parameters' correlation matrix as a map (undetermined parameters and those on a
+    bound left out; None where fewer than two remain)."""
+    keep = [i for i, n in enumerate(cov.names) if n not in cov.undetermined
+            and n not in cov.at_bound]
+    if len(keep) < 2:
+        return None
+    rho = cov.correlation()[np.ix_(keep, keep)]
+    labels = [cov.names[i] for i in keep]
+    size = 3.0 + 0.22 * len(keep)
+    fig, ax = plt.subplots(figsize=(size + 1.2, size))
+    im = ax.imshow(rho, cmap="RdBu_r", vmin=-1, vmax=1)
+    ax.set_xticks(range(len(keep)), labels, rotation=90, fontsize=6)
+    ax.set_yticks(range(len(keep)), labels, fontsize=6)
+    fig.colorbar(im, ax=ax, shrink=0.8, label="correlation ρ")
+    return _save(fig, f"{name}: parameter correlations", folder / "correlation.png")
+
+
+def plot_profile(prof: Profile, name: str, folder: Path) -> Path:
+    """A parameter's profile likelihood against the covariance's parabola, with both 95 %
+    intervals."""
+    fig, ax = plt.subplots(figsize=(7, 4.2))
+    fine = np.linspace(prof.values.min(), prof.values.max(), 200)
+    ax.plot(fine, ((fine - prof.estimate) / prof.std) ** 2, "--", color="0.5",
+            label="covariance: ((θ - θ̂)/σ)²")
+    ax.plot(prof.values, prof.delta_chi_square, "o-", color="C3", ms=4, label="profile Δχ²")
+    ax.axhline(THRESHOLD, color="k", lw=0.6)
+    for v in prof.interval():
+        if v is not None:
+            ax.axvline(v, color="C3", lw=0.8, ls=":")
+    for v in prof.wald_interval():
+        ax.axvline(v, color="0.5", lw=0.8, ls=":")
+    ax.set_xlabel(f"{prof.name} [{prof.unit}]")
+    ax.set_ylabel("Δχ²  (95 %: 3.84)")
+    ax.set_ylim(bottom=-0.2)
+    ax.legend(loc="upper center", fontsize=8)
+    return _save(fig, f"{name}: profile likelihood", folder / f"profile_{file_stem(prof.name)}.png")
+
+
+def file_stem(text: str) -> str:
+    """`text` as a file-name part: letters, digits, '-' and '_' kept, anything else '_'."""
+    return "".join(ch if ch.isalnum() or ch in "_-" else "_" for ch in text)
+
+
+# Shading of the phase windows, by kind: light, distinct colours.
+WINDOW_COLOURS = {"deployment": "#cfe2f3", "inflation": "#f9d5cf", "steady": "#d9ead3"}
+
+
+def plot_sensor_residuals(fit: Fit, windows: Sequence[PhaseWindow], folder: Path) -> list[Path]:
+    """One figure per sensor (``residuals_<sensor>.png``): for each channel the model over
+    the measurement (display units), and beneath it the normalised residuals with the
+    +-1 and +-3 sigma bands; the phase windows that apply to the sensor (its own canopy's
+    for a load cell) are shaded by kind, each kind labelled once."""
+    paths = []
+    for sensor in dict.fromkeys(r.sensor for r in fit.residuals
+                                if r.sensor not in fit.pseudo_sensors):
+        rows = [r for r in fit.residuals if r.sensor == sensor]
+        shown = windows_for_sensor(fit.test, sensor, windows)
+        fig, axes = plt.subplots(2 * len(rows), 1, figsize=(10, 2.8 * len(rows) + 1.5),
+                                 sharex=True, gridspec_kw={"height_ratios": [3, 1.4] * len(rows)})
+        for i, r in enumerate(rows):
+            unit, k = DISPLAY.get(r.channel, ("SI", 1.0))
+            ax, axr = axes[2 * i], axes[2 * i + 1]
+            _shade_windows([ax, axr], shown, legend=i == 0)
+            ax.plot(r.t, r.measured * k, ".", ms=1.5, color="0.55", label="measured")
+            ax.plot(r.t, r.model * k, "-", lw=1.0, color="C3", label="model")
+            ax.set_ylabel(f"{r.channel} [{unit}]")
+            ax.legend(loc="best", fontsize=7, ncol=2)
+            _plot_normalized(axr, r)
+        axes[-1].set_xlabel("time [s]")
+        paths.append(_save(fig, f"{fit.test.name}: {sensor}, residuals by phase window",
+                           folder / f"residuals_{sensor}.png"))
+    return paths
+
+
+def plot_residual_comparison(fit_a: Fit, fit_b: Fit, labels: tuple[str, str],
+                             windows: Sequence[PhaseWindow], folder: Path) -> list[Path]:
+    """One figure per sensor (``compare_<sensor>.png``): each channel's normalised residuals
+    under model A (left) and model B (right), same scale, phase windows shaded, the
+    normalised RMS of each in its panel's title."""
+    paths = []
+    # Channels are paired by name: a model may add pseudo-observations the other lacks.
+    in_b = {(r.sensor, r.channel): r for r in fit_b.residuals}
+    for sensor in dict.fromkeys(r.sensor for r in fit_a.residuals
+                                if r.sensor not in fit_a.pseudo_sensors):
+        pairs = [(a, in_b[a.sensor, a.channel]) for a in fit_a.residuals
+                 if a.sensor == sensor and (a.sensor, a.channel) in in_b]
+        shown = windows_for_sensor(fit_a.test, sensor, windows)
+        fig, axes = plt.subplots(len(pairs), 2, figsize=(12, 2.2 * len(pairs) + 1.2),
+                                 sharex=True, sharey="row", squeeze=False)
+        for i, pair in enumerate(pairs):
+            for j, (r, label) in enumerate(zip(pair, labels, strict=True)):
+                ax = axes[i, j]
+                _shade_windows([ax], shown, legend=i == 0 and j == 0)
+                _plot_normalized(ax, r)
+                rms = float(np.sqrt(np.mean(r.normalized**2)))
+                ax.set_title(f"{label}: {r.channel}, normalised RMS {rms:.3f}", fontsize=9)
+                if i == 0 and j == 0 and shown:
+                    ax.legend(loc="upper right", fontsize=7)
+            lim = max(4.0, *(float(np.percentile(np.abs(r.normalized), 99.5)) for r in pair))
+            axes[i, 0].set_ylim(-lim, lim)
+        for ax in axes[-1]:
+            ax.set_xlabel("time [s]")
+        paths.append(_save(fig, f"{fit_a.test.name}: {sensor}, {labels[0]} against {labels[1]}",
+                           folder / f"compare_{sensor}.png"))
+    return paths
+
+
+def _shade_windows(axes: list[plt.Axes], windows: Sequence[PhaseWindow], legend: bool) -> None:
+    """Shade the phase windows by kind on every axis; label each kind once on the first."""
+    labelled: set[str] = set()
+    for w in windows:
+        label = w.kind if legend and w.kind not in labelled else None
+        labelled.add(w.kind)
+        for a in axes:
+            a.axvspan(w.t0, w.t1, color=WINDOW_COLOURS.get(w.kind, "0.9"), alpha=0.6, lw=0,
+                      zorder=0, label=label if a is axes[0] else None)
+
+
+def _plot_normalized(ax: plt.Axes, r: SensorResidual) -> None:
+    """Normalised residuals with the +-1 and +-3 sigma bands."""
+    ax.axhspan(-3, 3, color="0.4", alpha=0.12, zorder=0.5, lw=0)
+    ax.axhspan(-1, 1, color="0.4", alpha=0.2, zorder=0.6, lw=0)
+    ax.plot(r.t, r.normalized, ".", ms=1.5, color="C0", zorder=2)
+    ax.axhline(0, color="k", lw=0.5, zorder=1)
+    ax.set_ylabel("res/σ (±1, ±3)")
+    lim = max(4.0, float(np.percentile(np.abs(r.normalized), 99.5)))
+    ax.set_ylim(-lim, lim)
+
+
+def _save(fig: plt.Figure, title: str, path: Path) -> Path:
+    """Title, lay out, write at 110 dpi and close a figure; returns `path`."""
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def plot_hull_projections(model: DispersionModel, cases: pd.DataFrame, path: Path,
+                          shown: int = 5000) -> Path:
+    """Each pair of hull parameters (paper Figs. 22, 26): the test points, the outline of
+    their hull and of the grown hull (the convex hull of the projected vertices), the caps
+    box of the two distributions, and `shown` Monte Carlo cases."""
+    names = model.hull_names
+    pairs = list(itertools.combinations(range(len(names)), 2))
+    fig, axes = plt.subplots(1, len(pairs), figsize=(5 * len(pairs), 4.5), squeeze=False)
+    grown = model.hull.vertices
+    tests = model.test_points[list(names)].to_numpy()
+    scale = (1.0 + model.hull.growth)
+    own = model.hull.center + (grown - model.hull.center) / scale
+    for ax, (i, j) in zip(axes[0], pairs, strict=True):
+        ax.plot(cases[names[i]].to_numpy()[:shown], cases[names[j]].to_numpy()[:shown], ".",
+                ms=1, color="0.6", label=f"Monte Carlo cases (first {shown:,})")
+        for vertices, style, label in ((own, "C9-", "tests' hull"),
+                                       (grown, "k--", f"grown {100 * model.hull.growth:.0f} %")):
+            outline = ConvexHull(vertices[:, [i, j]])
+            loop = np.append(outline.vertices, outline.vertices[0])
+            ax.plot(vertices[loop, i], vertices[loop, j], style, lw=1.2, label=label)
+        (x0, x1), (y0, y1) = ((model.dispersions[names[k]].lower_cap,
+                               model.dispersions[names[k]].upper_cap) for k in (i, j))
+        ax.plot([x0, x1, x1, x0, x0], [y0, y0, y1, y1, y0], "C3-", lw=1.0,
+                label="caps (distribution bounds)")
+        ax.plot(tests[:, i], tests[:, j], "ko", ms=4, label="tests")
+        ax.set_xlabel(names[i])
+        ax.set_ylabel(names[j])
+    axes[0][0].legend(fontsize=7)
+    return _save(fig, f"{model.label}: convex hull of the inflation parameters", path)
+
+
+def plot_dispersion_histograms(model: DispersionModel, cases: pd.DataFrame, path: Path) -> Path:
+    """Per dispersed parameter: histogram of the cases (density), the fitted capped density,
+    the caps, and the test values as ticks."""
+    names = list(model.dispersions)
+    fig, axes = plt.subplots(1, len(names), figsize=(3.6 * len(names), 3.4), squeeze=False)
+    for ax, name in zip(axes[0], names, strict=True):
+        d = model.dispersions[name]
+        ax.hist(cases[name], bins=60, density=True, color="0.75", label="cases")
+        x = np.linspace(d.lower_cap, d.upper_cap, 200)
+        density = d.frozen().pdf(x) / d.truncated_mass()
+        ax.plot(x, density, "C3-", lw=1.2, label=f"{d.family} (capped)")
+        for cap in (d.lower_cap, d.upper_cap):
+            ax.axvline(cap, color="C3", ls=":", lw=1)
+        ax.plot(model.test_points[name], np.zeros(len(model.test_points)), "k|", ms=14,
+                label="tests")
+        ax.set_xlabel(name)
+    axes[0][0].legend(fontsize=7)
+    return _save(fig, f"{model.label}: dispersions ({model.tests} tests)", path)
+
+
+def plot_peak_loads(result: StageLoads, path: Path) -> Path:
+    """A canopy stage's Monte Carlo peak riser tension: histogram (lbf) with the fitted
+    values' peak and the 50/99/99.9 % quantiles, and the exceedance probability
+    P(peak >= x) on a log scale (down to one case in the sample)."""
+    tension = np.sort(result.loads.tension) / LBF
+    n = tension.size
+    nominal = result.nominal.tension[0] / LBF
+    fig, (left, right) = plt.subplots(1, 2, figsize=(10, 4))
+    left.hist(tension, bins=min(80, max(10, n // 20)), color="0.7")
+    right.semilogy(tension, 1.0 - np.arange(n) / n, "C0-", lw=1.2, drawstyle="steps-post")
+    for ax in (left, right):
+        ax.axvline(nominal, color="C3", lw=1.2, label=f"fitted values {nominal:,.0f} lbf")
+        for q, style in ((0.5, ":"), (0.99, "--"), (0.999, "-.")):
+            x = float(np.quantile(tension, q))
+            ax.axvline(x, color="k", ls=style, lw=0.9, label=f"{100 * q:g} %: {x:,.0f} lbf")
+        ax.set_xlabel("peak riser tension (lbf)")
+    left.set_ylabel("cases")
+    right.set_ylabel("P(peak ≥ x)")
+    right.set_ylim(0.5 / n, 1.0)
+    left.legend(fontsize=7)
+    return _save(fig, f"{result.cases.label}: Monte Carlo peak loads ({n:,} cases)", path)
+
+
+def plot_drag_area_envelope(env: DragAreaEnvelope, path: Path) -> Path:
+    """Drag area (ft^2) against time from the stage start: the Monte Carlo min-max and 5-95 %
+    bands and median (grey), the flight curves (blue), the caps-box corner curves (red: solid
+    outside the grown hull, dotted inside or without a hull, each tagged at its peak) and
+    the Monte Carlo cases with the extreme peaks and rises (black dashed); all at the
+    campaign's median conditions (paper Figs. 18, 27)."""
+    c = env.conditions
+    area = 1.0 / FT**2
+    b = env.bands
+    fig, ax = plt.subplots(figsize=(9, 5.5))
+    ax.fill_between(env.t, b["min"] * area, b["max"] * area, color="0.88",
+                    label=f"Monte Carlo min-max ({env.cases:,} cases)")
+    ax.fill_between(env.t, b["p05"] * area, b["p95"] * area, color="0.7", label="5-95 %")
+    ax.plot(env.t, b["p50"] * area, color="0.4", lw=1.0, label="median")
+    for k, curve in enumerate(env.flight):
+        ax.plot(env.t, curve * area, "C0-", lw=0.9, alpha=0.8,
+                label=f"flight tests ({len(env.flight)})" if k == 0 else None)
+    shown = set()
+    for curve, tag, inside in zip(env.corners, env.corner_labels, env.corner_inside,
+                                  strict=True):
+        kind = {None: "caps corner (no hull)", True: "caps corner inside the grown hull",
+                False: "caps corner outside the grown hull"}[inside]
+        ax.plot(env.t, curve * area, "C3" + ("-" if inside is False else ":"), lw=1.1,
+                label=None if kind in shown else kind)
+        shown.add(kind)
+        k = int(np.argmax(curve))
+        ax.annotate(tag, (env.t[k], curve[k] * area), fontsize=6, color="C3",
+                    xytext=(2, 2), textcoords="offset points")
+    for k, (name, curve) in enumerate(env.extremes.items()):
+        ax.plot(env.t, curve * area, "k--", lw=0.8,
+                label="Monte Carlo extremes (peak, rise)" if k == 0 else None)
+        j = int(np.argmax(curve))
+        ax.annotate(name, (env.t[j], curve[j] * area), fontsize=6, xytext=(2, -8),
+                    textcoords="offset points")
+    ax.set_xlabel("time from the stage start t_i (s)")
+    ax.set_ylabel("drag area CdS (ft²)")
+    ax.legend(fontsize=7, loc="lower right")
+    ax.set_title(f"{c.inflation.replace('_', ' ')}, D_o {c.diameter / FT:.1f} ft, "
+                 f"V_i {c.v_start / FT:.0f} ft/s, previous stage {c.cds_prev * area:.1f} ft² "
+                 "(campaign medians)", fontsize=8)
+    return _save(fig, f"{env.label}: drag-area growth, Monte Carlo against flight", path)
+
+
+def plot_discovery(labels: Sequence[str], chi2_dof: Sequence[float],
+                   worst_rms: Sequence[float], path: Path) -> Path:
+    """The error falling step by step: chi-square per degree of freedom and the worst
+    window's normalised RMS of each step's model (`labels`: what each step added), with
+    the noise's value 1 marked."""
+    fig, ax = plt.subplots(figsize=(7.0, 4.0))
+    steps = np.arange(len(labels))
+    ax.plot(steps, chi2_dof, "o-", label="χ²/dof")
+    ax.plot(steps, worst_rms, "s--", label="worst window's normalised RMS")
+    ax.axhline(1.0, color="0.5", lw=0.8, label="the noise")
+    ax.set_xticks(steps, labels, rotation=20, ha="right")
+    ax.set_xlabel("model after each step")
+    ax.legend()
+    return _save(fig, "discovery: each step's model", path)

@@ -1,0 +1,91 @@
+"""`cpas-ocp reduce`: a test folder's offline reduction as a table, a plot and a guess.
+
+What an engineer checks before any fit: the IMU drag area (paper Eq. 2), each
+riser's drag area (Eq. 3), the per-stage scale factor that reconciles them, and
+the initial guess that the estimator will start from.  Everything here comes
+from the test folder alone.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import pandas as pd
+
+from cpas_ocp.io.flight_test import FlightTest
+from cpas_ocp.physics.model import Model
+from cpas_ocp.io.model_spec import ModelSpec
+from cpas_ocp.io.output_folder import atomic_folder
+from cpas_ocp.estimation.reduction import Reduction, reduce_and_guess, stage_starts
+from cpas_ocp.physics.units import FT
+
+
+def reduction_frame(red: Reduction) -> pd.DataFrame:
+    """The reduced curves on the IMU time base, SI (s, Pa, m/s, g, m^2)."""
+    cols = {"time_s": red.t, "dynamic_pressure_Pa": red.dynamic_pressure,
+            "airspeed_m_s": red.airspeed, "load_factor_g": red.load_factor,
+            "cds_imu_m2": red.cds_imu}
+    cols.update({f"cds_riser_{name}_m2": v for name, v in red.cds_riser.items()})
+    return pd.DataFrame(cols)
+
+
+def guess_table(model: Model, guess: dict[str, float]) -> str:
+    """Terminal table of the initial guess of every estimable parameter."""
+    lines = [f"{'parameter':30s} {'initial':>11s}  unit"]
+    for prm in model.parameters:
+        if prm.estimable:
+            extra = f"   ({guess[prm.name] / FT**2:7.2f} ft²)" if prm.unit == "m^2" else ""
+            lines.append(f"{prm.name:30s} {guess[prm.name]:11.5g}  {prm.unit}{extra}")
+    return "\n".join(lines)
+
+
+def write_reduction(test: FlightTest, out: str | Path, spec: ModelSpec
+                    ) -> tuple[Path, Model, dict[str, float]]:
+    """Reduce `test`, write reduction.csv, initial_guess.json and reduction.png to `out`.
+
+    The guess covers the parameters of the model `spec` describes and holds its fixed values.
+    """
+    model = spec.model(test)
+    guess, red = reduce_and_guess(test, model, spec.fixed_values(model))
+    out = Path(out)
+    with atomic_folder(out, "initial_guess.json") as tmp:
+        reduction_frame(red).to_csv(tmp / "reduction.csv", index=False)
+        units = {p.name: p.unit for p in model.parameters}
+        (tmp / "initial_guess.json").write_text(json.dumps({
+            "test": test.name,
+            "parameters": {n: {"value": guess[n], "unit": units[n]}
+                           for n in units if model.parameter(n).estimable},
+            "stage_scale": red.stage_scale,
+            "stage_windows_s": {k: list(v) for k, v in red.stage_windows.items()},
+        }, indent=2))
+        _plot(test, red, stage_starts(test, guess), tmp / "reduction.png")
+    return out, model, guess
+
+
+def _plot(test: FlightTest, red: Reduction, starts: dict[tuple[str, str], float],
+          path: Path) -> None:
+    fig, ax = plt.subplots(figsize=(10, 4.5))
+    ax.plot(red.t, red.cds_imu / FT**2, lw=0.6, color="0.4", label="IMU, Eq. 2 (total)")
+    if red.cds_riser:
+        ax.plot(red.t, sum(red.cds_riser.values()) / FT**2, lw=0.6, color="C0",
+                label="risers summed, Eq. 3")
+    for k, (name, curve) in enumerate(red.cds_riser.items()):
+        ax.plot(red.t, curve / FT**2, lw=0.5, color=f"C{k + 1}", label=f"riser {name}")
+    for stage, (a, b) in red.stage_windows.items():
+        ax.axvspan(a, b, color="C2", alpha=0.08)
+        ax.text(0.5 * (a + b), 0.98, f"{stage}\nscale {red.stage_scale[stage]:.3f}",
+                transform=ax.get_xaxis_transform(), ha="center", va="top", fontsize=8)
+    for t0 in starts.values():
+        ax.axvline(t0, color="C2", lw=0.6, ls="--")
+    ax.set_xlabel("time [s]  (dashed: start times from the events; shaded: steady windows)")
+    ax.set_ylabel("drag area [ft²]")
+    ax.set_title(f"{test.name}: offline reduction")
+    ax.legend(loc="upper left", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
