@@ -540,8 +540,8 @@ def _dispersions(args: argparse.Namespace) -> int:
         dispersion_models,
         read_parameter_table,
         read_stage_table,
-        write_dispersions,
     )
+    from cpas_ocp.reports.study_reports import write_dispersions
     table = read_parameter_table(args.campaign)
     stages = read_stage_table(args.campaign)
     models, skipped = dispersion_models(table)
@@ -568,12 +568,12 @@ def _montecarlo(args: argparse.Namespace) -> int:
         match_cases,
         run_monte_carlo,
         summary_text,
-        write_monte_carlo,
     )
     from cpas_ocp.estimation.estimator import Estimator
     from cpas_ocp.inference.continuation import solve_checked
     from cpas_ocp.io.flight_test import load_test
     from cpas_ocp.io.output_folder import atomic_folder
+    from cpas_ocp.reports.study_reports import write_monte_carlo
     where = _where(args)
     test = load_test(args.test_dir)
     stages = match_cases(test, args.cases, args.limit)

@@ -253,22 +253,6 @@ def run_monte_carlo(fit: Fit, stages: list[StageCases], workers: int = 2,
     return out
 
 
-def write_monte_carlo(fit: Fit, results: list[StageLoads], tmp: Path) -> list[Path]:
-    """Into the (temporary) output folder: per canopy stage quantiles_<P>_<S>.csv,
-    peak_loads_<P>_<S>.parquet and peak_loads_<P>_<S>.png; montecarlo.md for all."""
-    from cpas_ocp.reports.plots import plot_peak_loads
-    figures = []
-    for r in results:
-        stem = f"{r.cases.parachute}_{r.cases.stage}"
-        r.quantiles().to_csv(tmp / f"quantiles_{stem}.csv", index=False)
-        r.table().to_parquet(tmp / f"peak_loads_{stem}.parquet", index=False)
-        figures.append(plot_peak_loads(r, tmp / f"peak_loads_{stem}.png"))
-    (tmp / MARKER).write_text(
-        f"# Monte Carlo peak loads of {fit.test.name}\n\n```\n{summary_text(fit, results)}\n"
-        "```\n\n" + "".join(f"![{f.name}]({f.name})\n\n" for f in figures))
-    return figures
-
-
 def summary_text(fit: Fit, results: list[StageLoads]) -> str:
     """The reconstruction's status line and each stage's quantile table."""
     head = (f"reconstruction: {fit.solver.status}, {fit.solver.iterations} iterations, "

@@ -18,16 +18,18 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import TypeVar
+from typing import TYPE_CHECKING, TypeVar
 
 import casadi as ca
 import numpy as np
 
-from cpas_ocp.io.flight_test import Event, FlightTest
 from cpas_ocp.physics.effects.base import Capture, Constraint, Effect, EventTiming, State
 from cpas_ocp.physics.integration import rk4
 from cpas_ocp.physics.parameters import Parameter, param_name, split_name
 from cpas_ocp.physics.units import G0
+
+if TYPE_CHECKING:
+    from cpas_ocp.io.flight_test import Event, FlightTest
 
 T = TypeVar("T", Parameter, State, Capture)
 
