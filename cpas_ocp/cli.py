@@ -276,11 +276,8 @@ def _plugin_option(s: argparse.ArgumentParser, text: str) -> None:
 
 def _plugins(args: argparse.Namespace) -> dict[str, EffectType]:
     """The effects of the plug-in files given with --plugin, by name."""
-    from cpas_ocp.physics.effects.registry import load_plugin
-    out: dict[str, EffectType] = {}
-    for path in args.plugin:
-        out.update(load_plugin(path))
-    return out
+    from cpas_ocp.physics.effects.registry import load_plugins
+    return load_plugins(args.plugin)
 
 
 def _parallel_options(s: argparse.ArgumentParser) -> None:

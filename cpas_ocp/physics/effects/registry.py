@@ -15,6 +15,7 @@ import difflib
 import importlib.util
 import inspect
 import sys
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -172,6 +173,14 @@ def load_plugin(path: Path) -> dict[str, EffectType]:
     if not found:
         raise InputError(str(path), "(python)", "at least one Effect subclass")
     return found
+
+
+def load_plugins(paths: Sequence[str | Path]) -> dict[str, EffectType]:
+    """The effects of the plug-in files `paths` (`load_plugin` each), by name."""
+    out: dict[str, EffectType] = {}
+    for path in paths:
+        out.update(load_plugin(Path(path)))
+    return out
 
 
 # The hooks of `Effect` a model calls, and those of them through which an effect changes

@@ -1,0 +1,161 @@
+"""The Python interface for notebooks and scripts: the command line's steps as functions.
+
+    import cpas_ocp as co
+
+    test = co.simulate("drogue", "drogue-test", seed=1)   # or co.load_test(folder)
+    rec = co.reconstruct(test)        # solve, judge the fit, covariance
+    rec.parameters                    # value, sigma, 95 % interval, unit (SI)
+    rec.worst                         # where the model fits worst, one line
+    rec.report("report")              # the folder `cpas-ocp reconstruct` writes
+    diag = rec.diagnose()             # which effect is missing, or the residual's signature
+    chain = rec.discover()            # diagnose, add, refit, ... until the residual is noise
+    comp = rec.compare("model.json")  # this model against another, nested or not
+
+A fit that did not converge raises `SolverFailure` (its status and iteration
+count), never a result; a fit that converged but presses a guessed bound is
+returned with `rec.is_result` False and `rec.problems` saying why.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from cpas_ocp.discrepancy.diagnosis import Diagnosis, diagnose
+from cpas_ocp.discrepancy.discovery import Discovery, discover
+from cpas_ocp.estimation.estimator import Estimator, Fit
+from cpas_ocp.estimation.simulate import simulate_problem
+from cpas_ocp.estimation.uncertainty import Covariance
+from cpas_ocp.inference.diagnostics import window_statistics, worst_of
+from cpas_ocp.inference.model_comparison import Comparison, compare
+from cpas_ocp.inference.phase_windows import phase_windows
+from cpas_ocp.inference.result_claim import Claim
+from cpas_ocp.io.flight_test import FlightTest, load_test
+from cpas_ocp.io.model_spec import ModelSpec, load_model_file, spec_of_test
+from cpas_ocp.io.problems import load_problem
+from cpas_ocp.physics.effects.base import Effect
+from cpas_ocp.physics.effects.registry import EffectType, load_plugins
+from cpas_ocp.reports.discrepancy_report import write_comparison, write_diagnosis, write_discovery
+from cpas_ocp.reports.report import write_report
+
+__all__ = ["Reconstruction", "load_model", "load_test", "reconstruct", "simulate"]
+
+
+def simulate(problem: str, out: str | Path, seed: int, effects: Sequence[Effect] | None = None,
+             truth: Mapping[str, float] | None = None) -> FlightTest:
+    """Simulate the built-in problem `problem` (drogue, fbcp, main2, ...) with sensor noise
+    drawn from `seed` into the test folder `out`, and load it.  `effects` is the model
+    that makes the data (default: the problem's); `truth` overrides or adds true
+    parameter values (SI), such as those of an effect hidden from the fit."""
+    base = load_problem(problem)
+    if truth:
+        base = dataclasses.replace(base, truth={**base.truth, **truth})
+    return simulate_problem(base, out, seed, effects=None if effects is None else list(effects))
+
+
+def load_model(path: str | Path, plugins: Sequence[str | Path] = ()) -> ModelSpec:
+    """A model file (a JSON model block), with the plug-in files its effects may name."""
+    return load_model_file(path, load_plugins(plugins))
+
+
+def reconstruct(test: FlightTest | str | Path, model: ModelSpec | str | Path | None = None,
+                plugins: Sequence[str | Path] = (), rescale_sigmas: bool = False
+                ) -> Reconstruction:
+    """Reconstruct a test (a loaded test or its folder) with `model` (a spec, a model file,
+    or None for the manifest's): the fit from the offline reduction, what it may claim
+    (`result_claim`), and its covariance.  Raises SolverFailure where it does not
+    converge."""
+    from cpas_ocp.inference.continuation import solve_checked
+    if not isinstance(test, FlightTest):
+        test = load_test(test)
+    spec = model if isinstance(model, ModelSpec) else (
+        spec_of_test(test) if model is None else load_model_file(model, load_plugins(plugins)))
+    est, fit, claim = solve_checked(Estimator(test, spec))
+    return Reconstruction(est, fit, est.covariance(fit, rescale_sigmas), claim,
+                          load_plugins(plugins))
+
+
+@dataclass
+class Reconstruction:
+    """One reconstruction: the estimator that made it, the fit, its covariance and claim,
+    and the plug-in effects its model may use or its diagnosis test."""
+
+    estimator: Estimator
+    fit: Fit
+    covariance: Covariance
+    claim: Claim
+    plugins: dict[str, EffectType]
+
+    @property
+    def spec(self) -> ModelSpec:
+        return self.estimator.spec
+
+    @property
+    def is_result(self) -> bool:
+        """Whether the fit may be read as a result (no free parameter pressed against a
+        bound that was only a guess)."""
+        return self.claim.is_result
+
+    @property
+    def problems(self) -> list[str]:
+        """Why the fit is not yet a result (empty where it is)."""
+        return self.claim.problems()
+
+    @property
+    def parameters(self) -> pd.DataFrame:
+        """The free parameters: value, 1 sigma, 95 % interval (value -+ 1.96 sigma) and unit,
+        SI, indexed by name."""
+        model = self.estimator.model
+        rows = []
+        for name in self.fit.free:
+            value = self.fit.parameters[name]
+            sigma = self.covariance.std.get(name, np.nan)
+            rows.append({"parameter": name, "value": value, "sigma": sigma,
+                         "low_95": value - 1.96 * sigma, "high_95": value + 1.96 * sigma,
+                         "unit": model.parameter(name).unit})
+        return pd.DataFrame(rows).set_index("parameter")
+
+    @property
+    def chi_square_per_dof(self) -> float:
+        return self.fit.chi_square / self.fit.dof
+
+    @property
+    def worst(self) -> str:
+        """One line: the sensor channel and phase window that depart from the noise most."""
+        return worst_of(window_statistics(self.fit, phase_windows(self.fit)))
+
+    def report(self, out: str | Path) -> Path:
+        """Write the report folder `cpas-ocp reconstruct` writes (result.json,
+        parameters.csv, report.md, figures) to `out`."""
+        return write_report(self.fit, self.covariance, out, claim=self.claim)
+
+    def diagnose(self, out: str | Path | None = None) -> Diagnosis:
+        """Where the model fails and which effect it lacks (`cpas-ocp diagnose`); the folder
+        written to `out` where given."""
+        diag = diagnose(self.fit, self.spec, self.plugins)
+        if out is not None:
+            write_diagnosis(diag, self.covariance, out)
+        return diag
+
+    def discover(self, out: str | Path | None = None, max_steps: int = 4) -> Discovery:
+        """Diagnose, add the confirmed effect, refit, and again (`cpas-ocp discover`); the
+        folder written to `out` where given."""
+        found = discover(self.fit, self.spec, self.plugins, max_steps)
+        if out is not None:
+            write_discovery(found, out, self.plugins)
+        return found
+
+    def compare(self, model: ModelSpec | str | Path, out: str | Path | None = None,
+                labels: tuple[str, str] = ("this", "other")) -> Comparison:
+        """This model against `model` (a spec or a model file), the second started from
+        this fit (`cpas-ocp compare`); the folder written to `out` where given."""
+        other = model if isinstance(model, ModelSpec) else load_model_file(model, self.plugins)
+        comparison = compare(self.fit, self.covariance, self.spec, other, labels)
+        if out is not None:
+            write_comparison(comparison, out)
+        return comparison
