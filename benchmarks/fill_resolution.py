@@ -21,7 +21,7 @@ import argparse
 import dataclasses
 import time
 
-import cpas_ocp.estimation.estimator as estimation
+import cpas_ocp.estimation.fit as estimation
 from cpas_ocp.errors import SolverFailure
 from cpas_ocp.estimation.estimator import Estimator
 from cpas_ocp.io.flight_test import load_test

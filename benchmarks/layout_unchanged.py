@@ -36,13 +36,15 @@ ROOT = Path(__file__).resolve().parents[1]
 RUN = """
 import importlib.util, sys
 sys.meta_path = [f for f in sys.meta_path if "editable" not in repr(f).lower()]
-sys.path.insert(0, {src!r})
+sys.path[:] = [{src!r}] + [p for p in sys.path if p and "editable" not in p.lower()]
 for name, folder in (("cpas_ocp.problem_data", "problems"), ("cpas_ocp.schemas", "data_schemas")):
     spec = importlib.util.spec_from_file_location(
         name, {src!r} + "/" + folder + "/__init__.py",
         submodule_search_locations=[{src!r} + "/" + folder])
     sys.modules[name] = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(sys.modules[name])
+import cpas_ocp.cli
+assert cpas_ocp.cli.__file__.startswith({src!r}), cpas_ocp.cli.__file__
 from cpas_ocp.cli import main
 sys.exit(main(["demo", "--out", {out!r}]))
 """
@@ -53,7 +55,9 @@ MASKS = (re.compile(r"\d+(\.\d+)? ?(s|ms|min)\b"), re.compile(r"/tmp/\S+"))
 def demo(src: Path, out: Path) -> list[str]:
     """Run the demo with the code under `src` into `out`; its printed lines, masked."""
     done = subprocess.run([sys.executable, "-c", RUN.format(src=str(src), out=str(out))],
-                          capture_output=True, text=True, check=True)
+                          capture_output=True, text=True, check=False, cwd=out.parent)
+    if done.returncode != 0:
+        raise SystemExit(f"the demo from {src} failed:\n{done.stderr}")
     lines = done.stdout.splitlines()
     for mask in MASKS:
         lines = [mask.sub("#", line) for line in lines]

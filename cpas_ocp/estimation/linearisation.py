@@ -1,0 +1,111 @@
+"""The linearisation at a point and what it gives (`Estimator`'s third part): the
+covariance of the free parameters, Gauss-Newton estimates and steps, and the
+information's log-determinant.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import casadi as ca
+import numpy as np
+
+from cpas_ocp.estimation.fit import (
+    Fit,
+)
+from cpas_ocp.estimation.uncertainty import (
+    HESSIANS,
+    Covariance,
+    Linearization,
+    gauss_newton_step,
+    kkt_covariance,
+    linearize,
+    log_det_information,
+)
+
+
+def _violation(lin: Linearization) -> float:
+    """Largest scaled constraint violation of a linearisation's point (0 without any)."""
+    return float(np.max(np.abs(lin.c))) if lin.c.size else 0.0
+
+
+class Linearising:
+    """Linearisations of the NLP and the statistics they give."""
+
+    def covariance(self, fit: Fit, scale_by_residual: bool = False,
+                   hessian: str = "gauss-newton") -> Covariance:
+        """Covariance of the free parameters at `fit`: the KKT system's parameter block.
+
+        `hessian` is "gauss-newton" (J'J of the weighted residuals) or "exact"
+        (the Hessian of the Lagrangian at the fit's multipliers; see
+        `uncertainty`).  `scale_by_residual` multiplies it by chi^2/dof, for
+        sensor sigmas that are not trusted.
+        """
+        if hessian not in HESSIANS:
+            raise ValueError(f"hessian must be one of {HESSIANS}; got {hessian!r}")
+        product = None
+        if hessian == "exact":
+            fn = self._lagrangian_hessian_product()
+            product = lambda Z: np.asarray(  # noqa: E731
+                fn.map(Z.shape[1], "serial")(fit.z, fit.multipliers, Z))
+        return kkt_covariance(self._linearize(fit.z), self._param_index, self.pscale,
+                              self.free, scale_by_residual, product)
+
+    def gauss_newton_estimate(self, z: np.ndarray, release: Sequence[str] = ()
+                              ) -> tuple[dict[str, float], Covariance]:
+        """The free parameters after one Gauss-Newton step from `z` (SI), and their covariance
+        there; parameters in `release` are treated as unbounded (see `_linearize`).
+
+        At the optimum of a model with some parameters held at null values, the
+        step's components along them are their linearised estimates (`score_test`).
+        """
+        lin = self._linearize(z, release)
+        cov = kkt_covariance(lin, self._param_index, self.pscale, self.free)
+        return self.free_values(z + gauss_newton_step(lin)), cov
+
+    def information_log_det(self, fit: Fit) -> float:
+        """log det of the Gauss-Newton information of every free coordinate at `fit`, in the
+        scaled decision vector (`uncertainty.log_det_information`): the volume term of a
+        Laplace approximation (`process_intensity`)."""
+        return log_det_information(self._linearize(fit.z))
+
+    def gauss_newton_point(self, z: np.ndarray) -> tuple[np.ndarray, float]:
+        """The end of one full Gauss-Newton step from the decision vector `z` (the linearised
+        constraints met there), clipped into the variables' bounds, and the chi-square
+        at `z`: both from one linearisation."""
+        lin = self._linearize(z)
+        step_end = np.clip(z + gauss_newton_step(lin), self._lbz, self._ubz)
+        return step_end, float(lin.r @ lin.r)
+
+    def _lagrangian_hessian_product(self) -> ca.Function:
+        """(z, lambda, v) -> H v, H the Hessian of 0.5 |r|^2 + lambda' g in the scaled z
+        (forward over reverse mode on the NLP's expression graph; built on first use)."""
+        if self._hessian_product is None:
+            lam = ca.MX.sym("lam", self._g.numel())
+            v = ca.MX.sym("v", self._z.numel())
+            grad = ca.gradient(self._obj + ca.dot(lam, self._g), self._z)
+            self._hessian_product = ca.Function("hessian_product", [self._z, lam, v],
+                                                [ca.jtimes(grad, self._z, v)])
+        return self._hessian_product
+
+    def _linearize(self, z: np.ndarray, release: Sequence[str] = ()) -> Linearization:
+        """The problem linearised at `z`; the free parameters named in `release` are treated
+        as unbounded (a score test's parameters sit on a bound at their null values)."""
+        idx = self._param_index
+        nx = self.model.nx
+        n_states = self._nz[0]
+        pinned = np.flatnonzero(self._lbz[:nx] == self._ubz[:nx])
+        lower, upper = self._lbz[idx].copy(), self._ubz[idx].copy()
+        for name in release:
+            i = self.free.index(name)
+            lower[i], upper[i] = -np.inf, np.inf
+        points = self._points
+        return linearize(points.residual_jacobian, points.constraints, z, self._lbg, self._ubg,
+                         idx, lower, upper, chain_rows=n_states - nx,
+                         dependent=np.arange(nx, n_states), pinned=pinned)
+
+    def evaluate(self, z: np.ndarray) -> tuple[float, float]:
+        """Chi-square at the decision vector `z` and its largest scaled constraint violation
+        (the shooting gaps in units of the state scales)."""
+        lin = self._linearize(z)
+        return float(lin.r @ lin.r), _violation(lin)

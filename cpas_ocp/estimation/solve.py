@@ -1,0 +1,627 @@
+"""The solve and its stopping rule (`Estimator`'s second part).
+
+Ipopt on the transcribed NLP, with the statistical test that ends a run once the
+Gauss-Newton step would lower chi-square by less than `Settings.chi2_step_tol`, the
+finishing steps of a nearly feasible run, and the feasible descent after a stall.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from collections.abc import Callable
+
+import casadi as ca
+import numpy as np
+
+from cpas_ocp import interrupts
+from cpas_ocp.errors import SolverFailure
+from cpas_ocp.estimation.feasible_descent import DescentEnd, DescentProblem, descend
+from cpas_ocp.estimation.fit import (
+    POLISH_CONSTRAINT_TOL,
+    STOP_CONSTRAINT_TOL,
+    Fit,
+    SolverStats,
+)
+from cpas_ocp.estimation.linearisation import _violation
+from cpas_ocp.estimation.nlp_functions import MarquardtDamping, ipopt_functions
+from cpas_ocp.estimation.uncertainty import (
+    DECREMENT_FLOOR,
+    GaussNewtonStep,
+    Linearization,
+    gauss_newton,
+    measured_decrement,
+)
+
+# Status of a run ended by the statistical test (`Settings.chi2_step_tol`).
+STATISTICALLY_CONVERGED = "Solved_Gauss_Newton_Step_Below_Tolerance"
+
+
+# Status of a run stopped because chi-square no longer fell (`STALL_ITERATIONS`), and of
+# one such that Gauss-Newton steps through feasible points finished at the statistical
+# test (`feasible_descent`).
+STALLED = "Stalled_Without_Progress"
+
+
+DESCENT_CONVERGED = "Solved_Feasible_Descent_After_Stall"
+
+
+
+
+# Gauss-Newton steps the statistical test may take of its own from an iterate before
+# it has a point to end the run at (`Estimator._finishing_steps`); one more polishes it.
+FINISHING_STEPS = 3
+
+
+class _Monitor(ca.Callback):
+    """Ipopt iteration callback: progress line on stderr, and the statistical stopping test.
+
+    Gauss-Newton converges linearly, so Ipopt's optimality tests keep it
+    polishing chi-square in its fifth decimal long after the estimate has
+    stopped moving on the scale of its own uncertainty.  Whenever an
+    iteration lowers chi-square by less than `tol`, the monitor asks
+    `test(z)` for a feasible point at or one Gauss-Newton step from the
+    iterate and the chi-square decrease the full Gauss-Newton step predicts
+    there, and stops the run at that point (`point`) once it is below `tol`.
+    Each test costs a KKT factorisation (about two iterations' time), so
+    tests are at least 3 iterations apart, and 6 then 12 while the decrement
+    stays above 10 tol.
+    """
+
+    def __init__(self, nx: int, ng: int, violations: Callable[[np.ndarray], np.ndarray],
+                 test: Callable[[np.ndarray], tuple[float, np.ndarray] | None],
+                 tol: float | None, damping: MarquardtDamping | None = None,
+                 stall: int | None = None) -> None:
+        ca.Callback.__init__(self)
+        self._stall = stall  # iterations without progress that stop a run (None: never)
+        self._violations = violations  # how far each constraint value lies outside its bounds
+        self._nx, self._ng, self._test, self._tol = nx, ng, test, tol
+        self._damping = damping
+        self.reset(False, (np.full(nx, -np.inf), np.full(nx, np.inf)))
+        self.construct("monitor", {})
+
+    def reset(self, progress: bool, bounds: tuple[np.ndarray, np.ndarray],
+              max_iter: int | None = None, done: int = 0, stall: bool = True) -> None:
+        """Start a run within `bounds` (the scaled decision vector's lower and upper),
+        stopped after `max_iter` iterations if given; `done` iterations were made before
+        it (a restart with wider windows of action, or after a stall, which keeps the
+        Marquardt damping the run had reached); stopped where it stalls if `stall` and
+        the monitor was made to."""
+        self._k, self._last_test, self._gap, self._chi2 = 0, -100, 3, np.inf
+        self._done = done
+        self._outside = 0  # successive iterates with a parameter acting outside its window
+        self.left_at: np.ndarray | None = None  # where that has persisted
+        self.stopped, self.decrement = False, None
+        self.max_iter, self.capped = max_iter, False
+        self.diverged = self.stalled = False
+        self._stalls = stall and self._stall is not None
+        self.point: np.ndarray | None = None  # where the statistical test ended the run
+        self.bounds = bounds
+        self.progress = progress and sys.stderr.isatty()
+        if done:
+            return  # a widening restart goes on with what the run had gathered
+        if self._damping is not None:
+            self._damping.reset()
+        self._first_chi2: float | None = None  # the run's first iterate's (divergence)
+        # The nearly feasible iterate with the lowest chi-square so far (constraints
+        # within POLISH_CONSTRAINT_TOL): an unconverged run's best witness.
+        self.best: np.ndarray | None = None
+        self._best_chi2 = np.inf
+        # The lowest nearly feasible chi-square when it last fell by enough to count as
+        # progress (see STALL_ITERATIONS), and the iteration then.
+        self._progress = (np.inf, 0)
+        # The Gauss-Newton decrement the statistical test last found at an iterate.
+        self.promised = 0.0
+
+    def offer(self, z: np.ndarray, chi2: float) -> None:
+        """A feasible point found outside the run, kept as its best iterate where lower."""
+        if chi2 < self._best_chi2:
+            self.best, self._best_chi2 = z, chi2
+
+    def finish(self) -> None:
+        if self.progress and self._k + self._done:
+            sys.stderr.write("\n")
+
+    # Successive iterates at which some parameter acts outside the window of action
+    # Ipopt's derivatives were given before the run is stopped to widen the windows.  A
+    # watchdog's trial steps (up to 3) can take the iterate far afield and back: on an
+    # elastic-riser refit a restart from such an excursion (chi-square 2e8 against 8,500)
+    # started the refit over.
+    OUTSIDE_PERSISTS = 4
+
+    def window_check(self, z: np.ndarray, outside: bool) -> None:
+        """Whether at the iterate `z` a parameter acts outside its window of action; once
+        that has persisted over OUTSIDE_PERSISTS iterates, the run stops at the next
+        (and the solve restarts with wider windows from it)."""
+        self._outside = self._outside + 1 if outside else 0
+        if self._outside >= self.OUTSIDE_PERSISTS and self.left_at is None:
+            self.left_at = np.array(z, dtype=float)
+
+    def get_n_in(self) -> int:
+        return ca.nlpsol_n_out()
+
+    def get_n_out(self) -> int:
+        return 1
+
+    def get_name_in(self, i: int) -> str:
+        return ca.nlpsol_out(i)
+
+    def get_name_out(self, i: int) -> str:
+        return "ret"
+
+    def get_sparsity_in(self, i: int) -> ca.Sparsity:
+        name = ca.nlpsol_out(i)
+        n = {"f": 1, "x": self._nx, "lam_x": self._nx, "g": self._ng, "lam_g": self._ng}.get(
+            name, 0)
+        return ca.Sparsity.dense(n, 1)
+
+    def eval(self, arg: list) -> list:
+        self._k += 1
+        if interrupts.pending():
+            return [1]  # `interrupts.deferred` raises once Ipopt has returned
+        if self.max_iter is not None and self._k > self.max_iter:
+            self.capped = True  # called at iterations 0, 1, ...: this is iteration max_iter
+            return [1]
+        if self.left_at is not None:
+            return [1]
+        chi2 = 2.0 * float(arg[1])
+        if self._first_chi2 is None:
+            self._first_chi2 = chi2
+        if not chi2 <= DIVERGED_FACTOR * self._first_chi2:  # NaN too
+            self.diverged = True
+            return [1]
+        g = np.asarray(arg[2]).ravel()
+        if np.max(self._violations(g), initial=0.0) <= POLISH_CONSTRAINT_TOL:  # not NaN
+            if chi2 < self._best_chi2:
+                self.best, self._best_chi2 = np.asarray(arg[0]).ravel().copy(), chi2
+            if self._best_chi2 <= self._progress[0] - max(STALL_GAIN, STALL_SHARE * self.promised):
+                self._progress = (self._best_chi2, self._done + self._k)
+        if self._stalls and self.best is not None \
+                and self._done + self._k - self._progress[1] >= self._stall:
+            self.stalled = True
+            return [1]
+        if self._damping is not None:
+            self._damping.observe(np.asarray(arg[0]).ravel())
+        if self.progress:
+            sys.stderr.write(f"\r  iteration {self._done + self._k:4d}   "
+                             f"chi-square {chi2:14.6g}")
+            sys.stderr.flush()
+        improved, self._chi2 = self._chi2 - chi2, chi2
+        if self._tol is None or improved >= self._tol or self._k - self._last_test < self._gap:
+            return [0]
+        self._last_test = self._k
+        found = self._test(np.asarray(arg[0]).ravel())
+        if found is not None:
+            d, point = found
+            self.decrement = d
+            self.stopped = d < self._tol
+            self.point = point if self.stopped else None
+            # Still far: back off (3, 6, 12 iterations) while the estimate travels.
+            self._gap = min(2 * self._gap, 12) if d > 10 * self._tol else 3
+        return [1 if self.stopped else 0]
+
+
+# An accepted iterate whose chi-square exceeds the run's first by this factor (or is not a
+# number) ends the run as diverged.  Ipopt's watchdog accepts its trial steps on trust: on
+# `drogue` with added mass hidden, an elastic-riser refit's second trial step reached
+# chi-square 4e40 from 1.7e4, and the next iteration did not end in two minutes.  Trial
+# steps that came back had gone to 1e8 from 8.5e3.
+DIVERGED_FACTOR = 1e6
+
+
+# A run whose lowest nearly feasible chi-square has not fallen by STALL_SHARE of the
+# Gauss-Newton decrement the statistical test last found (at least STALL_GAIN) in
+# STALL_ITERATIONS iterations is stopped as stalled: Ipopt then gains less in many steps
+# than one Gauss-Newton step promises.  Gauss-Newton steps through feasible points
+# (`feasible_descent`) finish it where they can.  On `drogue` flown with added mass and
+# refitted with elastic risers instead, Ipopt reached chi-square 8,062 by iteration 26
+# and crept to 8,060 at its 150-iteration cap, with decrements of 10-25 throughout.  A
+# share of one half stopped a fit of `drogue` with a deployment load from the reduction
+# at chi-square 78,604 (a fall of 18,100 in 20 iterations against a decrement of 36,500),
+# and the descent from there ended in a minimum of its own at 65,190, where Ipopt goes on
+# to 7,200.
+STALL_ITERATIONS = 20
+
+
+STALL_SHARE = 0.1
+
+
+STALL_GAIN = 1.0
+
+
+class Solving:
+    """Ipopt's runs on the NLP, and when a run is done."""
+
+    def _setup_solver(self) -> None:
+        """Ipopt's options, the iteration monitor that carries the stopping rule, and the
+        solver on the transcribed NLP."""
+        s = self.settings
+        # Gauss-Newton converges linearly, so Ipopt's dual infeasibility plateaus near
+        # 1e-4 (scaled) long after the estimate has stopped moving; accept a point where
+        # the objective no longer changes (relative 1e-9, i.e. ~1e-5 in chi-square, over
+        # 5 iterations; a change of 1 in chi-square is the statistical scale) and the
+        # constraints hold to 1e-8.  `solve` reports which criterion ended the run.
+        self._options = {
+            "ipopt.max_iter": s.max_iter, "ipopt.tol": s.tol,
+            "ipopt.acceptable_tol": 1e-1, "ipopt.acceptable_iter": 5,
+            "ipopt.acceptable_obj_change_tol": 1e-9,
+            "ipopt.acceptable_constr_viol_tol": 1e-8,
+            "ipopt.watchdog_shortened_iter_trigger": s.watchdog_trigger,
+            "ipopt.print_level": 5 if s.verbose else 0, "print_time": False,
+            "ipopt.sb": "yes",
+            # The NLP is scaled by construction (states and parameters by their scales,
+            # residuals by their sigmas): MUMPS's own row and column scaling (MC64's
+            # permuting scaling and MC77's, computed afresh for every factorisation)
+            # changes no step here and cost 40 % of the KKT solves on `drogue_full`,
+            # and its analysis phase went from 0.6-1.8 s to 0.1 s without it.
+            "ipopt.mumps_permuting_scaling": 0, "ipopt.mumps_scaling": 0,
+        }
+        self._hessian_product: ca.Function | None = None
+        # the solver keeps only a reference to its callbacks
+        self._monitor = _Monitor(self._z.numel(), self._g.numel(), self._violations,
+                                 self._stop_test, s.chi2_step_tol, self._damping,
+                                 STALL_ITERATIONS if s.descent_steps > 0 else None)
+        self._make_solver()
+
+    def _make_solver(self, barrier: float | None = None) -> None:
+        """Ipopt on the NLP, its derivatives on the pattern `self._windows` keeps; with
+        `barrier`, warm-started (the caller passes the multipliers) at that barrier
+        parameter, the bounds not pushed."""
+        if self.settings.point_cache:
+            self._ipopt = ipopt_functions(self._points, self._curvature, self._small_rows,
+                                          self._windows, self._monitor.window_check,
+                                          self._damping, self._levenberg())
+            nlp, derivatives = self._ipopt.nlp, self._ipopt.options
+        else:
+            nlp, derivatives = self._expressions
+        self._warm = barrier is not None
+        warm = {} if barrier is None else {
+            "ipopt.warm_start_init_point": "yes", "ipopt.mu_init": barrier,
+            "ipopt.warm_start_bound_push": 1e-9, "ipopt.warm_start_mult_bound_push": 1e-9}
+        self._solver = ca.nlpsol("reconstruction", "ipopt", nlp, {
+            **self._options, **warm, **derivatives, "iteration_callback": self._monitor})
+
+    def _levenberg(self) -> tuple[np.ndarray, float] | None:
+        """The Levenberg term's columns of z (the free parameters) and size, or None."""
+        delta = self.settings.levenberg
+        return None if not delta else (self._param_index, float(delta))
+
+    def _jacobian_values(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The stored values of the residual and constraint Jacobians at `z`."""
+        return self._points.residual_jacobian(z)[1].data, self._points.constraints(z)[1].data
+
+    def _fit_windows(self, *points: np.ndarray, widen: bool = False,
+                     barrier: float | None = None) -> None:
+        """Fit the parameters' windows of action to their Jacobians' nonzeros at a point (or
+        widen them over several), and rebuild the solver on the pattern they keep; with
+        `barrier`, one that goes on from a run that ended at that barrier parameter."""
+        if not self._windows.active:
+            return
+        if widen:
+            self._windows.widen(*map(self._jacobian_values, points))
+        else:
+            self._windows.fit(self._jacobian_values(points[0]))
+        self._make_solver(barrier)
+
+    def solve(self, progress: bool = False, start: Fit | np.ndarray | None = None,
+              bounds: dict[str, tuple[float, float]] | None = None,
+              max_iter: int | None = None, sensitivities: bool = True) -> Fit:
+        """Solve the NLP; raise SolverFailure if it fails.
+
+        It starts from the reduction's initial point, from the solution of
+        `start` (a fit of this same estimator) or from `start` itself (a
+        decision vector, e.g. `point_from`).  `bounds` replaces the bounds of
+        free parameters (SI; equal bounds pin a value): a what-if constraint.
+        The fit then reports, per bounded parameter, the sensitivity of the
+        optimal chi-square to the bound, d(chi^2)/d(value) (its Lagrange
+        multiplier, times 2, per SI unit).
+        With `progress`, a one-line iteration counter with chi-square is shown on stderr.
+        `max_iter` stops this solve after fewer iterations than the settings' limit.
+        Without `sensitivities` (a profile's points, a null point: values held, their
+        multipliers unused) a run that stalls goes on by feasible Gauss-Newton steps as an
+        unbounded one does: a held point of the main's expopen on the Prometheus TeleMega
+        log with the wind process took 26 iterations (8.9 s) that way, against 500 iterations
+        (135 s) of Ipopt cycling within 1.2 of its chi-square without
+        (`benchmarks/fill_resolution.py`; on the TeleMetrum log neither converged until
+        the descent learnt the curvature, `Settings.descent_curvature`).
+        """
+        z0 = (self.initial_point() if start is None
+              else start.z if isinstance(start, Fit) else np.asarray(start, dtype=float))
+        lbz, ubz = self._lbz.copy(), self._ubz.copy()
+        n_states = self._nz[0]
+        for name, (lo, hi) in (bounds or {}).items():
+            i = self.free.index(name)
+            lbz[n_states + i], ubz[n_states + i] = lo / self.pscale[i], hi / self.pscale[i]
+        z0 = np.clip(z0, lbz, ubz)
+        t0 = time.perf_counter()
+        cap = min(max_iter or self.settings.max_iter, self.settings.max_iter)
+        self._fit_windows(z0)
+        if self._warm:  # an earlier solve's restart left its warm-started solver behind
+            self._make_solver()
+        iterations = 0
+        multipliers: dict[str, ca.DM] = {}
+        descended: DescentEnd | None = None
+        # A what-if's sensitivities need Ipopt's own multipliers at its own solution.
+        stall = not bounds or not sensitivities
+        while True:
+            self._monitor.reset(progress, (lbz, ubz), cap - iterations, iterations, stall)
+            with interrupts.deferred():  # a signal stops Ipopt at its next iteration
+                sol = self._solver(x0=z0, lbx=lbz, ubx=ubz, lbg=self._lbg, ubg=self._ubg,
+                                   **multipliers)
+            st = self._solver.stats()
+            iterations += int(st["iter_count"])
+            z0 = np.asarray(sol["x"]).ravel()
+            multipliers = {"lam_x0": sol["lam_x"], "lam_g0": sol["lam_g"]}
+            # No iteration record where Ipopt stopped at its first evaluation (a NaN there).
+            mu = st.get("iterations", {}).get("mu", [])
+            barrier = float(mu[-1]) if len(mu) else None
+            left = self._monitor.left_at
+            if self._monitor.stalled:
+                descended = self._descend(z0, (lbz, ubz), cap - iterations)
+                iterations += descended.steps if descended is not None else 0
+                if (descended is not None and descended.converged) or iterations >= cap:
+                    break
+                # Not finished that way: Ipopt goes on from its iterate, no longer stopped
+                # for stalling.
+                if descended is not None and descended.steps:
+                    self._monitor.offer(descended.z, descended.chi2)
+                stall = False
+                self._make_solver(barrier)
+                continue
+            if left is None and st["success"] and self._windows.active \
+                    and self._windows.outside_at(self._jacobian_values(z0)):
+                # What Ipopt converged on must hold with every entry: a parameter that
+                # acts outside its window at the end sends the run on.
+                left = z0
+            if left is None or self._monitor.capped or iterations >= cap:
+                break
+            # A parameter acts outside its window (a start time moved further than the
+            # margin): widen the windows over both points and go on from the iterate,
+            # with its multipliers and barrier parameter (from the default barrier and
+            # least-squares multipliers, the first steps of the new run were regularised
+            # and cut: on `drogue_full` 35 iterations in all against 30).
+            self._fit_windows(left, z0, widen=True, barrier=barrier)
+        self._monitor.finish()
+        z = np.asarray(sol["x"]).ravel()
+        multipliers = np.asarray(sol["lam_g"]).ravel()
+        status, success = self._run_status(st, left is not None)
+        decrement = self._monitor.decrement if self._monitor.stopped else None
+        own_point = self._monitor.stopped and self._monitor.point is not None
+        if own_point:
+            # The statistical test ended the run at its own Gauss-Newton step's end.
+            z = self._monitor.point
+        if descended is not None and descended.converged:
+            z, own_point, decrement = descended.z, True, descended.decrement
+            status, success = DESCENT_CONVERGED, True
+        if own_point or not success:
+            # Evaluated here: Ipopt's values describe its last iterate, and after a failure
+            # can be placeholders (zeros after an invalid number).
+            r = self._points.residual_value(z)
+            objective = 0.5 * float(r @ r)
+            g = self._points.constraint_value(z)
+        else:
+            g, objective = np.asarray(sol["g"]).ravel(), float(sol["f"])
+        wall = time.perf_counter() - t0
+        viol = self._violations(g)
+        worst = f"index {int(np.argmax(viol))}, violation {float(np.max(viol)):.3g}" \
+            if viol.size else ""
+        stats = SolverStats(status, success, iterations, wall, objective, worst, decrement,
+                            "the offline reduction" if start is None else
+                            "a fit" if isinstance(start, Fit) else "a given point")
+        if not stats.success:
+            raise SolverFailure(stats.status, stats.iterations, worst, 2.0 * stats.objective,
+                                self._last_iterate(z, stats))
+        fit = self._fit(z, stats)
+        fit.multipliers = multipliers
+        if bounds and sensitivities:
+            fit.sensitivities = self._bound_sensitivities(z, multipliers, list(bounds))
+        return fit
+
+    def _run_status(self, stats: dict, windows_unsettled: bool) -> tuple[str, bool]:
+        """The run's status and success from Ipopt's `stats` and the monitor: a stop the
+        monitor asked for is named for its reason."""
+        status, success = stats["return_status"], bool(stats["success"])
+        if windows_unsettled:  # the iterations ran out before the windows held
+            return "Maximum_Iterations_Exceeded", False
+        if status == "User_Requested_Stop" and self._monitor.stopped:
+            return STATISTICALLY_CONVERGED, True
+        if status == "User_Requested_Stop" and self._monitor.capped:
+            return "Maximum_Iterations_Exceeded", False
+        if status == "User_Requested_Stop" and self._monitor.diverged:
+            return "Diverging_Iterates", False
+        if status == "User_Requested_Stop" and self._monitor.stalled:
+            return STALLED, False
+        return status, success
+
+    def _descend(self, z: np.ndarray, bounds: tuple[np.ndarray, np.ndarray], left: int
+                 ) -> DescentEnd | None:
+        """Gauss-Newton steps through feasible points (`feasible_descent`) within the scaled
+        `bounds`, at most `descent_steps` of them and the `left` iterations of the run's
+        cap, from the feasible point nearest the stalled iterate `z` or the run's lowest
+        nearly feasible iterate, whichever has the lower chi-square; None where the
+        settings allow none (a what-if limit, no statistical test) or neither has a
+        feasible point near it.
+
+        Ipopt had stopped making progress: on `drogue` flown with added mass and
+        refitted with elastic risers instead, its iterate after 30 iterations
+        (chi-square 8,064.7, made feasible) reached the statistical test's
+        tolerance in 8 such steps (8,033.8, 5.6 s), where Ipopt had not in 150
+        iterations.  Ipopt's iterate can lie far below its best nearly feasible
+        one, which may be the start: it moves through infeasible points.
+        """
+        tol = self.settings.chi2_step_tol
+        if self.settings.descent_steps <= 0 or not tol or self._has_inequalities:
+            return None
+        points = [self.feasible_point(x) for x in (z, self._monitor.best) if x is not None]
+        points = [p for p in points if p is not None]
+        if not points:
+            return None
+        start = min(points, key=lambda p: p[1])
+        idx = self._param_index
+        lower, upper = bounds
+        problem = DescentProblem(self._linearize, self.feasible_point,
+                                 self._points.residual_value, idx, lower[idx], upper[idx])
+        learn = self.settings.descent_curvature
+        return descend(*start, problem, tol, min(self.settings.descent_steps, left), learn)
+
+    @property
+    def best_iterate(self) -> np.ndarray | None:
+        """The last solve's nearly feasible iterate (constraints within
+        POLISH_CONSTRAINT_TOL, scaled) with the lowest chi-square, None if it had none:
+        where a run that did not converge came closest, which its last iterate (a
+        watchdog's trial step, say) need not be."""
+        return self._monitor.best
+
+    def _last_iterate(self, z: np.ndarray, stats: SolverStats) -> Fit | None:
+        """The Fit at an unconverged solve's last iterate, for its failure report only
+        (None where the iterate cannot even be evaluated)."""
+        if not np.all(np.isfinite(z)):
+            return None
+        try:
+            return self._fit(z, stats)
+        except (RuntimeError, ValueError):
+            return None
+
+    def _bound_sensitivities(self, z: np.ndarray, lam_g: np.ndarray,
+                             names: list[str]) -> dict[str, float]:
+        """d(chi^2)/d(value) of each bounded parameter at a solution: twice the gradient of
+        the Lagrangian of the other constraints in that parameter (SI units)."""
+        r, jac = self._points.residual_jacobian(z)
+        _, jac_g = self._points.constraints(z)
+        grad = jac.T @ r + jac_g.T @ lam_g
+        n_states = self._nz[0]
+        return {n: float(2.0 * grad[n_states + self.free.index(n)]
+                         / self.pscale[self.free.index(n)]) for n in names}
+
+    def _stop_test(self, z: np.ndarray) -> tuple[float, np.ndarray] | None:
+        """The point at which the statistical test may end the run, near the Ipopt iterate
+        `z`, and the Gauss-Newton chi-square decrement there; None if there is none.
+
+        The point must be feasible, in two senses: every scaled constraint
+        within STOP_CONSTRAINT_TOL (the shooting gaps then below 1 mm and
+        0.1 mm/s), evaluated here rather than taken from Ipopt, whose reported
+        values may be scaled; and closing what gaps remain, with the
+        parameters held, changes chi-square by less than the test's own
+        tolerance (`GaussNewtonStep.restoration`: tiny gaps on many intervals
+        add up).  An iterate that misses either but whose gaps are within
+        POLISH_CONSTRAINT_TOL is offered one full Gauss-Newton step (the
+        linearised constraints hold after it, so what remains of the gaps is
+        second order in the step) and a few more (`_finishing_steps`); a
+        step's end is the point if it is feasible and within the bounds, else
+        its feasible projection or the iterate's may be.  Near the optimum Ipopt
+        shrinks the gaps only linearly, by the same factor as its steps, several
+        iterations for what one step does.
+        """
+        tol = self.settings.chi2_step_tol or 0.0
+        lin = self._linearize(z)
+        violation = _violation(lin)
+        # An inequality (a what-if limit) inactive at z might be crossed by the finishing
+        # step unseen: the linearisation holds only the active ones.
+        may_polish = (self.settings.polish and violation <= POLISH_CONSTRAINT_TOL
+                      and not self._has_inequalities)
+        if violation > STOP_CONSTRAINT_TOL and not may_polish:
+            return None  # no Gauss-Newton solve for an iterate that cannot end the run
+        gn = gauss_newton(lin)
+        self._monitor.promised = gn.decrement
+        found = None  # (decrement, point) that sets the tests' back-off
+        if violation <= STOP_CONSTRAINT_TOL and abs(gn.restoration) <= tol:
+            found = self._measured_decrement(lin, gn), z
+            if found[0] < tol or not may_polish:
+                return found
+        if not may_polish:
+            return None
+        stop, first = self._finishing_steps(lin, gn, tol)
+        if stop is not None:
+            return stop
+        found = found or first
+        if found is None and violation > STOP_CONSTRAINT_TOL:
+            # The iterate's feasible projection: it ends the run or counts for nothing.
+            lower, upper = self._monitor.bounds
+            projection = self._candidate(z + gn.projection, lower, upper, STOP_CONSTRAINT_TOL)
+            if projection is not None and self._feasible(projection, tol):
+                decrement = self._measured_decrement(*projection)
+                if decrement < tol:
+                    return decrement, projection[0].z
+        return found
+
+    def _finishing_steps(self, lin: Linearization, gn: GaussNewtonStep, tol: float
+                         ) -> tuple[tuple[float, np.ndarray] | None,
+                                    tuple[float, np.ndarray] | None]:
+        """Up to FINISHING_STEPS Gauss-Newton steps of the estimator's own from `lin`'s
+        point: (decrement, point) where one ends the run, else None; and the first
+        step's end with its decrement if that end is feasible as it stands.
+
+        Each step's end is projected onto the gaps where it misses them (a Newton
+        step on the gaps with the parameters held closes them quadratically, where
+        the step's nonlinearity leaves them open: on `drogue_full` a step that
+        travelled far along a weakly determined direction closed 1.5e-4 only to
+        5e-5).  After the first full step each is shortened to where chi-square is
+        least along it (a = D / c, the curvature c measured by
+        `_measured_decrement`): the Gauss-Newton model leaves out the shooting
+        gaps' curvature, and full steps did not converge (on `drogue`, from
+        decrements of 0.46, 0.17 and 0.10, a second full step reached 0.71, 0.24
+        and 0.18).  Ipopt's own iterate is held off the optimum by the barrier of
+        the parameters' bounds and by that curvature: on `drogue` from the
+        reduction it sat a decrement of 6.4 from the optimum at the third
+        iteration and crept after it for 23 more; after its first iteration these
+        steps reached 1.18, 0.064 and then 0.009, which ends the run.  A step that
+        does not halve the decrement leaves the run to Ipopt.
+
+        The decrement is measured along a direction that leaves that curvature
+        out, so a point just below the tolerance may lie a little more than it
+        above the optimum (0.0102 against a tolerance of 0.01 on `drogue`, seed
+        1): where a step's end ends the run, one more step is taken, and kept
+        where its decrement is lower.  Only the first step's end, unprojected,
+        may set the tests' back-off: the decrement at a projection or after
+        several steps ends the run or counts for nothing (on `fbcp` a
+        projection's put off the test that ends the run by three iterations).
+        """
+        lower, upper = self._monitor.bounds
+        first = stop = None
+        point, last, length = (lin, gn), np.inf, 1.0
+        for k in range(FINISHING_STEPS + 1):
+            end = self._candidate(point[0].z + length * point[1].step, lower, upper,
+                                  POLISH_CONSTRAINT_TOL)
+            projected = end is not None and not self._feasible(end, tol)
+            if projected:
+                end = self._candidate(end[0].z + end[1].projection, lower, upper,
+                                      STOP_CONSTRAINT_TOL)
+            if end is None or not self._feasible(end, tol):
+                break
+            decrement = self._measured_decrement(*end)
+            if stop is not None:  # the polishing step: kept where it got closer
+                if decrement < stop[0]:
+                    stop = decrement, end[0].z
+                break
+            if decrement < tol:
+                stop = decrement, end[0].z
+            elif k == FINISHING_STEPS - 1 or not decrement < 0.5 * last:
+                break
+            if k == 0 and not projected:
+                first = decrement, end[0].z
+            point, last = end, decrement
+            length = min(1.0, decrement / max(end[1].decrement, DECREMENT_FLOOR))
+        return stop, first
+
+    @staticmethod
+    def _feasible(candidate: tuple[Linearization, GaussNewtonStep], tol: float) -> bool:
+        """Whether a candidate's point meets STOP_CONSTRAINT_TOL and closing its remaining
+        gaps is worth less than `tol` in chi-square."""
+        lin, gn = candidate
+        return _violation(lin) <= STOP_CONSTRAINT_TOL and abs(gn.restoration) <= tol
+
+    def _candidate(self, z: np.ndarray, lower: np.ndarray, upper: np.ndarray, limit: float
+                   ) -> tuple[Linearization, GaussNewtonStep] | None:
+        """The linearisation and Gauss-Newton step at a point where the run might stop, if it
+        lies within the bounds and its scaled constraints within `limit` (judged on their
+        values first: 3 ms on `drogue`, where a linearisation takes 70)."""
+        if np.any(z < lower) or np.any(z > upper) \
+                or not self._value_violation(z) <= limit:  # NaN too
+            return None
+        lin = self._linearize(z)
+        return lin, gauss_newton(lin)
+
+    def _measured_decrement(self, lin: Linearization, gn: GaussNewtonStep) -> float:
+        """The chi-square decrease still to be had along `gn` from `lin.z`, its curvature
+        measured (`uncertainty.measured_decrement`)."""
+        return measured_decrement(self._points.residual_value, lin, gn)

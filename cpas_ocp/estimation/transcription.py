@@ -1,0 +1,820 @@
+"""The transcription: one test phase as one multiple-shooting NLP (see `estimator`).
+
+The grid, the decision variables and their scaling and bounds, the continuity gaps,
+the sensors' weighted residuals, the captures, the effects' constraints, what-if
+limits, priors and pseudo-observations, the functions Ipopt and the linearisation
+evaluate, and the points built from a guess or from another fit.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+
+import casadi as ca
+import numpy as np
+
+from cpas_ocp.estimation.action_windows import ActionWindows
+from cpas_ocp.estimation.compiled import compile_functions
+from cpas_ocp.estimation.fit import (
+    EVENTS,
+    PRIORS,
+    STOP_CONSTRAINT_TOL,
+    Fit,
+    SensorResidual,
+    Settings,
+    SolverStats,
+    default_grid_step,
+)
+from cpas_ocp.estimation.kinematic_track import kinematic_track
+from cpas_ocp.estimation.nlp_functions import MarquardtDamping, PointEvaluations
+from cpas_ocp.estimation.reduction import initial_guess
+from cpas_ocp.estimation.shooting_grid import TimeWindow, dynamics_grid, stable_refinement
+from cpas_ocp.estimation.simulate import rk4_step, simulate
+from cpas_ocp.io.flight_test import FlightTest
+from cpas_ocp.io.model_spec import ModelSpec, spec_from_effects, spec_of_test
+from cpas_ocp.physics.effects import Effect
+from cpas_ocp.physics.model import CORE_STATES, timing_label
+
+# Alternations of integrating the trajectory and meeting the other constraints that
+# `Estimator.feasible_point` makes (each correction moves the trajectory only slightly).
+FEASIBILITY_SWEEPS = 5
+
+
+@dataclass
+class _Block:
+    """A per-instance function, its instances' node indices, times and data columns.
+
+    `times` are the times of the first node of each instance: a sample between
+    nodes is predicted from the node before it at `times`, a partial step of
+    length dt later (dt is a data column).
+    """
+
+    fn: ca.Function
+    nodes: list[np.ndarray]
+    times: np.ndarray
+    data: list[np.ndarray]
+
+
+@dataclass
+class _Piece:
+    """A stretch of the residual or constraint vector, four ways: `symbolic` through CasADi's
+    VM (differentiable: the exact Hessian's graph), `value` for trial points (native
+    code where compiled), `with_jacobian` the same values from the Jacobian function,
+    and `jacobian` w.r.t. the scaled decision vector; and the time of each row (an
+    instance's first node), for `ActionWindows`."""
+
+    symbolic: ca.MX
+    value: ca.MX
+    with_jacobian: ca.MX
+    jacobian: ca.MX
+    times: np.ndarray  # per row, the time (s) it belongs to; NaN where none
+
+    @classmethod
+    def of(cls, expr: ca.MX, z: ca.MX) -> _Piece:
+        """A small expression: one graph for its values, CasADi's Jacobian for the rest (its
+        rows belong to no time)."""
+        return cls(expr, expr, expr, ca.jacobian(expr, z), np.full(expr.numel(), np.nan))
+
+
+def _stack(pieces: Sequence[_Piece], field_name: str) -> ca.MX:
+    """One field of every piece, stacked."""
+    return ca.vertcat(*[getattr(p, field_name) for p in pieces])
+
+
+def _gathered(pieces: Sequence[_Piece], destinations: Sequence[np.ndarray],
+              offsets: Sequence[int]) -> list[_Piece]:
+    """Row i of `pieces[b]` moved to row `destinations[b][i]` of the stacked result (the
+    destinations cover 0..offsets[-1]-1 once), cut into one piece per range
+    offsets[j]..offsets[j+1]."""
+    if not pieces:
+        return []
+    order = np.argsort(np.concatenate(destinations))  # stacked row of each result row
+    stacked = [_stack(pieces, f) for f in ("symbolic", "value", "with_jacobian", "jacobian")]
+    times = _stack_times(pieces)
+    out = []
+    for a, b in itertools.pairwise(offsets):
+        rows = order[a:b].tolist()
+        out.append(_Piece(*(x[rows] for x in stacked[:3]), stacked[3][rows, :],
+                          times[order[a:b]]))
+    return out
+
+
+def _stack_times(pieces: Sequence[_Piece]) -> np.ndarray:
+    """The row times of every piece, stacked."""
+    return np.concatenate([p.times for p in pieces]) if pieces else np.zeros(0)
+
+
+def cubic_bspline(u: ca.MX) -> ca.MX:
+    """Cubic B-spline kernel (support |u| < 2, C2, a partition of unity on integer nodes)."""
+    a = ca.fabs(u)
+    return ca.if_else(a < 1.0, (4.0 - 6.0 * a**2 + 3.0 * a**3) / 6.0,
+                      ca.if_else(a < 2.0, (2.0 - a) ** 3 / 6.0, 0.0))
+
+
+class NlpTranscription:
+    """The NLP of one test phase, built once (`Estimator`'s first part)."""
+
+    def __init__(self, test: FlightTest, effects: Sequence[Effect] | ModelSpec | None = None,
+                 settings: Settings | None = None) -> None:
+        """`effects`: an effect list, a `ModelSpec`, or None for the model the manifest declares.
+
+        `settings.free` and `settings.fixed` override the spec's choice.
+        """
+        self.test = test
+        self.settings = settings or Settings()
+        if effects is None:
+            self.spec = spec_of_test(test)
+        elif isinstance(effects, ModelSpec):
+            self.spec = effects
+        else:
+            self.spec = spec_from_effects(effects)
+        self.model = self.spec.model(test)
+        m, s = self.model, self.settings
+        names = m.parameter_names
+        if s.free is None:
+            self.free = self.spec.free_names(m)
+        else:
+            unknown = sorted(set(s.free) - set(names))
+            if unknown:
+                raise ValueError(f"cannot estimate unknown parameters {unknown}")
+            self.free = list(s.free)
+        fixed = {**self.spec.fixed_values(m), **s.fixed}
+        given = {**s.guess, **fixed}
+        if set(names) <= set(given):
+            # Every value given (a model started from another's fit): no reduction, which
+            # took 1.3 s of each 4 s score test on `drogue`.
+            self.guess = {n: given[n] for n in names}
+        else:
+            self.guess = initial_guess(test, m, fixed)
+            self.guess.update(s.guess)
+        self.values = {**self.guess, **fixed}
+
+        if s.nodes is not None:
+            self.t = np.asarray(s.nodes, dtype=float)
+            if len(m.states) > len(CORE_STATES):  # an effect's states: maybe a fast mode
+                self.t = self._stable_grid(self.t)
+        elif s.grid_step is not None:
+            n = int(np.floor((test.t_end - test.t_start) / s.grid_step + 1e-9))
+            self.t = test.t_start + s.grid_step * np.arange(n + 1)
+        else:
+            self.t = self._dynamics_grid(default_grid_step(test))
+        self.settings = replace(s, nodes=tuple(self.t))
+        # The finest interval, rounded to the microsecond: the B-spline's spacing.
+        self.fine_step = float(np.round(np.min(np.diff(self.t)), 6))
+        self._build(len(self.t) - 1, self.fine_step)
+
+    def _stable_grid(self, nodes: np.ndarray) -> np.ndarray:
+        """Given nodes, refined where this model's own states need finer steps for RK4 to
+        stay stable (`shooting_grid.stable_refinement`)."""
+        fine_step = float(np.round(np.min(np.diff(nodes)), 6))
+        return stable_refinement(nodes, self.model, self.values, self._first_state(fine_step),
+                                 fine_step)
+
+    def _dynamics_grid(self, fine_step: float) -> np.ndarray:
+        """The nodes chosen from the model's dynamics at the first guesses (`shooting_grid`)."""
+        m, test = self.model, self.test
+        windows = []
+        for cap in m.captures:
+            if cap.at_time is not None:
+                windows.append(TimeWindow(cap.at_time, cap.at_time, cap.at_time))
+                continue
+            prm, value = m.parameter(cap.time_parameter), self.values[cap.time_parameter]
+            windows.append(TimeWindow(prm.lower, prm.upper, value) if prm.name in self.free
+                           else TimeWindow(value, value, value))
+        return dynamics_grid(m, self.values, self._first_state(fine_step), test.t_start,
+                             test.t_end, fine_step, windows)
+
+    def _first_state(self, fine_step: float) -> np.ndarray:
+        """The guessed state at the phase's start (`_guessed_states`; the effects' guesses
+        take a rate from the first two lattice points)."""
+        t0 = self.test.t_start
+        return self._guessed_states(np.array([t0, t0 + fine_step]))[0][:, 0]
+
+    # ------------------------------------------------------------------ transcription
+    def _build(self, n: int, h: float) -> None:
+        """The NLP on the grid `self.t` of n intervals, the finest h long (s)."""
+        m, s = self.model, self.settings
+        nx, ncap = m.nx, len(m.captures)
+        xscale = m.state_scales()
+        self.pscale = np.array([m.parameter(f).scale for f in self.free])
+        X = ca.MX.sym("X", nx, n + 1)
+        P = ca.MX.sym("P", len(self.free))
+        C = ca.MX.sym("C", ncap)
+        cscale = 100.0
+        Xp = ca.repmat(ca.DM(xscale), 1, n + 1) * X
+        Cp = cscale * C
+        free_index = {f: i for i, f in enumerate(self.free)}
+        pfull = ca.vertcat(*[
+            P[free_index[p.name]] * self.pscale[free_index[p.name]] if p.name in free_index
+            else ca.MX(self.values.get(p.name, p.default)) for p in m.parameters])
+
+        step = self._step = rk4_step(m)
+        xs = ca.SX.sym("x", nx)
+        xs1 = ca.SX.sym("x1", nx)
+        ts = ca.SX.sym("t")
+        dts = ca.SX.sym("dt")
+        ps = ca.SX.sym("p", len(m.parameters))
+        cs = ca.SX.sym("c", ncap)
+        xe = xs
+        for j in range(s.substeps):
+            xe = step(xe, ts + j * dts / s.substeps, dts / s.substeps, ps, cs)
+        self._ctx = (X, Xp, pfull, Cp, xscale, cscale)
+
+        # Per-instance functions, each mapped over its instances with its Jacobian:
+        # the continuity gap of every shooting interval, and the weighted residuals of
+        # every sample of every sensor (sensors sampled between nodes are predicted one
+        # partial RK4 step after the node before the sample).
+        ks = np.arange(n)
+        blocks = [_Block(ca.Function("gap", [xs, xs1, ts, dts, ps, cs], [(xs1 - xe) / xscale]),
+                         [ks, ks + 1], self.t[:n], [np.diff(self.t)])]
+        sensor_blocks, destinations, offsets = self._sensor_blocks(step, n, h)
+        blocks += sensor_blocks
+        # Each block's values (the line search's trial points) and its values with the
+        # Jacobian (accepted points) run as native code; the functions themselves stay
+        # in CasADi's VM as well, for the differentiable graph (`_obj`, `_g`).
+        local = [self._local_jacobian(b.fn, len(b.nodes)) for b in blocks]
+        native = [b.fn for b in blocks] + local
+        if s.compile:
+            native = compile_functions(native)
+        mapped = [self._mapped_block(b, value_fn, jac_fn) for b, value_fn, jac_fn
+                  in zip(blocks, native[:len(blocks)], native[len(blocks):], strict=True)]
+        residual_pieces = _gathered(mapped[1:], destinations, offsets)
+        g = [mapped[0]]
+        lbg = [np.zeros(nx * n)]
+        ubg = [np.zeros(nx * n)]
+
+        # Captured quantities at free event times: cubic B-spline weights of node values.
+        z_all = ca.vertcat(ca.vec(X), P, C)
+        # For the captures' curvature, the process knots enter through a copy of P that is
+        # not differentiated (`Parameter.process_knot`): a captured airspeed is smooth in
+        # the air's velocity, and its exact curvature in each knot cost 0.4 s of build.
+        knots = [free_index[p.name] for p in m.parameters
+                 if p.process_knot and p.name in free_index]
+        P_held = ca.MX.sym("P_held", len(self.free))
+        pfull_curv = pfull
+        if knots:
+            held = ca.vertcat(*[P_held[i] if i in set(knots) else P[i]
+                                for i in range(len(self.free))])
+            pfull_curv = ca.substitute(pfull, P, held)
+        curved: list[ca.MX] = []
+        for i, cap in enumerate(m.captures):
+            if cap.at_time is not None:
+                lo = hi = cap.at_time
+                t_event = ca.MX(cap.at_time)
+            else:
+                prm = m.parameter(cap.time_parameter)
+                fixed = prm.name not in free_index
+                lo = self.values.get(prm.name, prm.default) if fixed else prm.lower
+                hi = self.values.get(prm.name, prm.default) if fixed else prm.upper
+                t_event = pfull[m.parameter_names.index(prm.name)]
+            kw = np.flatnonzero((self.t >= lo - 2.5 * h) & (self.t <= hi + 2.5 * h))
+            if np.any(np.abs(np.diff(self.t[kw]) - h) > 1e-6 * h):
+                raise ValueError(f"the shooting grid is not uniform (step {h:g} s) over "
+                                 f"[{lo:g}, {hi:g}] s, where {cap.name} may be captured")
+            qfn = m.capture_function(cap.name).map(len(kw), "serial")
+            node_vals = qfn(Xp[:, kw], ca.DM(self.t[kw]).T, pfull, Cp)
+            w = cubic_bspline((t_event - ca.DM(self.t[kw]).T) / h)
+            con = (Cp[i] - ca.dot(w, node_vals)) / cscale
+            g.append(_Piece.of(con, z_all))
+            curved.append(con if not knots else
+                          (Cp[i] - ca.dot(w, qfn(Xp[:, kw], ca.DM(self.t[kw]).T, pfull_curv,
+                                                 Cp))) / cscale)
+            lbg.append([0.0])
+            ubg.append([0.0])
+
+        # Constraints on parameters and captured values declared by effects.
+        p_sx = ca.vertcat(ca.SX(0, 1), *[m.ctx.p[p.name] for p in m.parameters])
+        c_sx = ca.vertcat(ca.SX(0, 1), *[m.ctx.c[c.name] for c in m.captures])
+        for con in m.constraints:
+            fn = ca.Function("con", [p_sx, c_sx], [con.expr])
+            g.append(_Piece.of(fn(pfull, Cp), z_all))
+            lbg.append([con.lower])
+            ubg.append([con.upper])
+
+        # What-if limits on model quantities, at every node (after the few constraints
+        # whose curvature the Hessian carries).
+        n_small = len(g)
+        self.limit_rows: dict[str, tuple[slice, float]] = {}
+        offset = sum(int(np.size(a)) for a in lbg)
+        for qname, (lo, hi) in s.limits.items():
+            if qname not in m.quantity_names:
+                raise ValueError(f"no model quantity {qname!r} to limit")
+            finite = [abs(v) for v in (lo, hi) if np.isfinite(v) and v != 0.0]
+            qscale = max(finite) if finite else 1.0
+            qi = m.quantity_names.index(qname)
+            fn = ca.Function("limit", [xs, ts, ps, cs], [m.quantities(xs, ts, ps, cs)[qi] / qscale])
+            block = _Block(fn, [np.arange(n + 1)], self.t, [])
+            g.append(self._mapped_block(block, fn, self._local_jacobian(fn, 1)))
+            lbg.append(np.full(n + 1, lo / qscale))
+            ubg.append(np.full(n + 1, hi / qscale))
+            self.limit_rows[qname] = (slice(offset, offset + n + 1), qscale)
+            offset += n + 1
+
+        # Observed event times the model predicts (a Pilot's Main bag lift and bag strip).
+        predicted = m.event_times(pfull, Cp)
+        for j, (timing, event) in enumerate(m.timings):
+            r = (event.time - predicted[j]) / event.sigma
+            residual_pieces.append(_Piece.of(r, z_all))
+            self._samples.append((EVENTS, (timing_label(timing),), np.array([event.time]),
+                                  np.array([[event.time]]), np.array([[event.sigma]])))
+
+        # Priors on free parameters: independent measurements of them (`ModelSpec.priors`).
+        for name, (value, sigma) in self.spec.prior_values(m).items():
+            if name not in free_index:
+                raise ValueError(f"a prior on {name}, which this estimator holds fixed")
+            r = (value - pfull[m.parameter_names.index(name)]) / sigma
+            residual_pieces.append(_Piece.of(r, z_all))
+            self._samples.append((PRIORS, (name,), np.array([self.t[0]]),
+                                  np.array([[value]]), np.array([[sigma]])))
+
+        # Effects' pseudo-observations (a process prior): residuals of the parameters alone.
+        for effect, channel, times, expr in m.penalties:
+            fn = ca.Function("penalty", [p_sx], [expr])
+            residual_pieces.append(_Piece.of(fn(pfull), z_all))
+            self._samples.append((effect, (channel,), times, np.zeros((1, times.size)),
+                                  np.ones((1, times.size))))
+
+        self._z = z_all
+        residual = _stack(residual_pieces, "symbolic")
+        jac = _stack(residual_pieces, "jacobian")
+        self._g = _stack(g, "symbolic")
+        constraint_jac = _stack(g, "jacobian")
+        self._residual_value = ca.Function("residual_value", [z_all],
+                                           [_stack(residual_pieces, "value")])
+        self._residual_jacobian = ca.Function("residual_jacobian", [z_all],
+                                              [_stack(residual_pieces, "with_jacobian"), jac])
+        self._constraint_value = ca.Function("constraint_value", [z_all], [_stack(g, "value")])
+        self._constraints = ca.Function("constraints", [z_all],
+                                        [_stack(g, "with_jacobian"), constraint_jac])
+        self._points = PointEvaluations(self._residual_value, self._residual_jacobian,
+                                        self._constraint_value, self._constraints)
+        obj = 0.5 * ca.sumsqr(residual)
+        # The exact curvature of the few capture and effect constraints (a capture at a
+        # free time bends in that time; without it a Pilot's bag-strip constraint made the
+        # steps cycle); the curvature of the continuity constraints is neglected.
+        small = ca.vertcat(*curved, _stack(g[1 + len(curved):n_small], "symbolic"))
+        lam_small = ca.MX.sym("lam_small", small.numel())
+        hessian = (ca.hessian(ca.dot(lam_small, small), z_all)[0] if small.numel()
+                   else ca.MX(z_all.numel(), z_all.numel()))
+        if knots:
+            hessian = ca.substitute(hessian, P_held, P)
+        curvature = ca.Function("curvature", [z_all, lam_small], [hessian])
+        small_rows = slice(nx * n, nx * n + small.numel())
+        lbg_all = np.concatenate([np.ravel(a) for a in lbg])
+        ubg_all = np.concatenate([np.ravel(a) for a in ubg])
+        self._damping = (MarquardtDamping(self._points, lbg_all, ubg_all)
+                         if s.point_cache and s.damping else None)
+        self._windows = ActionWindows(
+            (self._points._buffers["rJ"].pattern(1), self._points._buffers["gA"].pattern(1)),
+            (_stack_times(residual_pieces), _stack_times(g)), X.numel(),
+            s.window_margin if s.point_cache else None)
+        # Its upper triangle, as Ipopt takes it (compiled, it took as long: 7 ms on `drogue`).
+        self._curvature = ca.Function("curvature_upper", [z_all, lam_small],
+                                      [ca.triu(curvature(z_all, lam_small))])
+        self._small_rows = small_rows
+        if not s.point_cache:
+            self._expressions = self._plain_nlp(residual, jac, constraint_jac, curvature,
+                                                small_rows)
+        self._unpack = ca.Function("unpack", [z_all], [Xp, pfull, Cp])
+        self._residuals = ca.Function("residuals", [z_all], [p.value for p in residual_pieces])
+        self._lbg, self._ubg = lbg_all, ubg_all
+        self._has_inequalities = bool(np.any(self._lbg != self._ubg))  # what-if limits
+        self._obj = obj
+        self._nz = (X.numel(), P.numel(), C.numel())
+        self._xscale = xscale
+        self._cscale = cscale
+        pb = [m.parameter(f) for f in self.free]
+        inf = np.inf
+        self._lbz = np.concatenate([np.full(X.numel(), -inf), [p.lower / sc for p, sc in
+                                    zip(pb, self.pscale, strict=True)],
+                                    [c.lower / cscale for c in m.captures]])
+        self._ubz = np.concatenate([np.full(X.numel(), inf), [p.upper / sc for p, sc in
+                                    zip(pb, self.pscale, strict=True)], np.full(ncap, inf)])
+        for st in m.states:  # states known at the start of the phase: first node held
+            if st.pinned:
+                first_node = m.state_slice(st.name)
+                self._lbz[first_node] = self._ubz[first_node] = st.initial / st.scale
+        if not self.test.sensors_of("gps"):
+            # Nothing observes the horizontal plane (an altimeter-only log): the phase
+            # starts without horizontal motion, which then only the wind can give.
+            for name in ("position", "velocity"):
+                first = m.state_slice(name).start
+                self._lbz[first:first + 2] = self._ubz[first:first + 2] = 0.0
+
+    def _plain_nlp(self, residual: ca.MX, jac: ca.MX, constraint_jac: ca.MX,
+                   curvature: ca.Function, small_rows: slice) -> tuple[dict, dict]:
+        """The NLP in the decision vector z, objective 0.5 |r(z)|^2, and Ipopt's derivatives.
+
+        Gradient J'r and the Gauss-Newton Hessian J'J from the (compiled)
+        residual Jacobian blocks, plus the small constraints' curvature.
+        """
+        z, empty = self._z, ca.MX.sym("p", 0, 1)
+        obj = 0.5 * ca.sumsqr(residual)
+        sigma_f = ca.MX.sym("sigma_f")
+        lam_g = ca.MX.sym("lam_g", self._g.numel())
+        hessian = sigma_f * ca.mtimes(jac.T, jac) + curvature(z, lam_g[small_rows])
+        return {"x": z, "f": obj, "g": self._g}, {
+            "jac_g": ca.Function("jac_g", [z, empty], [self._g, constraint_jac],
+                                 ["x", "p"], ["g", "jac_g_x"]),
+            # dense, as Ipopt's interface copies it
+            "grad_f": ca.Function("grad_f", [z, empty], [obj, ca.densify(ca.mtimes(jac.T,
+                                                                                   residual))],
+                                  ["x", "p"], ["f", "grad_f_x"]),
+            "hess_lag": ca.Function("gauss_newton", [z, empty, sigma_f, lam_g],
+                                    [ca.triu(hessian)], ["x", "p", "lam_f", "lam_g"],
+                                    ["hess_gamma_x_x"])}
+
+    def _sensor_blocks(self, step: ca.Function, n: int, h: float
+                       ) -> tuple[list[_Block], list[np.ndarray], list[int]]:
+        """The per-sample residual functions of every sensor the model observes, and where
+        each block's rows go; records `self._samples`, one entry per sensor.
+
+        A sample at a node is predicted from that node's state; a sample between
+        nodes one partial RK4 step after the node before it.  Sensors sampled at the
+        same times (an IMU and the load cells) share one block, so the step to each
+        sample time is taken once for all of them: per such set of times, one block
+        of the samples at nodes and one of those between.  The rows of every block
+        are instance-major (every channel of one sample, then the next sample);
+        `destinations[b]` gives, per row of block b, its row in the sensors' part of
+        the residual vector, where sensor j's rows are offsets[j]..offsets[j+1]-1,
+        instance-major, in the order of `self._samples`.
+        """
+        m = self.model
+        xs, ts, dts = ca.SX.sym("x", m.nx), ca.SX.sym("t"), ca.SX.sym("dt")
+        ps, cs = ca.SX.sym("p", len(m.parameters)), ca.SX.sym("c", len(m.captures))
+        self._samples = []
+        groups: list[tuple[np.ndarray, list[int]]] = []  # (sample times, sensor numbers)
+        offsets = [0]
+        for sensor in self.test.sensors:
+            if sensor.name not in m.outputs:
+                continue
+            keep = (sensor.time >= self.t[0] - 1e-9) & (sensor.time <= self.t[-1] + 1e-9)
+            tsamp = sensor.time[keep]
+            channels = m.sensor_channels[sensor.name]
+            meas = np.vstack([sensor.data[c].to_numpy()[keep] for c in channels])
+            sig = np.vstack([sensor.weighting_sigma(c)[keep] for c in channels])
+            number = len(self._samples)
+            self._samples.append((sensor.name, channels, tsamp, meas, sig))
+            offsets.append(offsets[-1] + meas.size)
+            same = next((members for times, members in groups
+                         if np.array_equal(times, tsamp)), None)
+            if same is None:
+                groups.append((tsamp, [number]))
+            else:
+                same.append(number)
+        blocks, destinations = [], []
+        for tsamp, members in groups:
+            k = np.clip(np.searchsorted(self.t, tsamp + 1e-7 * h, side="right") - 1, 0, n - 1)
+            dt = tsamp - self.t[k]
+            between = np.abs(dt) >= 1e-7
+            for samples in (np.flatnonzero(~between), np.flatnonzero(between)):
+                if samples.size == 0:
+                    continue
+                names = [self._samples[i][0] for i in members]
+                meas = np.vstack([self._samples[i][3][:, samples] for i in members])
+                sig = np.vstack([self._samples[i][4][:, samples] for i in members])
+                ym, sg = ca.SX.sym("ym", meas.shape[0]), ca.SX.sym("sg", meas.shape[0])
+                if between[samples[0]]:
+                    x_at, t_at, sym_extra, extra = (step(xs, ts, dts, ps, cs), ts + dts,
+                                                    [dts], [dt[samples]])
+                else:
+                    x_at, t_at, sym_extra, extra = xs, ts, [], []
+                y_at = ca.vertcat(*[m.outputs[name](x_at, t_at, ps, cs) for name in names])
+                fn = ca.Function(f"residual_{len(blocks)}", [xs, ts, *sym_extra, ym, sg, ps, cs],
+                                 [(ym - y_at) / sg])
+                blocks.append(_Block(fn, [k[samples]], self.t[k[samples]],
+                                     [*extra, meas, sig]))
+                # Row (sample j, channel c) of sensor i lies at offsets[i] + j n_i + c.
+                destinations.append(np.concatenate([
+                    offsets[i] + samples[:, None] * len(self._samples[i][1])
+                    + np.arange(len(self._samples[i][1]))[None, :]
+                    for i in members], axis=1).ravel())
+        return blocks, destinations, offsets
+
+    def _local_jacobian(self, fn: ca.Function, n_states: int) -> ca.Function:
+        """Values and Jacobian of one instance of `fn` w.r.t. its scaled states, free
+        parameters and captures.
+
+        Same inputs as `fn`; the outputs are its m values and the column-major
+        m x (nx*n_states + free parameters + captures) block, formed at SX
+        level (CasADi picks forward or reverse mode for this small function).
+        """
+        _, _, _, _, xscale, cscale = self._ctx
+        m = self.model
+        args = fn.sx_in()
+        xs_args, p_arg, c_arg = args[:n_states], args[-2], args[-1]
+        out = fn(*args)
+        free_cols = [m.parameter_names.index(f) for f in self.free]
+        mrows = out.numel()
+        jblocks = [ca.jacobian(out, a) * ca.repmat(ca.DM(xscale).T, mrows, 1) for a in xs_args]
+        jp = ca.jacobian(out, p_arg)[:, free_cols] * ca.repmat(ca.DM(self.pscale).T, mrows, 1)
+        jc = ca.jacobian(out, c_arg) * cscale
+        return ca.Function(f"{fn.name()}_jac", args,
+                           [out, ca.vec(ca.horzcat(*jblocks, jp, jc))])
+
+    def _instance_arguments(self, block: _Block) -> list:
+        """The arguments of `block.fn` for all its instances at once (one column each)."""
+        _, Xp, pfull, Cp, _, _ = self._ctx
+        return [*(Xp[:, k] for k in block.nodes), ca.DM(block.times).T,
+                *(ca.DM(d) if np.ndim(d) == 2 else ca.DM(d).T for d in block.data), pfull, Cp]
+
+    def _instance_columns(self, block: _Block) -> np.ndarray:
+        """Per instance of `block`, the decision-vector index of each local column (its
+        states, then the free parameters and captures; as in `_local_jacobian`)."""
+        nx, nX = self.model.nx, self._ctx[0].numel()
+        nfree, ncap = len(self.free), len(self.model.captures)
+        n_states = len(block.nodes)
+        zcols = np.empty((len(block.times), nx * n_states + nfree + ncap), dtype=np.int64)
+        for j, k in enumerate(block.nodes):
+            zcols[:, j * nx:(j + 1) * nx] = (np.asarray(k)[:, None] * nx + np.arange(nx))
+        zcols[:, nx * n_states:] = nX + np.arange(nfree + ncap)
+        return zcols
+
+    def _mapped_block(self, block: _Block, value_fn: ca.Function,
+                      local: ca.Function) -> _Piece:
+        """Values and Jacobian (w.r.t. the scaled decision vector) of `block` over its instances.
+
+        `block.fn(x_a, x_b, ..., t, *data, p, c)` takes one state per entry of
+        `block.nodes` (node indices per instance), a time, per-instance data
+        columns, and the full parameter and capture vectors; it returns a
+        vector of m values.  `value_fn` computes the same (native code, or
+        `block.fn` itself), `local` its values and single-instance Jacobian
+        (`_local_jacobian`); all are mapped over the instances, and the
+        Jacobian values are scattered into the global sparse Jacobian.
+        Differentiating the mapped graph directly would take one sweep per
+        colour of the whole Jacobian, about as many as there are parameters.
+        """
+        n_inst = len(block.times)
+        mrows = block.fn.numel_out(0)
+        call = self._instance_arguments(block)
+
+        def mapped(fn: ca.Function) -> list[ca.MX]:
+            out = fn.map(n_inst, "thread", 2)(*call)
+            return [ca.vec(o) for o in (out if isinstance(out, tuple | list) else [out])]
+
+        with_jacobian, nz = mapped(local)
+        zcols = self._instance_columns(block)
+        ncols = zcols.shape[1]
+        rows = (np.arange(n_inst)[:, None] * mrows + np.arange(mrows)[None, :])
+        r_full = np.repeat(rows[:, None, :], ncols, axis=1).reshape(-1)
+        c_full = np.repeat(zcols[:, :, None], mrows, axis=2).reshape(-1)
+        order = np.lexsort((r_full, c_full))
+        n_z = self._ctx[0].numel() + len(self.free) + len(self.model.captures)
+        sp = ca.Sparsity.triplet(n_inst * mrows, n_z, r_full[order].tolist(),
+                                 c_full[order].tolist())
+        return _Piece(mapped(block.fn)[0], mapped(value_fn)[0], with_jacobian,
+                      ca.MX(sp, nz[order.tolist()]), np.repeat(block.times, mrows))
+
+    def initial_point(self) -> np.ndarray:
+        """Shooting nodes from the kinematic track (GPS, or the altimeter's vertical track) and
+        the effects' own state guesses, parameters from the reduction, captures from the
+        track's speed."""
+        m = self.model
+        x0, guessed = self._guessed_states(self.t)
+        vel = x0[m.state_slice("velocity")].T
+        unguessed = [st for st in m.states if st.name not in guessed]
+        if unguessed:
+            # States no effect guesses from the data (a Pilot's separation): a forward
+            # simulation from the first node with the initial parameter values.
+            traj = simulate(m, self.values, x0[:, 0], self.t[0], self.t[-1],
+                            step=self.fine_step)
+            for st in unguessed:
+                rows = m.state_slice(st.name)
+                x0[rows] = np.array([np.interp(self.t, traj.t, col) for col in traj.x[:, rows].T])
+        p0 = np.array([self.values[f] for f in self.free]) / self.pscale
+        # Captured values: each capture's quantity at the guessed state nearest its time
+        # (the start airspeeds the captures themselves feed in at the GPS speed).
+        speed = np.linalg.norm(vel, axis=1)
+        times = [c.at_time if c.at_time is not None else self.values[c.time_parameter]
+                 for c in m.captures]
+        c_speed = np.interp(times, self.t, speed)
+        pvec = m.parameter_vector(self.values)
+        c0 = np.empty(len(m.captures))
+        for i, (cap, tc) in enumerate(zip(m.captures, times, strict=True)):
+            k = int(np.argmin(np.abs(self.t - tc)))
+            c0[i] = float(m.capture_function(cap.name)(x0[:, k], self.t[k], pvec, c_speed))
+        c0 = np.maximum(c0, [c.lower for c in m.captures]) / self._cscale
+        return np.concatenate([(x0 / self._xscale[:, None]).ravel(order="F"), p0, c0])
+
+    def _guessed_states(self, t: np.ndarray) -> tuple[np.ndarray, set[str]]:
+        """States at times `t` (nx x len(t)) from the kinematic track (GPS, or the altimeter's
+        vertical track) and the effects' own guesses, pinned states at their start values,
+        and the names of the states so guessed (the others are zero)."""
+        m = self.model
+        track = kinematic_track(self.test, t)
+        x0 = np.zeros((m.nx, len(t)))
+        x0[m.state_slice("position")] = track.position.T
+        x0[m.state_slice("velocity")] = track.velocity.T
+        guessed = {"position", "velocity"}
+        for name, value in self._state_guesses(self.values, t).items():
+            x0[m.state_slice(name)] = value
+            guessed.add(name)
+        for st in m.states:
+            if st.pinned:
+                x0[m.state_slice(st.name), 0] = st.initial
+        return x0, guessed
+
+    def point_from(self, fit: Fit, values: dict[str, float] | None = None) -> np.ndarray:
+        """This NLP's decision vector at `fit`, a fit of another model of the same test on
+        this grid or a coarser one within it (`_fit_states`): states, parameters and
+        captured values by name.
+
+        States the fit's model lacks come from this model's effects' guesses
+        (`Effect.state_guess`), else zero; parameters it lacks take this
+        estimator's values; `values` (SI) override both.
+        """
+        fit_x = self._fit_states(fit)
+        m = self.model
+        known = {**self.values, **{k: v for k, v in fit.parameters.items()
+                                   if k in m.parameter_names}, **(values or {})}
+        x0 = np.zeros((m.nx, len(self.t)))
+        theirs = {st.name for st in fit.model.states}
+        for name, guess in self._state_guesses(known, self.t).items():
+            if name not in theirs:
+                x0[m.state_slice(name)] = guess
+        for st in m.states:
+            if st.name in theirs:
+                x0[m.state_slice(st.name)] = fit_x[:, fit.model.state_slice(st.name)].T
+            elif st.pinned:
+                x0[m.state_slice(st.name), 0] = st.initial
+        p0 = np.array([known[f] for f in self.free]) / self.pscale
+        c0 = np.array([fit.captures[c.name] for c in m.captures]) / self._cscale
+        return np.concatenate([(x0 / self._xscale[:, None]).ravel(order="F"), p0, c0])
+
+    def extension_start(self, fit: Fit, values: dict[str, float] | None = None
+                        ) -> tuple[np.ndarray, tuple[float, float]]:
+        """This NLP's start at `fit`, a fit of a model this one extends, with its chi-square
+        and largest scaled gap (`evaluate`): `point_from(fit, values)`, with the states
+        the fit's model lacks guessed from the data or, where that is nearer feasible,
+        integrated through the fitted motion (`swept`).
+
+        On `drogue` flown with added mass and fitted without it, an elastic
+        riser's stretch guessed from the measured tension left shooting gaps of
+        0.45 (scaled) and chi-square 87,477; integrated, 1.3e-5 and 8,553
+        against the fit's 8,518.
+        """
+        z = self.point_from(fit, values)
+        theirs = {st.name for st in fit.model.states}
+        new = [st.name for st in self.model.states if st.name not in theirs]
+        guessed = self.evaluate(z)
+        if not new:
+            return z, guessed
+        swept = self.swept(z, new)
+        integrated = self.evaluate(swept)
+        return (swept, integrated) if integrated[1] < guessed[1] else (z, guessed)
+
+    def _fit_states(self, fit: Fit) -> np.ndarray:
+        """The fit's states at this grid's nodes (len(t) x the fit's nx): its own nodes, and
+        between them (this grid refined, `_stable_grid`) one RK4 step of the fit's model
+        from the node before, as its shooting intervals predict."""
+        if fit.t.shape == self.t.shape and np.allclose(fit.t, self.t):
+            return fit.x
+        k = np.clip(np.searchsorted(fit.t, self.t + 1e-9, side="right") - 1, 0, len(fit.t) - 1)
+        dt = self.t - fit.t[k]
+        inside = np.isin(np.round(fit.t, 6), np.round(self.t, 6))
+        if not (np.all(inside) and abs(fit.t[-1] - self.t[-1]) < 1e-6):
+            raise ValueError("the fit was made on a shooting grid this one does not refine")
+        between = dt > 1e-9
+        x = fit.x[k].copy()
+        if np.any(between):
+            step = rk4_step(fit.model).map(int(between.sum()))
+            x[between] = np.asarray(step(
+                fit.x[k[between]].T, fit.t[k[between]], dt[between],
+                fit.model.parameter_vector(fit.parameters),
+                fit.model.capture_vector(fit.captures))).T
+        return x
+
+    def swept(self, z: np.ndarray, states: Sequence[str]) -> np.ndarray:
+        """`z` with the named states integrated forward along the grid from their first node,
+        every other state held at its node values: the named states' shooting gaps close.
+
+        A fit extended by an effect with states of its own starts those states
+        from the effect's guesses from the data (`Effect.state_guess`), which
+        the fitted trajectory does not carry: with a riser's stretch guessed
+        from the measured tension, the null point of the elastic riser on a
+        misspecified `drogue` fit opened gaps no solve closed in 500
+        iterations.  Integrated through the fitted motion, the states follow it.
+        """
+        m = self.model
+        nx, n = m.nx, len(self.t) - 1
+        X = z[:nx * (n + 1)].reshape(n + 1, nx).T * self._xscale[:, None]
+        _, pfull, Cp = self._unpack(z)
+        rows = np.concatenate([np.arange(nx)[m.state_slice(name)] for name in states])
+        sub = self.settings.substeps
+        for k in range(n):
+            x = X[:, k]
+            dt = (self.t[k + 1] - self.t[k]) / sub
+            for j in range(sub):
+                x = np.asarray(self._step(x, self.t[k] + j * dt, dt, pfull, Cp)).ravel()
+            X[rows, k + 1] = x[rows]
+        out = z.copy()
+        out[:nx * (n + 1)] = (X / self._xscale[:, None]).ravel(order="F")
+        return out
+
+    def feasible_point(self, z: np.ndarray) -> tuple[np.ndarray, float] | None:
+        """A feasible point near `z` and its chi-square; None where none is found.
+
+        Every state is integrated forward from the first node with the
+        parameters at `z` (`swept`), which closes the shooting gaps.  The other
+        constraints are then met by alternating with that integration: each
+        captured value is set to what the trajectory gives at its event, and
+        the parameters take the least-norm (scaled) step that meets the
+        effects' own constraints to first order.  None where, after
+        FEASIBILITY_SWEEPS, a constraint is still violated by more than
+        STOP_CONSTRAINT_TOL: a what-if limit, a trajectory that left the
+        model's domain, or a constraint on a captured state (a Pilot's riser
+        gap at its start time), which only a change of the trajectory would meet.
+
+        Any feasible point bounds the optimum from above: an unconverged solve's
+        last iterate, made feasible this way, gives a lower bound on the
+        chi-square a richer model removes (`score_test.confirm`).
+        """
+        all_states = [st.name for st in self.model.states]
+        n_gaps = self.model.nx * (len(self.t) - 1)
+        n_states, n_free, ncap = self._nz
+        captures = slice(n_states + n_free, n_states + n_free + ncap)
+        effect_rows = slice(n_gaps + ncap, n_gaps + ncap + len(self.model.constraints))
+        params = self._param_index
+        point = self.swept(z, all_states)
+        for _ in range(FEASIBILITY_SWEEPS):
+            g, A = self._points.constraints(point)
+            excess = g - np.clip(g, self._lbg, self._ubg)
+            if not np.all(np.isfinite(excess)) \
+                    or np.max(np.abs(excess[n_gaps:]), initial=0.0) <= STOP_CONSTRAINT_TOL:
+                break
+            point = point.copy()
+            # Capture rows read C_i - (the trajectory's value at the event) / cscale.
+            point[captures] -= excess[n_gaps:n_gaps + ncap]
+            if effect_rows.stop > effect_rows.start:
+                rows = A[effect_rows][:, params].toarray()
+                point[params] -= np.linalg.lstsq(rows, excess[effect_rows], rcond=None)[0]
+            point[params] = np.clip(point[params], self._lbz[params], self._ubz[params])
+            point = self.swept(point, all_states)
+        chi2, violation = self.evaluate(point)
+        if not (np.isfinite(chi2) and violation <= STOP_CONSTRAINT_TOL):
+            return None
+        return point, chi2
+
+    def _state_guesses(self, values: dict[str, float], t: np.ndarray
+                       ) -> dict[str, np.ndarray]:
+        """The effects' own guesses of their states at times `t` (`Effect.state_guess`)."""
+        out: dict[str, np.ndarray] = {}
+        for effect in self.model.effects:
+            out.update(effect.state_guess(self.test, t, values))
+        return out
+
+    # ------------------------------------------------------------------ solve
+    def size_text(self) -> str:
+        """One line describing the NLP's size."""
+        nX, nP, nC = self._nz
+        return (f"{nX + nP + nC} variables ({nX} shooting states on {len(self.t)} nodes, "
+                f"{nP} parameters, {nC} captured speeds), {self._g.numel()} constraints, "
+                f"{sum(len(s_[2]) * len(s_[1]) for s_ in self._samples)} residuals")
+
+    def _violations(self, g: np.ndarray) -> np.ndarray:
+        """How far each constraint value in `g` lies outside its bounds (scaled)."""
+        return np.maximum(self._lbg - g, 0) + np.maximum(g - self._ubg, 0)
+
+    def _value_violation(self, z: np.ndarray) -> float:
+        """Largest scaled constraint violation at `z`, from the constraint values alone (the
+        same figure as `_violation` of the linearisation there; NaN where not finite)."""
+        g = self._points.constraint_value(z)
+        if not np.all(np.isfinite(g)):
+            return np.nan
+        return float(np.max(self._violations(g), initial=0.0))
+
+    def with_value(self, z: np.ndarray, name: str, value: float) -> np.ndarray:
+        """A copy of the decision vector `z` with the free parameter `name` at `value` (SI)."""
+        i = self.free.index(name)
+        out = z.copy()
+        out[self._param_index[i]] = value / self.pscale[i]
+        return out
+
+    def free_values(self, z: np.ndarray) -> dict[str, float]:
+        """The free parameters at the decision vector `z` (SI)."""
+        values = z[self._param_index] * self.pscale
+        return dict(zip(self.free, map(float, values), strict=True))
+
+    @property
+    def _param_index(self) -> np.ndarray:
+        nX, nP, _ = self._nz
+        return np.arange(nX, nX + nP)
+
+    def _fit(self, z: np.ndarray, stats: SolverStats) -> Fit:
+        m = self.model
+        Xp, pfull, Cp = (np.asarray(a) for a in self._unpack(z))
+        params = {p.name: float(v) for p, v in zip(m.parameters, pfull.ravel(), strict=True)}
+        caps = {c.name: float(v) for c, v in zip(m.captures, Cp.ravel(), strict=True)}
+        blocks = self._residuals(z)
+        blocks = blocks if isinstance(blocks, tuple | list) else [blocks]
+        residuals = []
+        for (sensor, channels, tsamp, meas, sig), r in zip(self._samples, blocks, strict=True):
+            # Residual blocks are instance-major: (meas - model) / sigma per sample.
+            r = np.asarray(r).reshape(len(tsamp), len(channels)).T
+            y = meas - r * sig
+            for j, ch in enumerate(channels):
+                residuals.append(SensorResidual(sensor, ch, tsamp, meas[j], y[j], sig[j]))
+        return Fit(self.test, m, params, list(self.free), dict(self.guess), self.t, Xp.T, caps,
+                   residuals, stats, self.settings, z)
