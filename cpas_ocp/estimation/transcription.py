@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import casadi as ca
 import numpy as np
@@ -40,6 +40,42 @@ from cpas_ocp.physics.model import CORE_STATES, timing_label
 # Alternations of integrating the trajectory and meeting the other constraints that
 # `Estimator.feasible_point` makes (each correction moves the trajectory only slightly).
 FEASIBILITY_SWEEPS = 5
+
+
+@dataclass
+class _Nlp:
+    """The NLP while it is transcribed (`NlpTranscription._build`): the decision
+    variables X (node states), P (free parameters) and C (captured values), all scaled;
+    their physical values Xp, Cp and pfull (every parameter, the fixed ones as constants);
+    the whole decision vector z; the scales; the SX symbols of one instance (x, x1, t, dt,
+    p, c) and one interval's RK4 end state xe; and the constraint pieces g with their
+    bounds, the residual pieces, and the capture constraints whose curvature the Hessian
+    carries (`curved`; `n_small` constraint pieces in all, `knots`: process knots held in
+    that curvature)."""
+
+    X: ca.MX
+    P: ca.MX
+    C: ca.MX
+    Xp: ca.MX
+    Cp: ca.MX
+    pfull: ca.MX
+    z: ca.MX
+    free_index: dict[str, int]
+    xscale: np.ndarray
+    cscale: float
+    syms: dict[str, ca.SX]
+    xe: ca.SX
+    g: list = field(default_factory=list)
+    lbg: list = field(default_factory=list)
+    ubg: list = field(default_factory=list)
+    residuals: list = field(default_factory=list)
+    curved: list = field(default_factory=list)
+    n_small: int = 0
+    knots: bool = False
+    P_held: ca.MX = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.P_held = ca.MX.sym("P_held", self.P.numel())
 
 
 @dataclass
@@ -194,7 +230,22 @@ class NlpTranscription:
 
     # ------------------------------------------------------------------ transcription
     def _build(self, n: int, h: float) -> None:
-        """The NLP on the grid `self.t` of n intervals, the finest h long (s)."""
+        """The NLP on the grid `self.t` of n intervals, the finest h long (s): its
+        variables, the continuity gaps and sensor residuals, the captures, the effects'
+        constraints, what-if limits, observed event times, priors and pseudo-observations,
+        then the functions evaluated on it and its variables' bounds."""
+        nlp = self._variables(n)
+        self._gaps_and_sensors(nlp, n, h)
+        self._captures(nlp, h)
+        self._effect_constraints(nlp)
+        self._limits(nlp, n)
+        self._extra_residuals(nlp)
+        self._assemble(nlp, n)
+        self._variable_bounds(nlp)
+
+    def _variables(self, n: int) -> _Nlp:
+        """The decision variables (node states X, free parameters P, captured values C, all
+        scaled to order one), their physical values, and the RK4 step of one interval."""
         m, s = self.model, self.settings
         nx, ncap = m.nx, len(m.captures)
         xscale = m.state_scales()
@@ -209,166 +260,179 @@ class NlpTranscription:
         pfull = ca.vertcat(*[
             P[free_index[p.name]] * self.pscale[free_index[p.name]] if p.name in free_index
             else ca.MX(self.values.get(p.name, p.default)) for p in m.parameters])
-
         step = self._step = rk4_step(m)
-        xs = ca.SX.sym("x", nx)
-        xs1 = ca.SX.sym("x1", nx)
-        ts = ca.SX.sym("t")
-        dts = ca.SX.sym("dt")
-        ps = ca.SX.sym("p", len(m.parameters))
-        cs = ca.SX.sym("c", ncap)
-        xe = xs
+        syms = {"x": ca.SX.sym("x", nx), "x1": ca.SX.sym("x1", nx), "t": ca.SX.sym("t"),
+                "dt": ca.SX.sym("dt"), "p": ca.SX.sym("p", len(m.parameters)),
+                "c": ca.SX.sym("c", ncap)}
+        xe = syms["x"]
         for j in range(s.substeps):
-            xe = step(xe, ts + j * dts / s.substeps, dts / s.substeps, ps, cs)
+            xe = step(xe, syms["t"] + j * syms["dt"] / s.substeps, syms["dt"] / s.substeps,
+                      syms["p"], syms["c"])
         self._ctx = (X, Xp, pfull, Cp, xscale, cscale)
+        return _Nlp(X, P, C, Xp, Cp, pfull, ca.vertcat(ca.vec(X), P, C), free_index, xscale,
+                    cscale, syms, xe)
 
-        # Per-instance functions, each mapped over its instances with its Jacobian:
-        # the continuity gap of every shooting interval, and the weighted residuals of
-        # every sample of every sensor (sensors sampled between nodes are predicted one
-        # partial RK4 step after the node before the sample).
+    def _gaps_and_sensors(self, nlp: _Nlp, n: int, h: float) -> None:
+        """The continuity gap of every shooting interval and the weighted residuals of every
+        sample of every sensor, each a per-instance function mapped over its instances
+        with its Jacobian (sensors sampled between nodes are predicted one partial RK4
+        step after the node before the sample)."""
+        y = nlp.syms
         ks = np.arange(n)
-        blocks = [_Block(ca.Function("gap", [xs, xs1, ts, dts, ps, cs], [(xs1 - xe) / xscale]),
-                         [ks, ks + 1], self.t[:n], [np.diff(self.t)])]
-        sensor_blocks, destinations, offsets = self._sensor_blocks(step, n, h)
+        gap = ca.Function("gap", [y["x"], y["x1"], y["t"], y["dt"], y["p"], y["c"]],
+                          [(y["x1"] - nlp.xe) / nlp.xscale])
+        blocks = [_Block(gap, [ks, ks + 1], self.t[:n], [np.diff(self.t)])]
+        sensor_blocks, destinations, offsets = self._sensor_blocks(self._step, n, h)
         blocks += sensor_blocks
         # Each block's values (the line search's trial points) and its values with the
         # Jacobian (accepted points) run as native code; the functions themselves stay
         # in CasADi's VM as well, for the differentiable graph (`_obj`, `_g`).
         local = [self._local_jacobian(b.fn, len(b.nodes)) for b in blocks]
         native = [b.fn for b in blocks] + local
-        if s.compile:
+        if self.settings.compile:
             native = compile_functions(native)
         mapped = [self._mapped_block(b, value_fn, jac_fn) for b, value_fn, jac_fn
                   in zip(blocks, native[:len(blocks)], native[len(blocks):], strict=True)]
-        residual_pieces = _gathered(mapped[1:], destinations, offsets)
-        g = [mapped[0]]
-        lbg = [np.zeros(nx * n)]
-        ubg = [np.zeros(nx * n)]
+        nlp.residuals = _gathered(mapped[1:], destinations, offsets)
+        nlp.g = [mapped[0]]
+        nlp.lbg = [np.zeros(self.model.nx * n)]
+        nlp.ubg = [np.zeros(self.model.nx * n)]
 
-        # Captured quantities at free event times: cubic B-spline weights of node values.
-        z_all = ca.vertcat(ca.vec(X), P, C)
+    def _captures(self, nlp: _Nlp, h: float) -> None:
+        """Captured quantities at free event times: cubic B-spline weights of node values,
+        one equality each (and, for the Hessian, the same with the process knots held)."""
+        m = self.model
         # For the captures' curvature, the process knots enter through a copy of P that is
         # not differentiated (`Parameter.process_knot`): a captured airspeed is smooth in
         # the air's velocity, and its exact curvature in each knot cost 0.4 s of build.
-        knots = [free_index[p.name] for p in m.parameters
-                 if p.process_knot and p.name in free_index]
-        P_held = ca.MX.sym("P_held", len(self.free))
-        pfull_curv = pfull
+        knots = [nlp.free_index[p.name] for p in m.parameters
+                 if p.process_knot and p.name in nlp.free_index]
+        nlp.knots = bool(knots)
+        pfull_curv = nlp.pfull
         if knots:
-            held = ca.vertcat(*[P_held[i] if i in set(knots) else P[i]
+            held = ca.vertcat(*[nlp.P_held[i] if i in set(knots) else nlp.P[i]
                                 for i in range(len(self.free))])
-            pfull_curv = ca.substitute(pfull, P, held)
-        curved: list[ca.MX] = []
+            pfull_curv = ca.substitute(nlp.pfull, nlp.P, held)
         for i, cap in enumerate(m.captures):
             if cap.at_time is not None:
                 lo = hi = cap.at_time
                 t_event = ca.MX(cap.at_time)
             else:
                 prm = m.parameter(cap.time_parameter)
-                fixed = prm.name not in free_index
+                fixed = prm.name not in nlp.free_index
                 lo = self.values.get(prm.name, prm.default) if fixed else prm.lower
                 hi = self.values.get(prm.name, prm.default) if fixed else prm.upper
-                t_event = pfull[m.parameter_names.index(prm.name)]
+                t_event = nlp.pfull[m.parameter_names.index(prm.name)]
             kw = np.flatnonzero((self.t >= lo - 2.5 * h) & (self.t <= hi + 2.5 * h))
             if np.any(np.abs(np.diff(self.t[kw]) - h) > 1e-6 * h):
                 raise ValueError(f"the shooting grid is not uniform (step {h:g} s) over "
                                  f"[{lo:g}, {hi:g}] s, where {cap.name} may be captured")
             qfn = m.capture_function(cap.name).map(len(kw), "serial")
-            node_vals = qfn(Xp[:, kw], ca.DM(self.t[kw]).T, pfull, Cp)
-            w = cubic_bspline((t_event - ca.DM(self.t[kw]).T) / h)
-            con = (Cp[i] - ca.dot(w, node_vals)) / cscale
-            g.append(_Piece.of(con, z_all))
-            curved.append(con if not knots else
-                          (Cp[i] - ca.dot(w, qfn(Xp[:, kw], ca.DM(self.t[kw]).T, pfull_curv,
-                                                 Cp))) / cscale)
-            lbg.append([0.0])
-            ubg.append([0.0])
+            tk = ca.DM(self.t[kw]).T
+            w = cubic_bspline((t_event - tk) / h)
+            con = (nlp.Cp[i] - ca.dot(w, qfn(nlp.Xp[:, kw], tk, nlp.pfull, nlp.Cp))) / nlp.cscale
+            nlp.g.append(_Piece.of(con, nlp.z))
+            nlp.curved.append(con if not knots else (nlp.Cp[i] - ca.dot(
+                w, qfn(nlp.Xp[:, kw], tk, pfull_curv, nlp.Cp))) / nlp.cscale)
+            nlp.lbg.append([0.0])
+            nlp.ubg.append([0.0])
 
-        # Constraints on parameters and captured values declared by effects.
+    def _effect_constraints(self, nlp: _Nlp) -> None:
+        """Constraints on parameters and captured values declared by effects."""
+        m = self.model
         p_sx = ca.vertcat(ca.SX(0, 1), *[m.ctx.p[p.name] for p in m.parameters])
         c_sx = ca.vertcat(ca.SX(0, 1), *[m.ctx.c[c.name] for c in m.captures])
         for con in m.constraints:
             fn = ca.Function("con", [p_sx, c_sx], [con.expr])
-            g.append(_Piece.of(fn(pfull, Cp), z_all))
-            lbg.append([con.lower])
-            ubg.append([con.upper])
+            nlp.g.append(_Piece.of(fn(nlp.pfull, nlp.Cp), nlp.z))
+            nlp.lbg.append([con.lower])
+            nlp.ubg.append([con.upper])
+        # The constraints whose curvature the Hessian carries end here.
+        nlp.n_small = len(nlp.g)
 
-        # What-if limits on model quantities, at every node (after the few constraints
-        # whose curvature the Hessian carries).
-        n_small = len(g)
+    def _limits(self, nlp: _Nlp, n: int) -> None:
+        """What-if limits on model quantities (`Settings.limits`), at every node."""
+        m, y = self.model, nlp.syms
         self.limit_rows: dict[str, tuple[slice, float]] = {}
-        offset = sum(int(np.size(a)) for a in lbg)
-        for qname, (lo, hi) in s.limits.items():
+        offset = sum(int(np.size(a)) for a in nlp.lbg)
+        for qname, (lo, hi) in self.settings.limits.items():
             if qname not in m.quantity_names:
                 raise ValueError(f"no model quantity {qname!r} to limit")
             finite = [abs(v) for v in (lo, hi) if np.isfinite(v) and v != 0.0]
             qscale = max(finite) if finite else 1.0
             qi = m.quantity_names.index(qname)
-            fn = ca.Function("limit", [xs, ts, ps, cs], [m.quantities(xs, ts, ps, cs)[qi] / qscale])
+            fn = ca.Function("limit", [y["x"], y["t"], y["p"], y["c"]],
+                             [m.quantities(y["x"], y["t"], y["p"], y["c"])[qi] / qscale])
             block = _Block(fn, [np.arange(n + 1)], self.t, [])
-            g.append(self._mapped_block(block, fn, self._local_jacobian(fn, 1)))
-            lbg.append(np.full(n + 1, lo / qscale))
-            ubg.append(np.full(n + 1, hi / qscale))
+            nlp.g.append(self._mapped_block(block, fn, self._local_jacobian(fn, 1)))
+            nlp.lbg.append(np.full(n + 1, lo / qscale))
+            nlp.ubg.append(np.full(n + 1, hi / qscale))
             self.limit_rows[qname] = (slice(offset, offset + n + 1), qscale)
             offset += n + 1
 
-        # Observed event times the model predicts (a Pilot's Main bag lift and bag strip).
-        predicted = m.event_times(pfull, Cp)
+    def _extra_residuals(self, nlp: _Nlp) -> None:
+        """Residuals beyond the sensors': observed event times the model predicts (a
+        Pilot's Main bag lift and bag strip), priors on free parameters (`ModelSpec.priors`)
+        and the effects' pseudo-observations (a process prior)."""
+        m = self.model
+        predicted = m.event_times(nlp.pfull, nlp.Cp)
         for j, (timing, event) in enumerate(m.timings):
             r = (event.time - predicted[j]) / event.sigma
-            residual_pieces.append(_Piece.of(r, z_all))
+            nlp.residuals.append(_Piece.of(r, nlp.z))
             self._samples.append((EVENTS, (timing_label(timing),), np.array([event.time]),
                                   np.array([[event.time]]), np.array([[event.sigma]])))
-
-        # Priors on free parameters: independent measurements of them (`ModelSpec.priors`).
         for name, (value, sigma) in self.spec.prior_values(m).items():
-            if name not in free_index:
+            if name not in nlp.free_index:
                 raise ValueError(f"a prior on {name}, which this estimator holds fixed")
-            r = (value - pfull[m.parameter_names.index(name)]) / sigma
-            residual_pieces.append(_Piece.of(r, z_all))
+            r = (value - nlp.pfull[m.parameter_names.index(name)]) / sigma
+            nlp.residuals.append(_Piece.of(r, nlp.z))
             self._samples.append((PRIORS, (name,), np.array([self.t[0]]),
                                   np.array([[value]]), np.array([[sigma]])))
-
-        # Effects' pseudo-observations (a process prior): residuals of the parameters alone.
+        p_sx = ca.vertcat(ca.SX(0, 1), *[m.ctx.p[p.name] for p in m.parameters])
         for effect, channel, times, expr in m.penalties:
             fn = ca.Function("penalty", [p_sx], [expr])
-            residual_pieces.append(_Piece.of(fn(pfull), z_all))
+            nlp.residuals.append(_Piece.of(fn(nlp.pfull), nlp.z))
             self._samples.append((effect, (channel,), times, np.zeros((1, times.size)),
                                   np.ones((1, times.size))))
 
+    def _assemble(self, nlp: _Nlp, n: int) -> None:
+        """The functions evaluated on the NLP: residuals and constraints with their
+        Jacobians (one native evaluation per point, `nlp_functions.PointEvaluations`), the
+        objective, the curvature of the few capture and effect constraints, the action
+        windows, and the unpacking of a decision vector."""
+        s, z_all, pieces, g = self.settings, nlp.z, nlp.residuals, nlp.g
         self._z = z_all
-        residual = _stack(residual_pieces, "symbolic")
-        jac = _stack(residual_pieces, "jacobian")
+        residual = _stack(pieces, "symbolic")
+        jac = _stack(pieces, "jacobian")
         self._g = _stack(g, "symbolic")
         constraint_jac = _stack(g, "jacobian")
-        self._residual_value = ca.Function("residual_value", [z_all],
-                                           [_stack(residual_pieces, "value")])
+        self._residual_value = ca.Function("residual_value", [z_all], [_stack(pieces, "value")])
         self._residual_jacobian = ca.Function("residual_jacobian", [z_all],
-                                              [_stack(residual_pieces, "with_jacobian"), jac])
+                                              [_stack(pieces, "with_jacobian"), jac])
         self._constraint_value = ca.Function("constraint_value", [z_all], [_stack(g, "value")])
         self._constraints = ca.Function("constraints", [z_all],
                                         [_stack(g, "with_jacobian"), constraint_jac])
         self._points = PointEvaluations(self._residual_value, self._residual_jacobian,
                                         self._constraint_value, self._constraints)
-        obj = 0.5 * ca.sumsqr(residual)
         # The exact curvature of the few capture and effect constraints (a capture at a
         # free time bends in that time; without it a Pilot's bag-strip constraint made the
         # steps cycle); the curvature of the continuity constraints is neglected.
-        small = ca.vertcat(*curved, _stack(g[1 + len(curved):n_small], "symbolic"))
+        small = ca.vertcat(*nlp.curved, _stack(g[1 + len(nlp.curved):nlp.n_small], "symbolic"))
         lam_small = ca.MX.sym("lam_small", small.numel())
         hessian = (ca.hessian(ca.dot(lam_small, small), z_all)[0] if small.numel()
                    else ca.MX(z_all.numel(), z_all.numel()))
-        if knots:
-            hessian = ca.substitute(hessian, P_held, P)
+        if nlp.knots:
+            hessian = ca.substitute(hessian, nlp.P_held, nlp.P)
         curvature = ca.Function("curvature", [z_all, lam_small], [hessian])
+        nx = self.model.nx
         small_rows = slice(nx * n, nx * n + small.numel())
-        lbg_all = np.concatenate([np.ravel(a) for a in lbg])
-        ubg_all = np.concatenate([np.ravel(a) for a in ubg])
-        self._damping = (MarquardtDamping(self._points, lbg_all, ubg_all)
+        self._lbg = np.concatenate([np.ravel(a) for a in nlp.lbg])
+        self._ubg = np.concatenate([np.ravel(a) for a in nlp.ubg])
+        self._damping = (MarquardtDamping(self._points, self._lbg, self._ubg)
                          if s.point_cache and s.damping else None)
         self._windows = ActionWindows(
             (self._points._buffers["rJ"].pattern(1), self._points._buffers["gA"].pattern(1)),
-            (_stack_times(residual_pieces), _stack_times(g)), X.numel(),
+            (_stack_times(pieces), _stack_times(g)), nlp.X.numel(),
             s.window_margin if s.point_cache else None)
         # Its upper triangle, as Ipopt takes it (compiled, it took as long: 7 ms on `drogue`).
         self._curvature = ca.Function("curvature_upper", [z_all, lam_small],
@@ -377,14 +441,20 @@ class NlpTranscription:
         if not s.point_cache:
             self._expressions = self._plain_nlp(residual, jac, constraint_jac, curvature,
                                                 small_rows)
-        self._unpack = ca.Function("unpack", [z_all], [Xp, pfull, Cp])
-        self._residuals = ca.Function("residuals", [z_all], [p.value for p in residual_pieces])
-        self._lbg, self._ubg = lbg_all, ubg_all
+        self._unpack = ca.Function("unpack", [z_all], [nlp.Xp, nlp.pfull, nlp.Cp])
+        self._residuals = ca.Function("residuals", [z_all], [p.value for p in pieces])
         self._has_inequalities = bool(np.any(self._lbg != self._ubg))  # what-if limits
-        self._obj = obj
-        self._nz = (X.numel(), P.numel(), C.numel())
-        self._xscale = xscale
-        self._cscale = cscale
+        self._obj = 0.5 * ca.sumsqr(residual)
+        self._nz = (nlp.X.numel(), nlp.P.numel(), nlp.C.numel())
+        self._xscale = nlp.xscale
+        self._cscale = nlp.cscale
+
+    def _variable_bounds(self, nlp: _Nlp) -> None:
+        """Bounds of the scaled decision variables: the free parameters' own, captured
+        values above their lower limits, states free but for those pinned at the start
+        (and, without a GPS, the first node's horizontal motion held at zero)."""
+        m, cscale, ncap = self.model, nlp.cscale, len(self.model.captures)
+        X = nlp.X
         pb = [m.parameter(f) for f in self.free]
         inf = np.inf
         self._lbz = np.concatenate([np.full(X.numel(), -inf), [p.lower / sc for p, sc in
