@@ -296,18 +296,7 @@ def ipopt_functions(points: PointEvaluations, curvature: ca.Function, small_rows
     x_in = ("x", ca.Sparsity.dense(nz, 1))
     p_in = ("p", ca.Sparsity(0, 1))
     dense = ca.Sparsity.dense
-    curvature_buffer = FunctionBuffer(curvature)
-    curvature_pattern = curvature_buffer.pattern(0)
-    columns, delta = levenberg if levenberg is not None else (np.zeros(0, dtype=int), 0.0)
-    on_columns = sp.csc_matrix((np.ones(columns.size), (columns, columns)), shape=(nz, nz))
-    hessian_pattern = (sp.triu(abs(kept_J).T @ abs(kept_J), format="csc") + curvature_pattern
-                       + on_columns)
-    hessian_pattern.sort_indices()
-    keys = _column_major_keys(hessian_pattern)
-    curvature_at = np.searchsorted(keys, _column_major_keys(curvature_pattern))
-    diagonal = np.flatnonzero(hessian_pattern.diagonal())
-    diagonal_at = np.searchsorted(keys, diagonal * (nz + 1))
-    levenberg_at = np.searchsorted(keys, columns.astype(np.int64) * (nz + 1))
+    layout = _HessianLayout.of(kept_J, FunctionBuffer(curvature), levenberg)
 
     def objective(a: list[np.ndarray]) -> list:
         r = points.residual_value(a[0])
@@ -329,17 +318,9 @@ def ipopt_functions(points: PointEvaluations, curvature: ca.Function, small_rows
         _, J = points.residual_jacobian(z)
         checked(z, windows.outside(0, J.data)
                 or windows.outside(1, points.constraints(z)[1].data))
-        Jk = windows.kept_matrix(0, J)
-        product = sp.triu(Jk.T @ Jk, format="coo")
-        out = np.zeros(keys.size)
-        out[np.searchsorted(keys, product.col.astype(np.int64) * nz + product.row)] = \
-            float(sigma[0]) * product.data
-        out[curvature_at] += curvature_buffer.nonzeros(z, lam_g[small_rows])[0]
-        out[levenberg_at] += float(sigma[0]) * delta
-        if damping is not None and damping.mu > 0.0:
-            squares = np.asarray(J.multiply(J).sum(axis=0)).ravel()
-            out[diagonal_at] += float(sigma[0]) * damping.mu * squares[diagonal]
-        return [out]
+        mu = damping.mu if damping is not None else 0.0
+        return [layout.values(z, J, windows.kept_matrix(0, J), float(sigma[0]),
+                              lam_g[small_rows], mu)]
 
     f = _Oracle("objective", [x_in], [("f", dense(1, 1))], objective)
     g = _Oracle("constraint_value", [x_in], [("g", dense(ng, 1))], constraint_value)
@@ -349,7 +330,7 @@ def ipopt_functions(points: PointEvaluations, curvature: ca.Function, small_rows
                     constraint_jacobian)
     hess_lag = _Oracle("gauss_newton", [x_in, p_in, ("lam_f", dense(1, 1)),
                                         ("lam_g", dense(ng, 1))],
-                       [("hess_gamma_x_x", _casadi(hessian_pattern))], lagrangian_hessian)
+                       [("hess_gamma_x_x", _casadi(layout.pattern))], lagrangian_hessian)
     x = ca.MX.sym("x", nz)
     return IpoptFunctions(
         {"x": x, "f": f(x), "g": g(x)},
@@ -358,6 +339,57 @@ def ipopt_functions(points: PointEvaluations, curvature: ca.Function, small_rows
         {"grad_f": grad_f, "jac_g": jac_g, "hess_lag": hess_lag, "no_nlp_grad": True,
          "calc_lam_p": False},
         [f, g, grad_f, jac_g, hess_lag])
+
+
+@dataclass
+class _HessianLayout:
+    """The upper triangle of the Lagrangian's Hessian as Ipopt takes it: its `pattern`
+    (J'J on the entries the action windows keep, the small constraints' curvature, the
+    Levenberg columns), the column-major `keys` of its entries, and where in them the
+    curvature's nonzeros, the diagonal and the Levenberg columns (term `delta`) go."""
+
+    pattern: sp.csc_matrix
+    keys: np.ndarray
+    curvature: FunctionBuffer
+    curvature_at: np.ndarray
+    diagonal: np.ndarray
+    diagonal_at: np.ndarray
+    levenberg_at: np.ndarray
+    delta: float
+
+    @classmethod
+    def of(cls, kept_J: sp.csc_matrix, curvature: FunctionBuffer,
+           levenberg: tuple[np.ndarray, float] | None) -> _HessianLayout:
+        nz = kept_J.shape[1]
+        curvature_pattern = curvature.pattern(0)
+        columns, delta = levenberg if levenberg is not None else (np.zeros(0, dtype=int), 0.0)
+        on_columns = sp.csc_matrix((np.ones(columns.size), (columns, columns)), shape=(nz, nz))
+        pattern = (sp.triu(abs(kept_J).T @ abs(kept_J), format="csc") + curvature_pattern
+                   + on_columns)
+        pattern.sort_indices()
+        keys = _column_major_keys(pattern)
+        diagonal = np.flatnonzero(pattern.diagonal())
+        return cls(pattern, keys, curvature,
+                   np.searchsorted(keys, _column_major_keys(curvature_pattern)), diagonal,
+                   np.searchsorted(keys, diagonal * (nz + 1)),
+                   np.searchsorted(keys, columns.astype(np.int64) * (nz + 1)), delta)
+
+    def values(self, z: np.ndarray, J: sp.csr_matrix, kept: sp.csc_matrix, sigma: float,
+               lam_small: np.ndarray, mu: float) -> np.ndarray:
+        """The Hessian's values at `z`: sigma J'J on the kept entries, the curvature of the
+        small constraints at their multipliers `lam_small`, sigma delta on the Levenberg
+        columns, and with Marquardt damping `mu` > 0, sigma mu diag(J'J)."""
+        nz = self.pattern.shape[1]
+        product = sp.triu(kept.T @ kept, format="coo")
+        out = np.zeros(self.keys.size)
+        out[np.searchsorted(self.keys, product.col.astype(np.int64) * nz + product.row)] = \
+            sigma * product.data
+        out[self.curvature_at] += self.curvature.nonzeros(z, lam_small)[0]
+        out[self.levenberg_at] += sigma * self.delta
+        if mu > 0.0:
+            squares = np.asarray(J.multiply(J).sum(axis=0)).ravel()
+            out[self.diagonal_at] += sigma * mu * squares[self.diagonal]
+        return out
 
 
 def _column_major_keys(matrix: sp.csc_matrix) -> np.ndarray:

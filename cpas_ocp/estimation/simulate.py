@@ -142,11 +142,7 @@ def simulate_problem(problem: Problem, out: str | Path, seed: int,
         sample_times[s["name"]] = t0 + np.arange(round((t1 - t0) * rate) + 1) / rate
     planned = {name: pd.DataFrame({"time": t}) for name, t in sample_times.items()}
     test = test_from_manifest(manifest, out, series=planned)
-    if effects is not None:
-        model = Model(test, effects)
-    else:  # the truth's own effect set if the problem gives one, else the manifest's model
-        block = sim.get("model", manifest.get("model"))
-        model = spec_from_block(block, f"problem {problem.name}", Path()).model(test)
+    model = _truth_model(problem, test, effects)
     # Effects whose parameters are a random process (`simulation.drawn`: the air's
     # motion) take them from a stream of their own, so that the sensor noise of a seed
     # is the same with and without them.
@@ -168,17 +164,9 @@ def simulate_problem(problem: Problem, out: str | Path, seed: int,
                                 else None))
     try:
         for s in manifest["sensors"]:
-            sensor = next(x for x in test.sensors if x.name == s["name"])
-            t = sample_times[s["name"]]
-            clean = model_outputs(model, traj, truth, s["name"], _on_grid(t, t0, step))
-            cols = {"time": t}
-            for j, ch in enumerate(model.sensor_channels[s["name"]]):
-                sigma = sensor.noise_sigma(ch, clean[:, j])
-                dim = SENSOR_COLUMNS[s["kind"]][ch]
-                draw = rng.standard_normal(len(t)) if noise else np.zeros(len(t))
-                cols[ch] = (clean[:, j] + sigma * draw) \
-                    / FACTORS[dim][s["columns"][ch]]
-            pd.DataFrame(cols).to_csv(tmp / s["file"], index=False, float_format="%.9g")
+            _sensor_series(model, test, s, traj, truth, sample_times[s["name"]], (t0, step),
+                           rng if noise else None).to_csv(tmp / s["file"], index=False,
+                                                         float_format="%.9g")
         full_truth = {p.name: float(v) for p, v in
                       zip(model.parameters, model.parameter_vector(truth), strict=True)}
         (tmp / MANIFEST).write_text(json.dumps(manifest, indent=2))
@@ -191,6 +179,32 @@ def simulate_problem(problem: Problem, out: str | Path, seed: int,
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     return load_test(out)
+
+
+def _truth_model(problem: Problem, test: FlightTest, effects: list[Effect] | None) -> Model:
+    """The model that makes the data: `effects` if given, else the problem's
+    ``simulation.model`` block, else the manifest's model."""
+    if effects is not None:
+        return Model(test, effects)
+    block = problem.simulation.get("model", test.manifest.get("model"))
+    return spec_from_block(block, f"problem {problem.name}", Path()).model(test)
+
+
+def _sensor_series(model: Model, test: FlightTest, entry: dict, traj: Trajectory,
+                   truth: dict[str, float], t: np.ndarray, lattice: tuple[float, float],
+                   rng: np.random.Generator | None) -> pd.DataFrame:
+    """One sensor's samples at the times `t` (s) in its manifest `entry`'s column units: the
+    model's outputs along `traj` (on the simulation's `lattice`, its start and step),
+    plus noise of the sensor's sigma drawn from `rng` (none without it)."""
+    sensor = next(x for x in test.sensors if x.name == entry["name"])
+    clean = model_outputs(model, traj, truth, entry["name"], _on_grid(t, *lattice))
+    cols = {"time": t}
+    for j, ch in enumerate(model.sensor_channels[entry["name"]]):
+        sigma = sensor.noise_sigma(ch, clean[:, j])
+        dim = SENSOR_COLUMNS[entry["kind"]][ch]
+        draw = rng.standard_normal(len(t)) if rng is not None else np.zeros(len(t))
+        cols[ch] = (clean[:, j] + sigma * draw) / FACTORS[dim][entry["columns"][ch]]
+    return pd.DataFrame(cols)
 
 
 def initial_state(model: Model, simulation: dict) -> np.ndarray:

@@ -10,6 +10,7 @@ from __future__ import annotations
 import sys
 import time
 from collections.abc import Callable
+from dataclasses import dataclass, field
 
 import casadi as ca
 import numpy as np
@@ -229,6 +230,19 @@ STALL_SHARE = 0.1
 STALL_GAIN = 1.0
 
 
+@dataclass
+class _Run:
+    """Ipopt's runs within one solve: the last run's solution and statistics, the
+    iterations of all, where a parameter last acted outside its window (None: nowhere)
+    and how the feasible descent after a stall ended (None: none was made)."""
+
+    sol: dict = field(default_factory=dict)
+    stats: dict = field(default_factory=dict)
+    iterations: int = 0
+    left: np.ndarray | None = None
+    descended: DescentEnd | None = None
+
+
 class Solving:
     """Ipopt's runs on the NLP, and when a run is done."""
 
@@ -325,71 +339,102 @@ class Solving:
         (`benchmarks/fill_resolution.py`; on the TeleMetrum log neither converged until
         the descent learnt the curvature, `Settings.descent_curvature`).
         """
+        lbz, ubz = self._solve_bounds(bounds)
         z0 = (self.initial_point() if start is None
               else start.z if isinstance(start, Fit) else np.asarray(start, dtype=float))
-        lbz, ubz = self._lbz.copy(), self._ubz.copy()
-        n_states = self._nz[0]
-        for name, (lo, hi) in (bounds or {}).items():
-            i = self.free.index(name)
-            lbz[n_states + i], ubz[n_states + i] = lo / self.pscale[i], hi / self.pscale[i]
         z0 = np.clip(z0, lbz, ubz)
         t0 = time.perf_counter()
         cap = min(max_iter or self.settings.max_iter, self.settings.max_iter)
         self._fit_windows(z0)
         if self._warm:  # an earlier solve's restart left its warm-started solver behind
             self._make_solver()
-        iterations = 0
-        multipliers: dict[str, ca.DM] = {}
-        descended: DescentEnd | None = None
         # A what-if's sensitivities need Ipopt's own multipliers at its own solution.
-        stall = not bounds or not sensitivities
+        run = self._runs(z0, (lbz, ubz), cap, progress, not bounds or not sensitivities)
+        z, stats, multipliers = self._outcome(run, time.perf_counter() - t0, start)
+        if not stats.success:
+            raise SolverFailure(stats.status, stats.iterations, stats.worst_constraint,
+                                2.0 * stats.objective, self._last_iterate(z, stats))
+        fit = self._fit(z, stats)
+        fit.multipliers = multipliers
+        if bounds and sensitivities:
+            fit.sensitivities = self._bound_sensitivities(z, multipliers, list(bounds))
+        return fit
+
+    def _solve_bounds(self, bounds: dict[str, tuple[float, float]] | None
+                      ) -> tuple[np.ndarray, np.ndarray]:
+        """The scaled variables' bounds, with `bounds` (SI) replacing those of the free
+        parameters it names."""
+        lbz, ubz = self._lbz.copy(), self._ubz.copy()
+        n_states = self._nz[0]
+        for name, (lo, hi) in (bounds or {}).items():
+            i = self.free.index(name)
+            lbz[n_states + i], ubz[n_states + i] = lo / self.pscale[i], hi / self.pscale[i]
+        return lbz, ubz
+
+    def _runs(self, z0: np.ndarray, box: tuple[np.ndarray, np.ndarray], cap: int,
+              progress: bool, stall: bool) -> _Run:
+        """Ipopt from `z0` within `box` until a run ends the solve: converged or stopped by
+        the statistical test, finished by the feasible descent after a stall (`stall`:
+        a stall may end a run), out of its `cap` iterations, or failed; a run whose
+        parameters act outside their windows goes on with the windows widened."""
+        run = _Run()
+        multipliers: dict[str, ca.DM] = {}
         while True:
-            self._monitor.reset(progress, (lbz, ubz), cap - iterations, iterations, stall)
+            self._monitor.reset(progress, box, cap - run.iterations, run.iterations, stall)
             with interrupts.deferred():  # a signal stops Ipopt at its next iteration
-                sol = self._solver(x0=z0, lbx=lbz, ubx=ubz, lbg=self._lbg, ubg=self._ubg,
-                                   **multipliers)
-            st = self._solver.stats()
-            iterations += int(st["iter_count"])
-            z0 = np.asarray(sol["x"]).ravel()
-            multipliers = {"lam_x0": sol["lam_x"], "lam_g0": sol["lam_g"]}
+                run.sol = self._solver(x0=z0, lbx=box[0], ubx=box[1], lbg=self._lbg,
+                                       ubg=self._ubg, **multipliers)
+            run.stats = self._solver.stats()
+            run.iterations += int(run.stats["iter_count"])
+            z0 = np.asarray(run.sol["x"]).ravel()
+            multipliers = {"lam_x0": run.sol["lam_x"], "lam_g0": run.sol["lam_g"]}
             # No iteration record where Ipopt stopped at its first evaluation (a NaN there).
-            mu = st.get("iterations", {}).get("mu", [])
+            mu = run.stats.get("iterations", {}).get("mu", [])
             barrier = float(mu[-1]) if len(mu) else None
-            left = self._monitor.left_at
+            run.left = self._monitor.left_at
             if self._monitor.stalled:
-                descended = self._descend(z0, (lbz, ubz), cap - iterations)
-                iterations += descended.steps if descended is not None else 0
-                if (descended is not None and descended.converged) or iterations >= cap:
+                run.descended = self._descend(z0, box, cap - run.iterations)
+                run.iterations += run.descended.steps if run.descended is not None else 0
+                if (run.descended is not None and run.descended.converged) \
+                        or run.iterations >= cap:
                     break
                 # Not finished that way: Ipopt goes on from its iterate, no longer stopped
                 # for stalling.
-                if descended is not None and descended.steps:
-                    self._monitor.offer(descended.z, descended.chi2)
+                if run.descended is not None and run.descended.steps:
+                    self._monitor.offer(run.descended.z, run.descended.chi2)
                 stall = False
                 self._make_solver(barrier)
                 continue
-            if left is None and st["success"] and self._windows.active \
+            if run.left is None and run.stats["success"] and self._windows.active \
                     and self._windows.outside_at(self._jacobian_values(z0)):
                 # What Ipopt converged on must hold with every entry: a parameter that
                 # acts outside its window at the end sends the run on.
-                left = z0
-            if left is None or self._monitor.capped or iterations >= cap:
+                run.left = z0
+            if run.left is None or self._monitor.capped or run.iterations >= cap:
                 break
             # A parameter acts outside its window (a start time moved further than the
             # margin): widen the windows over both points and go on from the iterate,
             # with its multipliers and barrier parameter (from the default barrier and
             # least-squares multipliers, the first steps of the new run were regularised
             # and cut: on `drogue_full` 35 iterations in all against 30).
-            self._fit_windows(left, z0, widen=True, barrier=barrier)
+            self._fit_windows(run.left, z0, widen=True, barrier=barrier)
         self._monitor.finish()
+        return run
+
+    def _outcome(self, run: _Run, wall: float, start: Fit | np.ndarray | None
+                 ) -> tuple[np.ndarray, SolverStats, np.ndarray]:
+        """The point a solve ends at (Ipopt's, the statistical test's own step's end, or the
+        descent's), its statistics, and Ipopt's constraint multipliers."""
+        sol = run.sol
         z = np.asarray(sol["x"]).ravel()
         multipliers = np.asarray(sol["lam_g"]).ravel()
-        status, success = self._run_status(st, left is not None)
+        status, success = self._run_status(run.stats, run.left is not None)
         decrement = self._monitor.decrement if self._monitor.stopped else None
         own_point = self._monitor.stopped and self._monitor.point is not None
         if own_point:
             # The statistical test ended the run at its own Gauss-Newton step's end.
             z = self._monitor.point
+        descended = run.descended
         if descended is not None and descended.converged:
             z, own_point, decrement = descended.z, True, descended.decrement
             status, success = DESCENT_CONVERGED, True
@@ -401,21 +446,13 @@ class Solving:
             g = self._points.constraint_value(z)
         else:
             g, objective = np.asarray(sol["g"]).ravel(), float(sol["f"])
-        wall = time.perf_counter() - t0
         viol = self._violations(g)
         worst = f"index {int(np.argmax(viol))}, violation {float(np.max(viol)):.3g}" \
             if viol.size else ""
-        stats = SolverStats(status, success, iterations, wall, objective, worst, decrement,
+        stats = SolverStats(status, success, run.iterations, wall, objective, worst, decrement,
                             "the offline reduction" if start is None else
                             "a fit" if isinstance(start, Fit) else "a given point")
-        if not stats.success:
-            raise SolverFailure(stats.status, stats.iterations, worst, 2.0 * stats.objective,
-                                self._last_iterate(z, stats))
-        fit = self._fit(z, stats)
-        fit.multipliers = multipliers
-        if bounds and sensitivities:
-            fit.sensitivities = self._bound_sensitivities(z, multipliers, list(bounds))
-        return fit
+        return z, stats, multipliers
 
     def _run_status(self, stats: dict, windows_unsettled: bool) -> tuple[str, bool]:
         """The run's status and success from Ipopt's `stats` and the monitor: a stop the
