@@ -24,7 +24,7 @@ where a confirming refit starts (the stiff null).  On `drogue` flown with
 linearised estimates converged in the period (49 iterations, with the
 Levenberg term of `nlp_functions.ipopt_functions`) and stopped at its
 150-iteration cap in the frequency.  From other starts it still may not
-converge (see the README's diagnosis figures).  On `main3_full` (three Mains
+converge (see docs/validation.md).  On `main3_full` (three Mains
 on elastic risers, with added mass) the full model converges from the
 offline reduction in the period (62-67 iterations) and did not in 300 in
 the frequency.
