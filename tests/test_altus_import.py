@@ -39,6 +39,8 @@ from cpas_ocp.physics.atmosphere import (
 from cpas_ocp.physics.effects.canopy_inflation import CanopyInflation
 from cpas_ocp.physics.units import G0
 
+pytestmark = pytest.mark.slow
+
 SITE = SiteAtmosphere.from_surface_density(1401.0, 86300.0, 1.001, 0.008)
 HEADER = ("#version,serial,flight,call,time,state,state_name,acceleration,pressure,altitude,"
           "height,speed,temperature,accel_x,accel_y,accel_z,gyro_roll,gyro_pitch,gyro_yaw,"

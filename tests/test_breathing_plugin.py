@@ -25,6 +25,8 @@ from cpas_ocp.io.problems import load_problem
 from cpas_ocp.physics.effects import baseline_effects
 from cpas_ocp.physics.effects.registry import BASELINE, load_plugin
 
+pytestmark = pytest.mark.slow
+
 PLUGIN = Path(__file__).parent / "plugins" / "breathing.py"
 FREQUENCY_HZ = 3.0
 AMPLITUDES = {"breathing_cos[fbcp1]": 0.04, "breathing_sin[fbcp1]": 0.02,

@@ -12,6 +12,8 @@ import pytest
 from cpas_ocp.campaign.campaign import COLUMNS, find_tests, parameter_table, run_campaign
 from cpas_ocp.cli import main
 
+pytestmark = pytest.mark.slow
+
 
 @pytest.fixture(scope="module")
 def tests_root(problem_folder, tmp_path_factory):

@@ -11,7 +11,8 @@ from cpas_ocp.estimation import compiled
 from cpas_ocp.estimation.estimator import Estimator, Settings
 from cpas_ocp.io.flight_test import load_test
 
-pytestmark = pytest.mark.skipif(compiled.compiler() is None, reason="no C compiler here")
+pytestmark = [pytest.mark.slow,
+              pytest.mark.skipif(compiled.compiler() is None, reason="no C compiler here")]
 
 
 def test_compiled_and_interpreted_estimators_agree(drogue_folder, tmp_path,

@@ -23,7 +23,10 @@ parameter.
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from scipy.stats import chi2
+
+pytestmark = pytest.mark.slow
 
 SEEDS = [1, 2, 3, 4, 5]
 Z95 = 1.959964

@@ -26,6 +26,8 @@ from cpas_ocp.io.model_spec import spec_from_block
 from cpas_ocp.io.problems import load_problem
 from cpas_ocp.physics.effects import DeploymentLoad, baseline_effects
 
+pytestmark = pytest.mark.slow
+
 LOAD_N = 8896.4  # 2,000 lbf
 
 

@@ -59,6 +59,8 @@ from cpas_ocp.io.problems import load_problem, problem_names
 from cpas_ocp.physics.parameters import param_name
 from cpas_ocp.reports.plots import plot_sensor_residuals
 
+pytestmark = pytest.mark.slow
+
 TRUTH_STEP_S = 0.01  # RK4 step of the truth trajectories: fine for drag areas over 0.1 s fills
 
 

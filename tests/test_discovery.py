@@ -32,6 +32,8 @@ from cpas_ocp.reports.discrepancy_report import write_discovery
 
 from .conftest import assert_truth_within_noise
 
+pytestmark = pytest.mark.slow
+
 HIDDEN = {**{f"added_mass_factor[{c}]": 1.4 for c in ("fbcp1", "fbcp2")}, "lag[gps]": 0.1}
 
 

@@ -9,6 +9,8 @@ import pytest
 from cpas_ocp.cli import main
 from cpas_ocp.physics.effects.registry import BASELINE
 
+pytestmark = pytest.mark.slow
+
 
 @pytest.mark.parametrize("argv, field", [
     (["diagnose", "{test}", "--out", "{out}", "--alpha", "2"], "--alpha"),

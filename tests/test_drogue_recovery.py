@@ -20,6 +20,8 @@ from cpas_ocp.physics.parameters import split_name
 
 from .conftest import START_GUESS_OFFSET_S, event_errors
 
+pytestmark = pytest.mark.slow
+
 SEEDS = [1, 2]
 # Iterations Ipopt gets on its own in the statistical-stop comparison.
 IPOPT_ALONE_ITERATIONS = 150

@@ -26,6 +26,8 @@ from cpas_ocp.physics.effects import baseline_effects
 from cpas_ocp.physics.effects.registry import BASELINE, load_plugin
 from cpas_ocp.physics.parameters import param_name
 
+pytestmark = pytest.mark.slow
+
 TRUE_BIAS = 0.03  # g; three times the IMU's per-sample noise
 
 PLUGIN = '''"""Constant additive bias b (g) on every IMU load-factor reading: y = |f|/g0 + b."""
@@ -34,6 +36,7 @@ from dataclasses import dataclass
 
 from cpas_ocp.physics.effects import Effect
 from cpas_ocp.physics.parameters import Parameter, param_name
+
 
 
 @dataclass(frozen=True)

@@ -20,6 +20,8 @@ from cpas_ocp.physics.parameters import param_name
 
 from .conftest import START_GUESS_OFFSET_S, offset_events
 
+pytestmark = pytest.mark.slow
+
 FREQUENCY_HZ = 15.0
 DAMPING_RATIO = 0.25
 

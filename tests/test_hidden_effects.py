@@ -41,6 +41,8 @@ from cpas_ocp.physics.effects import (
 
 from .conftest import assert_truth_within_noise
 
+pytestmark = pytest.mark.slow
+
 PRIOR_RELATIVE_SIGMA = 0.03
 PRIOR_SEED = 7
 

@@ -9,12 +9,15 @@ from pathlib import Path
 
 import pytest
 
+pytestmark = pytest.mark.slow
+
 # The command, with Ipopt's first iteration callback announcing itself and then pausing, so
 # that the signal surely arrives inside the solver whatever the machine's load.
 RUN = """
 import sys, time
 import cpas_ocp.estimation.estimator as estimation
 from cpas_ocp.cli import main
+
 iterate = estimation._Monitor.eval
 def announced(self, arg):
     if self._k == 0:

@@ -34,6 +34,8 @@ from .conftest import (
     event_errors,
 )
 
+pytestmark = pytest.mark.slow
+
 SIGMA_CEILING = {"CdS": 0.03}  # relative
 START_SIGMA_CEILING_S = 0.1
 

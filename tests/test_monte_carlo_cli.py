@@ -20,6 +20,8 @@ from cpas_ocp.estimation.estimator import Estimator
 from cpas_ocp.io.flight_test import load_test
 from cpas_ocp.physics.units import LBF
 
+pytestmark = pytest.mark.slow
+
 SEED = 7
 LIMIT = 60
 SHAPE = ("CdS", "Ck", "n_p", "expopen", "t_k")

@@ -19,6 +19,8 @@ from cpas_ocp.io.model_spec import baseline_spec
 from cpas_ocp.io.problems import load_problem
 from cpas_ocp.physics.effects import AddedMass, baseline_effects
 
+pytestmark = pytest.mark.slow
+
 FUNCTIONS = ("nlp_f", "nlp_g", "nlp_grad_f", "nlp_jac_g", "nlp_hess_l")
 
 

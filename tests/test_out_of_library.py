@@ -34,6 +34,8 @@ from cpas_ocp.io.problems import load_problem
 from cpas_ocp.physics.effects import baseline_effects
 from cpas_ocp.physics.effects.registry import load_plugin
 
+pytestmark = pytest.mark.slow
+
 PLUGINS = Path(__file__).parent / "plugins"
 
 

@@ -37,6 +37,8 @@ from cpas_ocp.io.problems import load_problem
 from cpas_ocp.physics.effects import Effect, EventTiming
 from cpas_ocp.physics.model import Model, timing_label
 
+pytestmark = pytest.mark.slow
+
 SIGMA_CEILING = {"CdS[pilot1,stage1]": 0.03, "n[pilot1,stage1]": 0.05,
                  "mortar_speed[pilot1]": 0.05}  # relative
 

@@ -24,6 +24,8 @@ from cpas_ocp.io.problems import load_problem
 from cpas_ocp.physics.effects import baseline_effects
 from cpas_ocp.physics.effects.registry import BASELINE, load_plugin
 
+pytestmark = pytest.mark.slow
+
 GUIDE = Path(__file__).parents[1] / "docs" / "plugins.md"
 GROWTH = 0.01  # 1/s
 

@@ -33,9 +33,9 @@ DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "prometheus-202
 MEGA = "telemega-serial-6583-flight-0003.csv"
 METRUM = "telemetrum-serial-5115-flight-0001.csv"
 
-pytestmark = pytest.mark.skipif(
+pytestmark = [pytest.mark.slow, pytest.mark.skipif(
     not (DATA / MEGA).is_file(),
-    reason=f"the Prometheus flight logs are not at {DATA} (shared data folder absent)")
+    reason=f"the Prometheus flight logs are not at {DATA} (shared data folder absent)")]
 
 
 @pytest.mark.parametrize("log_name, recorder", [(MEGA, "TeleMega"), (METRUM, "TeleMetrum")])

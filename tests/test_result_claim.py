@@ -22,6 +22,8 @@ from cpas_ocp.io.flight_test import load_test
 from cpas_ocp.io.model_spec import spec_from_block
 from cpas_ocp.physics.effects.canopy_inflation import CanopyInflation
 
+pytestmark = pytest.mark.slow
+
 # Every event of the test moved this late: beyond the 1 s start window about each event.
 LATE_S = 1.5
 

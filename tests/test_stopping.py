@@ -15,6 +15,8 @@ from cpas_ocp.estimation.estimator import (
 from cpas_ocp.estimation.uncertainty import gauss_newton
 from cpas_ocp.io.flight_test import load_test
 
+pytestmark = pytest.mark.slow
+
 
 def test_the_finishing_step_gives_the_same_estimate_feasibly(problem_folder) -> None:
     test = load_test(problem_folder("fbcp", 1))

@@ -33,6 +33,8 @@ from cpas_ocp.physics.effects.registry import BASELINE
 from cpas_ocp.physics.effects.wind_process import WindProcess
 from cpas_ocp.reports.flight_report import air_motion_text
 
+pytestmark = pytest.mark.slow
+
 WIND = {"effects": ["wind_process", *BASELINE]}
 ALPHA = 1e-3
 
