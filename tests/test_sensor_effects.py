@@ -78,3 +78,23 @@ def test_time_offset_matches_the_trajectory(tmp_path) -> None:
     assert np.max(np.abs(lagged[3:] - earlier[3:])) < 0.001
     # and the lag is really applied: the unlagged reading differs by about v * lag
     assert np.max(np.abs(traj.x[now, :3] - earlier[:3])) > 10.0
+
+
+def test_a_lag_is_refused_on_elastic_risers(problem_fit) -> None:
+    """Integrated backwards, a damped riser mode grows as exp(zeta omega tau): a lag on a
+    model with elastic risers is refused when the model is composed, and the diagnosis's
+    score test of the elastic riser on a model with a lag says it does not apply."""
+    from cpas_ocp.discrepancy.score_test import candidate_effects, score_test
+    from cpas_ocp.errors import InputError
+    from cpas_ocp.io.model_spec import spec_from_effects
+    from cpas_ocp.physics.effects import with_elastic_risers
+
+    fit, _, _ = problem_fit("fbcp", 1)
+    both = spec_from_effects([*with_elastic_risers(baseline_effects()), SensorLag.gps()])
+    with pytest.raises(InputError, match="cannot be combined with elastic risers"):
+        both.model(fit.test)
+    lagged = spec_from_effects([*baseline_effects(), SensorLag.gps()])
+    fit = Estimator(fit.test, lagged).solve()
+    result = score_test(fit, lagged, candidate_effects()["elastic_riser"])
+    assert not result.tested
+    assert "does not apply" in result.note and "elastic risers" in result.note

@@ -22,16 +22,21 @@ from typing import Any
 import pandas as pd
 
 from cpas_ocp.discrepancy.diagnosis import Diagnosis
-from cpas_ocp.inference.diagnostics import WindowStatistic, window_statistics
 from cpas_ocp.discrepancy.discovery import Discovery
-from cpas_ocp.physics.effects.registry import EffectType
+from cpas_ocp.estimation.uncertainty import Covariance
+from cpas_ocp.inference.diagnostics import WindowStatistic, window_statistics
 from cpas_ocp.inference.model_comparison import Comparison
+from cpas_ocp.inference.phase_windows import phase_windows
 from cpas_ocp.io.model_spec import model_block
 from cpas_ocp.io.output_folder import atomic_folder
-from cpas_ocp.inference.phase_windows import phase_windows
-from cpas_ocp.reports.plots import file_stem, plot_discovery, plot_residual_comparison, plot_sensor_residuals
+from cpas_ocp.physics.effects.registry import EffectType
+from cpas_ocp.reports.plots import (
+    file_stem,
+    plot_discovery,
+    plot_residual_comparison,
+    plot_sensor_residuals,
+)
 from cpas_ocp.reports.report import parameter_table
-from cpas_ocp.estimation.uncertainty import Covariance
 
 
 def write_diagnosis(diag: Diagnosis, cov: Covariance | None, out: str | Path) -> Path:

@@ -17,9 +17,9 @@ import json
 from pathlib import Path
 from typing import Any
 
-from cpas_ocp.inference.diagnostics import sensor_summary, worst_windows
 from cpas_ocp.errors import SolverFailure
 from cpas_ocp.estimation.estimator import Fit
+from cpas_ocp.inference.diagnostics import sensor_summary, worst_windows
 from cpas_ocp.io.output_folder import atomic_folder
 
 # Files that mark a reconstruction's output folder, converged or not: either may be

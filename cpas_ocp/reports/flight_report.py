@@ -29,11 +29,14 @@ from typing import Any
 
 import numpy as np
 
-from cpas_ocp.physics.atmosphere import density_at
 from cpas_ocp.discrepancy.common_residual import BLOCK_S, combined_p_value, common_residuals
 from cpas_ocp.discrepancy.diagnosis import ALPHA, Diagnosis
-from cpas_ocp.physics.effects.wind_process import WindProcess
 from cpas_ocp.estimation.estimator import Fit
+from cpas_ocp.estimation.kinematic_track import altimeter_altitude
+from cpas_ocp.estimation.uncertainty import Covariance
+from cpas_ocp.inference.model_comparison import channel_rms
+from cpas_ocp.inference.phase_windows import DEPLOYMENT_EVENTS
+from cpas_ocp.inference.profile_likelihood import THRESHOLD, Profile, held_profile
 from cpas_ocp.io.flight_log import (
     EJECTION_EXCLUDE_S,
     OPENING_WINDOW_S,
@@ -41,13 +44,10 @@ from cpas_ocp.io.flight_log import (
     import_snatches,
 )
 from cpas_ocp.io.flight_test import Event, Parachute
-from cpas_ocp.estimation.kinematic_track import altimeter_altitude
-from cpas_ocp.inference.model_comparison import channel_rms
 from cpas_ocp.io.model_spec import ModelSpec
+from cpas_ocp.physics.atmosphere import density_at
+from cpas_ocp.physics.effects.wind_process import WindProcess
 from cpas_ocp.physics.parameters import param_name, split_name
-from cpas_ocp.inference.phase_windows import DEPLOYMENT_EVENTS
-from cpas_ocp.inference.profile_likelihood import THRESHOLD, Profile, held_profile
-from cpas_ocp.estimation.uncertainty import Covariance
 from cpas_ocp.physics.units import FACTORS, G0
 
 STEADY_AFTER_S = 10.0  # a canopy phase counts as steady this long after its deployment (s)

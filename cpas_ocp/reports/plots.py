@@ -17,13 +17,13 @@ import matplotlib.pyplot as plt
 import numpy as np
 from scipy.spatial import ConvexHull
 
-from cpas_ocp.physics.effects.wind_process import WindProcess
 from cpas_ocp.estimation.estimator import EVENTS, Fit, SensorResidual
-from cpas_ocp.physics.parameters import param_name, split_name
-from cpas_ocp.inference.phase_windows import PhaseWindow, windows_for_sensor
-from cpas_ocp.inference.profile_likelihood import THRESHOLD, Profile
 from cpas_ocp.estimation.reduction import reduce, stage_starts
 from cpas_ocp.estimation.uncertainty import Covariance
+from cpas_ocp.inference.phase_windows import PhaseWindow, windows_for_sensor
+from cpas_ocp.inference.profile_likelihood import THRESHOLD, Profile
+from cpas_ocp.physics.effects.wind_process import WindProcess
+from cpas_ocp.physics.parameters import param_name, split_name
 from cpas_ocp.physics.units import FT, LBF
 
 if TYPE_CHECKING:

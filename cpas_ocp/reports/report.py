@@ -11,11 +11,14 @@ import numpy as np
 import pandas as pd
 from scipy.stats import norm
 
-from cpas_ocp.inference.diagnostics import sensor_summary, worst_windows
 from cpas_ocp.estimation.estimator import EVENTS, PRIORS, Fit
-from cpas_ocp.reports.failure_report import RESULT_MARKERS
+from cpas_ocp.estimation.uncertainty import POORLY_DETERMINED, Covariance
+from cpas_ocp.inference.diagnostics import sensor_summary, worst_windows
 from cpas_ocp.inference.model_comparison import Criteria
+from cpas_ocp.inference.profile_likelihood import Profile
 from cpas_ocp.io.output_folder import atomic_folder
+from cpas_ocp.physics.units import FT
+from cpas_ocp.reports.failure_report import RESULT_MARKERS
 from cpas_ocp.reports.plots import (
     plot_correlation,
     plot_drag_areas,
@@ -24,9 +27,6 @@ from cpas_ocp.reports.plots import (
     plot_sensors,
     plot_wind,
 )
-from cpas_ocp.inference.profile_likelihood import Profile
-from cpas_ocp.estimation.uncertainty import POORLY_DETERMINED, Covariance
-from cpas_ocp.physics.units import FT
 
 if TYPE_CHECKING:
     from cpas_ocp.inference.result_claim import Claim
