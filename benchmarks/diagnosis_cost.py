@@ -31,7 +31,7 @@ from pathlib import Path
 
 from cpas_ocp.discrepancy import diagnosis as diagnosis_module
 from cpas_ocp.discrepancy import score_test as score_module
-from cpas_ocp.estimation.estimator import Estimator
+from cpas_ocp.estimation.estimator import Estimator, Fit
 from cpas_ocp.estimation.simulate import simulate_problem
 from cpas_ocp.inference.continuation import solve as solve_with_continuation
 from cpas_ocp.io.flight_test import load_test
@@ -74,17 +74,23 @@ def _timed(fn, case: str, label):
     return wrapper
 
 
-def run(case: str, seed: int, root: Path, null_point: str = "score") -> None:
-    effects, values = hidden_cases()[case]
+def simulated_fit(effects: list[Effect], values: dict[str, float], seed: int, folder: Path
+                  ) -> tuple[Fit, float]:
+    """`drogue` simulated into `folder` with `effects` and the true `values` added, and the
+    baseline model's fit from the offline reduction, with its wall time (s)."""
     problem = load_problem("drogue")
-    folder = root / case
     simulate_problem(dataclasses.replace(problem, truth={**problem.truth, **values}),
                      folder, seed, effects=effects)
     (folder / "truth.json").unlink()
     t_start = time.perf_counter()
+    fit = solve_with_continuation(Estimator(load_test(folder), baseline_spec()))
+    return fit, time.perf_counter() - t_start
+
+
+def run(case: str, seed: int, root: Path, null_point: str = "score") -> None:
+    effects, values = hidden_cases()[case]
     spec = baseline_spec()
-    fit = solve_with_continuation(Estimator(load_test(folder), spec))
-    t_fit = time.perf_counter() - t_start
+    fit, t_fit = simulated_fit(effects, values, seed, root / case)
     print(f"[{case}] baseline fit: {fit.solver.iterations} iterations, {t_fit:.1f} s, "
           f"chi-square {fit.chi_square:.1f} ({fit.dof} dof)", flush=True)
     original_test, original_confirm = score_module.score_test, score_module.confirm

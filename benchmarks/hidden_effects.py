@@ -22,22 +22,16 @@ the total wall time; at the end a table of all cases.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import resource
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
-from diagnosis_cost import DROGUES, hidden_cases
+from diagnosis_cost import DROGUES, hidden_cases, simulated_fit
 
 from cpas_ocp.discrepancy.discovery import Discovery, DiscoveryStep, discover
-from cpas_ocp.estimation.estimator import Estimator
-from cpas_ocp.estimation.simulate import simulate_problem
-from cpas_ocp.inference.continuation import solve as solve_with_continuation
-from cpas_ocp.io.flight_test import load_test
 from cpas_ocp.io.model_spec import baseline_spec
-from cpas_ocp.io.problems import load_problem
 from cpas_ocp.physics.effects import AddedMass, DeploymentLoad, Effect, SensorBias, SensorLag
 from cpas_ocp.physics.effects import baseline_effects as baseline
 from cpas_ocp.physics.effects.registry import load_plugin
@@ -80,14 +74,7 @@ def run(case: str, seed: int, root: Path) -> tuple[Discovery, list[float], float
     """The discovery of one case, the wall time of each step's diagnosis (s), and the
     baseline fit's (s)."""
     effects, values = cases()[case]
-    problem = load_problem("drogue")
-    folder = root / case
-    simulate_problem(dataclasses.replace(problem, truth={**problem.truth, **values}),
-                     folder, seed, effects=effects)
-    (folder / "truth.json").unlink()
-    t0 = time.perf_counter()
-    fit = solve_with_continuation(Estimator(load_test(folder), baseline_spec()))
-    t_fit = time.perf_counter() - t0
+    fit, t_fit = simulated_fit(effects, values, seed, root / case)
     print(f"[{case}] baseline fit {t_fit:.1f} s, chi-square/dof "
           f"{fit.chi_square / fit.dof:.3f}", flush=True)
     times: list[float] = []
