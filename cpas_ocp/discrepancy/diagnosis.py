@@ -118,6 +118,11 @@ class Diagnosis:
             self._stand_in[best.effect] = self._stand_in_reasons(best)
         return self._stand_in[best.effect]
 
+    def forget(self, effect: str) -> None:
+        """Drop what was judged of `effect`'s refit (after the refit was replaced)."""
+        self._stand_in.pop(effect, None)
+        self._implausible.pop(effect, None)
+
     def implausible(self, best: ScoreTest) -> list[str]:
         """The refit estimates of `best`'s effect that its declared plausible ranges
         (`Effect.plausible`) exclude, each in words; empty where none does.
@@ -153,7 +158,7 @@ class Diagnosis:
 
     def _stand_in_reasons(self, best: ScoreTest) -> list[str]:
         """`stand_in`, computed."""
-        reasons = self.implausible(best)
+        reasons = list(self.implausible(best))
         if best.refitted is not None:
             refit = best.refitted[1]
             level = self.departure_level
