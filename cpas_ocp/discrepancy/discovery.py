@@ -243,8 +243,10 @@ def from_reduction(diag: Diagnosis, best: ScoreTest, progress: bool = False) -> 
     fit = best.refitted[1]
     if fit.chi_square <= fit.dof + norm.isf(diag.alpha) * math.sqrt(2.0 * fit.dof):
         return
+    # The diagnosed fit's own iteration limit: a fit from the reduction is a fit, not a
+    # refit from next door (on the deployment load above it took more than 150).
     settings = dataclasses.replace(fit.settings, nodes=None, guess={}, free=None, fixed={},
-                                   limits={})
+                                   limits={}, max_iter=diag.fit.settings.max_iter)
     try:
         est = Estimator(fit.test, best.spec, settings)
         fresh = solve_with_continuation(est, progress)
