@@ -220,6 +220,20 @@ def next_step(diag: Diagnosis) -> DiscoveryStep | str:
     from_reduction(diag, best)
     implausible = diag.implausible(best)
     if implausible:
+        # The next confirmed effect whose estimates are plausible, if any: on `drogue` with
+        # a GPS lag and added mass hidden, fairlead friction of the wrong sign led the
+        # ranking after the lag, and added mass came next.
+        m = diag.family
+        for other in diag.effects:
+            if other is best or other.refit is None or other.refit.lower_bound \
+                    or other.refitted is None or other.spec is None \
+                    or not other.refit.p_value < diag.alpha / m:
+                continue
+            from_reduction(diag, other)
+            if not diag.implausible(other):
+                return DiscoveryStep(other.effect, other.spec, other.refitted[1],
+                                     f"{other.refit.text()}; {best.effect}, ranked above it, "
+                                     "is implausible", stand_in=diag.stand_in(other))
         return (f"{best.effect} fits part of the residual only with an implausible estimate "
                 f"({'; '.join(implausible)}): a stand-in, not added")
     return DiscoveryStep(best.effect, best.spec, best.refitted[1], best.refit.text(),
