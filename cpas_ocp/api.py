@@ -73,11 +73,11 @@ def reconstruct(test: FlightTest | str | Path, model: ModelSpec | str | Path | N
     from cpas_ocp.inference.continuation import solve_checked
     if not isinstance(test, FlightTest):
         test = load_test(test)
+    effects = load_plugins(plugins)
     spec = model if isinstance(model, ModelSpec) else (
-        spec_of_test(test) if model is None else load_model_file(model, load_plugins(plugins)))
+        spec_of_test(test) if model is None else load_model_file(model, effects))
     est, fit, claim = solve_checked(Estimator(test, spec))
-    return Reconstruction(est, fit, est.covariance(fit, rescale_sigmas), claim,
-                          load_plugins(plugins))
+    return Reconstruction(est, fit, est.covariance(fit, rescale_sigmas), claim, effects)
 
 
 @dataclass

@@ -308,12 +308,15 @@ def _model_option(s: argparse.ArgumentParser, model: bool = True, plugin: bool =
                         "folder (plug-ins are Python code run with your rights)")
 
 
-def _spec(test: FlightTest, args: argparse.Namespace) -> ModelSpec:
-    """The model of --model, else the manifest's, plug-ins contained as asked."""
+def _spec(test: FlightTest, args: argparse.Namespace,
+          plugins: dict[str, EffectType] | None = None) -> ModelSpec:
+    """The model of --model, else the manifest's, plug-ins contained as asked; `plugins`:
+    the effects of --plugin already loaded (else they are loaded here)."""
     from cpas_ocp.io.model_spec import load_model_file, spec_of_test
     allow = getattr(args, "allow_external_plugins", False)
     model = getattr(args, "model", None)
-    plugins = _plugins(args) if getattr(args, "plugin", None) else None
+    if plugins is None and getattr(args, "plugin", None):
+        plugins = _plugins(args)
     return load_model_file(model, plugins, allow) if model is not None else \
         spec_of_test(test, allow)
 
@@ -418,7 +421,7 @@ def _diagnose(args: argparse.Namespace) -> int:
     from cpas_ocp.reports.discrepancy_report import write_diagnosis
     test = load_test(args.test_dir)
     plugins = _plugins(args)
-    spec = _spec(test, args)
+    spec = _spec(test, args, plugins)
     est = _estimator(test, args, spec)
     print(f"solving: {est.size_text()} ...", flush=True)
     est, fit, cov, _ = _fit_and_covariance(est, args)
@@ -453,7 +456,7 @@ def _discover(args: argparse.Namespace) -> int:
     from cpas_ocp.reports.discrepancy_report import write_discovery
     test = load_test(args.test_dir)
     plugins = _plugins(args)
-    est = _estimator(test, args, _spec(test, args))
+    est = _estimator(test, args, _spec(test, args, plugins))
     print(f"solving: {est.size_text()} ...", flush=True)
     est, fit, _, claim = _fit_and_covariance(est, args)
 

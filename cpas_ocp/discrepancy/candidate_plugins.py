@@ -37,6 +37,7 @@ import numpy as np
 
 from cpas_ocp.discrepancy.diagnosis import Diagnosis
 from cpas_ocp.discrepancy.residual_diagnosis import PERIODICITY, Finding
+from cpas_ocp.discrepancy.signatures import Correlation
 from cpas_ocp.estimation.estimator import Fit
 from cpas_ocp.io.model_spec import ModelSpec
 
@@ -101,13 +102,23 @@ def _periodic(structure: list[Finding], fit: Fit) -> Proposal | None:
         frequency=f"{f0:.4f}", t_start=f"{t0:.3f}", t_end=end, reason=_wrap(reason)))
 
 
+def _strongest(structure: list[Finding], sensors: set[str] | None, signatures: tuple[str, ...]
+               ) -> tuple[Finding, Correlation] | None:
+    """The finding (of `sensors`, or of any sensor) and its significant correlation with a
+    signature of one of the kinds `signatures` that has the smallest p-value; None where
+    there is none."""
+    hits = [(f, c) for f in structure if sensors is None or f.sensor in sensors
+            for c in f.correlations
+            if c.signature in f.rejected and _base(c.signature) in signatures]
+    return min(hits, key=lambda h: h[1].p_value) if hits else None
+
+
 def _load_gain(structure: list[Finding], fit: Fit) -> Proposal | None:
     cells = {s.name for s in fit.test.sensors_of("load_cell")}
-    hits = [(f, c) for f in structure if f.sensor in cells for c in f.correlations
-            if c.signature in f.rejected and _base(c.signature) in LOAD_LEVEL]
-    if not hits:
+    hit = _strongest(structure, cells, LOAD_LEVEL)
+    if hit is None:
         return None
-    f, c = min(hits, key=lambda h: h[1].p_value)
+    f, c = hit
     q = fit.quantities()
     peaks = [float(np.max(np.abs(q[k]))) for k in q if _base(k) == "tension"]
     t_ref = _round_up(max(peaks, default=10_000.0))
@@ -118,11 +129,10 @@ def _load_gain(structure: list[Finding], fit: Fit) -> Proposal | None:
 
 
 def _wind_profile(structure: list[Finding], fit: Fit) -> Proposal | None:
-    hits = [(f, c) for f in structure for c in f.correlations
-            if c.signature in f.rejected and c.signature == "altitude"]
-    if not hits:
+    hit = _strongest(structure, None, ("altitude",))
+    if hit is None:
         return None
-    f, c = min(hits, key=lambda h: h[1].p_value)
+    f, c = hit
     h = fit.quantities()["altitude"]
     h0, span = float(h[0]), max(float(np.max(h) - np.min(h)), 1.0)
     reason = (f"{f.sensor} {f.channel} in {f.window} correlates with altitude "
