@@ -31,6 +31,7 @@ from cpas_ocp.discrepancy.residual_diagnosis import Finding, diagnose_residuals,
 from cpas_ocp.discrepancy.score_test import ScoreTest, confirm, confirmed_ranking, score_tests
 from cpas_ocp.discrepancy.wind_evidence import WindEvidence, wind_evidence
 from cpas_ocp.estimation.estimator import Fit
+from cpas_ocp.estimation.uncertainty import NonFiniteCurvature
 from cpas_ocp.inference.diagnostics import (
     WindowStatistic,
     departs,
@@ -149,7 +150,10 @@ class Diagnosis:
                    and not lo <= value <= hi}
         if outside and best.refitted is not None:
             est, refit = best.refitted
-            std = est.covariance(refit).std
+            try:
+                std = est.covariance(refit).std
+            except NonFiniteCurvature:  # no standard errors: the bare range decides
+                std = {}
             z = float(norm.isf(self.alpha / 2.0))
             outside = {name: v for name, v in outside.items()
                        if min(abs(v[0] - v[1]), abs(v[0] - v[2])) > z * std.get(name, 0.0)}
