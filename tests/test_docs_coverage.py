@@ -7,7 +7,11 @@ lists exactly the effect's constructor options (with the class's defaults where 
 page gives a number), and whose parameter table lists exactly the parameter bases the
 effect declares on the built-in problems, with their SI unit, their default (a number
 where the code's default is the same on every problem) and whether the fit estimates
-them by default.  A new effect, option or parameter without documentation fails here.
+them by default; the options agree with what `cpas-ocp effects` prints, and the page
+calls exactly its starred effects the baseline.  Every field of the manifest, series and
+model schemas, and every unit the converter accepts, is on the page too.  A new
+atmosphere, sensor kind, effect, option, parameter or field without documentation fails
+here.
 """
 
 from __future__ import annotations
@@ -21,10 +25,12 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from cpas_ocp.cli import main
 from cpas_ocp.io.flight_test import test_from_manifest as flight_test_from
 from cpas_ocp.io.problems import load_problem, problem_names
-from cpas_ocp.physics.effects.registry import BUILTIN, EffectType
+from cpas_ocp.physics.effects.registry import BASELINE, BUILTIN, EffectType
 from cpas_ocp.physics.parameters import Parameter, split_name
+from cpas_ocp.physics.units import FACTORS
 
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
@@ -102,10 +108,12 @@ def option_defaults(entry: EffectType) -> dict[str, object]:
 
 def problem_test(name: str):
     """The built-in problem's test, its series planned at 10 Hz and one observed event per
-    stage (a mortar fire, then a disreef into each later stage): enough for every effect
-    to declare its parameters, without simulating."""
+    stage (a mortar fire, then a disreef into each later stage) and the standard
+    atmosphere (no parameter depends on the air, and a table's file is not at hand):
+    enough for every effect to declare its parameters, without simulating."""
     problem = load_problem(name)
     manifest = json.loads(json.dumps(problem.manifest))
+    manifest["atmosphere"] = {"model": "standard"}
     manifest["events"] = [
         {"name": "mortar_fire" if k == 0 else "disreef", "parachute": c["name"],
          **({"stage": stage} if k else {}),
@@ -166,3 +174,50 @@ def test_each_effects_parameters_are_documented(name: str, declared) -> None:
             assert f"{next(iter(defaults)):g}" in re.findall(r"[-\d.]+", default), (name, base)
         free = {p.estimable and p.free_by_default for p in found}
         assert free == {estimated == "free"}, (name, base)
+
+
+def schema_fields(node: object, found: set[str] | None = None) -> set[str]:
+    """Every property name a JSON Schema (or part of one) defines, through allOf, items,
+    if/then and nested objects ($defs left out: they hold units, not fields)."""
+    found = set() if found is None else found
+    if isinstance(node, dict):
+        for key, child in node.items():
+            if key == "properties":
+                found.update(child)
+            if key != "$defs":
+                schema_fields(child, found)
+    elif isinstance(node, list):
+        for child in node:
+            schema_fields(child, found)
+    return found
+
+
+@pytest.mark.parametrize("schema", ["manifest.schema.json", "series.schema.json",
+                                    "model.schema.json"])
+def test_every_schema_field_is_documented(schema: str) -> None:
+    fields = schema_fields(json.loads((SCHEMAS / schema).read_text()))
+    # `value` and `unit` make every quantity; `$schema`-like keys are not fields.
+    missing = sorted(f for f in fields - {"value", "unit"} if f"`{f}`" not in PAGE.read_text())
+    assert not missing, f"docs/test-folder.md does not describe {missing} of {schema}"
+
+
+def test_every_unit_is_in_the_units_table() -> None:
+    listed = " ".join(" ".join(row) for row in table(PAGE.read_text(), "dimension"))
+    missing = sorted({f"{dim}: {u}" for dim, units in FACTORS.items() for u in units
+                      if u and f"`{u}`" not in listed})
+    assert not missing
+
+
+def test_the_page_matches_the_effects_command(capsys) -> None:
+    """`cpas-ocp effects` lists each effect with its options and marks the baseline set;
+    the page gives the same options and calls exactly the baseline effects Baseline."""
+    assert main(["effects"]) == 0
+    listing = capsys.readouterr().out
+    entries = re.findall(r"^([* ]) (\w+)\s.*\n\s+options: (.*)$", listing, re.MULTILINE)
+    assert [name for _, name, _ in entries] == list(BUILTIN)
+    page = PAGE.read_text()
+    for mark, name, options in entries:
+        text = section(page, f"### `{name}`")
+        listed = [r[0].strip("`") for r in table(text, "option")]
+        assert listed == ([] if options.strip() == "-" else options.split(", ")), name
+        assert ("Baseline." in text) == (mark == "*") == (name in BASELINE), name
