@@ -29,6 +29,7 @@ from cpas_ocp.errors import InputError
 from cpas_ocp.physics.atmosphere import (
     Atmosphere,
     SiteAtmosphere,
+    SoundingAtmosphere,
     StandardAtmosphere,
     TableAtmosphere,
 )
@@ -605,6 +606,11 @@ def _runs(rows: np.ndarray) -> str:
     return ", ".join(parts[:5]) + (" ..." if len(parts) > 5 else "")
 
 
+# Dimension of each column an atmosphere table may have beside altitude.
+TABLE_COLUMNS = {"density": "density", "pressure": "pressure", "temperature": "temperature",
+                 "wind_east": "velocity", "wind_north": "velocity"}
+
+
 def _load_atmosphere(mfile: str, folder: Path, spec: dict[str, Any]) -> Atmosphere:
     if spec["model"] == "standard":
         return StandardAtmosphere()
@@ -613,13 +619,37 @@ def _load_atmosphere(mfile: str, folder: Path, spec: dict[str, Any]) -> Atmosphe
         return SiteAtmosphere(_si(spec["elevation"], "length"), _si(spec["pressure"], "pressure"),
                               _si(spec["temperature"], "temperature"),
                               *([lapse] if lapse is not None else []))
-    dims = {"altitude": "length", "density": "density"}
-    dims.update({k: "velocity" for k in ("wind_east", "wind_north") if k in spec["columns"]})
-    data = read_series_table(folder / spec["file"], spec["columns"], dims)
-    if (data["density"] <= 0).any():
-        raise InputError(str(folder / spec["file"]), "density", "positive values")
-    return TableAtmosphere(data["altitude"], data["density"],
-                           data.get("wind_east"), data.get("wind_north"))
+    columns = spec["columns"]
+    given = [k for k in ("density", "pressure", "temperature") if k in columns]
+    if given in ([], ["pressure"]):
+        raise InputError(mfile, "atmosphere.columns", "a density or temperature column (with "
+                         "altitude; pressure alone gives no density)")
+    dims = {"altitude": "length", **{k: TABLE_COLUMNS[k] for k in columns if k != "altitude"}}
+    file = folder / spec["file"]
+    data = read_series_table(file, columns, dims)
+    for k in given:
+        if (data[k] <= 0).any():
+            raise InputError(str(file), k, "positive values")
+    winds = data.get("wind_east"), data.get("wind_north")
+    if given == ["density"]:
+        if "surface_pressure" in spec:
+            raise InputError(mfile, "atmosphere.surface_pressure", "a temperature column to "
+                             "integrate from it (a density table has no pressure)")
+        return TableAtmosphere(data["altitude"], data["density"], *winds)
+    if "pressure" in data:
+        if "surface_pressure" in spec:
+            raise InputError(mfile, "atmosphere.surface_pressure", "no surface pressure where "
+                             "the table has a pressure column")
+        if (np.diff(data["pressure"]) >= 0).any():
+            k = int(np.flatnonzero(np.diff(data["pressure"]) >= 0)[0])
+            raise InputError(str(file), "pressure", f"pressure falling with altitude; data row "
+                             f"{k + 2} ({data['pressure'][k + 1]:.6g} Pa) is not below row "
+                             f"{k + 1}")
+    base = _si(spec["surface_pressure"], "pressure") if "surface_pressure" in spec else None
+    return SoundingAtmosphere.from_profile(
+        data["altitude"], temperature_k=data.get("temperature"), pressure_pa=data.get("pressure"),
+        density_kg_m3=data.get("density"), base_pressure_pa=base,
+        wind_east_m_s=winds[0], wind_north_m_s=winds[1])
 
 
 def read_series_table(path: Path, units: dict[str, str],
