@@ -222,20 +222,25 @@ def descent_rates(fit: Fit, cov: Covariance) -> list[DescentRate]:
 def steady_descent_text(fit: Fit, cov: Covariance) -> str:
     """The markdown section on a steady descent (a test with a canopy open at its start):
     each canopy's steady drag area (per altitude band where it has bands) with the fit's
-    sigma, and the descent rates they imply against the altimeter's (`descent_rates`)."""
+    sigma and that sigma times sqrt(chi2/dof) (where the residuals exceed their stated
+    noise the fit's sigma is too small by that factor), and the descent rates they imply
+    against the altimeter's (`descent_rates`)."""
+    excess = float(np.sqrt(max(1.0, fit.chi_square / fit.dof)))
     lines = ["## Drag areas and steady descent rates", "",
-             "| canopy | parameter | altitudes (m MSL) | fitted (m²) | σ (m²) |",
-             "|---|---|---|---|---|"]
+             "| canopy | parameter | altitudes (m MSL) | fitted (m²) | fit's σ (m²) | "
+             f"σ × √(χ²/dof) = σ × {excess:.2f} |",
+             "|---|---|---|---|---|---|"]
     for chute in fit.test.parachutes:
         for band in chute.band_names or ("",):
             name = _steady_cds(fit, chute.name, band)
             lo, hi = chute.band_range(band) if band else (-np.inf, np.inf)
             span = ("all" if not band else f"below {hi:.0f}" if lo == -np.inf
                     else f"above {lo:.0f}" if hi == np.inf else f"{lo:.0f}-{hi:.0f}")
-            sd = ("held fixed" if name not in fit.free else "on a bound"
-                  if name in cov.at_bound else f"{cov.std.get(name, float('nan')):.2g}")
+            sd = cov.std.get(name, float("nan"))
+            sds = ("held fixed | " if name not in fit.free else "on a bound | "
+                   if name in cov.at_bound else f"{sd:.2g} | {excess * sd:.2g}")
             lines.append(f"| {chute.name} | {name} | {span} | {fit.parameters[name]:.4f} | "
-                         f"{sd} |")
+                         f"{sds} |")
     lines += ["", "| canopies open | band | window (s) | mean altitude (m MSL) | "
               "measured (m/s) | implied v = √(2W/(ρ CdS)) (m/s) | difference (σ) |",
               "|---|---|---|---|---|---|---|"]
