@@ -38,8 +38,9 @@ from cpas_ocp.estimation.stage_curve_fit import (
 )
 from cpas_ocp.io.flight_test import FlightTest, Parachute
 from cpas_ocp.physics.atmosphere import density_at, wind_at
+from cpas_ocp.physics.effects.canopy_inflation import steady_parameter_names
 from cpas_ocp.physics.model import Model
-from cpas_ocp.physics.parameters import param_name
+from cpas_ocp.physics.parameters import param_name, split_name
 from cpas_ocp.physics.units import G0
 
 SETTLE_S = 1.0  # time after a stage start before its drag area counts as steady (s)
@@ -47,13 +48,14 @@ SETTLE_S = 1.0  # time after a stage start before its drag area counts as steady
 
 @dataclass
 class Reduction:
-    """Offline drag areas (m^2) on the time base `t` (s).
+    """Offline drag areas (m^2) on the time base `t` (s), with the track's altitude (m).
 
     `cds_riser` holds each canopy's drag area from its load cell (Eq. 3), or,
     in a test without load cells, attributed from the total drag area.
     """
 
     t: np.ndarray
+    altitude: np.ndarray
     dynamic_pressure: np.ndarray
     airspeed: np.ndarray
     load_factor: np.ndarray
@@ -107,7 +109,7 @@ def reduce(test: FlightTest, starts: dict[tuple[str, str], float],
             scale[stage] = float(np.mean(cds_imu[sel]) / np.mean(riser_sum[sel]))
         else:
             scale[stage] = 1.0
-    return Reduction(t, q, airspeed, G, cds_imu, cds_riser, scale, windows)
+    return Reduction(t, pos[:, 2], q, airspeed, G, cds_imu, cds_riser, scale, windows)
 
 
 def _attributed_cds(test: FlightTest, starts: dict[tuple[str, str], float],
@@ -140,11 +142,14 @@ def _attributed_cds(test: FlightTest, starts: dict[tuple[str, str], float],
 
 def _steady_windows(test: FlightTest, starts: dict[tuple[str, str], float]
                     ) -> dict[str, tuple[float, float]]:
-    """Per stage name: from the last canopy's start + SETTLE_S to the first next start."""
+    """Per stage name: from the last canopy's start + SETTLE_S (from the start itself for a
+    canopy open at the phase's start) to the first next start."""
     stage_names = list(dict.fromkeys(s for c in test.parachutes for s in c.stages))
+    settle = {(c.name, s): 0.0 if c.open_at_start else SETTLE_S
+              for c in test.parachutes for s in c.stages}
     windows = {}
     for k, stage in enumerate(stage_names):
-        begin = max(t for (c, s), t in starts.items() if s == stage) + SETTLE_S
+        begin = max(t + settle[key] for key, t in starts.items() if key[1] == stage)
         later = [t for (c, s), t in starts.items() if s in stage_names[k + 1:]]
         end = min(later) if later else test.t_end
         windows[stage] = (begin, max(end, begin))
@@ -152,8 +157,10 @@ def _steady_windows(test: FlightTest, starts: dict[tuple[str, str], float]
 
 
 def stage_starts(test: FlightTest, values: dict[str, float]) -> dict[tuple[str, str], float]:
-    """Start time (s) of every canopy's every stage, keyed (canopy, stage), from `values`."""
-    return {(c.name, s): values[param_name("t_start", c.name, s)]
+    """Start time (s) of every canopy's every stage, keyed (canopy, stage), from `values`;
+    the phase's start for a canopy open at it."""
+    return {(c.name, s): test.t_start if c.open_at_start
+            else values[param_name("t_start", c.name, s)]
             for c in test.parachutes for s in c.stages}
 
 
@@ -192,6 +199,17 @@ def _fit_stage(test: FlightTest, red: Reduction, chute: Parachute, k: int,
     return fit_stage_curve(data)
 
 
+def _steady_names(test: FlightTest, red: Reduction, chute: Parachute, stage: str,
+                  steady: np.ndarray) -> list[tuple[str, tuple[float, float]]]:
+    """Each steady drag-area parameter of `chute`'s `stage` with the altitudes (m) it covers:
+    one per altitude band of a canopy open at the start (`steady_parameter_names`), else
+    the stage's CdS over all altitudes."""
+    if chute.open_at_start:
+        return [(name, chute.band_range(split_name(name)[1][-1]) if chute.band_names
+                 else (-np.inf, np.inf)) for name in steady_parameter_names(chute)]
+    return [(param_name("CdS", chute.name, stage), (-np.inf, np.inf))]
+
+
 def reduce_and_guess(test: FlightTest, model: Model, fixed: dict[str, float] | None = None
                      ) -> tuple[dict[str, float], Reduction]:
     """The initial guess and the reduction it came from (start times from the events).
@@ -217,13 +235,16 @@ def reduce_and_guess(test: FlightTest, model: Model, fixed: dict[str, float] | N
         for stage in chute.stages:
             a, b = red.stage_windows[stage]
             steady = (red.t >= a) & (red.t <= b)
-            cds = red.stage_scale.get(stage, 1.0) * float(np.median(curve[steady])) \
-                if steady.any() else 0.0
-            name = param_name("CdS", chute.name, stage)
             # The riser sees PRF*CdS (wake_deficit); the model's CdS is the free-stream one.
             prf = guess.get(param_name("prf", chute.name), 1.0)
-            if cds > 0 and name not in fixed:
-                guess[name] = cds / prf
+            for name, (lo, hi) in _steady_names(test, red, chute, stage, steady):
+                sel = steady & (red.altitude >= lo) & (red.altitude < hi)
+                cds = red.stage_scale.get(stage, 1.0) * float(np.median(curve[sel])) \
+                    if sel.any() else 0.0
+                if cds > 0 and name not in fixed:
+                    guess[name] = cds / prf
+        if chute.open_at_start:
+            continue  # no opening: nothing to fit but the steady drag areas
         for k in range(len(chute.stages)):
             shape = _fit_stage(test, red, chute, k, starts, guess, bounds, fixed)
             if shape is not None:

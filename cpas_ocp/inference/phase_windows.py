@@ -85,7 +85,8 @@ def phase_windows(fit: Fit) -> list[PhaseWindow]:
     parameters and drag areas; sorted by start time.
 
     A canopy without stages, or whose stages carry no start time (a model
-    without the `canopy_inflation` effect), has no windows.
+    without the `canopy_inflation` effect), has no windows; a canopy open at the
+    phase's start has one steady window, the whole phase.
     """
     q = fit.quantities()
     lo, hi = float(fit.t[0]), float(fit.t[-1])
@@ -97,12 +98,16 @@ def phase_windows(fit: Fit) -> list[PhaseWindow]:
 
 def _canopy_windows(fit: Fit, chute: Parachute, q: dict[str, np.ndarray], lo: float,
                     hi: float) -> list[PhaseWindow]:
+    out: list[PhaseWindow] = []
+    if chute.open_at_start:  # open and steady from the phase's start: one steady window
+        for stage in chute.stages:
+            _append(out, f"steady {chute.name} {stage}", "steady", chute.name, stage, lo, hi)
+        return out
     starts = [(s, fit.parameters[param_name("t_start", chute.name, s)]) for s in chute.stages
               if param_name("t_start", chute.name, s) in fit.parameters]
     if not starts:
         return []
     starts.sort(key=lambda st: st[1])
-    out: list[PhaseWindow] = []
     observed = [e.time for e in fit.test.events
                 if e.parachute == chute.name and e.name in DEPLOYMENT_EVENTS]
     deploy = min(observed) if observed else lo

@@ -16,6 +16,7 @@ import math
 from dataclasses import dataclass, field
 from functools import cache
 from importlib import resources
+from itertools import pairwise
 from pathlib import Path
 from typing import Any
 
@@ -28,6 +29,7 @@ from cpas_ocp.errors import InputError
 from cpas_ocp.physics.atmosphere import (
     Atmosphere,
     SiteAtmosphere,
+    SoundingAtmosphere,
     StandardAtmosphere,
     TableAtmosphere,
 )
@@ -71,7 +73,13 @@ class Vehicle:
 class Parachute:
     """One canopy: nominal diameter D_o (m), dry mass m_p (kg), its stages in order, and the
     suspension-line length L_s (m) where the manifest gives it (None otherwise; the model
-    does not use it: campaigns group drag areas by it, paper Tables 2-3)."""
+    does not use it: campaigns group drag areas by it, paper Tables 2-3).
+
+    `open_at_start`: the canopy is open and steady when the phase starts (a descent picked
+    up after its opening); it has one stage, no deployment event and no inflation curve,
+    only its steady drag area.  `altitude_bands` (m MSL, strictly increasing, only for such
+    a canopy): the altitudes at which that drag area changes, piecewise constant in
+    altitude, one value per band (`band_names`)."""
 
     name: str
     type: str
@@ -81,6 +89,21 @@ class Parachute:
     fill_length: str
     stages: tuple[str, ...]
     line_length: float | None = None
+    open_at_start: bool = False
+    altitude_bands: tuple[float, ...] = ()
+
+    @property
+    def band_names(self) -> tuple[str, ...]:
+        """Band labels, lowest first (band1 below the first edge); none without bands."""
+        if not self.altitude_bands:
+            return ()
+        return tuple(f"band{k + 1}" for k in range(len(self.altitude_bands) + 1))
+
+    def band_range(self, band: str) -> tuple[float, float]:
+        """Altitudes (m) bounding `band` (-inf below the lowest edge, inf above the top)."""
+        k = self.band_names.index(band)
+        edges = (-math.inf, *self.altitude_bands, math.inf)
+        return edges[k], edges[k + 1]
 
 
 @dataclass(frozen=True)
@@ -404,11 +427,17 @@ def test_from_manifest(manifest: dict[str, Any], folder: Path,
     for i, p in enumerate(manifest["parachutes"]):
         if len(set(p["stages"])) != len(p["stages"]):
             raise InputError(mfile, f"parachutes[{i}].stages", "stage names must be unique")
+        is_open = bool(p.get("open_at_start", False))
+        if is_open and len(p["stages"]) != 1:
+            raise InputError(mfile, f"parachutes[{i}].stages", "one stage for a canopy open "
+                             "at the start (its steady drag area)")
+        bands = _altitude_bands(mfile, f"parachutes[{i}].altitude_bands",
+                                p.get("altitude_bands", []), is_open)
         parachutes.append(Parachute(p["name"], p["type"], _si(p["diameter"], "length"),
                                     _si(p["dry_mass"], "mass"), p["inflation"],
                                     p.get("fill_length", "diameter"), tuple(p["stages"]),
                                     _si(p["line_length"], "length") if "line_length" in p
-                                    else None))
+                                    else None, is_open, bands))
     _unique(mfile, "parachutes", [p.name for p in parachutes])
     by_name = {p.name: p for p in parachutes}
 
@@ -439,6 +468,10 @@ def test_from_manifest(manifest: dict[str, Any], folder: Path,
         if e["name"] == "disreef" and stage is None:
             raise InputError(mfile, f"{where}.stage",
                              "a disreef event names the stage it opens into")
+        if by_name[e["parachute"]].open_at_start:
+            raise InputError(mfile, f"{where}.parachute", f"a canopy that deploys in the phase;"
+                             f" {e['parachute']} is open at the start (open_at_start), so it "
+                             "has no events")
         if e["name"] == "full_open" and stage is None:
             stage = by_name[e["parachute"]].stages[0]
         t = _si(e["time"], "time")
@@ -455,6 +488,20 @@ def test_from_manifest(manifest: dict[str, Any], folder: Path,
         t_start=t_start, t_end=t_end, description=manifest.get("description", ""),
         label=manifest.get("label", ""), manifest=manifest,
     )
+
+
+def _altitude_bands(mfile: str, where: str, given: list[Any], is_open: bool
+                    ) -> tuple[float, ...]:
+    """Band edges (m) of a canopy's drag area: numbers in m or {value, unit}, strictly
+    increasing, only for a canopy open at the start."""
+    if given and not is_open:
+        raise InputError(mfile, where, "altitude bands only for a canopy open at the start "
+                         "(open_at_start: true)")
+    edges = tuple(float(e) if isinstance(e, int | float) else _si(e, "length") for e in given)
+    if any(b <= a for a, b in pairwise(edges)):
+        raise InputError(mfile, where, f"strictly increasing altitudes; got "
+                         f"{', '.join(f'{e:g}' for e in edges)} m")
+    return edges
 
 
 def _unique(file: str, field_name: str, names: list[str]) -> None:
@@ -559,6 +606,11 @@ def _runs(rows: np.ndarray) -> str:
     return ", ".join(parts[:5]) + (" ..." if len(parts) > 5 else "")
 
 
+# Dimension of each column an atmosphere table may have beside altitude.
+TABLE_COLUMNS = {"density": "density", "pressure": "pressure", "temperature": "temperature",
+                 "wind_east": "velocity", "wind_north": "velocity"}
+
+
 def _load_atmosphere(mfile: str, folder: Path, spec: dict[str, Any]) -> Atmosphere:
     if spec["model"] == "standard":
         return StandardAtmosphere()
@@ -567,13 +619,37 @@ def _load_atmosphere(mfile: str, folder: Path, spec: dict[str, Any]) -> Atmosphe
         return SiteAtmosphere(_si(spec["elevation"], "length"), _si(spec["pressure"], "pressure"),
                               _si(spec["temperature"], "temperature"),
                               *([lapse] if lapse is not None else []))
-    dims = {"altitude": "length", "density": "density"}
-    dims.update({k: "velocity" for k in ("wind_east", "wind_north") if k in spec["columns"]})
-    data = read_series_table(folder / spec["file"], spec["columns"], dims)
-    if (data["density"] <= 0).any():
-        raise InputError(str(folder / spec["file"]), "density", "positive values")
-    return TableAtmosphere(data["altitude"], data["density"],
-                           data.get("wind_east"), data.get("wind_north"))
+    columns = spec["columns"]
+    given = [k for k in ("density", "pressure", "temperature") if k in columns]
+    if given in ([], ["pressure"]):
+        raise InputError(mfile, "atmosphere.columns", "a density or temperature column (with "
+                         "altitude; pressure alone gives no density)")
+    dims = {"altitude": "length", **{k: TABLE_COLUMNS[k] for k in columns if k != "altitude"}}
+    file = folder / spec["file"]
+    data = read_series_table(file, columns, dims)
+    for k in given:
+        if (data[k] <= 0).any():
+            raise InputError(str(file), k, "positive values")
+    winds = data.get("wind_east"), data.get("wind_north")
+    if given == ["density"]:
+        if "surface_pressure" in spec:
+            raise InputError(mfile, "atmosphere.surface_pressure", "a temperature column to "
+                             "integrate from it (a density table has no pressure)")
+        return TableAtmosphere(data["altitude"], data["density"], *winds)
+    if "pressure" in data:
+        if "surface_pressure" in spec:
+            raise InputError(mfile, "atmosphere.surface_pressure", "no surface pressure where "
+                             "the table has a pressure column")
+        if (np.diff(data["pressure"]) >= 0).any():
+            k = int(np.flatnonzero(np.diff(data["pressure"]) >= 0)[0])
+            raise InputError(str(file), "pressure", f"pressure falling with altitude; data row "
+                             f"{k + 2} ({data['pressure'][k + 1]:.6g} Pa) is not below row "
+                             f"{k + 1}")
+    base = _si(spec["surface_pressure"], "pressure") if "surface_pressure" in spec else None
+    return SoundingAtmosphere.from_profile(
+        data["altitude"], temperature_k=data.get("temperature"), pressure_pa=data.get("pressure"),
+        density_kg_m3=data.get("density"), base_pressure_pa=base,
+        wind_east_m_s=winds[0], wind_north_m_s=winds[1])
 
 
 def read_series_table(path: Path, units: dict[str, str],

@@ -10,7 +10,8 @@ A barometric altimeter reports the *pressure altitude*: the altitude at which
 the standard atmosphere has the measured pressure (`pressure_altitude`).  On a
 day that is not standard it differs from the geometric altitude by tens to
 hundreds of metres; a `SiteAtmosphere` built from the launch-site pressure and
-temperature turns one into the other.
+temperature, or a `SoundingAtmosphere` from a day-of-flight sounding, turns one
+into the other.
 """
 
 from __future__ import annotations
@@ -115,6 +116,118 @@ class TableAtmosphere:
         return self._wind(h)
 
 
+def hydrostatic_pressure(altitude_m: np.ndarray, temperature_k: np.ndarray,
+                         base_pressure_pa: float) -> np.ndarray:
+    """Pressure (Pa) at the rows of a temperature profile, integrated hydrostatically
+    upward from `base_pressure_pa` at its first row: dp/dh = -p g0 / (R T).
+
+    Temperature is taken linear in altitude between rows, for which each layer
+    integrates exactly: p2 = p1 (T2/T1)^(g0/(R L)) with lapse rate L = -(T2 - T1)/(h2 - h1),
+    or p2 = p1 exp(-g0 (h2 - h1) / (R T)) in an isothermal layer (|L| below 1e-9 K/m)."""
+    h = np.asarray(altitude_m, dtype=float)
+    temp = np.asarray(temperature_k, dtype=float)
+    p = np.empty_like(h)
+    p[0] = base_pressure_pa
+    for k in range(1, h.size):
+        dh = h[k] - h[k - 1]
+        lapse = -(temp[k] - temp[k - 1]) / dh
+        if abs(lapse) < 1e-9:
+            p[k] = p[k - 1] * np.exp(-G0 * dh / (R_AIR * temp[k - 1]))
+        else:
+            p[k] = float(_troposphere_pressure(h[k], h[k - 1], p[k - 1], temp[k - 1], lapse))
+    return p
+
+
+def _extrapolated_interp(x: np.ndarray, xp: np.ndarray, fp: np.ndarray) -> np.ndarray:
+    """Numeric piecewise-linear fp(xp) at x with the end segments extended (xp increasing):
+    what `_linear_function` evaluates, in numpy."""
+    x = np.asarray(x, dtype=float)
+    out = np.interp(x, xp, fp)
+    lo, hi = x < xp[0], x > xp[-1]
+    out[lo] = fp[0] + (x[lo] - xp[0]) * (fp[1] - fp[0]) / (xp[1] - xp[0])
+    out[hi] = fp[-1] + (x[hi] - xp[-1]) * (fp[-1] - fp[-2]) / (xp[-1] - xp[-2])
+    return out
+
+
+@dataclass(frozen=True)
+class SoundingAtmosphere:
+    """Day-of-flight profile with pressure: a sounding or reanalysis table.
+
+    Rows of altitude (m), pressure (Pa), temperature (K), density (kg/m^3) and
+    optionally wind (m/s).  Pressure is interpolated linearly in log(p) between
+    rows (exact in an isothermal layer; within (dh)^2 g0 L / (8 R T^2) of the
+    hydrostatic value in a layer of lapse rate L), density in log(rho) and wind
+    linearly (`TableAtmosphere`), the end segments extended beyond the table.
+    `from_profile` fills in what a sounding leaves out: pressure by hydrostatic
+    integration of the temperature, density from the gas law rho = p / (R T).
+    With pressure it serves a barometric altimeter.
+    """
+
+    altitude_m: np.ndarray
+    pressure_pa: np.ndarray
+    temperature_k: np.ndarray
+    density_kg_m3: np.ndarray
+    wind_east_m_s: np.ndarray | None = None
+    wind_north_m_s: np.ndarray | None = None
+    name: str = "table"
+    _table: TableAtmosphere = field(init=False, repr=False, compare=False)
+    _log_p: ca.Function = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "_table", TableAtmosphere(
+            self.altitude_m, self.density_kg_m3, self.wind_east_m_s, self.wind_north_m_s))
+        object.__setattr__(self, "_log_p", _linear_function(
+            "log_p", np.asarray(self.altitude_m, dtype=float),
+            np.log(np.asarray(self.pressure_pa, dtype=float))))
+
+    @classmethod
+    def from_profile(cls, altitude_m: np.ndarray, *, temperature_k: np.ndarray | None = None,
+                     pressure_pa: np.ndarray | None = None,
+                     density_kg_m3: np.ndarray | None = None,
+                     base_pressure_pa: float | None = None,
+                     wind_east_m_s: np.ndarray | None = None,
+                     wind_north_m_s: np.ndarray | None = None) -> SoundingAtmosphere:
+        """The profile from what a sounding gives, the rest by the gas law and hydrostatics.
+
+        Two of pressure, temperature and density give the third (p = rho R T).
+        Temperature alone gives pressure by `hydrostatic_pressure` from
+        `base_pressure_pa` at the first row (the standard atmosphere's pressure
+        there when not given), then density.  ValueError where too little is given.
+        """
+        h = np.asarray(altitude_m, dtype=float)
+        if pressure_pa is None and temperature_k is not None:
+            base = (float(StandardAtmosphere().pressure(h[0])) if base_pressure_pa is None
+                    else base_pressure_pa)
+            pressure_pa = hydrostatic_pressure(h, temperature_k, base)
+        if pressure_pa is None:
+            raise ValueError("a temperature or pressure profile (pressure needs one of them)")
+        p = np.asarray(pressure_pa, dtype=float)
+        if temperature_k is None and density_kg_m3 is None:
+            raise ValueError("a temperature or density profile beside the pressure")
+        temp = (p / (R_AIR * np.asarray(density_kg_m3, dtype=float)) if temperature_k is None
+                else np.asarray(temperature_k, dtype=float))
+        rho = p / (R_AIR * temp) if density_kg_m3 is None else np.asarray(density_kg_m3,
+                                                                          dtype=float)
+        return cls(h, p, temp, rho, wind_east_m_s, wind_north_m_s)
+
+    def pressure(self, h: ca.SX | ca.MX | float) -> ca.SX | ca.MX:
+        return ca.exp(self._log_p(h))
+
+    def density(self, h: ca.SX | ca.MX | float) -> ca.SX | ca.MX:
+        return self._table.density(h)
+
+    def wind(self, h: ca.SX | ca.MX | float) -> ca.SX | ca.MX:
+        return self._table.wind(h)
+
+    def altitude_at_pressure(self, p: np.ndarray | float) -> np.ndarray:
+        """Geometric altitude (m) at pressure `p` (Pa): the inverse of `pressure`, linear in
+        log(p) between rows and beyond them."""
+        log_p = np.log(np.asarray(self.pressure_pa, dtype=float))
+        return _extrapolated_interp(-np.log(np.atleast_1d(np.asarray(p, dtype=float))),
+                                    -log_p, np.asarray(self.altitude_m, dtype=float)
+                                    ).reshape(np.shape(p))
+
+
 @dataclass(frozen=True)
 class SiteAtmosphere:
     """Launch-site atmosphere: one tropospheric layer through the site's measured air.
@@ -160,7 +273,7 @@ class SiteAtmosphere:
                    lapse_rate_k_m)
 
 
-Atmosphere = StandardAtmosphere | TableAtmosphere | SiteAtmosphere
+Atmosphere = StandardAtmosphere | TableAtmosphere | SiteAtmosphere | SoundingAtmosphere
 
 
 def geometric_altitude(atmosphere: Atmosphere, p_altitude: np.ndarray) -> np.ndarray:
@@ -169,8 +282,8 @@ def geometric_altitude(atmosphere: Atmosphere, p_altitude: np.ndarray) -> np.nda
         G0 / (R_AIR * ISA_LAPSE_K_M))
     invert = getattr(atmosphere, "altitude_at_pressure", None)
     if invert is None:
-        raise TypeError("a barometric altitude needs a standard or site atmosphere (one with "
-                        "pressure)")
+        raise TypeError("a barometric altitude needs an atmosphere with pressure (standard, site, "
+                        "or a table with pressure or temperature)")
     return invert(p)
 
 

@@ -46,6 +46,7 @@ from cpas_ocp.io.flight_log import (
 from cpas_ocp.io.flight_test import Event, Parachute
 from cpas_ocp.io.model_spec import ModelSpec
 from cpas_ocp.physics.atmosphere import density_at
+from cpas_ocp.physics.effects.canopy_inflation import BAND_BLEND_M
 from cpas_ocp.physics.effects.wind_process import WindProcess
 from cpas_ocp.physics.parameters import param_name, split_name
 from cpas_ocp.physics.units import FACTORS, G0
@@ -60,7 +61,9 @@ HELD_PROFILE_MAX_ITER = 100  # Ipopt iterations of a held-profile point (held_op
 
 @dataclass(frozen=True)
 class DescentRate:
-    """Steady descent under the canopies open in [t0, t1] (s): rates in m/s (positive down)."""
+    """Steady descent under the canopies open in [t0, t1] (s): rates in m/s (positive down);
+    `band` names the altitude band of a canopy open at the start whose drag area applies
+    (empty without bands)."""
 
     canopies: tuple[str, ...]
     t0: float
@@ -70,6 +73,7 @@ class DescentRate:
     measured_sigma: float
     implied: float
     implied_sigma: float
+    band: str = ""
 
     @property
     def z(self) -> float:
@@ -100,12 +104,18 @@ class NominalComparison:
 
 
 def _phases(fit: Fit) -> list[tuple[tuple[str, ...], float, float]]:
-    """(canopies open, steady start, steady end) of each canopy phase, in deployment order."""
+    """(canopies open, steady start, steady end) of each canopy phase, in deployment order.
+
+    Canopies open at the phase's start make the first phase, steady from the start; a
+    canopy deployed in the phase counts as steady STEADY_AFTER_S after its start."""
     test = fit.test
-    starts = sorted((fit.parameters[param_name("t_start", c.name, c.stages[0])], c.name)
+    starts = sorted((test.t_start - STEADY_AFTER_S if c.open_at_start
+                     else fit.parameters[param_name("t_start", c.name, c.stages[0])], c.name)
                     for c in test.parachutes)
     out = []
     for k, (t0, _) in enumerate(starts):
+        if k + 1 < len(starts) and starts[k + 1][0] == t0:
+            continue  # opened together (at the phase's start): one phase
         t1 = starts[k + 1][0] - STEADY_BEFORE_S if k + 1 < len(starts) else test.t_end
         out.append((tuple(name for _, name in starts[:k + 1]), t0 + STEADY_AFTER_S, t1))
     return out
@@ -132,9 +142,13 @@ def steady_rate(fit: Fit, cds: float, altitude: float) -> float:
     return float(np.sqrt(2.0 * fit.test.weight / (rho * cds)))
 
 
-def _steady_cds(fit: Fit, canopy: str) -> str:
-    """Name of the steady drag area of `canopy` (its last stage)."""
-    return param_name("CdS", canopy, fit.test.parachute(canopy).stages[-1])
+def _steady_cds(fit: Fit, canopy: str, band: str = "") -> str:
+    """Name of the steady drag area of `canopy` (its last stage; in altitude `band` for a
+    canopy with bands)."""
+    chute = fit.test.parachute(canopy)
+    if chute.band_names:
+        return param_name("CdS", canopy, chute.stages[-1], band or chute.band_names[0])
+    return param_name("CdS", canopy, chute.stages[-1])
 
 
 def updraft_weights(fit: Fit, t0: float, t1: float) -> dict[str, float]:
@@ -153,11 +167,12 @@ def mean_updraft(fit: Fit, t0: float, t1: float) -> float:
 
 
 def _implied_rate(fit: Fit, cov: Covariance, canopies: tuple[str, ...], t0: float, t1: float,
-                  altitude: float) -> tuple[float, float]:
+                  altitude: float, band: str = "") -> tuple[float, float]:
     """Steady rate (m/s, down) over the ground the fitted drag areas give at `altitude` (m)
     in [t0, t1] (s), and its sigma: the rate through the air less the fitted mean updraft
-    there, which the drag areas trade against (their covariance counted)."""
-    names = [_steady_cds(fit, c) for c in canopies]
+    there, which the drag areas trade against (their covariance counted).  `band`: the
+    altitude band whose drag area a banded canopy among them has there."""
+    names = [_steady_cds(fit, c, band) for c in canopies]
     cds = sum(fit.parameters[n] for n in names) + fit.parameters.get("CdS_V", 0.0)
     v = steady_rate(fit, cds, altitude)
     weights = updraft_weights(fit, t0, t1)
@@ -168,16 +183,83 @@ def _implied_rate(fit: Fit, cov: Covariance, canopies: tuple[str, ...], t0: floa
     return v - mean_updraft(fit, t0, t1), float(np.sqrt(max(var, 0.0)))
 
 
-def descent_rates(fit: Fit, cov: Covariance) -> list[DescentRate]:
-    """Implied against measured steady descent rate under each canopy phase."""
+def _band_windows(fit: Fit, canopies: tuple[str, ...], t0: float, t1: float
+                  ) -> list[tuple[str, float, float]]:
+    """(band, start, end) (s) of [t0, t1] split where the altimeter crosses the altitude
+    bands of a banded canopy among `canopies` (away from each edge by BAND_BLEND_M, where
+    the drag area is that band's), in time order; [("", t0, t1)] without bands."""
+    chute = next((fit.test.parachute(c) for c in canopies if fit.test.parachute(c).band_names),
+                 None)
+    if chute is None:
+        return [("", t0, t1)]
+    t, h = altimeter_altitude(fit.test)
+    sel = (t >= t0) & (t <= t1)
     out = []
-    for canopies, t0, t1 in _phases(fit):
-        if t1 - t0 < 5.0:
-            continue
-        measured, m_sigma, altitude = _measured_rate(fit, t0, t1)
-        implied, i_sigma = _implied_rate(fit, cov, canopies, t0, t1, altitude)
-        out.append(DescentRate(canopies, t0, t1, altitude, measured, m_sigma, implied, i_sigma))
+    for band in chute.band_names:
+        lo, hi = chute.band_range(band)
+        inside = t[sel][(h[sel] > lo + BAND_BLEND_M) & (h[sel] < hi - BAND_BLEND_M)]
+        if inside.size:
+            out.append((band, float(inside[0]), float(inside[-1])))
+    return sorted(out, key=lambda w: w[1])
+
+
+def descent_rates(fit: Fit, cov: Covariance) -> list[DescentRate]:
+    """Implied against measured steady descent rate under each canopy phase (and in each
+    altitude band of a canopy open at the start that has bands), over windows of at least
+    5 s."""
+    out = []
+    for canopies, start, end in _phases(fit):
+        for band, t0, t1 in _band_windows(fit, canopies, start, end):
+            if t1 - t0 < 5.0:
+                continue
+            measured, m_sigma, altitude = _measured_rate(fit, t0, t1)
+            implied, i_sigma = _implied_rate(fit, cov, canopies, t0, t1, altitude, band)
+            out.append(DescentRate(canopies, t0, t1, altitude, measured, m_sigma, implied,
+                                   i_sigma, band))
     return out
+
+
+def steady_descent_text(fit: Fit, cov: Covariance) -> str:
+    """The markdown section on a steady descent (a test with a canopy open at its start):
+    each canopy's steady drag area (per altitude band where it has bands) with the fit's
+    sigma and that sigma times sqrt(chi2/dof) (where the residuals exceed their stated
+    noise the fit's sigma is too small by that factor), and the descent rates they imply
+    against the altimeter's (`descent_rates`)."""
+    excess = float(np.sqrt(max(1.0, fit.chi_square / fit.dof)))
+    lines = ["## Drag areas and steady descent rates", "",
+             "| canopy | parameter | altitudes (m MSL) | fitted (m²) | fit's σ (m²) | "
+             f"σ × √(χ²/dof) = σ × {excess:.2f} |",
+             "|---|---|---|---|---|---|"]
+    for chute in fit.test.parachutes:
+        for band in chute.band_names or ("",):
+            name = _steady_cds(fit, chute.name, band)
+            lo, hi = chute.band_range(band) if band else (-np.inf, np.inf)
+            span = ("all" if not band else f"below {hi:.0f}" if lo == -np.inf
+                    else f"above {lo:.0f}" if hi == np.inf else f"{lo:.0f}-{hi:.0f}")
+            sd = cov.std.get(name, float("nan"))
+            sds = ("held fixed | " if name not in fit.free else "on a bound | "
+                   if name in cov.at_bound else f"{sd:.2g} | {excess * sd:.2g}")
+            lines.append(f"| {chute.name} | {name} | {span} | {fit.parameters[name]:.4f} | "
+                         f"{sds} |")
+    lines += ["", "| canopies open | band | window (s) | mean altitude (m MSL) | "
+              "measured (m/s) | implied v = √(2W/(ρ CdS)) (m/s) | difference (σ) |",
+              "|---|---|---|---|---|---|---|"]
+    try:
+        rates = descent_rates(fit, cov)
+    except ValueError as exc:  # an altimeter too sparse for a window's line fit
+        rates = []
+        lines.append(f"| no descent rate: {exc} | | | | | | |")
+    for r in rates:
+        lines.append(f"| {' + '.join(r.canopies)} | {r.band or '-'} | {r.t0:.1f}-{r.t1:.1f} | "
+                     f"{r.altitude_m:.0f} | {r.measured:.2f} ± {r.measured_sigma:.2f} | "
+                     f"{r.implied:.2f} ± {r.implied_sigma:.2g} | {r.z:+.1f} |")
+    lines += ["", "The implied rate is drag equal to weight at the window's mean altitude, "
+              "its σ from the drag areas' covariance; the measured one a straight line "
+              "through the altimeter's geometric altitude, its σ counting the residuals' "
+              "autocorrelation. Falling into denser air the vehicle slows, so drag "
+              "exceeds weight and the measured rate exceeds the steady one by about "
+              "v³ |d ln ρ/dh| / (4 g) (0.06 m/s at 28 m/s near 2 km).", ""]
+    return "\n".join(lines)
 
 
 def rate_sigmas(fit: Fit, rates: list[DescentRate]) -> dict[str, float]:

@@ -19,6 +19,7 @@ from cpas_ocp.inference.profile_likelihood import Profile
 from cpas_ocp.io.output_folder import atomic_folder
 from cpas_ocp.physics.units import FT
 from cpas_ocp.reports.failure_report import RESULT_MARKERS
+from cpas_ocp.reports.flight_report import steady_descent_text
 from cpas_ocp.reports.plots import (
     plot_correlation,
     plot_drag_areas,
@@ -231,6 +232,8 @@ def write_report(fit: Fit, cov: Covariance | None, out: str | Path,
             f"{parameter_table(fit, cov)}\n\n{fit_summary(fit)}\n"
             + (f"{claim.text()}\n" if claim is not None else "") + "```\n\n"
             + (correlation_markdown(cov) if cov is not None else "")
+            + (steady_descent_text(fit, cov) + "\n" if cov is not None
+               and any(c.open_at_start for c in fit.test.parachutes) else "")
             + "".join(f"Profile likelihood, {p.text()}\n\n" for p in profiles)
             + "".join(f"![{p.stem}]({p.name})\n\n" for p in sorted(tmp.glob("*.png"))))
     return out

@@ -87,7 +87,10 @@ class AddedMass(Effect):
         v_air = -ctx.q["airspeed"] * ctx.q["drag_direction"]
         for chute in ctx.test.parachutes:
             cds = ctx.q[param_name("cds", chute.name)]
-            cds_o = ctx.p[param_name("CdS", chute.name, chute.stages[-1])]
+            # Full open: the last stage's drag area, or the current one of a canopy open at
+            # the start (steady, possibly banded in altitude).
+            cds_o = cds if chute.open_at_start else ctx.p[param_name("CdS", chute.name,
+                                                                     chute.stages[-1])]
             diameter = PROJECTED_RATIO * chute.diameter * ca.sqrt((cds + CDS_FLOOR) / cds_o)
             m_a = (ctx.p[param_name("added_mass_factor", chute.name)] * ctx.q["density"]
                    * math.pi * diameter**3 * (K_ENCLOSED / 12.0 + K_APPARENT / 8.0))

@@ -18,6 +18,14 @@ its peak or full fill; the first stage also covers the time before
 inflation).  Handing over through the rise rather than at t_i keeps every
 prediction smooth in t_i: a gain that jumped at t_i would let a few samples
 around the jump set the start time to a precision the data do not hold.
+
+A canopy open at the start of the phase (`Parachute.open_at_start`: a steady
+descent picked up after the opening) has neither start time nor shape: its
+drag area is the steady CdS (m^2) throughout, or, with altitude bands, one
+steady value per band, ``CdS[P,S,band1]`` (lowest) and up, handed from one
+to the next along a C2 smoothstep over +-BAND_BLEND_M about each edge (a
+step would make the dynamics discontinuous in altitude and the fit
+non-smooth).
 """
 
 from __future__ import annotations
@@ -55,6 +63,27 @@ MIN_START_AIRSPEED = 0.01
 # Ringsails reach about 0.9 and hobby-rocket canopies are sold at Cd 1.5-2.2; a
 # fitted system drag area also carries what hangs under the canopy.
 MAX_CD = 3.0
+# Half-width (m) of the blend between a canopy's drag areas in adjacent altitude bands.
+BAND_BLEND_M = 10.0
+
+
+def steady_parameter_names(chute: Parachute) -> tuple[str, ...]:
+    """The steady drag-area parameters of a canopy open at the start: ``CdS[P,S]``, or one
+    ``CdS[P,S,band]`` per altitude band (lowest first)."""
+    stage = chute.stages[-1]
+    if chute.band_names:
+        return tuple(param_name("CdS", chute.name, stage, b) for b in chute.band_names)
+    return (param_name("CdS", chute.name, stage),)
+
+
+def banded_cds(altitude: ca.SX | float, edges: tuple[float, ...],
+               values: list[ca.SX | float]) -> ca.SX:
+    """Drag area (m^2) piecewise constant in altitude (m): values[k] between edges k-1 and
+    k, each edge blended over +-BAND_BLEND_M by a C2 smoothstep."""
+    cds = values[0]
+    for edge, below, above in zip(edges, values, values[1:], strict=False):
+        cds = cds + (above - below) * smoothstep((altitude - edge) / BAND_BLEND_M)
+    return cds
 
 
 @dataclass(frozen=True)
@@ -93,6 +122,14 @@ class CanopyInflation(Effect):
         out = []
         for chute in test.parachutes:
             s_o = math.pi * chute.diameter**2 / 4.0
+            if chute.open_at_start:
+                out += [Parameter(name, "m^2", 0.5 * s_o, 1e-3 * s_o, MAX_CD * s_o,
+                                  description="steady drag area of the open canopy"
+                                  + (f" in altitude {split_name(name)[1][-1]}"
+                                     if chute.band_names else ""),
+                                  scale=0.5 * s_o, physical_lower=True)
+                        for name in steady_parameter_names(chute)]
+                continue
             n_stages = len(chute.stages)
             for k, stage in enumerate(chute.stages):
                 idx = (chute.name, stage)
@@ -144,14 +181,14 @@ class CanopyInflation(Effect):
     def captures(self, test: FlightTest) -> list[Capture]:
         return [Capture(param_name("V_start", c.name, s), param_name("t_start", c.name, s),
                         "airspeed", "m/s", lower=MIN_START_AIRSPEED)
-                for c in test.parachutes for s in c.stages]
+                for c in test.parachutes if not c.open_at_start for s in c.stages]
 
     def event_timings(self, test: FlightTest) -> list[EventTiming]:
         """A stage is full open (finite mass) or at its peak area (infinite mass) at
         ``rise_end`` = t_i + t_f: an observed ``full_open`` measures the start time and
         fill constant together."""
         return [EventTiming("full_open", c.name, s, time=param_name("rise_end", c.name, s))
-                for c in test.parachutes for s in c.stages]
+                for c in test.parachutes if not c.open_at_start for s in c.stages]
 
     @staticmethod
     def observed_start(test: FlightTest, chute: Parachute, k: int) -> float:
@@ -176,61 +213,73 @@ class CanopyInflation(Effect):
                          f"{stage})")
 
     def forces(self, ctx: ModelContext) -> None:
-        t, p = ctx.t, ctx.p
         for chute in ctx.test.parachutes:
-            cds_o = p[param_name("CdS", chute.name, chute.stages[-1])]
-            starts = [p[param_name("t_start", chute.name, s)] for s in chute.stages]
-            started = [stage_started(t, start) for start in starts]
-            # The inputs of each stage's law (Eq. 5, and Eq. 6 for infinite mass).
-            laws: list[dict[str, ca.SX]] = []
-            # Weight with which each stage's sensor gains apply: 1 before the next
-            # stage starts, handing over smoothly through the next stage's rise.
-            arrivals: list[ca.SX] = []
-            prev = ca.SX(0.0)
-            for k, stage in enumerate(chute.stages):
-                idx = (chute.name, stage)
-                steady = p[param_name("CdS", *idx)]
-                law = {"t_start": starts[k], "cds_prev": prev, "cds": steady,
-                       "expopen": p[param_name("expopen", *idx)],
-                       "length": fill_length(chute.fill_length, chute.diameter, prev, steady,
-                                             cds_o),
-                       "v_start": ctx.c[param_name("V_start", *idx)]}
-                if chute.inflation == "infinite_mass":
-                    law |= {"ck": p[param_name("Ck", *idx)], "n_p": p[param_name("n_p", *idx)],
-                            "t_k": p[param_name("t_k", *idx)]}
-                    constant = law["n_p"]
-                else:
-                    law["n"] = p[param_name("n", *idx)]
-                    constant = law["n"]
-                rise = fill_time(constant, law["length"], law["v_start"])
-                ctx.q[param_name("rise_end", *idx)] = starts[k] + rise
-                laws.append(law)
-                prev = steady
-                arrivals.append(1.0 if k == 0 else
-                                smoothstep(2.0 * (t - starts[k]) / rise - 1.0))
-            # The curve of the last stage started applies.  Its inputs are selected
-            # first and the law evaluated once: selecting whole curves would evaluate
-            # every stage's law (and its derivatives) at every time, although only one
-            # ever applies; the value and every derivative are the same.
-            current = laws[0]
-            for k in range(1, len(laws)):
-                current = {key: ca.if_else(started[k], value, current[key])
-                           for key, value in laws[k].items()}
-            curve = (infinite_mass_cds(t, **current) if chute.inflation == "infinite_mass"
-                     else finite_mass_cds(t, **current))
-            any_started = started[0]
-            for flag in started[1:]:
-                any_started = ca.logic_or(any_started, flag)
-            cds = ca.if_else(any_started, curve, 0.0)
-            # reached[k]: how far the canopy has come into stage k (a product, so that
-            # the weights below sum to one even when a stage starts before the rise
-            # of the previous one has ended).
-            reached = [arrivals[0]]
-            for a in arrivals[1:]:
-                reached.append(reached[-1] * a)
-            reached.append(0.0)
-            for k, stage in enumerate(chute.stages):
-                ctx.q[param_name("stage_weight", chute.name, stage)] = reached[k] - reached[k + 1]
+            if chute.open_at_start:
+                values = [ctx.p[n] for n in steady_parameter_names(chute)]
+                cds = banded_cds(ctx.x["position"][2], chute.altitude_bands, values)
+                ctx.q[param_name("stage_weight", chute.name, chute.stages[0])] = ca.SX(1.0)
+            else:
+                cds = self._inflating_cds(ctx, chute)
             ctx.q[param_name("cds", chute.name)] = cds
             ctx.q[param_name("drag", chute.name)] = (
                 cds * ctx.q["dynamic_pressure"] * ctx.q["drag_direction"])
+
+    @staticmethod
+    def _inflating_cds(ctx: ModelContext, chute: Parachute) -> ca.SX:
+        """Drag area (m^2) of a canopy deploying in the phase, through its stages' curves;
+        writes each stage's ``rise_end`` and ``stage_weight``."""
+        t, p = ctx.t, ctx.p
+        cds_o = p[param_name("CdS", chute.name, chute.stages[-1])]
+        starts = [p[param_name("t_start", chute.name, s)] for s in chute.stages]
+        started = [stage_started(t, start) for start in starts]
+        # The inputs of each stage's law (Eq. 5, and Eq. 6 for infinite mass).
+        laws: list[dict[str, ca.SX]] = []
+        # Weight with which each stage's sensor gains apply: 1 before the next
+        # stage starts, handing over smoothly through the next stage's rise.
+        arrivals: list[ca.SX] = []
+        prev = ca.SX(0.0)
+        for k, stage in enumerate(chute.stages):
+            idx = (chute.name, stage)
+            steady = p[param_name("CdS", *idx)]
+            law = {"t_start": starts[k], "cds_prev": prev, "cds": steady,
+                   "expopen": p[param_name("expopen", *idx)],
+                   "length": fill_length(chute.fill_length, chute.diameter, prev, steady,
+                                         cds_o),
+                   "v_start": ctx.c[param_name("V_start", *idx)]}
+            if chute.inflation == "infinite_mass":
+                law |= {"ck": p[param_name("Ck", *idx)], "n_p": p[param_name("n_p", *idx)],
+                        "t_k": p[param_name("t_k", *idx)]}
+                constant = law["n_p"]
+            else:
+                law["n"] = p[param_name("n", *idx)]
+                constant = law["n"]
+            rise = fill_time(constant, law["length"], law["v_start"])
+            ctx.q[param_name("rise_end", *idx)] = starts[k] + rise
+            laws.append(law)
+            prev = steady
+            arrivals.append(1.0 if k == 0 else
+                            smoothstep(2.0 * (t - starts[k]) / rise - 1.0))
+        # The curve of the last stage started applies.  Its inputs are selected
+        # first and the law evaluated once: selecting whole curves would evaluate
+        # every stage's law (and its derivatives) at every time, although only one
+        # ever applies; the value and every derivative are the same.
+        current = laws[0]
+        for k in range(1, len(laws)):
+            current = {key: ca.if_else(started[k], value, current[key])
+                       for key, value in laws[k].items()}
+        curve = (infinite_mass_cds(t, **current) if chute.inflation == "infinite_mass"
+                 else finite_mass_cds(t, **current))
+        any_started = started[0]
+        for flag in started[1:]:
+            any_started = ca.logic_or(any_started, flag)
+        cds = ca.if_else(any_started, curve, 0.0)
+        # reached[k]: how far the canopy has come into stage k (a product, so that
+        # the weights below sum to one even when a stage starts before the rise
+        # of the previous one has ended).
+        reached = [arrivals[0]]
+        for a in arrivals[1:]:
+            reached.append(reached[-1] * a)
+        reached.append(0.0)
+        for k, stage in enumerate(chute.stages):
+            ctx.q[param_name("stage_weight", chute.name, stage)] = reached[k] - reached[k + 1]
+        return cds

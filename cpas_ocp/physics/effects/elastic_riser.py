@@ -125,7 +125,8 @@ class ElasticRiser(Effect):
         when the canopy is still packed then (its first stage starts later)."""
         out = []
         for c in test.parachutes:
-            packed = CanopyInflation.observed_start(test, c, 0) > test.t_start + PACKED_MARGIN_S
+            packed = not c.open_at_start and \
+                CanopyInflation.observed_start(test, c, 0) > test.t_start + PACKED_MARGIN_S
             out += [State(param_name("stretch", c.name), 1, "m", 0.1, pinned=packed),
                     State(param_name("stretch_rate", c.name), 1, "m/s", 1.0, pinned=packed)]
         return out
@@ -153,7 +154,9 @@ class ElasticRiser(Effect):
             zeta = ctx.p[param_name("riser_damping_ratio", chute.name)]
             linear = chute.dry_mass * omega * (omega * s + 2.0 * zeta * s_dot)
             pulled = tension_only(linear)
-            t_deploy = ctx.p[param_name("t_start", chute.name, chute.stages[0])]
+            # A canopy open at the phase's start has its riser released throughout.
+            t_deploy = (ctx.test.t_start - DEPLOY_S if chute.open_at_start
+                        else ctx.p[param_name("t_start", chute.name, chute.stages[0])])
             released = smoothstep(2.0 * (ctx.t - t_deploy) / DEPLOY_S - 1.0)
             ctx.q[param_name("riser_force", chute.name)] = (
                 (1.0 - released) * linear + released * pulled)

@@ -80,8 +80,9 @@ class BaroSensor(Effect):
         atm = ctx.test.atmosphere
         if not hasattr(atm, "pressure"):
             raise InputError(str(ctx.test.path or "manifest"), "atmosphere.model",
-                             "'standard' or 'site' for a barometric altimeter (the table "
-                             "atmosphere has no pressure)")
+                             "'standard', 'site', or a table with a temperature or "
+                             "pressure column, for a barometric altimeter (a density table "
+                             "has no pressure)")
         h_p = pressure_altitude(atm.pressure(ctx.x["position"][2]))
         for s in sensors:
             ctx.y[s.name] = {"altitude": h_p}
