@@ -108,7 +108,8 @@ def option_defaults(entry: EffectType) -> dict[str, object]:
 
 def problem_test(name: str):
     """The built-in problem's test, its series planned at 10 Hz and one observed event per
-    stage (a mortar fire, then a disreef into each later stage) and the standard
+    stage of a canopy that deploys in the phase (a mortar fire, then a disreef into each
+    later stage; a canopy open at the start has none) and the standard
     atmosphere (no parameter depends on the air, and a table's file is not at hand):
     enough for every effect to declare its parameters, without simulating."""
     problem = load_problem(name)
@@ -118,7 +119,8 @@ def problem_test(name: str):
         {"name": "mortar_fire" if k == 0 else "disreef", "parachute": c["name"],
          **({"stage": stage} if k else {}),
          "time": {"value": 1.0 + 2.0 * k, "unit": "s"}, "sigma": {"value": 0.1, "unit": "s"}}
-        for c in manifest["parachutes"] for k, stage in enumerate(c["stages"])]
+        for c in manifest["parachutes"] if not c.get("open_at_start")
+        for k, stage in enumerate(c["stages"])]
     t_end = float(problem.simulation["t_end"])
     series = {s["name"]: pd.DataFrame({"time": np.arange(0.0, t_end, 0.1)})
               for s in manifest["sensors"]}
