@@ -759,6 +759,9 @@ def _estimator(test: FlightTest, args: argparse.Namespace, spec: ModelSpec) -> E
     est = Estimator(test, spec, settings=Settings(grid_step=args.grid_step,
                                                   verbose=args.verbose, max_iter=args.max_iter))
     print(f"  {grid_text(est.t)}", flush=True)
+    if est.unfitted:
+        print(f"warning: no effect of the model predicts sensor(s) {', '.join(est.unfitted)}: "
+              "their data are not fitted", file=sys.stderr)
     return est
 
 

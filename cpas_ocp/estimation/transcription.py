@@ -33,7 +33,7 @@ from cpas_ocp.estimation.reduction import initial_guess
 from cpas_ocp.estimation.shooting_grid import TimeWindow, dynamics_grid, stable_refinement
 from cpas_ocp.estimation.simulate import rk4_step, simulate
 from cpas_ocp.io.flight_test import FlightTest
-from cpas_ocp.io.model_spec import ModelSpec, spec_from_effects, spec_of_test
+from cpas_ocp.io.model_spec import ModelSpec, spec_from_effects, spec_of_test, unfitted_sensors
 from cpas_ocp.physics.effects import Effect
 from cpas_ocp.physics.model import CORE_STATES, timing_label
 
@@ -167,6 +167,7 @@ class NlpTranscription:
         else:
             self.spec = spec_from_effects(effects)
         self.model = self.spec.model(test)
+        self.unfitted = unfitted_sensors(test, self.model)
         m, s = self.model, self.settings
         names = m.parameter_names
         if s.free is None:

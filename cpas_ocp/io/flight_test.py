@@ -241,7 +241,11 @@ def validate_block(obj: Any, schema: str, file: str, prefix: str = "") -> None:
     """
     schemas, registry = _schema_registry()
     validator = jsonschema.Draft202012Validator(schemas[schema], registry=registry)
-    error = jsonschema.exceptions.best_match(validator.iter_errors(obj))
+    errors = list(validator.iter_errors(obj))
+    # A field a subschema rejects is also "unevaluated" to the block that refuses unknown
+    # fields: name the subschema's reason, and an unknown field only where it is the only one.
+    error = jsonschema.exceptions.best_match(
+        [e for e in errors if e.validator != "unevaluatedProperties"] or errors)
     if error is not None:
         # Descend to the most specific cause so the message names the leaf field.
         while error.context:
@@ -624,6 +628,9 @@ def _load_atmosphere(mfile: str, folder: Path, spec: dict[str, Any]) -> Atmosphe
     if given in ([], ["pressure"]):
         raise InputError(mfile, "atmosphere.columns", "a density or temperature column (with "
                          "altitude; pressure alone gives no density)")
+    if ("wind_east" in columns) != ("wind_north" in columns):
+        raise InputError(mfile, "atmosphere.columns", "both wind_east and wind_north for a "
+                         "wind (a horizontal wind has two components), or neither")
     dims = {"altitude": "length", **{k: TABLE_COLUMNS[k] for k in columns if k != "altitude"}}
     file = folder / spec["file"]
     data = read_series_table(file, columns, dims)

@@ -41,7 +41,13 @@ from cpas_ocp.errors import InputError
 from cpas_ocp.io.flight_test import MANIFEST, FlightTest, read_json, validate_block
 from cpas_ocp.physics.effects import baseline_effects
 from cpas_ocp.physics.effects.base import Effect
-from cpas_ocp.physics.effects.registry import BASELINE, BUILTIN, EffectType, load_plugin
+from cpas_ocp.physics.effects.registry import (
+    BASELINE,
+    BUILTIN,
+    SENSOR_EFFECTS,
+    EffectType,
+    load_plugin,
+)
 from cpas_ocp.physics.model import Model
 from cpas_ocp.physics.units import FACTORS
 
@@ -202,11 +208,32 @@ def spec_from_block(block: dict[str, Any] | None, file: str, base_dir: Path,
 
 
 def spec_of_test(test: FlightTest, allow_external: bool = False) -> ModelSpec:
-    """The model a test folder's manifest declares (the baseline when it declares none);
-    `allow_external` as in `spec_from_block`."""
+    """The model a test folder's manifest declares; where it declares none, the baseline
+    with the measurement effect of every sensor kind the test has (an altimeter-only log
+    is fitted to its altimeter); `allow_external` as in `spec_from_block`."""
     base = test.path if test.path is not None else Path()
-    return spec_from_block(test.manifest.get("model"), str(base / MANIFEST), base,
-                           allow_external=allow_external)
+    block = test.manifest.get("model")
+    if block is None:
+        kinds = dict.fromkeys(s.kind for s in test.sensors)
+        extra = [SENSOR_EFFECTS[k] for k in kinds if SENSOR_EFFECTS[k] not in BASELINE]
+        return ModelSpec((*baseline_effects(),
+                          *(BUILTIN[n].build({}, "(baseline)", n) for n in extra)))
+    return spec_from_block(block, str(base / MANIFEST), base, allow_external=allow_external)
+
+
+def unfitted_sensors(test: FlightTest, model: Model) -> list[str]:
+    """The test's sensors that no effect of `model` predicts (their data are not fitted).
+
+    Raises InputError naming the manifest's model block where that is every sensor: a fit
+    to no data is no reconstruction."""
+    out = [s.name for s in test.sensors if s.name not in model.outputs]
+    if out and len(out) == len(test.sensors):
+        base = test.path if test.path is not None else Path()
+        wanted = sorted({SENSOR_EFFECTS[s.kind] for s in test.sensors})
+        raise InputError(str(base / MANIFEST), "model.effects",
+                         f"an effect that predicts the sensors' readings ({', '.join(wanted)}); "
+                         f"no effect listed predicts any of {', '.join(out)}")
+    return out
 
 
 def load_model_file(path: str | Path, plugins: dict[str, EffectType] | None = None,

@@ -139,6 +139,11 @@ BUILTIN: dict[str, EffectType] = _builtin()
 BASELINE = ("canopy_inflation", "forebody_drag", "rigid_riser", "drag_scale", "loadcell_scale",
             "gps", "imu", "load_cell")
 
+# The effect that predicts each sensor kind's readings (its measurement model).
+SENSOR_EFFECTS = {"gps": "gps", "imu_load_factor": "imu", "load_cell": "load_cell",
+                  "baro": "baro", "gps_altitude": "gps_altitude",
+                  "axial_accelerometer": "axial_accelerometer"}
+
 
 def load_plugin(path: Path) -> dict[str, EffectType]:
     """The `Effect` subclasses defined in the Python file `path`, by their `name`.
