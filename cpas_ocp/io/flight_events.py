@@ -76,14 +76,15 @@ def _running_median(t: np.ndarray, x: np.ndarray, window_s: float) -> np.ndarray
     return pd.Series(x).rolling(n, center=True, min_periods=1).median().to_numpy()
 
 
-def _spikes(t: np.ndarray, x: np.ndarray, floor: float) -> np.ndarray:
-    """Times of the samples further than SPIKE_SIGMAS robust sigmas (and `floor`) off the
-    running median over SMOOTH_S."""
-    if t.size < 10:
+def _spikes(t: np.ndarray, x: np.ndarray, floor: float, within: np.ndarray) -> np.ndarray:
+    """Times of the samples `within` further than SPIKE_SIGMAS robust sigmas (there) and
+    `floor` off the running median over SMOOTH_S (taken over the whole series, so that the
+    search window's edges see both sides)."""
+    if within.sum() < 10:
         return np.empty(0)
-    r = x - _running_median(t, x, SMOOTH_S)
+    r = (x - _running_median(t, x, SMOOTH_S))[within]
     scatter = 1.4826 * float(np.median(np.abs(r - np.median(r))))
-    return t[np.abs(r) > max(SPIKE_SIGMAS * scatter, floor)]
+    return t[within][np.abs(r) > max(SPIKE_SIGMAS * scatter, floor)]
 
 
 def detect_events(samples: pd.DataFrame) -> tuple[dict[str, FlightEvent], list[str]]:
@@ -124,8 +125,8 @@ def detect_events(samples: pd.DataFrame) -> tuple[dict[str, FlightEvent], list[s
     t_stop = down.time - HOLD_S if down is not None else float(tb[-1])
     lo = start + (AFTER_BURNOUT_S if "coast" in events else 0.0)
     in_a, in_b = (ta >= lo) & (ta < t_stop), (tb >= lo) & (tb < t_stop)
-    jolts = _spikes(ta[in_a], a[in_a], SPIKE_MIN_G * G0)
-    pulses = _spikes(tb[in_b], h[in_b], PULSE_MIN_M)
+    jolts = _spikes(ta, a, SPIKE_MIN_G * G0, in_a)
+    pulses = _spikes(tb, h, PULSE_MIN_M, in_b)
     charges = _ejections(jolts, pulses, dta, dtb)
     for name, event in zip(("drogue", "main"), charges, strict=False):
         events[name] = event

@@ -23,6 +23,7 @@ The record holds, on one time base (s):
 
 from __future__ import annotations
 
+import csv
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -30,7 +31,7 @@ import numpy as np
 import pandas as pd
 
 from cpas_ocp.errors import InputError
-from cpas_ocp.physics.atmosphere import pressure_altitude
+from cpas_ocp.physics.atmosphere import StandardAtmosphere, pressure_altitude
 from cpas_ocp.physics.units import G0
 
 SAMPLE_COLUMNS = ("time", "pressure", "altitude", "acceleration")
@@ -152,3 +153,53 @@ def _boost_axis(path: str, si: np.ndarray, field_name: str) -> tuple[float, int]
                          "samples); give the axis and sign instead")
     k = int(np.nanargmax(best))
     return (1.0 if held_up[k] >= held_down[k] else -1.0), k
+
+
+def pressure_of_altitude(altitude_m: np.ndarray) -> np.ndarray:
+    """Pressure (Pa) whose pressure altitude is `altitude_m` (m): the inverse of
+    `pressure_altitude`, for loggers that write the altitude and not the pressure."""
+    return np.asarray(StandardAtmosphere().pressure(np.asarray(altitude_m, float)),
+                      float).ravel()
+
+
+def read_table(path: Path, what: str, sep: str | None = None, skip_rows: int = 0
+               ) -> pd.DataFrame:
+    """A CSV table with a header row (after `skip_rows` lines), every column kept as text
+    stripped of padding; `sep` None sniffs the delimiter (comma, semicolon, tab).
+    InputError naming the file for a missing, unreadable or empty one; `what` says what
+    the file should have been."""
+    if not path.is_file():
+        raise InputError(str(path), "(file)", f"an existing {what}")
+    try:
+        table = pd.read_csv(path, sep=sep, engine="python", skiprows=skip_rows, dtype=str,
+                            skipinitialspace=True, encoding="utf-8-sig")
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError,
+            csv.Error) as exc:
+        raise InputError(str(path), "(csv)", f"a {what} with a header row ({exc})") from None
+    table.columns = [str(c).strip() for c in table.columns]
+    if table.empty:
+        raise InputError(str(path), "(rows)", f"a {what} with data rows; it has none")
+    return table
+
+
+def numeric(table: pd.DataFrame, path: Path, column: str, field_name: str) -> np.ndarray:
+    """Column `column` of `table` as numbers (blank: NaN); InputError naming the line of
+    the first entry that is neither."""
+    text = table[column].astype("string").str.strip()
+    values = pd.to_numeric(text, errors="coerce")
+    bad = values.isna() & text.notna() & (text != "") & (text.str.lower() != "nan")
+    if bad.any():
+        row = int(np.flatnonzero(bad.to_numpy())[0])
+        raise InputError(str(path), f"line {row + 2}, {column}",
+                         f"a number ({field_name}); got {text.iloc[row]!r}")
+    return values.to_numpy(float)
+
+
+def time_ordered(frame: pd.DataFrame) -> tuple[pd.DataFrame, int, int]:
+    """`frame` without rows lacking a time, sorted by time, a repeated time stamp keeping
+    its first row; with the counts of rows without a time and of repeated stamps."""
+    no_time = frame["time"].isna()
+    ordered = frame[~no_time].sort_values("time", kind="stable")
+    repeated = ordered["time"].duplicated(keep="first")
+    return (ordered[~repeated].reset_index(drop=True), int(no_time.sum()),
+            int(repeated.sum()))
