@@ -379,3 +379,28 @@ def test_unknown_format_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture
                  "prometheus", "--out", str(tmp_path / "test")])
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1 and "--format" in err[0] and "cats" in err[0]
+
+
+@pytest.mark.slow
+def test_imported_column_mapped_log_reconstructs(flight: Flight, tmp_path: Path) -> None:
+    """The folder imported from the column-mapped log reconstructs.  The generator's canopies
+    fill by a linear ramp of drag area, not the model's finite-mass inflation, so the fit
+    is judged by convergence (a SolverFailure would raise), a chi-square per degree of
+    freedom within the noise (below 1 here: the altimeter's sigma floor of 0.3 m is above
+    the generator's 2 Pa, 0.2 m) and steady drag areas within 1 % of the truth: under
+    each open canopy the known mass and density fix the drag area by the descent rate,
+    whatever the opening's model."""
+    from cpas_ocp.estimation.estimator import Estimator
+
+    write_mapped(flight, tmp_path / "log.csv", seed=1)
+    (tmp_path / "map.json").write_text(json.dumps(COLUMN_MAP))
+    _import(["import", str(tmp_path / "log.csv"), "--columns", str(tmp_path / "map.json"),
+             "--card", str(_card(tmp_path))], tmp_path / "test")
+    est = Estimator(load_test(tmp_path / "test"))
+    fit = est.solve()
+    cov = est.covariance(fit)
+    assert 0.1 < fit.chi_square / fit.dof < 1.5
+    for name, chute, stage in (("drogue", "drogue", "stage1"), ("main", "main", "stage2")):
+        key = f"CdS[{chute},{stage}]"
+        assert fit.parameters[key] == pytest.approx(CDS[name], rel=0.01), key
+        assert np.isfinite(cov.std[key]) and cov.std[key] < 0.01 * CDS[name]
