@@ -171,8 +171,8 @@ def touchdown(tb: np.ndarray, h: np.ndarray, ta: np.ndarray, a: np.ndarray,
     Landed: the altitude's slope within STILL_RATE_M_S and its range within
     STILL_BAND_SIGMAS noise sigmas (+ STILL_BAND_M) over HOLD_S, and the
     accelerometer's scatter there within REST_ACCEL_M_S2 (or three times the
-    pad's).  The touchdown time is where the line through the last RATE seconds
-    of the descent, above the ground's noise, meets the ground level (the median
+    pad's).  The touchdown time is where the line through the last 2 s
+    of the descent above the ground's noise meets the ground level (the median
     altitude while still); where the accelerometer shows the impact within
     IMPACT_WINDOW_S of it, the impact's sample.  Sigma: one sample interval of
     the sensor that timed it, or the noise over the descent rate."""
@@ -196,20 +196,21 @@ def touchdown(tb: np.ndarray, h: np.ndarray, ta: np.ndarray, a: np.ndarray,
         ground = float(np.median(hw))
         above = np.flatnonzero((tb < tb[i] + HOLD_S) & (h > ground + 3.0 * noise + 0.5)
                                & (tb > after))
-        if above.size < 4:
+        if above.size == 0:
             return FlightEvent(float(tb[i]), dtb, "altimeter")
         t_c = tb[above[-1]]
         fit = (tb >= t_c - 2.0) & (tb <= t_c) & (tb > after)
+        if fit.sum() < 4:
+            return FlightEvent(float(t_c), dtb, "altimeter")
         slope, icpt = np.polyfit(tb[fit] - t_c, h[fit], 1)
         t_down = t_c + (float(np.clip((ground - icpt) / slope, 0.0, 1.0)) if slope < 0 else 0.0)
         sigma = max(dtb, noise / abs(slope)) if slope < 0 else dtb
         near = (ta >= t_down - IMPACT_WINDOW_S) & (ta <= t_down + IMPACT_WINDOW_S)
-        if near.sum() >= 3:
-            r = np.abs(a[near] - float(np.median(a[(ta > t_down) & (ta <= t_down + HOLD_S)]
-                                                 if ((ta > t_down) & (ta <= t_down + HOLD_S))
-                                                 .any() else a[near])))
-            if r.max() > SPIKE_MIN_G * G0:
-                return FlightEvent(float(ta[near][np.argmax(r)]), _interval(ta),
+        rest = (ta > t_down + IMPACT_WINDOW_S) & (ta <= t_down + HOLD_S)
+        if near.sum() >= 3 and rest.sum() >= 3:
+            jolt = np.abs(a[near] - float(np.median(a[rest])))
+            if jolt.max() > SPIKE_MIN_G * G0:
+                return FlightEvent(float(ta[near][np.argmax(jolt)]), _interval(ta),
                                    "accelerometer (impact)")
         return FlightEvent(float(t_down), float(sigma), "altimeter")
     return None
