@@ -404,3 +404,75 @@ def test_imported_column_mapped_log_reconstructs(flight: Flight, tmp_path: Path)
         key = f"CdS[{chute},{stage}]"
         assert fit.parameters[key] == pytest.approx(CDS[name], rel=0.01), key
         assert np.isfinite(cov.std[key]) and cov.std[key] < 0.01 * CDS[name]
+
+
+def test_column_map_with_altitude_states_and_gnss_altitude(flight: Flight,
+                                                           tmp_path: Path) -> None:
+    """A logger writing height above the pad in feet (the map's offset adds the pad's
+    pressure altitude), its own state codes, and GNSS with altitude (ft) and velocities:
+    the states give the events, the GNSS altitude is fitted with the lapse rate, the fixes
+    are placed east/north/up about the pad, and the folder has no accelerometer."""
+    from cpas_ocp.io.column_map import load_column_map, read_mapped_log
+    from cpas_ocp.io.flight_record import enu_about
+    from cpas_ocp.physics.units import FACTORS
+
+    p, _ = _sensors(flight, seed=6)
+    pad = float(pressure_altitude(SITE.pressure_pa))
+    ft = FACTORS["length"]["ft"]
+    fix = np.isclose(flight.t % 1.0, 0.0, atol=1e-6)
+    ev = flight.events
+    code = np.select([flight.t >= ev["main"], flight.t >= ev["drogue"],
+                      flight.t >= ev["coast"], flight.t >= 0.0], [6, 5, 4, 3], 2)
+    rng = np.random.default_rng(7)
+    pd.DataFrame({
+        "time": flight.t, "agl_ft": np.round((pressure_altitude(p) - pad) / ft, 2),
+        "mode": code,
+        "lat": np.where(fix, 32.94 + 1e-5 * flight.t, np.nan),
+        "lon": np.where(fix, -106.9, np.nan),
+        "gps_ft": np.where(fix, (SITE.elevation_m + flight.h + rng.normal(0, 2.0, flight.t.size))
+                           / ft, np.nan),
+        "ve": np.where(fix, 2.0, np.nan), "vn": np.where(fix, 0.5, np.nan),
+    }).to_csv(tmp_path / "log.csv", index=False, float_format="%.8g")
+    column_map = {
+        "time": {"column": "time", "unit": "s"},
+        "altitude": {"column": "agl_ft", "unit": "ft", "offset": pad / ft},
+        "gnss": {"latitude": "lat", "longitude": "lon",
+                 "altitude": {"column": "gps_ft", "unit": "ft"},
+                 "velocity": {"east": "ve", "north": "vn", "unit": "m/s"}},
+        "state": {"column": "mode", "names": {"3": "boost", "4": "coast", "5": "drogue",
+                                              "6": "main"}},
+    }
+    (tmp_path / "map.json").write_text(json.dumps(column_map))
+    record = read_mapped_log(tmp_path / "log.csv", load_column_map(tmp_path / "map.json"),
+                             "map.json")
+    assert record.states == pytest.approx({k: _sample_time(flight, ev[k])
+                                           for k in ("boost", "coast", "drogue", "main")})
+    assert record.samples["pressure"].iloc[0] == pytest.approx(SITE.pressure_pa, abs=10.0)
+    assert record.gnss["v_east"].iloc[0] == pytest.approx(2.0)
+    enu = enu_about(record.gnss)
+    assert enu["north"].iloc[-1] == pytest.approx(1e-5 * np.pi / 180 * 6371008.8
+                                                  * (flight.t[fix][-1] - flight.t[fix][0]),
+                                                  rel=1e-6)
+    assert enu["up"].abs().max() > 500.0
+    card = {**CARD, "site": {**CARD["site"], "lapse_rate": "gps"}}
+    (tmp_path / "card.json").write_text(json.dumps(card))
+    report = _import(["import", str(tmp_path / "log.csv"), "--columns",
+                      str(tmp_path / "map.json"), "--card", str(tmp_path / "card.json")],
+                     tmp_path / "test")
+    assert report["flight_events"]["main"]["source"] == "flight state"
+    # The GPS altitudes are fitted to within their 2 m noise (over 650 m of height the
+    # lapse rate itself moves the fit by about a metre only: not determined here).
+    assert report["lapse_fit"]["residual_sigma_m"] == pytest.approx(2.0, rel=0.3)
+    assert report["samples"]["gps_altitude.csv"] > 40
+    assert any("no accelerometer" in n for n in report["notes"])
+
+
+def test_cats_export_without_its_imu_file_is_one_line(flight: Flight, tmp_path: Path,
+                                                      capsys: pytest.CaptureFixture[str]
+                                                      ) -> None:
+    write_cats(flight, tmp_path / "export", seed=8)
+    (tmp_path / "export" / "imu.csv").unlink()
+    code = main(["import", str(tmp_path / "export"), "--format", "cats", "--card",
+                 str(_card(tmp_path)), "--out", str(tmp_path / "test")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and "imu.csv" in err[0]

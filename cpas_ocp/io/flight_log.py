@@ -521,28 +521,34 @@ def import_flight(log: FlightRecord | AltusLog, card: FlightCard, out: str | Pat
     # apart in each later canopy's opening.
     accel_bounds = [*sorted({*starts, *opening_ends} - {t_end}), t_end]
     accel_sigmas = []
+    has_accel = len(accel) >= 10
+    if not has_accel:
+        accel_bounds = []
+        notes.append("no accelerometer in the log's phase: the folder has the altimeter only")
     for a, b in pairwise(accel_bounds):
         part = accel[(accel["time"] >= a) & (accel["time"] < b)]
         accel_sigmas.append(max(MIN_ACCEL_SIGMA, scatter_rms(
             part["time"].to_numpy(), part["acceleration"].to_numpy()) if len(part) > 10
             else second_difference_sigma(accel["acceleration"].to_numpy())))
-    files = {"baro.csv": baro_phase[["time", "altitude"]],
-             "accelerometer.csv": accel}
+    files = {"baro.csv": baro_phase[["time", "altitude"]]}
     sensors: list[dict[str, Any]] = [
         {"name": "baro", "kind": "baro", "file": "baro.csv",
          "columns": {"time": "s", "altitude": "m"},
          "sigma": {"altitude": {"value": round(baro_sigmas[0], 3), "unit": "m"}},
          "sigma_after": [{"time": {"value": round(t, 3), "unit": "s"},
                           "sigma": {"altitude": {"value": round(sig, 3), "unit": "m"}}}
-                         for t, sig in zip(bounds[1:-1], baro_sigmas[1:], strict=True)]},
-        {"name": "accelerometer", "kind": "axial_accelerometer", "file": "accelerometer.csv",
-         "columns": {"time": "s", "acceleration": "m/s^2"},
-         "sigma": {"acceleration": {"value": round(accel_sigmas[0], 3), "unit": "m/s^2"}},
-         "sigma_after": [{"time": {"value": round(t, 3), "unit": "s"},
-                          "sigma": {"acceleration": {"value": round(sig, 3), "unit": "m/s^2"}}}
-                         for t, sig in zip(accel_bounds[1:-1], accel_sigmas[1:],
-                                           strict=True)]},
-    ]
+                         for t, sig in zip(bounds[1:-1], baro_sigmas[1:], strict=True)]}]
+    if has_accel:
+        files["accelerometer.csv"] = accel
+        sensors.append({
+            "name": "accelerometer", "kind": "axial_accelerometer",
+            "file": "accelerometer.csv", "columns": {"time": "s", "acceleration": "m/s^2"},
+            "sigma": {"acceleration": {"value": round(accel_sigmas[0], 3), "unit": "m/s^2"}},
+            "sigma_after": [{"time": {"value": round(t, 3), "unit": "s"},
+                             "sigma": {"acceleration": {"value": round(sig, 3),
+                                                        "unit": "m/s^2"}}}
+                            for t, sig in zip(accel_bounds[1:-1], accel_sigmas[1:],
+                                              strict=True)]})
     if lapse_fit is not None and len(fixes_phase) >= 2:
         files["gps_altitude.csv"] = fixes_phase[["time", "gps_altitude"]].rename(
             columns={"gps_altitude": "up"})
