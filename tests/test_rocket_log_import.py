@@ -359,6 +359,7 @@ def test_log_ending_before_touchdown_ends_the_phase_at_its_end(flight: Flight,
     ({"acceleration": {"axes": {"x": "ax_g", "y": "ay_g"}, "axis": "-z", "unit": "g"}},
      "acceleration.axis"),
     ({"time": {"column": "t_ms"}}, "time.unit"),
+    ({"altitude": {"column": "press_hPa", "unit": "m"}}, "pressure/altitude"),
 ])
 def test_column_map_errors_are_one_line(flight: Flight, tmp_path: Path,
                                         capsys: pytest.CaptureFixture[str], change: dict,

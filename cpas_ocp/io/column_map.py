@@ -55,6 +55,13 @@ def load_column_map(path: str | Path) -> dict[str, Any]:
     path = Path(path)
     raw = read_json(path, "an existing column-map JSON file")
     validate_block(raw, "column_map.schema.json", str(path))
+    if ("pressure" in raw) == ("altitude" in raw):
+        raise InputError(str(path), "pressure/altitude", "exactly one of the two: the "
+                         "barometer's pressure column, or the altimeter's altitude column")
+    accel = raw.get("acceleration")
+    if accel is not None and ("column" in accel) == ("axes" in accel):
+        raise InputError(str(path), "acceleration", "exactly one of 'column' (the axial "
+                         "reading) or 'axes' with 'axis' (a two- or three-axis accelerometer)")
     return raw
 
 
