@@ -477,3 +477,26 @@ def test_cats_export_without_its_imu_file_is_one_line(flight: Flight, tmp_path: 
                  str(_card(tmp_path)), "--out", str(tmp_path / "test")])
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1 and "imu.csv" in err[0]
+
+
+PROMETHEUS = Path(__file__).resolve().parents[2] / "shared" / "data" / "prometheus-2022"
+
+
+@pytest.mark.parametrize("log_name", ["telemega-serial-6583-flight-0003.csv",
+                                      "telemetrum-serial-5115-flight-0001.csv"])
+def test_prometheus_events_are_found_with_the_states_hidden(log_name: str) -> None:
+    """The real logs read as if their computer had logged no states: the main's charge (the
+    TeleMega's pressure pulse; on the TeleMetrum only the snatch, with its 1 s lag as
+    sigma) within three sigmas of the state AltOS logged (its own sigma 0.1 s added), the
+    drogue's within the drogue window of it, touchdown before AltOS's late landed state."""
+    from cpas_ocp.io.altus_metrum import read_altus_log
+    from cpas_ocp.io.flight_events import DROGUE_WINDOW_S, detect_events
+
+    if not (PROMETHEUS / log_name).is_file():
+        pytest.skip(f"the Prometheus flight logs are not at {PROMETHEUS}")
+    record = read_altus_log(PROMETHEUS / log_name).record()
+    events, _ = detect_events(record.samples)
+    main_ = events["main"]
+    assert abs(main_.time - record.states["main"]) <= 3.0 * main_.sigma + 0.1
+    assert abs(events["drogue"].time - record.states["drogue"]) <= DROGUE_WINDOW_S
+    assert record.states["main"] < events["landed"].time < record.states["landed"]
