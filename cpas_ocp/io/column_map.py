@@ -77,7 +77,7 @@ def read_mapped_log(path: str | Path, column_map: dict[str, Any], map_source: st
         if name not in table.columns:
             raise InputError(map_source, field_name, f"a column of {path} (its columns: "
                              f"{', '.join(table.columns)}); got {name!r}")
-        return numeric(table, path, name, field_name)
+        return numeric(table, path, name, field_name, column_map.get("skip_rows", 0) + 1)
 
     spec = column_map["time"]
     frame = pd.DataFrame({"time": column(spec["column"], "time.column")

@@ -88,7 +88,7 @@ from cpas_ocp.io.flight_events import (
     detect_events,
     second_difference_sigma,
 )
-from cpas_ocp.io.flight_record import FlightRecord
+from cpas_ocp.io.flight_record import FlightRecord, enu_about
 from cpas_ocp.io.flight_test import (
     FORMAT,
     MANIFEST,
@@ -439,6 +439,11 @@ def import_flight(log: FlightRecord | AltusLog, card: FlightCard, out: str | Pat
                      f"{float(baro['altitude'].iloc[-1]) - pad_altitude:.1f} m above the pad: "
                      "the phase ends at the log's end")
     t_end = t_down - TOUCHDOWN_MARGIN_S
+    if not record.gnss.empty:
+        last = enu_about(record.gnss).iloc[-1]
+        notes.append(f"GNSS: {len(record.gnss)} fixes, the last {last['east']:+.0f} m east, "
+                     f"{last['north']:+.0f} m north of the first (the descent is fitted "
+                     "vertically: horizontal positions are not written to the folder)")
     # Series run SERIES_MARGIN_S beyond the phase so that every sensor covers it (the
     # estimator uses the samples inside the phase only).
     lo, hi = t_begin - SERIES_MARGIN_S, t_end + SERIES_MARGIN_S

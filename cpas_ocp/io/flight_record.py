@@ -182,15 +182,16 @@ def read_table(path: Path, what: str, sep: str | None = None, skip_rows: int = 0
     return table
 
 
-def numeric(table: pd.DataFrame, path: Path, column: str, field_name: str) -> np.ndarray:
+def numeric(table: pd.DataFrame, path: Path, column: str, field_name: str,
+            header_line: int = 1) -> np.ndarray:
     """Column `column` of `table` as numbers (blank: NaN); InputError naming the line of
-    the first entry that is neither."""
+    the first entry that is neither (the header row is line `header_line` of the file)."""
     text = table[column].astype("string").str.strip()
     values = pd.to_numeric(text, errors="coerce")
     bad = values.isna() & text.notna() & (text != "") & (text.str.lower() != "nan")
     if bad.any():
         row = int(np.flatnonzero(bad.to_numpy())[0])
-        raise InputError(str(path), f"line {row + 2}, {column}",
+        raise InputError(str(path), f"line {row + header_line + 1}, {column}",
                          f"a number ({field_name}); got {text.iloc[row]!r}")
     return values.to_numpy(float)
 
