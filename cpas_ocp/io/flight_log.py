@@ -13,8 +13,8 @@ folder:
 
 * the card's deployments name flight states (``drogue``, ``main``): the
   log's own where it logged states, else the events `flight_events`
-  detects in the accelerometer and the altimeter (the first ejection charge
-  is ``drogue``, the second ``main``);
+  detects in the accelerometer and the altimeter (the charge near apogee,
+  or apogee itself, is ``drogue``, the next ``main``);
 * phase: from the first deployment to touchdown (`flight_events.touchdown`:
   the altitude has stopped falling and the accelerometer is at rest), less
   `TOUCHDOWN_MARGIN_S`; a log that ends before touchdown ends the phase at
@@ -28,8 +28,9 @@ folder:
   as a 150 m jump in one sample);
 * ``gps_altitude.csv``: GPS altitude (m MSL) at each new fix with at least
   four satellites;
-* ``accelerometer.csv``: axial acceleration (m/s^2, 1 g subtracted), fitted by
-  the `axial_accelerometer` effect, less the charge samples and, in each
+* ``accelerometer.csv`` (where the log has an accelerometer): axial
+  acceleration (m/s^2, 1 g subtracted), fitted by the `axial_accelerometer`
+  effect, less the charge samples and, in each
   later canopy's opening, the samples above the drag ceiling
   (`drag_ceiling`: the shock cord's snatch, which no drag model makes; the
   largest is the full-open event below);
