@@ -199,26 +199,28 @@ def write_altus(flight: Flight, path: Path, seed: int) -> tuple[int, int]:
     return copies, int(same.sum())
 
 
-def write_cats(flight: Flight, folder: Path, seed: int) -> None:
+def write_cats(flight: Flight, folder: Path, seed: int, unit_s: float = 1.0) -> None:
     """A CATS Configurator export: two IMUs whose axial axis is -x, two barometers, the
-    flight states, GNSS at 1 Hz; time stamps in s from lift-off."""
+    flight states, GNSS at 1 Hz; time stamps from lift-off in units of `unit_s` (1: s,
+    0.001: ms as the raw log counts)."""
     folder.mkdir()
     p, a = _sensors(flight, seed)
     rng = np.random.default_rng(seed + 10)
     imu, baro = [], []
     for k, t in enumerate(flight.t):
         for i in range(2):
-            imu.append((round(t, 3), f"IMU{i}", -(a[k] + G0) + rng.normal(0, 0.1),
+            imu.append((round(t / unit_s, 3), f"IMU{i}", -(a[k] + G0) + rng.normal(0, 0.1),
                         rng.normal(0, A_NOISE), rng.normal(0, A_NOISE), 0.0, 0.0, 0.0))
-            baro.append((round(t, 3), f"BARO{i}", 25.0, p[k] + rng.normal(0, 1.0)))
+            baro.append((round(t / unit_s, 3), f"BARO{i}", 25.0, p[k] + rng.normal(0, 1.0)))
     pd.DataFrame(imu, columns=["ts", "id", "Ax", "Ay", "Az", "Gx", "Gy", "Gz"]).to_csv(
         folder / "imu.csv", index=False)
     pd.DataFrame(baro, columns=["ts", "id", "T", "P"]).to_csv(folder / "baro.csv", index=False)
     ev = flight.events
-    pd.DataFrame({"ts": [-5.0, 0.0, ev["coast"], ev["drogue"], ev["main"], ev["landed"] + 3],
+    pd.DataFrame({"ts": np.array([-5.0, 0.0, ev["coast"], ev["drogue"], ev["main"],
+                                  ev["landed"] + 3]) / unit_s,
                   "state": [2, 3, 4, 5, 6, 7]}).to_csv(folder / "flightStates.csv", index=False)
     fixes = flight.t[np.isclose(flight.t % 1.0, 0.0, atol=1e-6)]
-    pd.DataFrame({"ts": fixes, "latitude": 32.94 + 1e-5 * np.arange(fixes.size),
+    pd.DataFrame({"ts": fixes / unit_s, "latitude": 32.94 + 1e-5 * np.arange(fixes.size),
                   "longitude": -106.9, "satellites": 9}).to_csv(folder / "gnssInfo.csv",
                                                                 index=False)
     (folder / "voltageInfo.csv").write_text("No data recorded")
@@ -300,8 +302,10 @@ def test_column_mapped_log_imports_with_detected_events(
     assert "flight events:" in capsys.readouterr().out
 
 
-def test_cats_export_imports_with_its_states(flight: Flight, tmp_path: Path) -> None:
-    write_cats(flight, tmp_path / "flight-log-export", seed=2)
+@pytest.mark.parametrize("unit_s", [1.0, 1e-3])
+def test_cats_export_imports_with_its_states(flight: Flight, tmp_path: Path,
+                                             unit_s: float) -> None:
+    write_cats(flight, tmp_path / "flight-log-export", seed=2, unit_s=unit_s)
     report = _import(["import", str(tmp_path / "flight-log-export"), "--format", "cats",
                       "--card", str(_card(tmp_path))], tmp_path / "test")
     events = report["flight_events"]
