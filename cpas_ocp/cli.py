@@ -14,8 +14,10 @@
     cpas-ocp dispersions CAMPAIGN --out DIR   Monte Carlo cases within the grown hulls
     cpas-ocp montecarlo TEST_DIR --cases DIR --out DIR
                                               fly the cases through a test's fit: peak loads
-    cpas-ocp import-altus LOG --card CARD --out DIR
-                                              an Altus Metrum flight log into a test folder
+    cpas-ocp import LOG (--format NAME | --columns MAP.json) --card CARD --out DIR
+                                              a rocketry flight log (altus, cats, or any CSV
+                                              through a column map) into a test folder;
+                                              import-altus LOG ... is import --format altus
     cpas-ocp flight NAME --out DIR            import a real flight's logs, reconstruct, compare
                                               with the nominal drag areas and the measured descent
     cpas-ocp demo [--out DIR]                 simulate the built-in Drogue test and reconstruct it
@@ -242,13 +244,21 @@ def _parser() -> argparse.ArgumentParser:
     _parallel_options(s)
     s.set_defaults(run=_montecarlo)
 
+    s = sub.add_parser("import", help="a rocketry flight log into a test folder: Altus "
+                                      "Metrum, CATS, or any CSV through a column map")
+    s.add_argument("log", type=Path, help="the log file (for cats: the export folder)")
+    source = s.add_mutually_exclusive_group(required=True)
+    source.add_argument("--format", metavar="NAME", help="a built-in format: altus, cats")
+    source.add_argument("--columns", type=Path, metavar="MAP.json",
+                        help="a column map: which column holds what, in which unit")
+    _card_options(s)
+    s.set_defaults(run=_import)
+
     s = sub.add_parser("import-altus", help="an Altus Metrum (TeleMega, TeleMetrum) CSV log "
-                                            "into a test folder")
+                                            "into a test folder (import --format altus)")
     s.add_argument("log", type=Path)
-    s.add_argument("--card", required=True, metavar="CARD",
-                   help="a flight card: a built-in name (prometheus) or a JSON file")
-    s.add_argument("--out", required=True, type=Path)
-    s.set_defaults(run=_import_altus)
+    _card_options(s)
+    s.set_defaults(run=_import, format="altus", columns=None)
 
     s = sub.add_parser("flight", help="import a real flight's logs, reconstruct each, and "
                                       "compare with the nominal drag areas and the descent")
@@ -594,10 +604,18 @@ def _montecarlo(args: argparse.Namespace) -> int:
     return 0
 
 
-def _import_altus(args: argparse.Namespace) -> int:
-    from cpas_ocp.io.altus_metrum import read_altus_log
+def _card_options(s: argparse.ArgumentParser) -> None:
+    s.add_argument("--card", required=True, metavar="CARD",
+                   help="a flight card: a built-in name (prometheus) or a JSON file")
+    s.add_argument("--out", required=True, type=Path)
+
+
+def _import(args: argparse.Namespace) -> int:
     from cpas_ocp.io.flight_log import import_flight, load_card
-    summary = import_flight(read_altus_log(args.log), load_card(args.card), args.out)
+    from cpas_ocp.io.log_formats import read_flight_log
+    card = load_card(args.card)
+    record = read_flight_log(args.log, args.format, args.columns)
+    summary = import_flight(record, card, args.out)
     print(summary.text())
     print(f"test folder written to {args.out}")
     return 0

@@ -144,7 +144,7 @@ def test_reader_survives_the_altos_quirks(tmp_path: Path) -> None:
     events = _write_log(tmp_path / "log.csv", seed=1)
     log = read_altus_log(tmp_path / "log.csv")
     d = log.data
-    assert log.recorder == "TeleMega"
+    assert log.recorder == "Altus Metrum"  # a renamed export: no product in its name
     assert log.duplicate_times > 0 and d["time"].is_monotonic_increasing
     assert not d["time"].duplicated().any()
     assert "gps_altitude" in d.columns and d["gps_altitude"].iloc[0] > 1000.0

@@ -19,13 +19,20 @@ Columns used, in the units AltOS writes:
 * the second ``altitude`` (m above mean sea level), ``latitude``,
   ``longitude`` and ``nsat``: GPS.
 
-The reader returns the cleaned table and the flight-state events; turning
-them into a test folder is `flight_log.import_flight`.
+The reader returns the cleaned table and the flight-state events; `AltusLog.record`
+gives the common cleaned log (`flight_record.FlightRecord`) that
+`flight_log.import_flight` turns into a test folder.
+
+What made the log is told by the name AltOS gives its exports
+(``telemega-serial-6583-flight-0003.csv``: product, serial, flight) and the
+``serial`` column; a log renamed or converted says "Altus Metrum" (the IMU
+columns tell nothing: a converted log may carry them empty).
 """
 
 from __future__ import annotations
 
 import csv
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -33,28 +40,41 @@ import numpy as np
 import pandas as pd
 
 from cpas_ocp.errors import InputError
+from cpas_ocp.io.flight_record import FlightRecord, new_fixes
 from cpas_ocp.io.flight_test import MAX_MAGNITUDE
 
 REQUIRED = ("time", "state_name", "pressure", "altitude", "acceleration")
-# Columns of the sensor record: a row whose values all equal the previous row's repeats it.
-SENSOR_COLUMNS = ("pressure", "acceleration")
+# Columns a new sensor record changes: the barometer, the accelerometers, the IMU, and the
+# flight computer's filter (height, speed), which it steps at every sensor sample.  A row
+# whose values in all of them equal the previous row's is another record's (GPS, voltages,
+# pyro, state) repeating that sample.  Voltages, GPS and state are left out: those records
+# change them.
+SENSOR_COLUMNS = ("pressure", "acceleration", "altitude", "height", "speed", "temperature",
+                  "accel_x", "accel_y", "accel_z", "gyro_roll", "gyro_pitch", "gyro_yaw",
+                  "mag_x", "mag_y", "mag_z", "tilt")
 GPS_COLUMNS = ("latitude", "longitude", "gps_altitude", "nsat")
-IMU_COLUMNS = ("accel_x", "accel_y", "accel_z", "gyro_roll", "gyro_pitch", "gyro_yaw")
 # AltOS writes 2^31 - 1 for a quantity the receiver did not report (e.g. hdop).
 MISSING_SENTINEL = 2147483647.0
 MIN_SATELLITES = 4  # a GPS fix needs four satellites for an altitude
+# AltOS names an export <product>-serial-<serial>-flight-<flight>.csv.
+EXPORT_NAME = re.compile(r"^(?P<product>[a-z]+)-serial-(?P<serial>\d+)-flight-(?P<flight>\d+)",
+                         re.IGNORECASE)
+PRODUCTS = {p.lower(): p for p in ("TeleMega", "TeleMetrum", "EasyMega", "EasyMini",
+                                   "TeleMini", "EasyTimer", "EasyMotor", "TeleDongle")}
 
 
 @dataclass(frozen=True)
 class AltusLog:
     """One cleaned log: `data` sorted by strictly increasing time, `events` the first time (s)
-    of each flight state, `recorder` 'TeleMega' (IMU columns present) or 'TeleMetrum'."""
+    of each flight state, `recorder` the product the export's name gives ('TeleMega', ...)
+    or 'Altus Metrum'."""
 
     path: Path
     recorder: str
     data: pd.DataFrame
     events: dict[str, float]
     duplicate_times: int
+    serial: str = ""
 
     def sensor_samples(self) -> pd.DataFrame:
         """Rows that hold a new sample of the barometer and accelerometer.
@@ -64,13 +84,21 @@ class AltusLog:
         stamp.  On the TeleMega log of the Prometheus flight about a quarter of the
         descent rows are such copies, 0.01-0.09 s after the sample they repeat: kept,
         they would weigh those samples twice and look like an altimeter lag.  A row
-        is a copy when pressure (Pa, a resolution of a few centimetres of altitude)
-        and axial acceleration both equal the previous row's.
+        is a copy when every `SENSOR_COLUMNS` value it has equals the previous row's
+        (NaN equal to NaN).  Equal pressure and acceleration alone do not make a
+        copy: at 100 Hz in the boost the TeleMetrum of the Prometheus flight reads
+        the same pressure (1 Pa steps) and acceleration in 41 consecutive pairs of
+        real samples, whose filter speed differs.
         """
         d = self.data
-        same = (d[list(SENSOR_COLUMNS)].diff() == 0).all(axis=1).to_numpy().copy()
+        return d[~self._repeats()].reset_index(drop=True)
+
+    def _repeats(self) -> np.ndarray:
+        d = self.data
+        x = d[[c for c in SENSOR_COLUMNS if c in d.columns]]
+        same = ((x.diff() == 0) | (x.isna() & x.shift().isna())).all(axis=1).to_numpy().copy()
         same[0] = False
-        return d[~same].reset_index(drop=True)
+        return same
 
     @property
     def has_gps(self) -> bool:
@@ -80,14 +108,29 @@ class AltusLog:
         """Rows at which the GPS reported a new fix with enough satellites: time (s),
         latitude, longitude (deg) and altitude (m MSL).  Rows that repeat the previous fix
         are dropped."""
+        return self._fixes()[0]
+
+    def _fixes(self) -> tuple[pd.DataFrame, int, int]:
+        """(new fixes with enough satellites, rows with too few, repeats between fixes)."""
+        cols = ["time", "latitude", "longitude", "gps_altitude"]
         if not self.has_gps:
-            return pd.DataFrame(columns=["time", "latitude", "longitude", "gps_altitude"])
+            return pd.DataFrame(columns=cols), 0, 0
         d = self.data
-        cols = ["latitude", "longitude", "gps_altitude"]
-        new = (d[cols].diff().abs().sum(axis=1) > 0).to_numpy().copy()
-        new[0] = True
-        ok = new & (d["nsat"].to_numpy() >= MIN_SATELLITES) & d[cols].notna().all(axis=1)
-        return d.loc[ok, ["time", *cols]].reset_index(drop=True)
+        enough = (d["nsat"].to_numpy(float) >= MIN_SATELLITES)
+        fixes, repeats = new_fixes(d.loc[enough, cols])
+        return fixes, int((~enough).sum()), repeats
+
+    def record(self) -> FlightRecord:
+        """The common cleaned log: the sensor samples, the new GPS fixes with enough
+        satellites, the flight states, and what was left out."""
+        samples = self.sensor_samples()[["time", "pressure", "altitude", "acceleration"]]
+        fixes, few, repeats = self._fixes()
+        label = f"{self.recorder} serial {self.serial}" if self.serial else self.recorder
+        return FlightRecord(self.path, label, samples, fixes, dict(self.events),
+                            {"repeated_time_stamps": self.duplicate_times,
+                             "repeated_sensor_rows": int(self._repeats().sum()),
+                             "gps_fixes_with_too_few_satellites": few,
+                             "gps_repeats_between_fixes": repeats})
 
 
 def _header(path: Path) -> list[str]:
@@ -161,5 +204,8 @@ def read_altus_log(path: str | Path) -> AltusLog:
     events = {}
     for state in data["state_name"].unique():
         events[state] = float(data.loc[data["state_name"] == state, "time"].iloc[0])
-    recorder = "TeleMega" if all(c in data.columns for c in IMU_COLUMNS) else "TeleMetrum"
-    return AltusLog(path, recorder, data, events, int(repeated.sum()))
+    named = EXPORT_NAME.match(path.name)
+    recorder = PRODUCTS.get(named["product"].lower(), "Altus Metrum") if named else "Altus Metrum"
+    serials = data["serial"].dropna().unique() if "serial" in data.columns else []
+    serial = str(int(serials[0])) if len(serials) == 1 else named["serial"] if named else ""
+    return AltusLog(path, recorder, data, events, int(repeated.sum()), serial)

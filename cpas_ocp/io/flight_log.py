@@ -7,14 +7,20 @@ the launch site (elevation, surface air density, lapse rate or ``"gps"``),
 the model block to reconstruct with, and the published nominal drag areas
 to compare against.
 
-`import_flight` turns an Altus Metrum log (`altus_metrum.read_altus_log`)
-and a card into a test folder:
+`import_flight` turns a cleaned log (`flight_record.FlightRecord`, from any
+reader: `altus_metrum`, `cats_vega`, `column_map`) and a card into a test
+folder:
 
-* phase: from the first deployment to touchdown (the first altimeter sample
-  after the last deployment within `TOUCHDOWN_M` of the pad altitude), less
-  `TOUCHDOWN_MARGIN_S`;
-* events: each deployment's flight-state change as a ``mortar_fire`` of its
-  canopy, with the state machine's timing sigma `EVENT_SIGMA_S`;
+* the card's deployments name flight states (``drogue``, ``main``): the
+  log's own where it logged states, else the events `flight_events`
+  detects in the accelerometer and the altimeter (the charge near apogee,
+  or apogee itself, is ``drogue``, the next ``main``);
+* phase: from the first deployment to touchdown (`flight_events.touchdown`:
+  the altitude has stopped falling and the accelerometer is at rest), less
+  `TOUCHDOWN_MARGIN_S`; a log that ends before touchdown ends the phase at
+  its end, and the import says so;
+* events: each deployment as a ``mortar_fire`` of its canopy, with the state
+  machine's timing sigma `EVENT_SIGMA_S` or the detector's sigma;
 * every series runs `SERIES_MARGIN_S` beyond the phase, so that each
   covers it;
 * ``baro.csv``: pressure altitude (m); samples from `EVENT_SIGMA_S` before to
@@ -22,8 +28,9 @@ and a card into a test folder:
   as a 150 m jump in one sample);
 * ``gps_altitude.csv``: GPS altitude (m MSL) at each new fix with at least
   four satellites;
-* ``accelerometer.csv``: axial acceleration (m/s^2, 1 g subtracted), fitted by
-  the `axial_accelerometer` effect, less the charge samples and, in each
+* ``accelerometer.csv`` (where the log has an accelerometer): axial
+  acceleration (m/s^2, 1 g subtracted), fitted by the `axial_accelerometer`
+  effect, less the charge samples and, in each
   later canopy's opening, the samples above the drag ceiling
   (`drag_ceiling`: the shock cord's snatch, which no drag model makes; the
   largest is the full-open event below);
@@ -77,6 +84,12 @@ from scipy.signal import savgol_filter
 
 from cpas_ocp.errors import InputError
 from cpas_ocp.io.altus_metrum import AltusLog
+from cpas_ocp.io.flight_events import (
+    FlightEvent,
+    detect_events,
+    second_difference_sigma,
+)
+from cpas_ocp.io.flight_record import FlightRecord, enu_about
 from cpas_ocp.io.flight_test import (
     FORMAT,
     MANIFEST,
@@ -90,7 +103,6 @@ from cpas_ocp.io.problems import problem_names
 from cpas_ocp.physics.atmosphere import ISA_LAPSE_K_M, R_AIR, SiteAtmosphere, pressure_altitude
 from cpas_ocp.physics.units import FACTORS, G0
 
-TOUCHDOWN_M = 3.0  # altimeter height above the pad that counts as landed (m)
 TOUCHDOWN_MARGIN_S = 0.5  # phase ends this long before the detected touchdown (s)
 EVENT_SIGMA_S = 0.1  # timing sigma of a flight-state change (one descent sample, s)
 EJECTION_EXCLUDE_S = 0.3  # altimeter samples left out after an ejection charge (s)
@@ -220,13 +232,6 @@ def scatter_rms(t: np.ndarray, values: np.ndarray) -> float:
     return float(np.sqrt(np.mean(r**2)))
 
 
-def second_difference_sigma(values: np.ndarray) -> float:
-    """White-noise sigma of a smooth signal's samples: 1.4826 MAD of the second
-    differences over sqrt(6) (the second difference of white noise has variance 6 s^2)."""
-    d2 = np.diff(values, 2)
-    return float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / np.sqrt(6.0))
-
-
 def settled_time(t: np.ndarray, altitude: np.ndarray, t_from: float, t_to: float) -> float:
     """When the descent after a deployment at `t_from` has settled (s): the first time from
     which the local descent rate (slope of a line through `RATE_WINDOW_S` of altitude
@@ -282,12 +287,6 @@ def drag_ceiling(t: np.ndarray, height: np.ndarray, density: np.ndarray, t_charg
     return G0 * ratio * (v_c / v_s) ** 2 - G0
 
 
-def touchdown_time(t: np.ndarray, height: np.ndarray, after: float) -> float:
-    """First time (s) after `after` at which `height` (m above the pad) is below TOUCHDOWN_M."""
-    low = np.flatnonzero((t > after) & (height < TOUCHDOWN_M))
-    return float(t[low[0]]) if low.size else float(t[-1])
-
-
 @dataclass(frozen=True)
 class Snatch:
     """A later canopy's opening as the accelerometer read it against the drag ceiling
@@ -335,6 +334,8 @@ class ImportSummary:
     dropped: dict[str, int]
     accel_sigma: list[float] = field(default_factory=list)  # m/s^2, per segment
     snatches: dict[str, Snatch] = field(default_factory=dict)  # per later canopy
+    flight_events: dict[str, FlightEvent] = field(default_factory=dict)  # time, sigma, source
+    notes: list[str] = field(default_factory=list)
 
     def text(self) -> str:
         """A few lines for the terminal."""
@@ -353,6 +354,11 @@ class ImportSummary:
                          "counted): " + ", ".join(f"{s:.2f} m/s²" for s in self.accel_sigma))
         for name, snatch in self.snatches.items():
             lines.append(f"{name}'s opening: {snatch.text()}")
+        if self.flight_events:
+            lines.append("flight events: " + ", ".join(
+                f"{k} {e.time:.2f} ± {e.sigma:.2f} s ({e.source})"
+                for k, e in self.flight_events.items()))
+        lines.extend(f"note: {n}" for n in self.notes)
         lines.append("samples: " + ", ".join(f"{k} {v}" for k, v in self.samples.items())
                      + "; dropped: " + ", ".join(f"{k} {v}" for k, v in self.dropped.items()))
         return "\n".join(lines)
@@ -368,34 +374,77 @@ class ImportSummary:
                  "residual_sigma_m": self.lapse_fit[2]},
                 "baro_sigma_m": self.baro_sigma_m, "accel_sigma_m_s2": self.accel_sigma,
                 "snatch": {k: dataclasses.asdict(v) for k, v in self.snatches.items()},
-                "samples": self.samples, "dropped": self.dropped}
+                "flight_events": {k: {"time_s": e.time, "sigma_s": e.sigma, "source": e.source}
+                                  for k, e in self.flight_events.items()},
+                "notes": self.notes, "samples": self.samples, "dropped": self.dropped}
 
 
-def import_flight(log: AltusLog, card: FlightCard, out: str | Path) -> ImportSummary:
+def flight_events(record: FlightRecord) -> tuple[dict[str, FlightEvent], list[str]]:
+    """The record's flight events with their sigmas: its logged states (sigma
+    `EVENT_SIGMA_S`) where it has them, else those `detect_events` finds; touchdown
+    (``landed``) always detected from the data, never taken from a state or the log's
+    end.  Notes say what could not be found."""
+    detected, notes = detect_events(record.samples)
+    if record.states:
+        events = {name: FlightEvent(t, EVENT_SIGMA_S, "flight state")
+                  for name, t in record.states.items() if name != "landed"}
+        if "landed" in detected:
+            events["landed"] = detected["landed"]
+        notes = [n for n in notes if "touchdown" in n]
+    else:
+        events = detected
+    if "landed" not in events:
+        notes.append("no touchdown found: the log ends while the vehicle still descends")
+    return events, notes
+
+
+def import_flight(log: FlightRecord | AltusLog, card: FlightCard, out: str | Path
+                  ) -> ImportSummary:
     """Write the test folder of `log` under `card` to `out` (see the module docstring)."""
     out = Path(out)
-    d = log.data
-    samples = log.sensor_samples()
-    src = str(log.path)
-    deploy = {}
+    record = log if isinstance(log, FlightRecord) else log.record()
+    samples = record.samples
+    src = str(record.path)
+    events, notes = flight_events(record)
+    deploy: dict[str, float] = {}
+    deploy_sigma: dict[str, float] = {}
+    kind = "a flight state of the log" if record.states else \
+        "an event detected in the log (it has no flight states)"
     for i, chute in enumerate(card.parachutes):
         state = chute["deployment"]
-        if state not in log.events:
+        if state not in events or state == "landed":
             raise InputError(card.source, f"parachutes[{i}].deployment",
-                             f"a flight state of the log {src} that deploys {chute['name']} "
-                             f"({', '.join(log.events)}); got {state!r}")
-        deploy[chute["name"]] = log.events[state]
-    pad = d[d["time"] < 0.0]
+                             f"{kind} {src} that deploys {chute['name']} "
+                             f"({', '.join(events)}); got {state!r}")
+        deploy[chute["name"]] = events[state].time
+        deploy_sigma[chute["name"]] = events[state].sigma
+    baro = samples[["time", "altitude", "pressure"]].dropna()
+    if len(baro) < 20:
+        raise InputError(src, "pressure", "a barometer (pressure or altitude) read in at "
+                         f"least 20 samples; the log has {len(baro)}")
+    t_boost = events["boost"].time if "boost" in events else 0.0
+    pad = baro[baro["time"] < t_boost]
     if pad.empty:
-        pad = d.iloc[:50]
+        pad = baro.iloc[:50]
     p0 = float(pad["pressure"].median())
     pad_altitude = float(pressure_altitude(p0))
     t_begin = min(deploy.values())
-    t_last = max(deploy.values())
-    baro = samples[["time", "altitude", "pressure"]].dropna()
-    t_down = touchdown_time(baro["time"].to_numpy(),
-                            baro["altitude"].to_numpy() - pad_altitude, t_last)
+    if "landed" in events:
+        t_down = events["landed"].time
+        ground = baro[(baro["time"] >= t_down) & (baro["time"] <= t_down + 3.0)]["altitude"]
+        notes.append(f"touchdown at {t_down:.2f} s, {float(ground.median()) - pad_altitude:+.1f}"
+                     " m (pressure altitude) from the pad")
+    else:
+        t_down = float(baro["time"].iloc[-1])
+        notes.append(f"the log ends at {t_down:.2f} s, "
+                     f"{float(baro['altitude'].iloc[-1]) - pad_altitude:.1f} m above the pad: "
+                     "the phase ends at the log's end")
     t_end = t_down - TOUCHDOWN_MARGIN_S
+    if not record.gnss.empty:
+        last = enu_about(record.gnss).iloc[-1]
+        notes.append(f"GNSS: {len(record.gnss)} fixes, the last {last['east']:+.0f} m east, "
+                     f"{last['north']:+.0f} m north of the first (the descent is fitted "
+                     "vertically: horizontal positions are not written to the folder)")
     # Series run SERIES_MARGIN_S beyond the phase so that every sensor covers it (the
     # estimator uses the samples inside the phase only).
     lo, hi = t_begin - SERIES_MARGIN_S, t_end + SERIES_MARGIN_S
@@ -412,7 +461,7 @@ def import_flight(log: AltusLog, card: FlightCard, out: str | Path) -> ImportSum
                "site.surface_density")
     t0 = p0 / (R_AIR * rho0)
     lapse_spec = site_spec.get("lapse_rate", {"value": 1e3 * ISA_LAPSE_K_M, "unit": "K/km"})
-    fixes = log.gps_fixes()
+    fixes = record.gps_fixes()
     lapse_fit = None
     if lapse_spec == "gps":
         descent = fixes[(fixes["time"] >= t_begin) & (fixes["time"] <= t_down)]
@@ -478,28 +527,34 @@ def import_flight(log: AltusLog, card: FlightCard, out: str | Path) -> ImportSum
     # apart in each later canopy's opening.
     accel_bounds = [*sorted({*starts, *opening_ends} - {t_end}), t_end]
     accel_sigmas = []
+    has_accel = len(accel) >= 10
+    if not has_accel:
+        accel_bounds = []
+        notes.append("no accelerometer in the log's phase: the folder has the altimeter only")
     for a, b in pairwise(accel_bounds):
         part = accel[(accel["time"] >= a) & (accel["time"] < b)]
         accel_sigmas.append(max(MIN_ACCEL_SIGMA, scatter_rms(
             part["time"].to_numpy(), part["acceleration"].to_numpy()) if len(part) > 10
             else second_difference_sigma(accel["acceleration"].to_numpy())))
-    files = {"baro.csv": baro_phase[["time", "altitude"]],
-             "accelerometer.csv": accel}
+    files = {"baro.csv": baro_phase[["time", "altitude"]]}
     sensors: list[dict[str, Any]] = [
         {"name": "baro", "kind": "baro", "file": "baro.csv",
          "columns": {"time": "s", "altitude": "m"},
          "sigma": {"altitude": {"value": round(baro_sigmas[0], 3), "unit": "m"}},
          "sigma_after": [{"time": {"value": round(t, 3), "unit": "s"},
                           "sigma": {"altitude": {"value": round(sig, 3), "unit": "m"}}}
-                         for t, sig in zip(bounds[1:-1], baro_sigmas[1:], strict=True)]},
-        {"name": "accelerometer", "kind": "axial_accelerometer", "file": "accelerometer.csv",
-         "columns": {"time": "s", "acceleration": "m/s^2"},
-         "sigma": {"acceleration": {"value": round(accel_sigmas[0], 3), "unit": "m/s^2"}},
-         "sigma_after": [{"time": {"value": round(t, 3), "unit": "s"},
-                          "sigma": {"acceleration": {"value": round(sig, 3), "unit": "m/s^2"}}}
-                         for t, sig in zip(accel_bounds[1:-1], accel_sigmas[1:],
-                                           strict=True)]},
-    ]
+                         for t, sig in zip(bounds[1:-1], baro_sigmas[1:], strict=True)]}]
+    if has_accel:
+        files["accelerometer.csv"] = accel
+        sensors.append({
+            "name": "accelerometer", "kind": "axial_accelerometer",
+            "file": "accelerometer.csv", "columns": {"time": "s", "acceleration": "m/s^2"},
+            "sigma": {"acceleration": {"value": round(accel_sigmas[0], 3), "unit": "m/s^2"}},
+            "sigma_after": [{"time": {"value": round(t, 3), "unit": "s"},
+                             "sigma": {"acceleration": {"value": round(sig, 3),
+                                                        "unit": "m/s^2"}}}
+                            for t, sig in zip(accel_bounds[1:-1], accel_sigmas[1:],
+                                              strict=True)]})
     if lapse_fit is not None and len(fixes_phase) >= 2:
         files["gps_altitude.csv"] = fixes_phase[["time", "gps_altitude"]].rename(
             columns={"gps_altitude": "up"})
@@ -509,14 +564,14 @@ def import_flight(log: AltusLog, card: FlightCard, out: str | Path) -> ImportSum
     manifest = {
         "format": FORMAT,
         "name": card.name,
-        "description": f"{card.title}: {log.recorder} log {log.path.name}",
+        "description": f"{card.title}: {record.recorder} log {record.path.name}",
         "label": card.label,
         "vehicle": card.vehicle,
         "parachutes": [{k: v for k, v in c.items() if k != "deployment"}
                        for c in card.parachutes],
         "events": [{"name": "mortar_fire", "parachute": name,
                     "time": {"value": round(t, 3), "unit": "s"},
-                    "sigma": {"value": EVENT_SIGMA_S, "unit": "s"}}
+                    "sigma": {"value": round(deploy_sigma[name], 3), "unit": "s"}}
                    for name, t in deploy.items()]
                   + [{"name": "full_open", "parachute": name,
                       "time": {"value": round(t, 3), "unit": "s"},
@@ -534,19 +589,15 @@ def import_flight(log: AltusLog, card: FlightCard, out: str | Path) -> ImportSum
     }
     validate_manifest(manifest, card.source)
     summary = ImportSummary(
-        log.recorder, (t_begin, t_end),
+        record.recorder, (t_begin, t_end),
         {**deploy, **{f"{name} full open": t for name, (t, _) in full_open.items()},
          "touchdown": t_down}, site, lapse_fit,
         baro_sigmas, {name: len(frame) for name, frame in files.items()},
-        {"repeated_time_stamps": log.duplicate_times,
-         "repeated_sensor_rows": int(d["time"].between(lo, hi).sum()
-                                     - samples["time"].between(lo, hi).sum()),
+        {**record.dropped,
          "ejection_charge_samples": int((in_phase.to_numpy() & near_charge).sum()),
          "ejection_charge_accelerometer_samples": int(accel_charge.sum()),
-         "snatch_samples_above_drag_ceiling": int(snatch.sum()),
-         "gps_repeats_between_fixes": int(d["time"].between(lo, hi).sum()
-                                          - len(fixes_phase)) if log.has_gps else 0},
-        accel_sigmas, snatches)
+         "snatch_samples_above_drag_ceiling": int(snatch.sum())},
+        accel_sigmas, snatches, events, [*record.notes, *notes])
     _write_folder(out, manifest, files, summary, card.source, src)
     return summary
 

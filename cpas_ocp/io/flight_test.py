@@ -214,7 +214,7 @@ class FlightTest:
 
 
 SCHEMAS = ("manifest.schema.json", "series.schema.json", "model.schema.json",
-           "flight_card.schema.json")
+           "flight_card.schema.json", "column_map.schema.json")
 
 
 @cache

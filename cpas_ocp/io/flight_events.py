@@ -1,0 +1,259 @@
+"""Flight events found in a rocket's barometer and axial accelerometer.
+
+Where a flight computer logged no flight states, `detect_events` finds them
+in the `flight_record.FlightRecord`'s samples, each with its time (s) and
+timing sigma (s):
+
+* ``boost``: the first of `BOOST_RUN` accelerometer samples reading more than
+  `BOOST_G` (the reading, 1 g subtracted, is 0 at rest on the pad: the
+  motor lit); sigma one sample;
+* ``coast`` (burnout): the first sample after that whose specific force is
+  below zero (axial reading below -1 g: the drag exceeds what thrust is
+  left); sigma one sample;
+* ``apogee``: the highest point of the altimeter's running median over
+  `SMOOTH_S`; sigma half the time it stays within the noise of the top;
+* ``drogue``, ``main``: the ejection charges.  A charge jolts the
+  accelerometer (and the shock cord's snatch follows) and its gas puffs the
+  static port, which reads a pressure pulse (on the Prometheus logs 155 and
+  603 m of altitude in one sample, a 27 g jolt).  Samples further than
+  `SPIKE_SIGMAS` robust sigmas (and at least `SPIKE_MIN_G`, or `PULSE_MIN_M`
+  for the altimeter) off the running median over `SMOOTH_S` are spikes (a
+  rocket swinging under its drogue reads up to 4.6 g and 18 m off it there);
+  spikes closer than `CLUSTER_GAP_S` are one charge (its opening's snatch
+  included).  The pressure pulse is the charge's gas: where the altimeter
+  shows one, the charge is its first sample, sigma that sample's interval
+  (or, where the accelerometer's first spike is within `SAME_S`, both saw
+  the charge: the earlier, sigma their disagreement or sample interval).
+  The accelerometer alone may show only the opening's snatch, up to
+  `SNATCH_LAG_S` after the charge: its first spike, with that lag as sigma.  The drogue's is the
+  first charge from one second plus apogee's sigma before apogee to
+  `DROGUE_WINDOW_S` after it; with none there the drogue is taken to open at
+  apogee (its time and sigma, and a note).  The main's is the next charge;
+  more are reported in a note;
+* ``landed`` (touchdown, `touchdown`): from when the altitude stops falling.
+
+What cannot be found (no accelerometer, no boost in the log) is left out.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from cpas_ocp.physics.units import G0
+
+BOOST_G = 3.0  # a boost reads more than this many g (1 g subtracted) ...
+BOOST_RUN = 3  # ... for this many samples in a row
+SMOOTH_S = 1.0  # running-median window of the spike and apogee searches (s)
+SPIKE_SIGMAS = 8.0  # a spike stands this many robust sigmas off the running median ...
+SPIKE_MIN_G = 6.0  # ... and at least this far (g) for the accelerometer
+PULSE_MIN_M = 30.0  # ... or this far (m of pressure altitude) for the altimeter
+SAME_S = 0.3  # the two sensors' first spikes closer than this saw the same charge (s)
+SNATCH_LAG_S = 1.0  # an opening's snatch comes up to this long after its charge (s)
+DROGUE_WINDOW_S = 5.0  # the drogue's charge comes within this long after apogee (s)
+CLUSTER_GAP_S = 3.0  # spikes closer than this are one ejection (charge, then snatch)
+AFTER_BURNOUT_S = 1.0  # charges are looked for from this long after burnout (s)
+HOLD_S = 3.0  # landed: still for this long (s)
+STILL_RATE_M_S = 0.5  # ... the altitude's slope within this (m/s)
+STILL_BAND_SIGMAS = 6.0  # ... its range within this many noise sigmas (+ STILL_BAND_M)
+STILL_BAND_M = 1.0
+REST_ACCEL_M_S2 = 1.0  # ... and the accelerometer's scatter within this (or 3 pad sigmas)
+IMPACT_WINDOW_S = 0.5  # the landing's impact is looked for this close to the baro's touchdown
+
+
+@dataclass(frozen=True)
+class FlightEvent:
+    """A flight event: time (s), timing sigma (s), and what found it."""
+
+    time: float
+    sigma: float
+    source: str
+
+
+def second_difference_sigma(values: np.ndarray) -> float:
+    """White-noise sigma of a smooth signal's samples: 1.4826 MAD of the second
+    differences over sqrt(6) (the second difference of white noise has variance 6 s^2)."""
+    d2 = np.diff(values, 2)
+    return float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / np.sqrt(6.0))
+
+
+def _interval(t: np.ndarray) -> float:
+    """Median sample interval (s)."""
+    return float(np.median(np.diff(t))) if t.size > 1 else float("nan")
+
+
+def _step_at(t: np.ndarray, t0: float) -> float:
+    """The sample interval (s) that ends at the sample at `t0`: the timing sigma of an event
+    first seen in that sample (loggers slow down in the descent)."""
+    k = int(np.searchsorted(t, t0))
+    return float(t[k] - t[k - 1]) if 0 < k < t.size else _interval(t)
+
+
+def _running_median(t: np.ndarray, x: np.ndarray, window_s: float) -> np.ndarray:
+    n = max(3, round(window_s / _interval(t)) // 2 * 2 + 1)
+    return pd.Series(x).rolling(n, center=True, min_periods=1).median().to_numpy()
+
+
+def _spikes(t: np.ndarray, x: np.ndarray, floor: float, within: np.ndarray) -> np.ndarray:
+    """Times of the samples `within` further than SPIKE_SIGMAS robust sigmas (there) and
+    `floor` off the running median over SMOOTH_S (taken over the whole series, so that the
+    search window's edges see both sides)."""
+    if within.sum() < 10:
+        return np.empty(0)
+    r = (x - _running_median(t, x, SMOOTH_S))[within]
+    scatter = 1.4826 * float(np.median(np.abs(r - np.median(r))))
+    return t[within][np.abs(r) > max(SPIKE_SIGMAS * scatter, floor)]
+
+
+def detect_events(samples: pd.DataFrame) -> tuple[dict[str, FlightEvent], list[str]]:
+    """The events of the module docstring found in a record's `samples` (time (s), altitude
+    (m), acceleration (m/s^2, 1 g subtracted)), and notes on what could not be told."""
+    accel = samples[["time", "acceleration"]].dropna()
+    baro = samples[["time", "altitude"]].dropna()
+    ta, a = accel["time"].to_numpy(float), accel["acceleration"].to_numpy(float)
+    tb, h = baro["time"].to_numpy(float), baro["altitude"].to_numpy(float)
+    events: dict[str, FlightEvent] = {}
+    notes: list[str] = []
+    if ta.size > 20:
+        high = pd.Series(a > BOOST_G * G0).rolling(BOOST_RUN).sum().to_numpy()
+        runs = np.flatnonzero(high >= BOOST_RUN)
+        if runs.size:
+            k = runs[0] - BOOST_RUN + 1
+            events["boost"] = FlightEvent(float(ta[k]), _step_at(ta, ta[k]), "accelerometer")
+            after = np.flatnonzero((ta > ta[runs[0]]) & (a + G0 < 0.0))
+            if after.size:
+                t_out = float(ta[after[0]])
+                events["coast"] = FlightEvent(t_out, _step_at(ta, t_out), "accelerometer")
+    if "boost" not in events:
+        notes.append("no boost found in the accelerometer: boost and burnout not detected")
+    if tb.size < 20:
+        notes.append("too few altimeter samples to find apogee and touchdown")
+        return events, notes
+    start = events["coast"].time if "coast" in events else tb[0]
+    smooth = _running_median(tb, h, SMOOTH_S)
+    up = tb >= start
+    k_top = int(np.flatnonzero(up)[np.argmax(smooth[up])])
+    noise = max(second_difference_sigma(h), 0.05)
+    near_top = tb[up][np.abs(smooth[up] - smooth[k_top]) <= 2.0 * noise]
+    events["apogee"] = FlightEvent(float(tb[k_top]),
+                                   max(_step_at(tb, tb[k_top]),
+                                       0.5 * float(near_top.max() - near_top.min())),
+                                   "altimeter")
+    down = touchdown(tb, h, ta, a, float(tb[k_top]))
+    t_stop = down.time - HOLD_S if down is not None else float(tb[-1])
+    lo = start + (AFTER_BURNOUT_S if "coast" in events else 0.0)
+    in_a, in_b = (ta >= lo) & (ta < t_stop), (tb >= lo) & (tb < t_stop)
+    jolts = _spikes(ta, a, SPIKE_MIN_G * G0, in_a)
+    pulses = _spikes(tb, h, PULSE_MIN_M, in_b)
+    charges = _ejections(jolts, pulses, ta, tb)
+    top = events["apogee"]
+    near = [c for c in charges
+            if top.time - top.sigma - 1.0 <= c.time <= top.time + DROGUE_WINDOW_S]
+    if near:
+        events["drogue"] = near[0]
+    else:
+        events["drogue"] = FlightEvent(top.time, top.sigma, "apogee (no charge seen)")
+        notes.append("no ejection charge seen near apogee: the drogue is taken to open at "
+                     "apogee")
+    later = [c for c in charges if c.time > events["drogue"].time + CLUSTER_GAP_S]
+    if later:
+        events["main"] = later[0]
+    else:
+        notes.append("no later ejection charge found in the accelerometer or the altimeter: "
+                     "no main")
+    extra = [c for c in charges if c is not events["drogue"] and c not in later[:1]]
+    if extra:
+        notes.append(f"{len(extra)} more ejection-like disturbance(s), at "
+                     f"{', '.join(f'{e.time:.2f}' for e in extra)} s: not used")
+    if down is not None:
+        events["landed"] = down
+    return events, notes
+
+
+def _ejections(jolts: np.ndarray, pulses: np.ndarray, ta: np.ndarray, tb: np.ndarray
+               ) -> list[FlightEvent]:
+    """One event per cluster of spikes (see the module docstring); `ta`, `tb` the
+    accelerometer's and the altimeter's sample times."""
+    marks = sorted([(t, "accelerometer") for t in jolts] + [(t, "altimeter") for t in pulses])
+    clusters: list[list[tuple[float, str]]] = []
+    for mark in marks:
+        if clusters and mark[0] - clusters[-1][-1][0] <= CLUSTER_GAP_S:
+            clusters[-1].append(mark)
+        else:
+            clusters.append([mark])
+    out = []
+    for cluster in clusters:
+        first: dict[str, float] = {}
+        for t, source in cluster:
+            first.setdefault(source, t)
+        t0, source = cluster[0]
+        step = {"accelerometer": _step_at(ta, t0) if ta.size else np.nan,
+                "altimeter": _step_at(tb, t0) if tb.size else np.nan}
+        if "altimeter" not in first:
+            # The accelerometer alone: the spike may be the opening's snatch, not the charge.
+            sigma = max(step["accelerometer"], SNATCH_LAG_S)
+        elif len(first) == 2 and abs(first["accelerometer"] - first["altimeter"]) <= SAME_S:
+            # Both sensors saw the charge.
+            sigma = max(step["accelerometer"], step["altimeter"],
+                        abs(first["accelerometer"] - first["altimeter"]))
+            source = "accelerometer and altimeter"
+        else:
+            sigma = step["altimeter"]
+            t0, source = first["altimeter"], "altimeter"
+        out.append(FlightEvent(float(t0), float(sigma), source))
+    return out
+
+
+def touchdown(tb: np.ndarray, h: np.ndarray, ta: np.ndarray, a: np.ndarray,
+              after: float) -> FlightEvent | None:
+    """Touchdown after `after` (s), or None where the log ends before the vehicle is down.
+
+    Landed: the altitude's slope within STILL_RATE_M_S and its range within
+    STILL_BAND_SIGMAS noise sigmas (+ STILL_BAND_M) over HOLD_S, and the
+    accelerometer's scatter there within REST_ACCEL_M_S2 (or three times the
+    pad's).  The touchdown time is where the line through the last 2 s
+    of the descent above the ground's noise meets the ground level (the median
+    altitude while still); where the accelerometer shows the impact within
+    IMPACT_WINDOW_S of it, the impact's sample.  Sigma: one sample interval of
+    the sensor that timed it, or the noise over the descent rate."""
+    noise = max(second_difference_sigma(h), 0.05)
+    band = STILL_BAND_SIGMAS * noise + STILL_BAND_M
+    rest_a = (max(REST_ACCEL_M_S2, 3.0 * float(np.std(a[: max(10, ta.size // 20)])))
+              if ta.size > 20 else np.inf)
+    dtb = _interval(tb)
+    step = max(1, round(0.1 / dtb))
+    candidates = np.flatnonzero(tb > after)[::step]
+    for i in candidates:
+        w = (tb >= tb[i]) & (tb <= tb[i] + HOLD_S)
+        if tb[i] + HOLD_S > tb[-1] or w.sum() < 5:
+            return None
+        hw = h[w]
+        if np.ptp(hw) > band or abs(np.polyfit(tb[w] - tb[i], hw, 1)[0]) > STILL_RATE_M_S:
+            continue
+        wa = (ta >= tb[i]) & (ta <= tb[i] + HOLD_S)
+        if wa.sum() >= 5 and np.std(a[wa]) > rest_a:
+            continue
+        ground = float(np.median(hw))
+        above = np.flatnonzero((tb < tb[i] + HOLD_S) & (h > ground + 3.0 * noise + 0.5)
+                               & (tb > after))
+        if above.size == 0:
+            return FlightEvent(float(tb[i]), _step_at(tb, tb[i]), "altimeter")
+        t_c = tb[above[-1]]
+        fit = (tb >= t_c - 2.0) & (tb <= t_c) & (tb > after)
+        if fit.sum() < 4:
+            return FlightEvent(float(t_c), _step_at(tb, t_c), "altimeter")
+        slope, icpt = np.polyfit(tb[fit] - t_c, h[fit], 1)
+        t_down = t_c + (float(np.clip((ground - icpt) / slope, 0.0, 1.0)) if slope < 0 else 0.0)
+        step_c = _step_at(tb, t_c)
+        sigma = max(step_c, noise / abs(slope)) if slope < 0 else step_c
+        near = (ta >= t_down - IMPACT_WINDOW_S) & (ta <= t_down + IMPACT_WINDOW_S)
+        rest = (ta > t_down + IMPACT_WINDOW_S) & (ta <= t_down + HOLD_S)
+        if near.sum() >= 3 and rest.sum() >= 3:
+            jolt = np.abs(a[near] - float(np.median(a[rest])))
+            if jolt.max() > SPIKE_MIN_G * G0:
+                t_hit = float(ta[near][np.argmax(jolt)])
+                return FlightEvent(t_hit, _step_at(ta, t_hit), "accelerometer (impact)")
+        return FlightEvent(float(t_down), float(sigma), "altimeter")
+    return None
