@@ -386,9 +386,29 @@ def test_unknown_format_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture
     assert code == 2 and len(err) == 1 and "--format" in err[0] and "cats" in err[0]
 
 
+def _import_layout(layout: str, flight: Flight, tmp_path: Path) -> Path:
+    """The flight written in `layout` (altus, cats or a column-mapped CSV) and imported with
+    one command into tmp_path/test."""
+    card = str(_card(tmp_path))
+    if layout == "altus":
+        write_altus(flight, tmp_path / "telemega-serial-1234-flight-0002.csv", seed=3)
+        args = ["import", str(tmp_path / "telemega-serial-1234-flight-0002.csv"),
+                "--format", "altus"]
+    elif layout == "cats":
+        write_cats(flight, tmp_path / "flight-log-export", seed=2)
+        args = ["import", str(tmp_path / "flight-log-export"), "--format", "cats"]
+    else:
+        write_mapped(flight, tmp_path / "log.csv", seed=1)
+        (tmp_path / "map.json").write_text(json.dumps(COLUMN_MAP))
+        args = ["import", str(tmp_path / "log.csv"), "--columns", str(tmp_path / "map.json")]
+    _import([*args, "--card", card], tmp_path / "test")
+    return tmp_path / "test"
+
+
 @pytest.mark.slow
-def test_imported_column_mapped_log_reconstructs(flight: Flight, tmp_path: Path) -> None:
-    """The folder imported from the column-mapped log reconstructs.  The generator's canopies
+@pytest.mark.parametrize("layout", ["columns", "cats", "altus"])
+def test_imported_log_reconstructs(flight: Flight, tmp_path: Path, layout: str) -> None:
+    """The folder imported from each layout reconstructs.  The generator's canopies
     fill by a linear ramp of drag area, not the model's finite-mass inflation, so the fit
     is judged by convergence (a SolverFailure would raise), a chi-square per degree of
     freedom within the noise (below 1 here: the altimeter's sigma floor of 0.3 m is above
@@ -397,11 +417,7 @@ def test_imported_column_mapped_log_reconstructs(flight: Flight, tmp_path: Path)
     whatever the opening's model."""
     from cpas_ocp.estimation.estimator import Estimator
 
-    write_mapped(flight, tmp_path / "log.csv", seed=1)
-    (tmp_path / "map.json").write_text(json.dumps(COLUMN_MAP))
-    _import(["import", str(tmp_path / "log.csv"), "--columns", str(tmp_path / "map.json"),
-             "--card", str(_card(tmp_path))], tmp_path / "test")
-    est = Estimator(load_test(tmp_path / "test"))
+    est = Estimator(load_test(_import_layout(layout, flight, tmp_path)))
     fit = est.solve()
     cov = est.covariance(fit)
     assert 0.1 < fit.chi_square / fit.dof < 1.5
