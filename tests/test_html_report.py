@@ -1,0 +1,136 @@
+"""report.html: one self-contained page per reconstruction, opened in a real browser.
+
+The browser tests drive Debian's Chromium through its chromedriver (Selenium, nothing
+downloaded); they skip where either is absent.  One simulated drogue fit (the session's)
+serves every test here.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import re
+import shutil
+from pathlib import Path
+
+import pytest
+
+from cpas_ocp.reports.display_units import DisplayUnits
+from cpas_ocp.reports.report import write_report
+
+CHROMIUM = next((p for p in ("/usr/bin/chromium", "/usr/bin/chromium-browser")
+                 if Path(p).is_file()), shutil.which("chromium"))
+CHROMEDRIVER = next((p for p in ("/usr/bin/chromedriver", "/usr/lib/chromium/chromedriver")
+                     if Path(p).is_file()), shutil.which("chromedriver"))
+
+
+@pytest.fixture(scope="module")
+def report(drogue_fit, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The drogue fit's report folder, one parameter put on its bound (a flagged row)."""
+    fit, cov, _ = drogue_fit(1)
+    name = next(n for n in fit.free if n.startswith("t_start"))
+    held = dataclasses.replace(cov, at_bound=[name])
+    return write_report(fit, held, tmp_path_factory.mktemp("html") / "report")
+
+
+def test_the_page_is_self_contained_and_carries_the_tables(report, drogue_fit) -> None:
+    fit, _, _ = drogue_fit(1)
+    page = (report / "report.html").read_text()
+    # Offline: no script or stylesheet fetched from anywhere, plotly.js embedded.
+    assert not re.search(r"<script[^>]+src=", page)
+    assert not re.search(r"<link[^>]+href=", page)
+    assert "Plotly.newPlot" in page
+    assert len(page) > 3_000_000  # plotly.js itself is several MB
+    for name in fit.free:
+        assert f"<td>{name}</td>" in page
+    flagged = re.findall(r"<tr class=flagged><td>([^<]+)</td>", page)
+    assert len(flagged) == 1 and flagged[0].startswith("t_start")
+    assert "bound</td>" in page and "identifiability:" in page
+    sensors = dict.fromkeys(r.sensor for r in fit.residuals if r.sensor not in fit.pseudo_sensors)
+    for sensor in sensors:
+        assert f"{sensor}: model against measurement" in page
+    assert "canopy drag areas" in page
+    # The drogue manifest is in US customary units: the table says so.
+    assert "<td>ft²</td>" in page and "US customary" in page
+    assert "Interactive plots: report.html" in (report / "report.md").read_text()
+
+
+def test_si_units_on_request(drogue_fit, tmp_path) -> None:
+    fit, cov, _ = drogue_fit(1)
+    out = write_report(fit, cov, tmp_path / "report", units=DisplayUnits("si"))
+    page = (out / "report.html").read_text()
+    md = (out / "report.md").read_text()
+    assert "<td>m²</td>" in page and "<td>ft²</td>" not in page
+    assert "tension [N]" in page and "tension [lbf]" not in page
+    assert "ft^2" not in md and "m^2" in md and " N" in md
+
+
+@pytest.fixture(scope="module")
+def browser():
+    """Headless Chromium driven by Debian's chromedriver; skips where either is absent."""
+    webdriver = pytest.importorskip("selenium.webdriver")
+    if CHROMIUM is None or CHROMEDRIVER is None:
+        pytest.skip("Chromium and chromedriver are not installed (Debian: apt-get install "
+                    "chromium chromium-driver); the browser test needs both")
+    from selenium.webdriver.chrome.service import Service
+    options = webdriver.ChromeOptions()
+    options.binary_location = CHROMIUM
+    for flag in ("--headless=new", "--no-sandbox", "--disable-dev-shm-usage",
+                 "--disable-gpu", "--window-size=1400,1000"):
+        options.add_argument(flag)
+    options.set_capability("goog:loggingPrefs", {"browser": "ALL"})
+    driver = webdriver.Chrome(service=Service(executable_path=CHROMEDRIVER), options=options)
+    driver.set_script_timeout(30)
+    yield driver
+    driver.quit()
+
+
+def _range(driver, div: str, axis: str) -> list[float]:
+    return driver.execute_script(
+        f"return document.getElementById('{div}')._fullLayout['{axis}'].range.slice();")
+
+
+def test_the_page_renders_and_zooms_in_a_browser(report, browser, drogue_fit) -> None:
+    fit, _, _ = drogue_fit(1)
+    browser.get((report / "report.html").as_uri())
+    plots = browser.execute_script(
+        "return Array.from(document.querySelectorAll('div.js-plotly-plot')).map(d => "
+        "[d.id, d.data.length, d.querySelectorAll('.scatterlayer .trace').length, "
+        "d.querySelectorAll('svg.main-svg').length, d.dataset.xaxis]);")
+    sensors = {r.sensor for r in fit.residuals if r.sensor not in fit.pseudo_sensors}
+    assert len(plots) == len(sensors) + 1  # one per sensor, and the drag areas
+    for div, traces, drawn, svgs, _ in plots:
+        assert traces > 0 and drawn == traces and svgs > 0, div
+    severe = [e for e in browser.get_log("browser") if e["level"] == "SEVERE"]
+    assert not severe, severe
+
+    # Zoom into the opening: a relayout of one plot's time axis; every plot follows.
+    first, other = plots[0], plots[-1]
+    before = _range(browser, other[0], other[4])
+    browser.execute_async_script(
+        "const done = arguments[arguments.length - 1];"
+        f"Plotly.relayout('{first[0]}', {{'{first[4]}.range': [1.0, 1.7]}}).then(() => "
+        "setTimeout(done, 200));")
+    assert _range(browser, first[0], first[4]) == pytest.approx([1.0, 1.7])
+    assert _range(browser, first[0], "xaxis") == pytest.approx([1.0, 1.7])  # panels shared
+    assert _range(browser, other[0], other[4]) == pytest.approx([1.0, 1.7])
+    assert before != pytest.approx([1.0, 1.7])
+
+    # A box zoom dragged with the mouse across the bottom panel narrows the time axis.
+    from selenium.webdriver.common.action_chains import ActionChains
+    browser.execute_async_script(
+        "const done = arguments[arguments.length - 1];"
+        f"Plotly.relayout('{first[0]}', {{'{first[4]}.autorange': true}}).then(() => "
+        "setTimeout(done, 200));")
+    full = _range(browser, first[0], first[4])
+    area = browser.find_elements(
+        "css selector", f"#{first[0]} .draglayer .nsewdrag")[-1]
+    width = area.size["width"]
+    ActionChains(browser).move_to_element_with_offset(area, -width // 4, 0).click_and_hold() \
+        .move_by_offset(width // 8, 0).move_by_offset(width // 8, 5).release().perform()
+    browser.execute_async_script("setTimeout(arguments[arguments.length - 1], 300);")
+    zoomed = _range(browser, first[0], first[4])
+    assert zoomed[1] - zoomed[0] < 0.5 * (full[1] - full[0])
+    assert full[0] < zoomed[0] < zoomed[1] < full[1]
+    assert _range(browser, other[0], other[4]) == pytest.approx(zoomed)
+    severe = [e for e in browser.get_log("browser") if e["level"] == "SEVERE"]
+    assert not severe, severe
