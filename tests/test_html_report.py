@@ -134,3 +134,65 @@ def test_the_page_renders_and_zooms_in_a_browser(report, browser, drogue_fit) ->
     assert _range(browser, other[0], other[4]) == pytest.approx(zoomed)
     severe = [e for e in browser.get_log("browser") if e["level"] == "SEVERE"]
     assert not severe, severe
+
+
+@pytest.fixture(scope="module")
+def diagnosis_folder(drogue_fit, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The diagnosis folder of the drogue fit's residuals (their windows and signatures;
+    no effect refitted, which is what `diagnose` adds and this page only prints)."""
+    from cpas_ocp.discrepancy.diagnosis import Diagnosis
+    from cpas_ocp.discrepancy.residual_diagnosis import diagnose_residuals
+    from cpas_ocp.inference.diagnostics import window_statistics
+    from cpas_ocp.inference.phase_windows import phase_windows
+    from cpas_ocp.reports.discrepancy_report import write_diagnosis
+    fit, cov, _ = drogue_fit(1)
+    windows = phase_windows(fit)
+    diag = Diagnosis(fit, windows, window_statistics(fit, windows), [],
+                     diagnose_residuals(fit, windows, 0.01))
+    return write_diagnosis(diag, cov, tmp_path_factory.mktemp("diag") / "diagnosis")
+
+
+def test_the_diagnosis_page_has_the_verdict_the_windows_and_the_plots(diagnosis_folder,
+                                                                     drogue_fit) -> None:
+    fit, _, _ = drogue_fit(1)
+    page = (diagnosis_folder / "diagnosis.html").read_text()
+    assert "<h2>Verdict</h2>" in page and "Residuals per sensor channel and phase window" in page
+    windows = (diagnosis_folder / "windows.csv").read_text().splitlines()
+    rows = re.findall(r"<tr><td>(riser_drogue1|gps|imu|riser_drogue2)</td>", page)
+    assert len(rows) == len(windows) - 1  # every window of windows.csv, in the table
+    # The RMS is shown in display units (US customary here), named in its own column.
+    assert "<td>lbf</td>" in page and "<td>ft/s</td>" in page
+    sensors = {r.sensor for r in fit.residuals if r.sensor not in fit.pseudo_sensors}
+    for sensor in sensors:
+        assert page.count(f"{sensor}: model against measurement") == 1
+    assert "inflation</span>" in page  # the windows' colours explained
+
+
+def test_the_comparison_page_shows_both_models_and_the_test(drogue_fit, tmp_path) -> None:
+    from cpas_ocp.inference.model_comparison import Comparison, LikelihoodRatio
+    from cpas_ocp.io.model_spec import spec_of_test
+    from cpas_ocp.reports.discrepancy_report import write_comparison
+    fit, cov, _ = drogue_fit(1)
+    spec = spec_of_test(fit.test)
+    lr = LikelihoodRatio(statistic=1.5, dof=2)
+    comparison = Comparison(("A", "B"), (spec, spec), (fit, fit), (cov, cov), lr,
+                            "A is nested in B")
+    out = write_comparison(comparison, tmp_path / "cmp")
+    page = (out / "comparison.html").read_text()
+    assert lr.text() in page and "A is nested in B" in page
+    assert "Parameters: A" in page and "Parameters: B" in page
+    for sensor in {r.sensor for r in fit.residuals if r.sensor not in fit.pseudo_sensors}:
+        assert f"{sensor}: normalised residuals, A and B" in page
+
+
+def test_the_diagnosis_page_renders_in_a_browser(diagnosis_folder, browser) -> None:
+    browser.get((diagnosis_folder / "diagnosis.html").as_uri())
+    plots = browser.execute_script(
+        "return Array.from(document.querySelectorAll('div.js-plotly-plot')).map(d => "
+        "[d.data.length, d.querySelectorAll('.scatterlayer .trace').length, "
+        "d.querySelectorAll('.shapelayer path').length]);")
+    assert plots
+    for traces, drawn, shapes in plots:
+        assert traces > 0 and drawn == traces and shapes > 0  # bands and windows drawn
+    severe = [e for e in browser.get_log("browser") if e["level"] == "SEVERE"]
+    assert not severe, severe
