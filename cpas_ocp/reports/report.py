@@ -214,11 +214,11 @@ def correlation_markdown(cov: Covariance, threshold: float = REPORTED_CORRELATIO
 
 def units_note(units: DisplayUnits, test_units: DisplayUnits) -> str:
     """Which units a report's figures and tables are in, and why (result.json is SI)."""
-    system = "US customary" if units.system == "us" else "SI"
-    why = ("the manifest's" if units == test_units else
-           "as asked, the manifest's being " + ("US customary" if test_units.system == "us"
-                                                 else "SI"))
-    return f"Figures and tables in {system} units ({why}); result.json is in SI."
+    name = {"us": "US customary", "si": "SI"}
+    why = ("as the manifest is written" if units == test_units else
+           f"as asked (the manifest is written in {name[test_units.system]})")
+    return (f"Figures and tables in {name[units.system]} units, {why}; result.json is in "
+            "SI.")
 
 
 def begin_page(fit: Fit, title: str, units: DisplayUnits) -> Page:
