@@ -196,3 +196,29 @@ def test_the_diagnosis_page_renders_in_a_browser(diagnosis_folder, browser) -> N
         assert traces > 0 and drawn == traces and shapes > 0  # bands and windows drawn
     severe = [e for e in browser.get_log("browser") if e["level"] == "SEVERE"]
     assert not severe, severe
+
+
+def test_a_large_series_is_drawn_in_full_with_webgl_and_said_so(browser, tmp_path) -> None:
+    """A channel of a long descent at a high rate: every sample kept, drawn with WebGL."""
+    import numpy as np
+
+    from cpas_ocp.reports.html_page import LARGE_TRACE, Page, sensor_figure
+    from cpas_ocp.reports.report_data import ChannelSeries
+    rng = np.random.default_rng(3)
+    n = LARGE_TRACE + 5_000
+    t = np.linspace(0.0, 245.0, n)
+    model = np.sin(t)
+    measured = model + 0.1 * rng.standard_normal(n)
+    page = Page("a long descent")
+    sensor_figure(page, "accel", [ChannelSeries("accel", "acceleration", "m/s^2", t, measured,
+                                                model, (measured - model) / 0.1)])
+    path = page.write(tmp_path / "large.html")
+    assert f"accel.acceleration ({n:,} points)" in path.read_text()
+    browser.get(path.as_uri())
+    drawn = browser.execute_script(
+        "const g = document.querySelector('div.js-plotly-plot');"
+        "return [g._fullData.map(d => d.type), g._fullData.map(d => d.x.length),"
+        " g.querySelectorAll('canvas').length];")
+    assert drawn[0] == ["scattergl"] * 3 and drawn[1] == [n] * 3 and drawn[2] > 0
+    severe = [e for e in browser.get_log("browser") if e["level"] == "SEVERE"]
+    assert not severe, severe
