@@ -217,7 +217,7 @@ def sensor_figure(page: Page, sensor: str, channels: Sequence[ChannelSeries],
         fig.update_yaxes(title_text=f"{c.channel} [{pretty(c.unit)}]", row=top, col=1)
         fig.update_yaxes(title_text="res/σ", range=_residual_range(c.normalized), row=low,
                          col=1)
-    fig.update_layout(shapes=shapes + _window_shapes(spans, n))
+    fig.update_layout(shapes=_window_shapes(spans, n) + shapes)  # bands over the windows
     fig.update_xaxes(title_text="time [s]", row=n, col=1)
     fig.update_layout(title=f"{sensor}: model against measurement",
                       height=170 * len(channels) * 2 + 120)
@@ -275,7 +275,7 @@ def residual_comparison_figure(page: Page, sensor: str, labels: tuple[str, str],
         shapes += _band_shapes(i)
         fig.update_yaxes(title_text=f"{pair[0].channel} res/σ",
                          range=_residual_range(*(c.normalized for c in pair)), row=i, col=1)
-    fig.update_layout(shapes=shapes + _window_shapes(spans, len(pairs)))
+    fig.update_layout(shapes=_window_shapes(spans, len(pairs)) + shapes)
     fig.update_xaxes(title_text="time [s]", row=len(pairs), col=1)
     fig.update_layout(title=f"{sensor}: normalised residuals, {labels[0]} and {labels[1]}",
                       height=220 * len(pairs) + 140)
