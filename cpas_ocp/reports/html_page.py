@@ -38,8 +38,8 @@ STYLE = """
 body { font-family: system-ui, sans-serif; margin: 1.5em auto; max-width: 1200px;
        padding: 0 1em; color: #222; }
 table { border-collapse: collapse; font-size: 0.9em; margin: 0.5em 0 1em; }
-th, td { border: 1px solid #ccc; padding: 0.25em 0.6em; text-align: right; }
-th { background: #f2f2f2; } td:first-child, th:first-child { text-align: left; }
+th, td { border: 1px solid #ccc; padding: 0.25em 0.6em; text-align: left; }
+th { background: #f2f2f2; } td.n { text-align: right; }
 tr.flagged td { background: #fde8e4; }
 pre { background: #f7f7f7; padding: 0.7em; overflow-x: auto; font-size: 0.85em; }
 .warning { background: #fde8e4; border-left: 4px solid #c0392b; padding: 0.6em 1em; }
@@ -100,15 +100,18 @@ class Page:
 
     def table(self, header: Sequence[str], rows: Sequence[Sequence[object]],
               flagged: Sequence[bool] = ()) -> None:
-        """A table; numbers to 5 significant digits; `flagged` rows highlighted."""
+        """A table; numbers to 5 significant digits, right-aligned; `flagged` rows
+        highlighted."""
         def cell(v: object) -> str:
             if isinstance(v, float | np.floating):
-                return "—" if not np.isfinite(v) else f"{float(v):.5g}"
-            return html.escape(str(v))
+                return "<td class=n>" + ("—" if not np.isfinite(v) else f"{float(v):.5g}")
+            if isinstance(v, int | np.integer):
+                return f"<td class=n>{v}"
+            return f"<td>{html.escape(str(v))}"
         head = "".join(f"<th>{html.escape(h)}</th>" for h in header)
         body = "".join(
             f'<tr{" class=flagged" if k < len(flagged) and flagged[k] else ""}>'
-            + "".join(f"<td>{cell(v)}</td>" for v in row) + "</tr>"
+            + "".join(f"{cell(v)}</td>" for v in row) + "</tr>"
             for k, row in enumerate(rows))
         self.parts.append(f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>")
 
