@@ -167,6 +167,7 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("test_dir", type=Path)
     s.add_argument("--out", required=True, type=Path)
     _model_option(s)
+    _units_option(s)
     s.set_defaults(run=_reduce)
 
     s = sub.add_parser("reconstruct", help="reconstruct a test folder")
@@ -401,8 +402,9 @@ def _reduce(args: argparse.Namespace) -> int:
     from cpas_ocp.io.flight_test import load_test
     from cpas_ocp.reports.reduction_report import guess_table, write_reduction
     test = load_test(args.test_dir)
-    out, model, guess = write_reduction(test, args.out, _spec(test, args))
-    print(guess_table(model, guess))
+    units = _units(test, args)
+    out, model, guess = write_reduction(test, args.out, _spec(test, args), units)
+    print(guess_table(model, guess, units))
     print(f"\nreduction written to {out} (reduction.csv, initial_guess.json, reduction.png)")
     return 0
 

@@ -131,3 +131,20 @@ def test_units_option_overrides_an_si_manifest(drogue_folder, tmp_path, capsys) 
     assert "ft^2" in (out / "report.md").read_text()
     result = json.loads((out / "result.json").read_text())
     assert result["parameters"]["CdS[drogue1,stage1]"]["unit"] == "m^2"
+
+
+def test_reduce_prints_the_guess_in_the_units_asked(drogue_folder, tmp_path, capsys) -> None:
+    folder = drogue_folder(1)
+    assert main(["reduce", str(folder), "--out", str(tmp_path / "us")]) == 0
+    us = capsys.readouterr().out
+    assert main(["reduce", str(folder), "--out", str(tmp_path / "si"), "--units", "si"]) == 0
+    si = capsys.readouterr().out
+    name = "CdS[drogue1,stage1]"
+    row_us, row_si = (next(line for line in text.splitlines() if line.startswith(name))
+                      for text in (us, si))
+    assert row_us.split()[2] == "ft^2" and row_si.split()[2] == "m^2"
+    assert float(row_us.split()[1]) * FT**2 == pytest.approx(float(row_si.split()[1]),
+                                                             rel=1e-4)
+    guess = json.loads((tmp_path / "si" / "initial_guess.json").read_text())["parameters"]
+    assert guess[name]["unit"] == "m^2"  # the file stays SI
+    assert guess[name]["value"] == pytest.approx(float(row_si.split()[1]), rel=1e-4)
