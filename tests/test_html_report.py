@@ -14,7 +14,6 @@ from pathlib import Path
 
 import pytest
 
-from cpas_ocp.reports.display_units import DisplayUnits
 from cpas_ocp.reports.report import write_report
 
 CHROMIUM = next((p for p in ("/usr/bin/chromium", "/usr/bin/chromium-browser")
@@ -52,16 +51,6 @@ def test_the_page_is_self_contained_and_carries_the_tables(report, drogue_fit) -
     # The drogue manifest is in US customary units: the table says so.
     assert "<td>ft²</td>" in page and "US customary" in page
     assert "Interactive plots: report.html" in (report / "report.md").read_text()
-
-
-def test_si_units_on_request(drogue_fit, tmp_path) -> None:
-    fit, cov, _ = drogue_fit(1)
-    out = write_report(fit, cov, tmp_path / "report", units=DisplayUnits("si"))
-    page = (out / "report.html").read_text()
-    md = (out / "report.md").read_text()
-    assert "<td>m²</td>" in page and "<td>ft²</td>" not in page
-    assert "tension [N]" in page and "tension [lbf]" not in page
-    assert "ft^2" not in md and "m^2" in md and " N" in md
 
 
 @pytest.fixture(scope="module")

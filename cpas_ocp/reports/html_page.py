@@ -192,7 +192,7 @@ def _band_shapes(row: int) -> list[dict]:
 
 
 def _residual_range(*series: np.ndarray) -> list[float]:
-    lim = max(4.0, *(float(np.percentile(np.abs(s), 99.5)) for s in series if s.size))
+    lim = max([4.0, *(float(np.percentile(np.abs(s), 99.5)) for s in series if s.size)])
     return [-lim, lim]
 
 
