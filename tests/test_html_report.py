@@ -53,6 +53,26 @@ def test_the_page_is_self_contained_and_carries_the_tables(report, drogue_fit) -
     assert "Interactive plots: report.html" in (report / "report.md").read_text()
 
 
+def test_observed_events_are_tabled_against_the_model(drogue_fit) -> None:
+    import numpy as np
+
+    from cpas_ocp.estimation.estimator import EVENTS, SensorResidual
+    from cpas_ocp.reports.display_units import display_units
+    from cpas_ocp.reports.report import reconstruction_page
+    fit, cov, _ = drogue_fit(1)
+    # The drogue model observes no event times; two are added as the fit would see them.
+    events = [SensorResidual(EVENTS, name, np.array([t]), np.array([t]), np.array([m]),
+                             np.array([0.01])) for name, t, m in
+              (("full_open[drogue1,stage1]", 2.10, 2.095), ("disreef[drogue1,stage2]", 7.00, 6.9))]
+    seen = dataclasses.replace(fit, residuals=[*fit.residuals, *events])
+    page = reconstruction_page(seen, cov, None, display_units(fit.test)).html()
+    assert "Events: observed against the model" in page
+    assert "<td>full_open[drogue1,stage1]</td><td class=n>2.1</td><td class=n>2.095</td>" in page
+    # 10 sigma off: the row is flagged; 0.5 sigma: not.
+    assert "<tr class=flagged><td>disreef[drogue1,stage2]</td>" in page
+    assert "<tr><td>full_open[drogue1,stage1]</td>" in page
+
+
 @pytest.fixture(scope="module")
 def browser():
     """Headless Chromium driven by Debian's chromedriver; skips where either is absent."""

@@ -18,7 +18,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 from scipy.spatial import ConvexHull
 
-from cpas_ocp.estimation.estimator import EVENTS, Fit, SensorResidual
+from cpas_ocp.estimation.estimator import Fit, SensorResidual
 from cpas_ocp.estimation.reduction import reduce, stage_starts
 from cpas_ocp.estimation.uncertainty import Covariance
 from cpas_ocp.inference.phase_windows import PhaseWindow, windows_for_sensor
@@ -27,6 +27,7 @@ from cpas_ocp.physics.effects.wind_process import WindProcess
 from cpas_ocp.physics.parameters import param_name, split_name
 from cpas_ocp.physics.units import FT, LBF
 from cpas_ocp.reports.display_units import DisplayUnits, display_units, pretty
+from cpas_ocp.reports.report_data import event_rows
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -67,19 +68,17 @@ def plot_sensors(fit: Fit, folder: Path, units: DisplayUnits | None = None) -> l
 
 def plot_events(fit: Fit, folder: Path) -> Path | None:
     """Observed event times (with their 1 and 2 sigma) against the model's, one row each."""
-    rows = [r for r in fit.residuals if r.sensor == EVENTS]
+    rows = event_rows(fit)
     if not rows:
         return None
     fig, ax = plt.subplots(figsize=(10, 0.6 * len(rows) + 1.6))
-    for i, r in enumerate(rows):
-        t_obs, t_model, sigma = float(r.measured[0]), float(r.model[0]), float(r.sigma[0])
-        ax.errorbar(t_obs, i, xerr=2 * sigma, fmt="none", ecolor="0.75", elinewidth=6)
-        ax.errorbar(t_obs, i, xerr=sigma, fmt="o", color="0.35", ms=4, elinewidth=6,
+    for i, e in enumerate(rows):
+        ax.errorbar(e.observed, i, xerr=2 * e.sigma, fmt="none", ecolor="0.75", elinewidth=6)
+        ax.errorbar(e.observed, i, xerr=e.sigma, fmt="o", color="0.35", ms=4, elinewidth=6,
                     label="observed ±1σ, ±2σ" if i == 0 else None)
-        ax.plot(t_model, i, "|", color="C3", ms=18, mew=2, label="model" if i == 0 else None)
-        ax.annotate(f"{(t_obs - t_model) / sigma:+.2f}σ", (t_obs + 2.5 * sigma, i),
-                    va="center", fontsize=8)
-    ax.set_yticks(range(len(rows)), [r.channel for r in rows])
+        ax.plot(e.model, i, "|", color="C3", ms=18, mew=2, label="model" if i == 0 else None)
+        ax.annotate(f"{e.z:+.2f}σ", (e.observed + 2.5 * e.sigma, i), va="center", fontsize=8)
+    ax.set_yticks(range(len(rows)), [e.event for e in rows])
     ax.set_ylim(-0.7, len(rows) - 0.3)
     ax.set_xlabel("time [s]")
     ax.legend(loc="lower right", fontsize=8)

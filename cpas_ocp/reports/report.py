@@ -30,7 +30,13 @@ from cpas_ocp.reports.plots import (
     plot_sensors,
     plot_wind,
 )
-from cpas_ocp.reports.report_data import Z95, channel_series, parameter_rows, sensor_spans
+from cpas_ocp.reports.report_data import (
+    Z95,
+    channel_series,
+    event_rows,
+    parameter_rows,
+    sensor_spans,
+)
 
 if TYPE_CHECKING:
     from cpas_ocp.inference.result_claim import Claim
@@ -264,6 +270,12 @@ def reconstruction_page(fit: Fit, cov: Covariance | None, claim: Claim | None,
     parameter_section(page, fit, cov, units)
     page.heading("Fit")
     page.preformatted(fit_summary(fit, units))
+    events = event_rows(fit)
+    if events:
+        page.heading("Events: observed against the model")
+        page.table(["event", "observed [s]", "model [s]", "σ [s]", "(observed - model)/σ"],
+                   [[e.event, e.observed, e.model, e.sigma, e.z] for e in events],
+                   flagged=[abs(e.z) > 3.0 for e in events])
     page.heading("Sensors: model against measurement")
     sensor_figures(page, fit, units, phase_windows(fit))
     page.heading("Canopy drag areas")

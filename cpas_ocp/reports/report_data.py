@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.stats import norm
 
-from cpas_ocp.estimation.estimator import Fit
+from cpas_ocp.estimation.estimator import EVENTS, Fit
 from cpas_ocp.estimation.uncertainty import Covariance
 from cpas_ocp.inference.phase_windows import PhaseWindow, windows_for_sensor
 from cpas_ocp.reports.display_units import DisplayUnits
@@ -100,3 +100,25 @@ def parameter_rows(fit: Fit, cov: Covariance | None, units: DisplayUnits
         rows.append(ParameterRow(name, v, s, ci, unit, fit.guess.get(name, prm.default) * k,
                                  parameter_flag(fit, cov, name)))
     return rows
+
+
+@dataclass(frozen=True)
+class EventRow:
+    """An observed event time against the model's (s), its sigma and the difference in
+    sigmas."""
+
+    event: str
+    observed: float
+    model: float
+    sigma: float
+
+    @property
+    def z(self) -> float:
+        return (self.observed - self.model) / self.sigma
+
+
+def event_rows(fit: Fit) -> list[EventRow]:
+    """The observed events the fit sees, in time order."""
+    rows = [EventRow(r.channel, float(r.measured[0]), float(r.model[0]), float(r.sigma[0]))
+            for r in fit.residuals if r.sensor == EVENTS]
+    return sorted(rows, key=lambda e: e.observed)
