@@ -58,6 +58,7 @@ if TYPE_CHECKING:
     from cpas_ocp.io.model_spec import ModelSpec
     from cpas_ocp.io.recorder_clocks import RecorderEstimates
     from cpas_ocp.physics.effects.registry import EffectType
+    from cpas_ocp.reports.display_units import DisplayUnits
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -168,6 +169,7 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("test_dir", type=Path)
     s.add_argument("--out", required=True, type=Path)
     _model_option(s)
+    _units_option(s)
     s.set_defaults(run=_reduce)
 
     s = sub.add_parser("reconstruct", help="reconstruct a test folder")
@@ -182,6 +184,7 @@ def _parser() -> argparse.ArgumentParser:
                    help="values per profile (default 13)")
     _model_option(s)
     _solver_options(s)
+    _units_option(s)
     s.set_defaults(run=_reconstruct)
 
     s = sub.add_parser("whatif", help="re-solve under constraints and report what they cost")
@@ -197,6 +200,7 @@ def _parser() -> argparse.ArgumentParser:
     s = sub.add_parser("diagnose", help="fit, then find where the model fails and which "
                                         "effect is missing")
     _diagnosis_options(s)
+    _units_option(s)
     s.set_defaults(run=_diagnose)
 
     s = sub.add_parser("discover", help="diagnose, add the confirmed effect, refit, and "
@@ -216,6 +220,7 @@ def _parser() -> argparse.ArgumentParser:
     _plugin_option(s, "a Python file whose effects the model files may name (repeatable)")
     _model_option(s, model=False)
     _solver_options(s)
+    _units_option(s)
     s.set_defaults(run=_compare)
 
     s = sub.add_parser("campaign", help="reconstruct every test folder under a folder, in "
@@ -275,8 +280,21 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--out", type=Path, default=Path("cpas-demo"))
     s.add_argument("--seed", type=SEED, default=1)
     _solver_options(s)
+    _units_option(s)
     s.set_defaults(run=_demo)
     return p
+
+
+def _units_option(s: argparse.ArgumentParser) -> None:
+    s.add_argument("--units", choices=("si", "us"), default=None,
+                   help="draw figures and tables in SI or US customary units (default: "
+                        "the manifest's; result.json is always SI)")
+
+
+def _units(test: FlightTest, args: argparse.Namespace) -> DisplayUnits:
+    """The display units of --units, else those the test's manifest is written in."""
+    from cpas_ocp.reports.display_units import display_units
+    return display_units(test, getattr(args, "units", None))
 
 
 def _plugin_option(s: argparse.ArgumentParser, text: str) -> None:
@@ -394,8 +412,9 @@ def _reduce(args: argparse.Namespace) -> int:
     from cpas_ocp.io.flight_test import load_test
     from cpas_ocp.reports.reduction_report import guess_table, write_reduction
     test = load_test(args.test_dir)
-    out, model, guess = write_reduction(test, args.out, _spec(test, args))
-    print(guess_table(model, guess))
+    units = _units(test, args)
+    out, model, guess = write_reduction(test, args.out, _spec(test, args), units)
+    print(guess_table(model, guess, units))
     print(f"\nreduction written to {out} (reduction.csv, initial_guess.json, reduction.png)")
     return 0
 
@@ -438,10 +457,11 @@ def _diagnose(args: argparse.Namespace) -> int:
     print("testing the effects the model does not use ...", flush=True)
     diag = diagnose(fit, est.spec, plugins, args.confirm, args.alpha,
                     progress=not args.verbose)
-    out = write_diagnosis(diag, cov, args.out)
+    out = write_diagnosis(diag, cov, args.out, _units(test, args))
     print()
     print(diag.text())
     print(f"\ndiagnosis written to {out} (diagnosis.md, diagnosis.json, windows.csv, figures)")
+    print(f"interactive report: {out / 'diagnosis.html'}")
     return 0
 
 
@@ -516,11 +536,12 @@ def _compare(args: argparse.Namespace) -> int:
     spec_b = with_start_shifts(specs[1], start_shifts(est.spec))
     print(f"solving {labels[1]} from it ...", flush=True)
     comparison = compare(fit_a, cov_a, est.spec, spec_b, labels, progress=not args.verbose)
-    out = write_comparison(comparison, args.out)
+    out = write_comparison(comparison, args.out, _units(test, args))
     print()
     print(comparison.text())
     print(f"\ncomparison written to {out} (comparison.md, comparison.json, windows.csv, "
           "figures)")
+    print(f"interactive report: {out / 'comparison.html'}")
     return 0
 
 
@@ -749,15 +770,17 @@ def _run_reconstruction(test: FlightTest, args: argparse.Namespace, spec: ModelS
         raise
     profiles = [profile(est, fit, cov, n, args.profile_span, args.profile_points,
                         progress=not args.verbose) for n in names]
-    out = write_report(fit, cov, target, profiles, claim)
+    units = _units(test, args)
+    out = write_report(fit, cov, target, profiles, claim, units)
     print()
-    print(parameter_table(fit, cov))
+    print(parameter_table(fit, cov, units))
     print()
-    print(fit_summary(fit))
+    print(fit_summary(fit, units))
     for prof in profiles:
         print(f"profile likelihood, {prof.text()}")
     print(claim.text())
     print(f"\nreport written to {out} (result.json, parameters.csv, report.md, figures)")
+    print(f"interactive report: {out / 'report.html'}")
     if not claim.is_result:
         raise NotAResult(f"the fit converged but is not a result (see the claim in "
                          f"{out / 'report.md'}): {claim.problems()[0]}")

@@ -2,10 +2,13 @@
 
 diagnose:  diagnosis.md (the text, the window table, the figures),
            diagnosis.json (everything, SI), windows.csv (residual statistics
-           per sensor channel and phase window), residuals_<sensor>.png.
+           per sensor channel and phase window, SI), residuals_<sensor>.png,
+           diagnosis.html (verdict, tables and zoomable plots in one page).
 compare:   comparison.md, comparison.json, windows.csv (both models, per
            channel and window), residuals_<label>_<sensor>.png per model and
-           compare_<sensor>.png (normalised residuals side by side).
+           compare_<sensor>.png (normalised residuals side by side),
+           comparison.html (the test, tables and zoomable plots in one page).
+Figures and tables are in the display units (`display_units`); JSON and CSV in SI.
 discover:  discovery.md (the chain of models, per-channel normalised RMS after
            each step, the last diagnosis), discovery.json, discovery.png,
            step_<k>.json (each step's model as a model file), and the last
@@ -26,23 +29,36 @@ from cpas_ocp.discrepancy.discovery import Discovery
 from cpas_ocp.estimation.uncertainty import Covariance
 from cpas_ocp.inference.diagnostics import WindowStatistic, window_statistics
 from cpas_ocp.inference.model_comparison import Comparison
-from cpas_ocp.inference.phase_windows import phase_windows
+from cpas_ocp.inference.phase_windows import PhaseWindow, phase_windows
 from cpas_ocp.io.model_spec import model_block
 from cpas_ocp.io.output_folder import atomic_folder
 from cpas_ocp.physics.effects.registry import EffectType
+from cpas_ocp.reports.display_units import DisplayUnits, display_units, pretty
+from cpas_ocp.reports.html_page import Page, residual_comparison_figure, window_legend
+from cpas_ocp.reports.html_page import parameter_table as parameter_html
 from cpas_ocp.reports.plots import (
     file_stem,
     plot_discovery,
     plot_residual_comparison,
     plot_sensor_residuals,
 )
-from cpas_ocp.reports.report import parameter_table
+from cpas_ocp.reports.report import (
+    begin_page,
+    parameter_section,
+    parameter_table,
+    sensor_figures,
+    units_note,
+)
+from cpas_ocp.reports.report_data import channel_series, parameter_rows, sensor_spans
 
 
-def write_diagnosis(diag: Diagnosis, cov: Covariance | None, out: str | Path) -> Path:
-    """Write the diagnosis folder atomically: all of it or nothing."""
+def write_diagnosis(diag: Diagnosis, cov: Covariance | None, out: str | Path,
+                    units: DisplayUnits | None = None) -> Path:
+    """Write the diagnosis folder atomically: all of it or nothing.  Figures and tables in
+    `units` (default the test's own)."""
     out = Path(out)
     fit = diag.fit
+    units = units or display_units(fit.test)
     with atomic_folder(out, "diagnosis.json") as tmp:
         table = _window_frame(diag.statistics)
         table.to_csv(tmp / "windows.csv", index=False)
@@ -66,20 +82,37 @@ def write_diagnosis(diag: Diagnosis, cov: Covariance | None, out: str | Path) ->
             "verdict": diag.verdict(),
         }
         (tmp / "diagnosis.json").write_text(json.dumps(result, indent=2, default=float))
-        figures = plot_sensor_residuals(fit, diag.windows, tmp)
+        figures = plot_sensor_residuals(fit, diag.windows, tmp, units)
+        shown = _display_frame(table, units)
         (tmp / "diagnosis.md").write_text(
             f"# Diagnosis of {fit.test.name}\n\n{fit.test.label}\n\n"
-            f"```\n{parameter_table(fit, cov)}\n\n{diag.text()}\n```\n\n"
+            f"```\n{parameter_table(fit, cov, units)}\n\n{diag.text()}\n```\n\n"
             "## Residuals per sensor channel and phase window\n\n"
-            + _markdown(table) + "\n\n"
-            + "".join(f"![{p.stem}]({p.name})\n\n" for p in figures))
+            + _markdown(shown) + "\n\n"
+            + "".join(f"![{p.stem}]({p.name})\n\n" for p in figures)
+            + f"{units_note(units, display_units(fit.test))}  Interactive plots: "
+            "diagnosis.html\n")
+        page = begin_page(fit, f"Diagnosis of {fit.test.name}", units)
+        page.heading("Verdict")
+        page.preformatted(diag.verdict())
+        parameter_section(page, fit, cov, units)
+        page.heading("Diagnosis")
+        page.preformatted(diag.text())
+        page.heading("Residuals per sensor channel and phase window")
+        _table(page, shown)
+        page.heading("Sensors: model against measurement, by phase window")
+        sensor_figures(page, fit, units, diag.windows)
+        page.write(tmp / "diagnosis.html")
     return out
 
 
-def write_comparison(comparison: Comparison, out: str | Path) -> Path:
-    """Write the comparison folder atomically."""
+def write_comparison(comparison: Comparison, out: str | Path,
+                     units: DisplayUnits | None = None) -> Path:
+    """Write the comparison folder atomically.  Figures and tables in `units` (default the
+    test's own)."""
     out = Path(out)
     fit_a, fit_b = comparison.fits
+    units = units or display_units(fit_a.test)
     windows = phase_windows(fit_a)
     with atomic_folder(out, "comparison.json") as tmp:
         frames = []
@@ -111,21 +144,73 @@ def write_comparison(comparison: Comparison, out: str | Path) -> Path:
         for label, fit in zip(comparison.labels, comparison.fits, strict=True):
             sub = tmp / file_stem(label)
             sub.mkdir()
-            figures += plot_sensor_residuals(fit, windows, sub)
+            figures += plot_sensor_residuals(fit, windows, sub, units)
         side = plot_residual_comparison(fit_a, fit_b, comparison.labels, windows, tmp)
+        title = f"{comparison.labels[0]} against {comparison.labels[1]} on {fit_a.test.name}"
         (tmp / "comparison.md").write_text(
-            f"# {comparison.labels[0]} against {comparison.labels[1]} on {fit_a.test.name}\n\n"
+            f"# {title}\n\n"
             f"```\n{comparison.text()}\n```\n\n"
             "## Normalised residual RMS per sensor channel and phase window\n\n"
             + _markdown(wide) + "\n\n"
             + "".join(f"![{p.stem}]({p.name})\n\n" for p in side)
             + "".join(f"![{p.parent.name} {p.stem}]({p.parent.name}/{p.name})\n\n"
-                      for p in figures))
+                      for p in figures)
+            + "Interactive plots: comparison.html\n")
+        comparison_page(comparison, title, wide, windows, units).write(
+            tmp / "comparison.html")
     return out
+
+
+def comparison_page(comparison: Comparison, title: str, wide: pd.DataFrame,
+                    windows: list[PhaseWindow], units: DisplayUnits) -> Page:
+    """The comparison as one HTML page: the likelihood-ratio test and the criteria, each
+    model's parameters, the normalised RMS per channel and window, and per sensor both
+    models' normalised residuals on one time axis."""
+    fit_a, fit_b = comparison.fits
+    labels = comparison.labels
+    page = begin_page(fit_a, title, units)
+    page.heading("Likelihood-ratio test")
+    page.paragraph(comparison.note)
+    page.paragraph("no likelihood-ratio test: the models are not nested"
+                   if comparison.lr is None else comparison.lr.text())
+    page.preformatted(comparison.text())
+    for label, fit, cov in zip(labels, comparison.fits, comparison.covariances, strict=True):
+        page.heading(f"Parameters: {label}")
+        parameter_html(page, parameter_rows(fit, cov, units))
+    page.heading("Normalised residual RMS per sensor channel and phase window")
+    _table(page, wide)
+    page.heading(f"Normalised residuals: {labels[0]} and {labels[1]}")
+    in_b = {(c.sensor, c.channel): c for c in channel_series(fit_b, units)}
+    series_a = channel_series(fit_a, units)
+    if windows:
+        window_legend(page)
+    for sensor, spans in sensor_spans(fit_a, windows).items():
+        # Channels are paired by name: a model may add pseudo-observations the other lacks.
+        pairs = [(c, in_b[c.sensor, c.channel]) for c in series_a
+                 if c.sensor == sensor and (c.sensor, c.channel) in in_b]
+        if pairs:
+            residual_comparison_figure(page, sensor, labels, pairs, spans)
+    return page
 
 
 def _window_frame(stats: list[WindowStatistic]) -> pd.DataFrame:
     return pd.DataFrame([{**dataclasses.asdict(s), "excess": s.excess} for s in stats])
+
+
+def _display_frame(table: pd.DataFrame, units: DisplayUnits) -> pd.DataFrame:
+    """The window table as read: each RMS in its channel's display unit, named beside it."""
+    if table.empty:
+        return table
+    shown = table.copy()
+    unit_factor = [units.channel(c) for c in shown["channel"]]
+    shown["rms"] = shown["rms"] * [k for _, k in unit_factor]
+    shown.insert(shown.columns.get_loc("rms") + 1, "unit", [pretty(u) for u, _ in unit_factor])
+    return shown
+
+
+def _table(page: Page, frame: pd.DataFrame) -> None:
+    """A data frame as a table of the page."""
+    page.table([str(c) for c in frame.columns], [list(row) for row in frame.itertuples(False)])
 
 
 def _before_after(table: pd.DataFrame, labels: tuple[str, str]) -> pd.DataFrame:

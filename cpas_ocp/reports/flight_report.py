@@ -50,6 +50,7 @@ from cpas_ocp.physics.effects.canopy_inflation import BAND_BLEND_M
 from cpas_ocp.physics.effects.wind_process import WindProcess
 from cpas_ocp.physics.parameters import param_name, split_name
 from cpas_ocp.physics.units import FACTORS, G0
+from cpas_ocp.reports.display_units import DisplayUnits, pretty
 
 STEADY_AFTER_S = 10.0  # a canopy phase counts as steady this long after its deployment (s)
 STEADY_BEFORE_S = 2.0  # ... and until this long before the next deployment (s)
@@ -219,30 +220,35 @@ def descent_rates(fit: Fit, cov: Covariance) -> list[DescentRate]:
     return out
 
 
-def steady_descent_text(fit: Fit, cov: Covariance) -> str:
+def steady_descent_text(fit: Fit, cov: Covariance, units: DisplayUnits | None = None) -> str:
     """The markdown section on a steady descent (a test with a canopy open at its start):
     each canopy's steady drag area (per altitude band where it has bands) with the fit's
     sigma and that sigma times sqrt(chi2/dof) (where the residuals exceed their stated
     noise the fit's sigma is too small by that factor), and the descent rates they imply
-    against the altimeter's (`descent_rates`)."""
+    against the altimeter's (`descent_rates`); in `units` (default SI)."""
+    units = units or DisplayUnits("si")
+    area, k_area = pretty(units.unit("area")), units.factor("area")
+    length, k_length = units.unit("length"), units.factor("length")
+    speed, k_speed = units.unit("velocity"), units.factor("velocity")
     excess = float(np.sqrt(max(1.0, fit.chi_square / fit.dof)))
     lines = ["## Drag areas and steady descent rates", "",
-             "| canopy | parameter | altitudes (m MSL) | fitted (m²) | fit's σ (m²) | "
-             f"σ × √(χ²/dof) = σ × {excess:.2f} |",
+             f"| canopy | parameter | altitudes ({length} MSL) | fitted ({area}) | "
+             f"fit's σ ({area}) | σ × √(χ²/dof) = σ × {excess:.2f} |",
              "|---|---|---|---|---|---|"]
     for chute in fit.test.parachutes:
         for band in chute.band_names or ("",):
             name = _steady_cds(fit, chute.name, band)
-            lo, hi = chute.band_range(band) if band else (-np.inf, np.inf)
+            lo, hi = (k_length * h for h in chute.band_range(band)) if band else (
+                -np.inf, np.inf)
             span = ("all" if not band else f"below {hi:.0f}" if lo == -np.inf
                     else f"above {lo:.0f}" if hi == np.inf else f"{lo:.0f}-{hi:.0f}")
-            sd = cov.std.get(name, float("nan"))
+            sd = k_area * cov.std.get(name, float("nan"))
             sds = ("held fixed | " if name not in fit.free else "on a bound | "
                    if name in cov.at_bound else f"{sd:.2g} | {excess * sd:.2g}")
-            lines.append(f"| {chute.name} | {name} | {span} | {fit.parameters[name]:.4f} | "
-                         f"{sds} |")
-    lines += ["", "| canopies open | band | window (s) | mean altitude (m MSL) | "
-              "measured (m/s) | implied v = √(2W/(ρ CdS)) (m/s) | difference (σ) |",
+            lines.append(f"| {chute.name} | {name} | {span} | "
+                         f"{k_area * fit.parameters[name]:.4f} | {sds} |")
+    lines += ["", f"| canopies open | band | window (s) | mean altitude ({length} MSL) | "
+              f"measured ({speed}) | implied v = √(2W/(ρ CdS)) ({speed}) | difference (σ) |",
               "|---|---|---|---|---|---|---|"]
     try:
         rates = descent_rates(fit, cov)
@@ -251,8 +257,9 @@ def steady_descent_text(fit: Fit, cov: Covariance) -> str:
         lines.append(f"| no descent rate: {exc} | | | | | | |")
     for r in rates:
         lines.append(f"| {' + '.join(r.canopies)} | {r.band or '-'} | {r.t0:.1f}-{r.t1:.1f} | "
-                     f"{r.altitude_m:.0f} | {r.measured:.2f} ± {r.measured_sigma:.2f} | "
-                     f"{r.implied:.2f} ± {r.implied_sigma:.2g} | {r.z:+.1f} |")
+                     f"{k_length * r.altitude_m:.0f} | {k_speed * r.measured:.2f} ± "
+                     f"{k_speed * r.measured_sigma:.2f} | {k_speed * r.implied:.2f} ± "
+                     f"{k_speed * r.implied_sigma:.2g} | {r.z:+.1f} |")
     lines += ["", "The implied rate is drag equal to weight at the window's mean altitude, "
               "its σ from the drag areas' covariance; the measured one a straight line "
               "through the altimeter's geometric altitude, its σ counting the residuals' "

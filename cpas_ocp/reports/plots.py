@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -17,7 +18,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 from scipy.spatial import ConvexHull
 
-from cpas_ocp.estimation.estimator import EVENTS, Fit, SensorResidual
+from cpas_ocp.estimation.estimator import Fit, SensorResidual
 from cpas_ocp.estimation.reduction import reduce, stage_starts
 from cpas_ocp.estimation.uncertainty import Covariance
 from cpas_ocp.inference.phase_windows import PhaseWindow, windows_for_sensor
@@ -25,6 +26,8 @@ from cpas_ocp.inference.profile_likelihood import THRESHOLD, Profile
 from cpas_ocp.physics.effects.wind_process import WindProcess
 from cpas_ocp.physics.parameters import param_name, split_name
 from cpas_ocp.physics.units import FT, LBF
+from cpas_ocp.reports.display_units import DisplayUnits, display_units, pretty
+from cpas_ocp.reports.report_data import event_rows
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -33,16 +36,12 @@ if TYPE_CHECKING:
     from cpas_ocp.campaign.drag_area_envelope import DragAreaEnvelope
     from cpas_ocp.campaign.peak_load_study import StageLoads
 
-# Display units: the engineers' customary ones, per channel.
-DISPLAY = {
-    "east": ("ft", 1 / FT), "north": ("ft", 1 / FT), "up": ("ft", 1 / FT),
-    "v_east": ("ft/s", 1 / FT), "v_north": ("ft/s", 1 / FT), "v_up": ("ft/s", 1 / FT),
-    "load_factor": ("g", 1.0), "tension": ("lbf", 1 / LBF),
-}
 
 
-def plot_sensors(fit: Fit, folder: Path) -> list[Path]:
-    """One figure per sensor: each channel's data and model, normalised residuals beneath."""
+def plot_sensors(fit: Fit, folder: Path, units: DisplayUnits | None = None) -> list[Path]:
+    """One figure per sensor: each channel's data and model (in `units`, default the
+    test's own), normalised residuals beneath."""
+    units = units or display_units(fit.test)
     paths = []
     for sensor in dict.fromkeys(r.sensor for r in fit.residuals
                                 if r.sensor not in fit.pseudo_sensors):
@@ -50,11 +49,11 @@ def plot_sensors(fit: Fit, folder: Path) -> list[Path]:
         fig, axes = plt.subplots(2 * len(rows), 1, figsize=(10, 2.6 * len(rows) + 1.5),
                                  sharex=True, gridspec_kw={"height_ratios": [3, 1] * len(rows)})
         for i, r in enumerate(rows):
-            unit, k = DISPLAY.get(r.channel, ("SI", 1.0))
+            unit, k = units.channel(r.channel)
             ax, axr = axes[2 * i], axes[2 * i + 1]
             ax.plot(r.t, r.measured * k, ".", ms=1.5, color="0.55", label="measured")
             ax.plot(r.t, r.model * k, "-", lw=1.0, color="C3", label="model")
-            ax.set_ylabel(f"{r.channel} [{unit}]")
+            ax.set_ylabel(f"{r.channel} [{pretty(unit)}]")
             ax.legend(loc="best", fontsize=8)
             axr.plot(r.t, r.normalized, ".", ms=1.5, color="C0")
             axr.axhline(0, color="k", lw=0.5)
@@ -69,19 +68,17 @@ def plot_sensors(fit: Fit, folder: Path) -> list[Path]:
 
 def plot_events(fit: Fit, folder: Path) -> Path | None:
     """Observed event times (with their 1 and 2 sigma) against the model's, one row each."""
-    rows = [r for r in fit.residuals if r.sensor == EVENTS]
+    rows = event_rows(fit)
     if not rows:
         return None
     fig, ax = plt.subplots(figsize=(10, 0.6 * len(rows) + 1.6))
-    for i, r in enumerate(rows):
-        t_obs, t_model, sigma = float(r.measured[0]), float(r.model[0]), float(r.sigma[0])
-        ax.errorbar(t_obs, i, xerr=2 * sigma, fmt="none", ecolor="0.75", elinewidth=6)
-        ax.errorbar(t_obs, i, xerr=sigma, fmt="o", color="0.35", ms=4, elinewidth=6,
+    for i, e in enumerate(rows):
+        ax.errorbar(e.observed, i, xerr=2 * e.sigma, fmt="none", ecolor="0.75", elinewidth=6)
+        ax.errorbar(e.observed, i, xerr=e.sigma, fmt="o", color="0.35", ms=4, elinewidth=6,
                     label="observed ±1σ, ±2σ" if i == 0 else None)
-        ax.plot(t_model, i, "|", color="C3", ms=18, mew=2, label="model" if i == 0 else None)
-        ax.annotate(f"{(t_obs - t_model) / sigma:+.2f}σ", (t_obs + 2.5 * sigma, i),
-                    va="center", fontsize=8)
-    ax.set_yticks(range(len(rows)), [r.channel for r in rows])
+        ax.plot(e.model, i, "|", color="C3", ms=18, mew=2, label="model" if i == 0 else None)
+        ax.annotate(f"{e.z:+.2f}σ", (e.observed + 2.5 * e.sigma, i), va="center", fontsize=8)
+    ax.set_yticks(range(len(rows)), [e.event for e in rows])
     ax.set_ylim(-0.7, len(rows) - 0.3)
     ax.set_xlabel("time [s]")
     ax.legend(loc="lower right", fontsize=8)
@@ -89,32 +86,61 @@ def plot_events(fit: Fit, folder: Path) -> Path | None:
                  folder / "events.png")
 
 
-def plot_drag_areas(fit: Fit, folder: Path) -> Path:
-    """Each canopy's reconstructed drag area against its offline (Eq. 3) reduction."""
+@dataclass(frozen=True)
+class DragAreaCurves:
+    """A canopy's drag area (SI, m^2): the reconstruction on the fit's grid, the riser
+    load cell's offline (Eq. 3) reduction mapped to the trajectory frame (divided by the
+    fitted load-cell gain; None without a load cell), and its stages' start times (s)."""
+
+    canopy: str
+    t: np.ndarray
+    cds: np.ndarray
+    data_t: np.ndarray | None
+    data_cds: np.ndarray | None
+    starts: dict[str, float]
+
+
+def drag_area_curves(fit: Fit) -> list[DragAreaCurves]:
+    """Each canopy's reconstructed drag area against its offline reduction, as data."""
     q = fit.quantities()
     starts = stage_starts(fit.test, fit.parameters)
     red = reduce(fit.test, starts)
-    chutes = fit.test.parachutes
-    fig, axes = plt.subplots(len(chutes), 1, figsize=(10, 3.2 * len(chutes)), sharex=True,
-                             squeeze=False)
-    for ax, chute in zip(axes[:, 0], chutes, strict=True):
+    curves = []
+    for chute in fit.test.parachutes:
+        data_t = data_cds = None
         if chute.name in red.cds_riser:
             # Load-cell drag area mapped to the trajectory frame: divided by the fitted gain.
             gain = q.get(param_name("loadcell_gain", chute.name))
             factor = 1.0 if gain is None else 1.0 / np.interp(red.t, fit.t, gain)
-            ax.plot(red.t, red.cds_riser[chute.name] * factor / FT**2, ".", ms=1.2,
-                    color="0.6", label="riser data, Eq. 3, with fitted scales")
-        ax.plot(fit.t, q[param_name("cds", chute.name)] / FT**2, color="C3", lw=1.2,
-                label="reconstructed CdS(t)")
-        for s in chute.stages:
-            ax.axvline(starts[(chute.name, s)], color="C2", lw=0.6, ls="--")
-        ax.set_ylabel(f"{chute.name} CdS [ft²]")
+            data_t, data_cds = np.asarray(red.t), red.cds_riser[chute.name] * factor
+        curves.append(DragAreaCurves(chute.name, fit.t, q[param_name("cds", chute.name)],
+                                     data_t, data_cds,
+                                     {s: starts[(chute.name, s)] for s in chute.stages}))
+    return curves
+
+
+def plot_drag_areas(fit: Fit, folder: Path, units: DisplayUnits | None = None) -> Path:
+    """Each canopy's reconstructed drag area against its offline (Eq. 3) reduction."""
+    units = units or display_units(fit.test)
+    k, unit = units.factor("area"), pretty(units.unit("area"))
+    curves = drag_area_curves(fit)
+    fig, axes = plt.subplots(len(curves), 1, figsize=(10, 3.2 * len(curves)), sharex=True,
+                             squeeze=False)
+    for ax, c in zip(axes[:, 0], curves, strict=True):
+        if c.data_t is not None and c.data_cds is not None:
+            ax.plot(c.data_t, c.data_cds * k, ".", ms=1.2, color="0.6",
+                    label="riser data, Eq. 3, with fitted scales")
+        ax.plot(c.t, c.cds * k, color="C3", lw=1.2, label="reconstructed CdS(t)")
+        for t0 in c.starts.values():
+            ax.axvline(t0, color="C2", lw=0.6, ls="--")
+        ax.set_ylabel(f"{c.canopy} CdS [{unit}]")
         ax.legend(loc="best", fontsize=8)
     axes[-1, 0].set_xlabel("time [s]  (dashed: reconstructed inflation start times)")
     return _save(fig, f"{fit.test.name}: canopy drag areas", folder / "drag_areas.png")
 
 
-def plot_wind(fit: Fit, cov: Covariance | None, folder: Path) -> Path | None:
+def plot_wind(fit: Fit, cov: Covariance | None, folder: Path,
+              units: DisplayUnits | None = None) -> Path | None:
     """The wind process's estimate (`wind_process`): each component's air velocity at its
     knots with the 95 % band (+-1.96 sigma), against time and against altitude; None
     where the model has no process knots."""
@@ -125,6 +151,9 @@ def plot_wind(fit: Fit, cov: Covariance | None, folder: Path) -> Path | None:
             components.setdefault(base.removeprefix("wind_"), []).append((int(index[0]), name))
     if not components:
         return None
+    units = units or display_units(fit.test)
+    kv, speed = units.factor("velocity"), pretty(units.unit("velocity"))
+    kh, length = units.factor("length"), pretty(units.unit("length"))
     std = cov.std if cov is not None else {}
     q = fit.quantities()
     fig, axes = plt.subplots(len(components), 2, figsize=(12, 2.8 * len(components) + 1.0),
@@ -134,21 +163,21 @@ def plot_wind(fit: Fit, cov: Covariance | None, folder: Path) -> Path | None:
     for row, (component, knots) in enumerate(components.items()):
         names = [n for _, n in sorted(knots)]
         t = knot_times[:len(names)]
-        u = np.array([fit.parameters[n] for n in names])
-        band = 1.96 * np.array([std.get(n, np.nan) for n in names])
+        u = kv * np.array([fit.parameters[n] for n in names])
+        band = kv * 1.96 * np.array([std.get(n, np.nan) for n in names])
         ax = axes[row, 0]
         ax.fill_between(t, u - band, u + band, color="C0", alpha=0.25, label="95 % band")
         ax.plot(t, u, "-o", ms=2.5, color="C0", label="estimate at the knots")
         ax.axhline(0.0, color="k", lw=0.5)
-        ax.set_ylabel(f"{component} air velocity [m/s]")
+        ax.set_ylabel(f"{component} air velocity [{speed}]")
         ax.legend(loc="best", fontsize=8)
-        altitude = np.interp(t, fit.t, q["altitude"])
+        altitude = kh * np.interp(t, fit.t, q["altitude"])
         ax = axes[row, 1]
         ax.fill_betweenx(altitude, u - band, u + band, color="C0", alpha=0.25)
         ax.plot(u, altitude, "-o", ms=2.5, color="C0")
         ax.axvline(0.0, color="k", lw=0.5)
-        ax.set_xlabel(f"{component} [m/s]")
-        ax.set_ylabel("altitude [m]")
+        ax.set_xlabel(f"{component} [{speed}]")
+        ax.set_ylabel(f"altitude [{length}]")
     axes[-1, 0].set_xlabel("time [s]")
     return _save(fig, f"{fit.test.name}: air motion (wind process)", folder / "wind.png")
 
@@ -201,11 +230,13 @@ def file_stem(text: str) -> str:
 WINDOW_COLOURS = {"deployment": "#cfe2f3", "inflation": "#f9d5cf", "steady": "#d9ead3"}
 
 
-def plot_sensor_residuals(fit: Fit, windows: Sequence[PhaseWindow], folder: Path) -> list[Path]:
+def plot_sensor_residuals(fit: Fit, windows: Sequence[PhaseWindow], folder: Path,
+                          units: DisplayUnits | None = None) -> list[Path]:
     """One figure per sensor (``residuals_<sensor>.png``): for each channel the model over
-    the measurement (display units), and beneath it the normalised residuals with the
-    +-1 and +-3 sigma bands; the phase windows that apply to the sensor (its own canopy's
-    for a load cell) are shaded by kind, each kind labelled once."""
+    the measurement (in `units`, default the test's own), and beneath it the normalised
+    residuals with the +-1 and +-3 sigma bands; the phase windows that apply to the sensor
+    (its own canopy's for a load cell) are shaded by kind, each kind labelled once."""
+    units = units or display_units(fit.test)
     paths = []
     for sensor in dict.fromkeys(r.sensor for r in fit.residuals
                                 if r.sensor not in fit.pseudo_sensors):
@@ -214,12 +245,12 @@ def plot_sensor_residuals(fit: Fit, windows: Sequence[PhaseWindow], folder: Path
         fig, axes = plt.subplots(2 * len(rows), 1, figsize=(10, 2.8 * len(rows) + 1.5),
                                  sharex=True, gridspec_kw={"height_ratios": [3, 1.4] * len(rows)})
         for i, r in enumerate(rows):
-            unit, k = DISPLAY.get(r.channel, ("SI", 1.0))
+            unit, k = units.channel(r.channel)
             ax, axr = axes[2 * i], axes[2 * i + 1]
             _shade_windows([ax, axr], shown, legend=i == 0)
             ax.plot(r.t, r.measured * k, ".", ms=1.5, color="0.55", label="measured")
             ax.plot(r.t, r.model * k, "-", lw=1.0, color="C3", label="model")
-            ax.set_ylabel(f"{r.channel} [{unit}]")
+            ax.set_ylabel(f"{r.channel} [{pretty(unit)}]")
             ax.legend(loc="best", fontsize=7, ncol=2)
             _plot_normalized(axr, r)
         axes[-1].set_xlabel("time [s]")

@@ -22,7 +22,7 @@ from cpas_ocp.io.flight_test import FlightTest
 from cpas_ocp.io.model_spec import ModelSpec
 from cpas_ocp.io.output_folder import atomic_folder
 from cpas_ocp.physics.model import Model
-from cpas_ocp.physics.units import FT
+from cpas_ocp.reports.display_units import DisplayUnits, display_units, pretty
 
 
 def reduction_frame(red: Reduction) -> pd.DataFrame:
@@ -34,22 +34,24 @@ def reduction_frame(red: Reduction) -> pd.DataFrame:
     return pd.DataFrame(cols)
 
 
-def guess_table(model: Model, guess: dict[str, float]) -> str:
-    """Terminal table of the initial guess of every estimable parameter."""
+def guess_table(model: Model, guess: dict[str, float], units: DisplayUnits) -> str:
+    """Terminal table of the initial guess of every estimable parameter, in `units`."""
     lines = [f"{'parameter':30s} {'initial':>11s}  unit"]
     for prm in model.parameters:
         if prm.estimable:
-            extra = f"   ({guess[prm.name] / FT**2:7.2f} ft²)" if prm.unit == "m^2" else ""
-            lines.append(f"{prm.name:30s} {guess[prm.name]:11.5g}  {prm.unit}{extra}")
+            unit, k = units.of_si(prm.unit)
+            lines.append(f"{prm.name:30s} {guess[prm.name] * k:11.5g}  {unit}")
     return "\n".join(lines)
 
 
-def write_reduction(test: FlightTest, out: str | Path, spec: ModelSpec
-                    ) -> tuple[Path, Model, dict[str, float]]:
-    """Reduce `test`, write reduction.csv, initial_guess.json and reduction.png to `out`.
+def write_reduction(test: FlightTest, out: str | Path, spec: ModelSpec,
+                    units: DisplayUnits | None = None) -> tuple[Path, Model, dict[str, float]]:
+    """Reduce `test`, write reduction.csv, initial_guess.json (both SI) and reduction.png
+    (drag areas in `units`, default the test's own) to `out`.
 
     The guess covers the parameters of the model `spec` describes and holds its fixed values.
     """
+    shown = units or display_units(test)
     model = spec.model(test)
     guess, red = reduce_and_guess(test, model, spec.fixed_values(model))
     out = Path(out)
@@ -63,19 +65,20 @@ def write_reduction(test: FlightTest, out: str | Path, spec: ModelSpec
             "stage_scale": red.stage_scale,
             "stage_windows_s": {k: list(v) for k, v in red.stage_windows.items()},
         }, indent=2))
-        _plot(test, red, stage_starts(test, guess), tmp / "reduction.png")
+        _plot(test, red, stage_starts(test, guess), tmp / "reduction.png", shown)
     return out, model, guess
 
 
 def _plot(test: FlightTest, red: Reduction, starts: dict[tuple[str, str], float],
-          path: Path) -> None:
+          path: Path, units: DisplayUnits) -> None:
+    area = units.factor("area")
     fig, ax = plt.subplots(figsize=(10, 4.5))
-    ax.plot(red.t, red.cds_imu / FT**2, lw=0.6, color="0.4", label="IMU, Eq. 2 (total)")
+    ax.plot(red.t, red.cds_imu * area, lw=0.6, color="0.4", label="IMU, Eq. 2 (total)")
     if red.cds_riser:
-        ax.plot(red.t, sum(red.cds_riser.values()) / FT**2, lw=0.6, color="C0",
+        ax.plot(red.t, sum(red.cds_riser.values()) * area, lw=0.6, color="C0",
                 label="risers summed, Eq. 3")
     for k, (name, curve) in enumerate(red.cds_riser.items()):
-        ax.plot(red.t, curve / FT**2, lw=0.5, color=f"C{k + 1}", label=f"riser {name}")
+        ax.plot(red.t, curve * area, lw=0.5, color=f"C{k + 1}", label=f"riser {name}")
     for stage, (a, b) in red.stage_windows.items():
         ax.axvspan(a, b, color="C2", alpha=0.08)
         ax.text(0.5 * (a + b), 0.98, f"{stage}\nscale {red.stage_scale[stage]:.3f}",
@@ -83,7 +86,7 @@ def _plot(test: FlightTest, red: Reduction, starts: dict[tuple[str, str], float]
     for t0 in starts.values():
         ax.axvline(t0, color="C2", lw=0.6, ls="--")
     ax.set_xlabel("time [s]  (dashed: start times from the events; shaded: steady windows)")
-    ax.set_ylabel("drag area [ft²]")
+    ax.set_ylabel(f"drag area [{pretty(units.unit('area'))}]")
     ax.set_title(f"{test.name}: offline reduction")
     ax.legend(loc="upper left", fontsize=8)
     fig.tight_layout()

@@ -9,18 +9,21 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
-from scipy.stats import norm
 
 from cpas_ocp.estimation.estimator import EVENTS, PRIORS, Fit
 from cpas_ocp.estimation.uncertainty import POORLY_DETERMINED, Covariance
 from cpas_ocp.inference.diagnostics import sensor_summary, worst_windows
 from cpas_ocp.inference.model_comparison import Criteria
+from cpas_ocp.inference.phase_windows import PhaseWindow, phase_windows
 from cpas_ocp.inference.profile_likelihood import Profile
 from cpas_ocp.io.output_folder import atomic_folder
-from cpas_ocp.physics.units import FT
+from cpas_ocp.reports.display_units import DisplayUnits, display_units
 from cpas_ocp.reports.failure_report import RESULT_MARKERS
 from cpas_ocp.reports.flight_report import steady_descent_text
+from cpas_ocp.reports.html_page import Page, drag_area_figure, sensor_figure, window_legend
+from cpas_ocp.reports.html_page import parameter_table as parameter_html
 from cpas_ocp.reports.plots import (
+    drag_area_curves,
     plot_correlation,
     plot_drag_areas,
     plot_events,
@@ -28,11 +31,17 @@ from cpas_ocp.reports.plots import (
     plot_sensors,
     plot_wind,
 )
+from cpas_ocp.reports.report_data import (
+    Z95,
+    channel_series,
+    event_rows,
+    parameter_rows,
+    sensor_spans,
+)
 
 if TYPE_CHECKING:
     from cpas_ocp.inference.result_claim import Claim
 
-Z95 = float(norm.ppf(0.975))  # two-sided 95 % quantile of the standard normal
 STRONG_CORRELATION = 0.9  # |rho| from which a parameter pair is named in the terminal
 REPORTED_CORRELATION = 0.5  # |rho| from which report.md lists a pair (the map shows all)
 
@@ -55,8 +64,9 @@ def strong_correlations(cov: Covariance,
     return sorted(pairs, key=lambda p: -abs(p[2]))
 
 
-SENSOR_UNITS = {"east": "m", "north": "m", "up": "m", "v_east": "m/s", "v_north": "m/s",
-                "v_up": "m/s", "load_factor": "g", "tension": "N"}
+SENSOR_UNITS = {"east": "m", "north": "m", "up": "m", "altitude": "m", "v_east": "m/s",
+                "v_north": "m/s", "v_up": "m/s", "load_factor": "g", "tension": "N",
+                "acceleration": "m/s^2"}
 
 
 def channel_unit(fit: Fit, sensor: str, channel: str) -> str:
@@ -66,6 +76,14 @@ def channel_unit(fit: Fit, sensor: str, channel: str) -> str:
     if any(sensor == effect for effect, *_ in fit.model.penalties):
         return "σ"  # a process prior's innovations, in units of their own sigma
     return "s" if sensor == EVENTS else SENSOR_UNITS.get(channel, "SI")
+
+
+def display_channel(fit: Fit, units: DisplayUnits, sensor: str, channel: str
+                    ) -> tuple[str, float]:
+    """A residual channel's display unit and its factor from SI."""
+    if sensor in fit.pseudo_sensors:
+        return channel_unit(fit, sensor, channel), 1.0
+    return units.channel(channel)
 
 
 def result_dict(fit: Fit, cov: Covariance | None,
@@ -125,35 +143,30 @@ def result_dict(fit: Fit, cov: Covariance | None,
     }
 
 
-def parameter_table(fit: Fit, cov: Covariance | None) -> str:
-    """A readable terminal table of the estimated parameters: value, 1 sigma, 95 % interval,
-    correlations and the combinations the data do not determine."""
-    std = cov.std if cov is not None else {}
+def parameter_table(fit: Fit, cov: Covariance | None, units: DisplayUnits | None = None) -> str:
+    """A readable terminal table of the estimated parameters in `units` (default the
+    test's own): value, 1 sigma, 95 % interval, correlations and the combinations the data
+    do not determine."""
+    units = units or display_units(fit.test)
     lines = [f"{'parameter':30s} {'value':>11s} {'± 1σ':>10s} {'95 % interval':>25s}  "
-             f"{'unit':5s} {'initial':>10s}"]
-    for name in fit.free:
-        prm = fit.model.parameter(name)
-        v = fit.parameters[name]
-        if name in std:
-            half = Z95 * std[name]
-            s, ci = f"{std[name]:10.4g}", f"[{v - half:.5g}, {v + half:.5g}]"
-        else:
-            s, ci = f"{'—':>10s}", f"{'—':>25s}"
-        extra = f"   ({v / FT**2:7.2f} ft²)" if prm.unit == "m^2" else ""
-        flag = ""
-        if cov is not None and name in cov.at_bound:
-            flag = f"  on its {prm.nearer_bound(v)} bound"
-        elif cov is not None and name in cov.undetermined:
-            flag = "  undetermined"
-        lines.append(f"{name:30s} {v:11.5g} {s} {ci:>25s}  {prm.unit:5s} "
-                     f"{fit.guess.get(name, prm.default):10.4g}{extra}{flag}")
+             f"{'unit':6s} {'initial':>10s}"]
+    for row in parameter_rows(fit, cov, units):
+        s = f"{'—':>10s}" if row.std is None else f"{row.std:10.4g}"
+        ci = "—" if row.ci95 is None else f"[{row.ci95[0]:.5g}, {row.ci95[1]:.5g}]"
+        lines.append(f"{row.name:30s} {row.value:11.5g} {s} {ci:>25s}  {row.unit:6s} "
+                     f"{row.initial:10.4g}" + (f"  {row.flag}" if row.flag else ""))
     if cov is not None:
-        pairs = strong_correlations(cov)
-        lines.append(f"correlations |ρ| ≥ {STRONG_CORRELATION}: "
-                     + ("none" if not pairs else f"{len(pairs)}, strongest "
-                        + "; ".join(f"{a} ~ {b} {r:+.3f}" for a, b, r in pairs[:3])))
+        lines.append(correlation_line(cov))
         lines.append(identifiability_text(cov))
     return "\n".join(lines)
+
+
+def correlation_line(cov: Covariance) -> str:
+    """How many parameter pairs are strongly correlated, and the three strongest."""
+    pairs = strong_correlations(cov)
+    return (f"correlations |ρ| ≥ {STRONG_CORRELATION}: "
+            + ("none" if not pairs else f"{len(pairs)}, strongest "
+               + "; ".join(f"{a} ~ {b} {r:+.3f}" for a, b, r in pairs[:3])))
 
 
 def identifiability_text(cov: Covariance) -> str:
@@ -176,15 +189,18 @@ def identifiability_text(cov: Covariance) -> str:
     return "\n".join(lines)
 
 
-def fit_summary(fit: Fit) -> str:
-    """Solver outcome, residuals per sensor and where the model fits worst."""
+def fit_summary(fit: Fit, units: DisplayUnits | None = None) -> str:
+    """Solver outcome, residuals per sensor (RMS in `units`, default the test's own) and
+    where the model fits worst."""
+    units = units or display_units(fit.test)
     ic = information_criteria(fit)
     out = [f"solver: {fit.solver.status}, {fit.solver.iterations} iterations, "
            f"{fit.solver.wall_s:.1f} s, from {fit.solver.start};  "
            f"chi²/dof = {fit.chi_square:.1f}/{fit.dof} = {fit.chi_square / fit.dof:.3f};  "
            f"AIC {ic['aic']:.1f}, BIC {ic['bic']:.1f}"]
     for s, e in sensor_summary(fit).items():
-        rms = ", ".join(f"{c} {v:.4g} {channel_unit(fit, s, c)}" for c, v in e["rms"].items())
+        rms = ", ".join(f"{c} {v * k:.4g} {unit}" for c, v in e["rms"].items()
+                        for unit, k in [display_channel(fit, units, s, c)])
         out.append(f"  {s:16s} normalised RMS {e['normalized_rms']:.3f}   (RMS {rms})")
     worst = worst_windows(fit, top=1)
     if worst:
@@ -203,11 +219,80 @@ def correlation_markdown(cov: Covariance, threshold: float = REPORTED_CORRELATIO
             + (f"| parameter | parameter | ρ |\n|---|---|---|\n{rows}\n" if pairs else "none\n\n"))
 
 
+def units_note(units: DisplayUnits, test_units: DisplayUnits) -> str:
+    """Which units a report's figures and tables are in, and why (result.json is SI)."""
+    name = {"us": "US customary", "si": "SI"}
+    why = ("as the manifest is written" if units == test_units else
+           f"as asked (the manifest is written in {name[test_units.system]})")
+    return (f"Figures and tables in {name[units.system]} units, {why}; result.json is in "
+            "SI.")
+
+
+def begin_page(fit: Fit, title: str, units: DisplayUnits) -> Page:
+    """An HTML page begun with the test's label and the units it is drawn in."""
+    page = Page(title)
+    page.paragraph(fit.test.label)
+    page.paragraph(units_note(units, display_units(fit.test)), "note")
+    return page
+
+
+def parameter_section(page: Page, fit: Fit, cov: Covariance | None,
+                      units: DisplayUnits) -> None:
+    """The parameter table (flagged rows highlighted), then the strong correlations and
+    the combinations the data do not determine."""
+    page.heading("Parameters")
+    parameter_html(page, parameter_rows(fit, cov, units))
+    if cov is not None:
+        page.preformatted(f"{correlation_line(cov)}\n{identifiability_text(cov)}")
+
+
+def sensor_figures(page: Page, fit: Fit, units: DisplayUnits,
+                   windows: Sequence[PhaseWindow]) -> None:
+    """One interactive figure per sensor: model over measurement, normalised residuals
+    with their bands, the phase windows shaded."""
+    series = channel_series(fit, units)
+    spans = sensor_spans(fit, windows)
+    if windows:
+        window_legend(page)
+    for sensor, shown in spans.items():
+        sensor_figure(page, sensor, [c for c in series if c.sensor == sensor], shown)
+
+
+def reconstruction_page(fit: Fit, cov: Covariance | None, claim: Claim | None,
+                        units: DisplayUnits) -> Page:
+    """The reconstruction as one HTML page: the claim, the parameters, the fit, each
+    sensor's model against its measurement, and the canopies' drag areas."""
+    page = begin_page(fit, f"Reconstruction of {fit.test.name}", units)
+    if claim is not None:
+        if not claim.is_result:
+            page.warning("Not a result. " + " ".join(f"{p}." for p in claim.problems()))
+        page.heading("Claim")
+        page.preformatted(claim.text())
+    parameter_section(page, fit, cov, units)
+    page.heading("Fit")
+    page.preformatted(fit_summary(fit, units))
+    events = event_rows(fit)
+    if events:
+        page.heading("Events: observed against the model")
+        page.table(["event", "observed [s]", "model [s]", "σ [s]", "(observed - model)/σ"],
+                   [[e.event, e.observed, e.model, e.sigma, e.z] for e in events],
+                   flagged=[abs(e.z) > 3.0 for e in events])
+    page.heading("Sensors: model against measurement")
+    sensor_figures(page, fit, units, phase_windows(fit))
+    page.heading("Canopy drag areas")
+    drag_area_figure(page, drag_area_curves(fit), units.factor("area"), units.unit("area"))
+    return page
+
+
 def write_report(fit: Fit, cov: Covariance | None, out: str | Path,
-                 profiles: Sequence[Profile] = (), claim: Claim | None = None) -> Path:
+                 profiles: Sequence[Profile] = (), claim: Claim | None = None,
+                 units: DisplayUnits | None = None) -> Path:
     """Write the report folder atomically: all of it or nothing.  With `claim`, result.json
-    and report.md say what the fit may claim, a fit that is not a result first of all."""
+    and report.md say what the fit may claim, a fit that is not a result first of all.
+    Figures and tables are in `units` (default the test's own; result.json is SI);
+    report.html holds them as one interactive page."""
     out = Path(out)
+    units = units or display_units(fit.test)
     with atomic_folder(out, RESULT_MARKERS) as tmp:
         result = result_dict(fit, cov, profiles)
         if claim is not None:
@@ -217,10 +302,10 @@ def write_report(fit: Fit, cov: Covariance | None, out: str | Path,
         rows = [{"parameter": n, "value": fit.parameters[n], "std": std.get(n, np.nan),
                  "unit": fit.model.parameter(n).unit} for n in fit.free]
         pd.DataFrame(rows).to_csv(tmp / "parameters.csv", index=False)
-        plot_sensors(fit, tmp)
-        plot_drag_areas(fit, tmp)
+        plot_sensors(fit, tmp, units)
+        plot_drag_areas(fit, tmp, units)
         plot_events(fit, tmp)
-        plot_wind(fit, cov, tmp)
+        plot_wind(fit, cov, tmp, units)
         if cov is not None:
             plot_correlation(cov, fit.test.name, tmp)
         for prof in profiles:
@@ -229,11 +314,13 @@ def write_report(fit: Fit, cov: Covariance | None, out: str | Path,
                    if claim is not None and not claim.is_result else "")
         (tmp / "report.md").write_text(
             f"# Reconstruction of {fit.test.name}\n\n{fit.test.label}\n\n{warning}```\n"
-            f"{parameter_table(fit, cov)}\n\n{fit_summary(fit)}\n"
+            f"{parameter_table(fit, cov, units)}\n\n{fit_summary(fit, units)}\n"
             + (f"{claim.text()}\n" if claim is not None else "") + "```\n\n"
             + (correlation_markdown(cov) if cov is not None else "")
-            + (steady_descent_text(fit, cov) + "\n" if cov is not None
+            + (steady_descent_text(fit, cov, units) + "\n" if cov is not None
                and any(c.open_at_start for c in fit.test.parachutes) else "")
             + "".join(f"Profile likelihood, {p.text()}\n\n" for p in profiles)
-            + "".join(f"![{p.stem}]({p.name})\n\n" for p in sorted(tmp.glob("*.png"))))
+            + "".join(f"![{p.stem}]({p.name})\n\n" for p in sorted(tmp.glob("*.png")))
+            + f"{units_note(units, display_units(fit.test))}  Interactive plots: report.html\n")
+        reconstruction_page(fit, cov, claim, units).write(tmp / "report.html")
     return out

@@ -1,0 +1,124 @@
+"""A fit as the plain data its HTML report draws: sensor channels and parameter rows in
+display units, phase windows as time spans.  No figures here; `html_page` draws them."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.stats import norm
+
+from cpas_ocp.estimation.estimator import EVENTS, Fit
+from cpas_ocp.estimation.uncertainty import Covariance
+from cpas_ocp.inference.phase_windows import PhaseWindow, windows_for_sensor
+from cpas_ocp.reports.display_units import DisplayUnits
+
+Z95 = float(norm.ppf(0.975))  # two-sided 95 % quantile of the standard normal
+
+
+@dataclass(frozen=True)
+class ChannelSeries:
+    """One sensor channel: sample times (s), measurement and model in `unit`, and the
+    normalised residual (measured - model) / sigma."""
+
+    sensor: str
+    channel: str
+    unit: str
+    t: np.ndarray
+    measured: np.ndarray
+    model: np.ndarray
+    normalized: np.ndarray
+
+
+@dataclass(frozen=True)
+class Span:
+    """A time span to shade (s), of a kind (deployment, inflation, steady), named."""
+
+    name: str
+    kind: str
+    t0: float
+    t1: float
+
+
+@dataclass(frozen=True)
+class ParameterRow:
+    """A free parameter's estimate in display units: value, 1 sigma and 95 % interval
+    (None where the covariance gives none), initial guess, and what is wrong with it."""
+
+    name: str
+    value: float
+    std: float | None
+    ci95: tuple[float, float] | None
+    unit: str
+    initial: float
+    flag: str
+
+
+def channel_series(fit: Fit, units: DisplayUnits) -> list[ChannelSeries]:
+    """Every sensor channel of the fit (not events, priors or process innovations), in
+    `units`."""
+    out = []
+    for r in fit.residuals:
+        if r.sensor in fit.pseudo_sensors:
+            continue
+        unit, k = units.channel(r.channel)
+        out.append(ChannelSeries(r.sensor, r.channel, unit, np.asarray(r.t),
+                                 np.asarray(r.measured) * k, np.asarray(r.model) * k,
+                                 np.asarray(r.normalized)))
+    return out
+
+
+def sensor_spans(fit: Fit, windows: Sequence[PhaseWindow]) -> dict[str, list[Span]]:
+    """Per sensor, the phase windows that apply to it (its own canopy's for a load cell)."""
+    sensors = dict.fromkeys(r.sensor for r in fit.residuals
+                            if r.sensor not in fit.pseudo_sensors)
+    return {s: [Span(w.name, w.kind, w.t0, w.t1)
+                for w in windows_for_sensor(fit.test, s, windows)] for s in sensors}
+
+
+def parameter_flag(fit: Fit, cov: Covariance | None, name: str) -> str:
+    """What the covariance says is wrong with a free parameter's estimate, or ''."""
+    if cov is not None and name in cov.at_bound:
+        return f"on its {fit.model.parameter(name).nearer_bound(fit.parameters[name])} bound"
+    if cov is not None and name in cov.undetermined:
+        return "undetermined"
+    return ""
+
+
+def parameter_rows(fit: Fit, cov: Covariance | None, units: DisplayUnits
+                   ) -> list[ParameterRow]:
+    """The free parameters' estimates in `units`, in the fit's order."""
+    std = cov.std if cov is not None else {}
+    rows = []
+    for name in fit.free:
+        prm = fit.model.parameter(name)
+        unit, k = units.of_si(prm.unit)
+        v = fit.parameters[name] * k
+        s = std[name] * k if name in std else None
+        ci = None if s is None else (v - Z95 * s, v + Z95 * s)
+        rows.append(ParameterRow(name, v, s, ci, unit, fit.guess.get(name, prm.default) * k,
+                                 parameter_flag(fit, cov, name)))
+    return rows
+
+
+@dataclass(frozen=True)
+class EventRow:
+    """An observed event time against the model's (s), its sigma and the difference in
+    sigmas."""
+
+    event: str
+    observed: float
+    model: float
+    sigma: float
+
+    @property
+    def z(self) -> float:
+        return (self.observed - self.model) / self.sigma
+
+
+def event_rows(fit: Fit) -> list[EventRow]:
+    """The observed events the fit sees, in time order."""
+    rows = [EventRow(r.channel, float(r.measured[0]), float(r.model[0]), float(r.sigma[0]))
+            for r in fit.residuals if r.sensor == EVENTS]
+    return sorted(rows, key=lambda e: e.observed)
