@@ -17,6 +17,11 @@ of the diagnosis that found it), why it stopped, the plug-ins proposed and
 the total wall time; at the end a table of all cases.
 
     python benchmarks/hidden_effects.py [--cases added_mass breathing ...] [--seed N]
+                                        [--stop-at-stand-ins]
+
+`--stop-at-stand-ins` keeps the earlier diagnosis, which refits only the
+`--confirm` leading score tests even where every effect they confirm is
+implausible (`diagnosis.confirm_past_stand_ins` is skipped).
 """
 
 from __future__ import annotations
@@ -30,6 +35,7 @@ from pathlib import Path
 import numpy as np
 from diagnosis_cost import DROGUES, hidden_cases, simulated_fit
 
+from cpas_ocp.discrepancy import diagnosis as diagnosis_module
 from cpas_ocp.discrepancy.discovery import Discovery, DiscoveryStep, discover
 from cpas_ocp.io.model_spec import baseline_spec
 from cpas_ocp.physics.effects import AddedMass, DeploymentLoad, Effect, SensorBias, SensorLag
@@ -98,7 +104,11 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--cases", nargs="+", default=list(cases()), choices=list(cases()))
     parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--stop-at-stand-ins", action="store_true",
+                        help="refit only the leading score tests (the earlier diagnosis)")
     args = parser.parse_args()
+    if args.stop_at_stand_ins:
+        diagnosis_module.confirm_past_stand_ins = lambda *args, **kwargs: None
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for case in args.cases:
