@@ -14,7 +14,8 @@ baseline model from the offline reduction, and handed to `discover`:
 
 Printed per case: the chain (each step's effect, chi-square/dof and wall time
 of the diagnosis that found it), why it stopped, the plug-ins proposed and
-the total wall time; at the end a table of all cases.
+the total wall time; at the end a table of all cases, with the chi-square
+tail probability of the last fit (P(chi-square on its dof above it)).
 
     python benchmarks/hidden_effects.py [--cases added_mass breathing ...] [--seed N]
                                         [--stop-at-stand-ins]
@@ -34,6 +35,7 @@ from pathlib import Path
 
 import numpy as np
 from diagnosis_cost import DROGUES, hidden_cases, simulated_fit
+from scipy.stats import chi2
 
 from cpas_ocp.discrepancy import diagnosis as diagnosis_module
 from cpas_ocp.discrepancy.discovery import Discovery, DiscoveryStep, discover
@@ -116,15 +118,16 @@ def main() -> None:
             found, times, t_fit = run(case, args.seed, Path(tmp))
             last = found.steps[-1].fit
             rows.append((case, " > ".join(s.label for s in found.steps[1:]) or "-",
-                         last.chi_square / last.dof, found.stopped.split(":")[0][:44],
+                         last.chi_square / last.dof, float(chi2.sf(last.chi_square, last.dof)),
+                         found.stopped.split(":")[0][:44],
                          t_fit, float(np.max(times)) if times else 0.0,
                          time.perf_counter() - t0))
     peak_gb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6
-    print(f"\n{'case':20s} {'chain':44s} {'chi2/dof':>8s} {'fit':>7s} {'longest step':>12s} "
-          f"{'total':>8s}  stopped")
-    for case, chain, chi2, stopped, t_fit, longest, total in rows:
-        print(f"{case:20s} {chain:44s} {chi2:8.3f} {t_fit:5.1f} s {longest:10.1f} s "
-              f"{total:6.0f} s  {stopped}")
+    print(f"\n{'case':20s} {'chain':44s} {'chi2/dof':>8s} {'tail p':>7s} {'fit':>7s} "
+          f"{'longest step':>12s} {'total':>8s}  stopped")
+    for case, chain, per_dof, tail, stopped, t_fit, longest, total in rows:
+        print(f"{case:20s} {chain:44s} {per_dof:8.3f} {tail:7.2g} {t_fit:5.1f} s "
+              f"{longest:10.1f} s {total:6.0f} s  {stopped}")
     print(f"peak memory of the process {peak_gb:.2f} GB")
 
 

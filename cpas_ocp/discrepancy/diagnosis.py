@@ -11,7 +11,7 @@ unexplained residual looks like.
    likelihood ratio.  The confirmed effect with the smallest likelihood-ratio
    p-value is the diagnosis.  Where every confirmed effect is implausible (a
    stand-in) the other tested effects are refitted too, in score order, until
-   one is confirmed with plausible estimates (`confirm_past_stand_ins`).
+   a plausible one is confirmed better (`confirm_past_stand_ins`).
 3. The air's motion: where an altimeter and a GPS share a slow wander, the
    evidence of a wind process against still air (`wind_evidence`); the
    process is named where its Bayes factor is decisive.
@@ -289,10 +289,11 @@ def diagnose(fit: Fit, spec: ModelSpec, candidates: Mapping[str, EffectType] | N
 
 def confirm_past_stand_ins(diag: Diagnosis, tests: list[ScoreTest], progress: bool = False
                            ) -> None:
-    """Where every effect the likelihood ratio confirms is implausible (a stand-in) and none
-    is plausible, refit the other tested effects too, in score-test order, whatever their
-    score statistic, until one is confirmed with plausible estimates (in place: `diag`'s
-    ranking is made again).
+    """Where the effect the likelihood ratio confirms best is implausible (a stand-in),
+    refit the other tested effects too, in score-test order, whatever their score
+    statistic, until a plausible one is confirmed better than every stand-in (a smaller
+    likelihood-ratio p-value: it explains more of the signal the stand-in fits in
+    part), or none is left (in place: `diag`'s ranking is made again).
 
     A confirmed stand-in says the data ask for something the model lacks; the score
     test, being local, may rank the effect that describes it low.  The fit without
@@ -307,8 +308,9 @@ def confirm_past_stand_ins(diag: Diagnosis, tests: list[ScoreTest], progress: bo
     if diag.air is not None and diag.air.decisive:
         return
     for t in tests:
-        confirmed = diag.confirmed()
-        if not confirmed or not all(diag.implausible(c) for c in confirmed):
+        best = diag.explanation
+        if best is None or best.refit is None or best.refit.lower_bound \
+                or not diag.implausible(best):
             return
         if not t.tested or t.refit is not None or t.refit_note:
             continue
