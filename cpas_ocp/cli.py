@@ -472,7 +472,8 @@ def _diagnosis_options(s: argparse.ArgumentParser) -> None:
     s.add_argument("--out", required=True, type=Path)
     _plugin_option(s, "also test the effects this Python file defines (repeatable)")
     s.add_argument("--confirm", type=_ranged(int, 0), default=3, metavar="N",
-                   help="refit with at most N significant effects to confirm them (default 3)")
+                   help="refit the N leading significant effects to confirm them, and more "
+                        "where the best confirmed is implausible (default 3)")
     s.add_argument("--alpha", type=_ranged(float, 0.0, 1.0, low_open=True, high_open=True),
                    default=0.01,
                    help="family-wise significance level (default 0.01)")

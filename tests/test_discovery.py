@@ -7,6 +7,10 @@ admitted by a likelihood ratio significant at the family-wise level, stop
 because the residuals are consistent with the noise, and end at the truth
 within the noise.  Each step's model must be written as a model file that
 loads again.
+
+After the lag is added, fairlead friction of the wrong sign (a stand-in for the
+air mass) leads the score tests and added mass comes second: a diagnosis that
+refits only its leader must refit past the stand-in and confirm added mass.
 """
 
 from __future__ import annotations
@@ -20,8 +24,9 @@ import pytest
 from scipy.stats import chi2
 
 from cpas_ocp.cli import main
-from cpas_ocp.discrepancy.diagnosis import ALPHA
-from cpas_ocp.discrepancy.discovery import discover
+from cpas_ocp.discrepancy.diagnosis import ALPHA, diagnose
+from cpas_ocp.discrepancy.discovery import DiscoveryStep, discover, next_step
+from cpas_ocp.discrepancy.score_test import rank
 from cpas_ocp.estimation.estimator import Estimator
 from cpas_ocp.estimation.simulate import simulate_problem
 from cpas_ocp.io.flight_test import load_test
@@ -98,6 +103,31 @@ def test_each_step_is_a_model_file_and_the_report_shows_the_fall(two_hidden) -> 
     header = next(line for line in text.splitlines() if line.startswith("| channel"))
     assert header.count("|") == len(found.steps) + 2  # a column per step
     assert "stopped: the residuals are consistent with the noise" in text
+
+
+def test_a_stand_in_leading_the_score_tests_does_not_hide_the_effect_behind_it(two_hidden
+                                                                             ) -> None:
+    """Diagnosed with one confirming refit, the fit with the lag has fairlead friction of
+    the wrong sign, confirmed and implausible, as its score tests' leader; the diagnosis
+    refits past it, in score order, and confirms added mass with plausible estimates,
+    which is the next step."""
+    _, truth, found, _ = two_hidden
+    step = found.steps[1]
+    assert step.added == "gps_lag", found.text()
+    diag = diagnose(step.fit, step.spec, confirm_top=1)
+    by_score = [t for t in rank(diag.effects) if t.tested]
+    leader = by_score[0]
+    assert leader.effect == "loadcell_friction", diag.text()
+    assert leader in diag.confirmed() and diag.implausible(leader), diag.text()
+    refitted = [t.effect for t in by_score if t.refit is not None]
+    assert refitted == [t.effect for t in by_score[:len(refitted)]]  # in score order
+    added = next(t for t in diag.effects if t.effect == "added_mass")
+    assert added in diag.confirmed() and not diag.implausible(added), diag.text()
+    found_next = next_step(diag)
+    assert isinstance(found_next, DiscoveryStep) and found_next.added == "added_mass"
+    assert found_next.fit.chi_square < chi2.ppf(0.999, found_next.fit.dof)
+    est = Estimator(found_next.fit.test, found_next.spec, found_next.fit.settings)
+    assert_truth_within_noise(found_next.fit, est.covariance(found_next.fit), truth)
 
 
 def test_discover_refuses_a_step_limit_below_one(two_hidden, tmp_path, capsys) -> None:

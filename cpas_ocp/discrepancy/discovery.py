@@ -220,14 +220,11 @@ def next_step(diag: Diagnosis) -> DiscoveryStep | str:
     from_reduction(diag, best)
     implausible = diag.implausible(best)
     if implausible:
-        # The next confirmed effect whose estimates are plausible, if any: on `drogue` with
-        # a GPS lag and added mass hidden, fairlead friction of the wrong sign led the
-        # ranking after the lag, and added mass came next.
-        m = diag.family
-        for other in diag.effects:
-            if other is best or other.refit is None or other.refit.lower_bound \
-                    or other.refitted is None or other.spec is None \
-                    or not other.refit.p_value < diag.alpha / m:
+        # The next confirmed effect whose estimates are plausible, if any (the diagnosis
+        # refits candidates past the score tests' leaders to find one where it must:
+        # `confirm_past_stand_ins`).
+        for other in diag.confirmed():
+            if other is best:
                 continue
             from_reduction(diag, other)
             if not diag.implausible(other):
