@@ -39,6 +39,7 @@ from cpas_ocp.io.flight_record import (
     axial_from_axes,
     new_fixes,
     numeric,
+    positive,
     read_table,
     samples_frame,
     time_ordered,
@@ -86,6 +87,7 @@ def read_cats_log(path: str | Path, axis: str = "auto") -> FlightRecord:
     folder = path if path.is_dir() else path.parent
     imu = _required(folder, "imu.csv", ("ts", "Ax", "Ay", "Az"))
     baro = _required(folder, "baro.csv", ("ts", "P"))
+    positive(baro["P"].to_numpy(float), folder / "baro.csv", "P", "pressure (Pa)")
     fsm = _section(folder, "flightStates.csv", ("ts", "state"))
     gnss = _section(folder, "gnssInfo.csv", ("ts", "latitude", "longitude", "satellites"))
     stamps = np.diff(np.unique(imu["ts"].dropna().to_numpy()))

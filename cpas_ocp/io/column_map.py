@@ -37,6 +37,7 @@ from cpas_ocp.io.flight_record import (
     axial_from_axes,
     new_fixes,
     numeric,
+    positive,
     pressure_of_altitude,
     read_table,
     samples_frame,
@@ -84,8 +85,10 @@ def read_mapped_log(path: str | Path, column_map: dict[str, Any], map_source: st
                           * FACTORS["time"][spec["unit"]]})
     if "pressure" in column_map:
         spec = column_map["pressure"]
-        frame["pressure"] = column(spec["column"], "pressure.column") * PRESSURE_UNITS[
-            spec["unit"]]
+        frame["pressure"] = positive(column(spec["column"], "pressure.column"), path,
+                                     spec["column"], "pressure.column",
+                                     column_map.get("skip_rows", 0) + 1) \
+            * PRESSURE_UNITS[spec["unit"]]
     else:
         spec = column_map["altitude"]
         h = (column(spec["column"], "altitude.column") + spec.get("offset", 0.0)) \

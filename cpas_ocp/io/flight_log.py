@@ -405,6 +405,10 @@ def import_flight(log: FlightRecord | AltusLog, card: FlightCard, out: str | Pat
     record = log if isinstance(log, FlightRecord) else log.record()
     samples = record.samples
     src = str(record.path)
+    baro = samples[["time", "altitude", "pressure"]].dropna()
+    if len(baro) < 20:
+        raise InputError(src, "pressure", "a barometer (pressure or altitude) read in at "
+                         f"least 20 samples; the log has {len(baro)}")
     events, notes = flight_events(record)
     deploy: dict[str, float] = {}
     deploy_sigma: dict[str, float] = {}
@@ -418,10 +422,6 @@ def import_flight(log: FlightRecord | AltusLog, card: FlightCard, out: str | Pat
                              f"({', '.join(events)}); got {state!r}")
         deploy[chute["name"]] = events[state].time
         deploy_sigma[chute["name"]] = events[state].sigma
-    baro = samples[["time", "altitude", "pressure"]].dropna()
-    if len(baro) < 20:
-        raise InputError(src, "pressure", "a barometer (pressure or altitude) read in at "
-                         f"least 20 samples; the log has {len(baro)}")
     t_boost = events["boost"].time if "boost" in events else 0.0
     pad = baro[baro["time"] < t_boost]
     if pad.empty:

@@ -196,6 +196,18 @@ def numeric(table: pd.DataFrame, path: Path, column: str, field_name: str,
     return values.to_numpy(float)
 
 
+def positive(values: np.ndarray, path: Path, column: str, field_name: str,
+             header_line: int = 1) -> np.ndarray:
+    """`values` (column `column` of the table read from `path`, NaN where blank) unchanged
+    where every reading is above zero; InputError naming the line of the first that is not
+    (a pressure of zero or below has no pressure altitude)."""
+    bad = np.flatnonzero(~np.isnan(values) & (values <= 0.0))
+    if bad.size:
+        raise InputError(str(path), f"line {int(bad[0]) + header_line + 1}, {column}",
+                         f"a value above zero ({field_name}); got {values[bad[0]]:g}")
+    return values
+
+
 def time_ordered(frame: pd.DataFrame) -> tuple[pd.DataFrame, int, int]:
     """`frame` without rows lacking a time, sorted by time, a repeated time stamp keeping
     its first row; with the counts of rows without a time and of repeated stamps."""
