@@ -402,6 +402,22 @@ def test_a_log_without_valid_pressures_is_one_line(flight: Flight, tmp_path: Pat
     assert not (tmp_path / "test").exists()
 
 
+def test_state_values_that_name_no_state_leave_the_events_to_detection(
+        flight: Flight, tmp_path: Path) -> None:
+    """A state column mapped without `names` whose values are no flight state's name
+    (a logger's numeric codes) gives no states: the events are detected, as without it."""
+    write_mapped(flight, tmp_path / "log.csv", seed=5)
+    table = pd.read_csv(tmp_path / "log.csv")
+    table["mode"] = np.where(table["t_ms"] < 0, 1, 3)
+    table.to_csv(tmp_path / "log.csv", index=False, float_format="%.7g")
+    (tmp_path / "map.json").write_text(json.dumps({**COLUMN_MAP, "state": {"column": "mode"}}))
+    report = _import(["import", str(tmp_path / "log.csv"), "--columns",
+                      str(tmp_path / "map.json"), "--card", str(_card(tmp_path))],
+                     tmp_path / "test")
+    assert {"drogue", "main"} <= set(report["flight_events"])
+    assert all(e["source"] != "flight state" for e in report["flight_events"].values())
+
+
 def test_unknown_format_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     (tmp_path / "log.csv").write_text("a,b\n1,2\n")
     code = main(["import", str(tmp_path / "log.csv"), "--format", "eggtimer", "--card",
