@@ -17,7 +17,8 @@ from cpas_ocp.inference.model_comparison import Criteria
 from cpas_ocp.inference.phase_windows import PhaseWindow, phase_windows
 from cpas_ocp.inference.profile_likelihood import Profile
 from cpas_ocp.io.output_folder import atomic_folder
-from cpas_ocp.reports.display_units import DisplayUnits, display_units
+from cpas_ocp.physics.units import SI_UNIT
+from cpas_ocp.reports.display_units import CHANNEL_DIMENSION, DisplayUnits, display_units
 from cpas_ocp.reports.failure_report import RESULT_MARKERS
 from cpas_ocp.reports.flight_report import steady_descent_text
 from cpas_ocp.reports.html_page import Page, drag_area_figure, sensor_figure, window_legend
@@ -64,9 +65,9 @@ def strong_correlations(cov: Covariance,
     return sorted(pairs, key=lambda p: -abs(p[2]))
 
 
-SENSOR_UNITS = {"east": "m", "north": "m", "up": "m", "altitude": "m", "v_east": "m/s",
-                "v_north": "m/s", "v_up": "m/s", "load_factor": "g", "tension": "N",
-                "acceleration": "m/s^2"}
+# SI unit of each sensor channel: that of its dimension (one table of channels, in
+# display_units).
+SENSOR_UNITS = {channel: SI_UNIT[dim] for channel, dim in CHANNEL_DIMENSION.items()}
 
 
 def channel_unit(fit: Fit, sensor: str, channel: str) -> str:
