@@ -24,6 +24,7 @@ from cpas_ocp.reports.flight_report import steady_descent_text
 from cpas_ocp.reports.html_page import Page, drag_area_figure, sensor_figure, window_legend
 from cpas_ocp.reports.html_page import parameter_table as parameter_html
 from cpas_ocp.reports.plots import (
+    DragAreaCurves,
     drag_area_curves,
     plot_correlation,
     plot_drag_areas,
@@ -260,9 +261,11 @@ def sensor_figures(page: Page, fit: Fit, units: DisplayUnits,
 
 
 def reconstruction_page(fit: Fit, cov: Covariance | None, claim: Claim | None,
-                        units: DisplayUnits) -> Page:
+                        units: DisplayUnits,
+                        curves: Sequence[DragAreaCurves] | None = None) -> Page:
     """The reconstruction as one HTML page: the claim, the parameters, the fit, each
-    sensor's model against its measurement, and the canopies' drag areas."""
+    sensor's model against its measurement, and the canopies' drag areas (`curves`,
+    `drag_area_curves` of the fit where not given)."""
     page = begin_page(fit, f"Reconstruction of {fit.test.name}", units)
     if claim is not None:
         if not claim.is_result:
@@ -281,7 +284,8 @@ def reconstruction_page(fit: Fit, cov: Covariance | None, claim: Claim | None,
     page.heading("Sensors: model against measurement")
     sensor_figures(page, fit, units, phase_windows(fit))
     page.heading("Canopy drag areas")
-    drag_area_figure(page, drag_area_curves(fit), units.factor("area"), units.unit("area"))
+    drag_area_figure(page, drag_area_curves(fit) if curves is None else curves,
+                     units.factor("area"), units.unit("area"))
     return page
 
 
@@ -304,7 +308,10 @@ def write_report(fit: Fit, cov: Covariance | None, out: str | Path,
                  "unit": fit.model.parameter(n).unit} for n in fit.free]
         pd.DataFrame(rows).to_csv(tmp / "parameters.csv", index=False)
         plot_sensors(fit, tmp, units)
-        plot_drag_areas(fit, tmp, units)
+        # The drag areas against their reduction (which re-reduces the test), drawn in
+        # the figure and the page from one computation.
+        curves = drag_area_curves(fit)
+        plot_drag_areas(fit, tmp, units, curves)
         plot_events(fit, tmp)
         plot_wind(fit, cov, tmp, units)
         if cov is not None:
@@ -323,5 +330,5 @@ def write_report(fit: Fit, cov: Covariance | None, out: str | Path,
             + "".join(f"Profile likelihood, {p.text()}\n\n" for p in profiles)
             + "".join(f"![{p.stem}]({p.name})\n\n" for p in sorted(tmp.glob("*.png")))
             + f"{units_note(units, display_units(fit.test))}  Interactive plots: report.html\n")
-        reconstruction_page(fit, cov, claim, units).write(tmp / "report.html")
+        reconstruction_page(fit, cov, claim, units, curves).write(tmp / "report.html")
     return out
