@@ -35,6 +35,7 @@ import pandas as pd
 
 from cpas_ocp.errors import InputError
 from cpas_ocp.io.flight_record import (
+    MIN_SATELLITES,
     FlightRecord,
     axial_from_axes,
     new_fixes,
@@ -47,7 +48,6 @@ from cpas_ocp.io.flight_record import (
 
 STATES = {3: "boost", 4: "coast", 5: "drogue", 6: "main", 7: "landed"}
 EMPTY = "No data recorded"
-MIN_SATELLITES = 4
 
 
 def _required(folder: Path, name: str, columns: tuple[str, ...]) -> pd.DataFrame:

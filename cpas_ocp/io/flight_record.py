@@ -36,6 +36,7 @@ from cpas_ocp.physics.units import G0
 
 SAMPLE_COLUMNS = ("time", "pressure", "altitude", "acceleration")
 GNSS_COLUMNS = ("time", "latitude", "longitude", "gps_altitude")
+MIN_SATELLITES = 4  # a GNSS fix needs four satellites for a position with an altitude
 EARTH_RADIUS_M = 6371008.8  # mean Earth radius (m): east/north over a few km to < 0.5 %
 BOOST_AXIS_G = 2.0  # an axis counts as boosting where it reads this many g above rest
 BOOST_RUN = 3  # ... for this many samples in a row
