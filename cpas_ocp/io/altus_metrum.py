@@ -93,6 +93,8 @@ class AltusLog:
         return d[~self._repeats()].reset_index(drop=True)
 
     def _repeats(self) -> np.ndarray:
+        """Per row: True where it repeats the previous row's sensor record (see
+        `sensor_samples`)."""
         d = self.data
         x = d[[c for c in SENSOR_COLUMNS if c in d.columns]]
         same = ((x.diff() == 0) | (x.isna() & x.shift().isna())).all(axis=1).to_numpy().copy()

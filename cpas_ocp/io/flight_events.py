@@ -93,6 +93,8 @@ def _step_at(t: np.ndarray, t0: float) -> float:
 
 
 def _running_median(t: np.ndarray, x: np.ndarray, window_s: float) -> np.ndarray:
+    """Centred running median of `x` over about `window_s` (s) of samples (an odd count, at
+    least 3, from the median interval of `t`); the ends over the samples there are."""
     n = max(3, round(window_s / _interval(t)) // 2 * 2 + 1)
     return pd.Series(x).rolling(n, center=True, min_periods=1).median().to_numpy()
 

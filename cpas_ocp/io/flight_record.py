@@ -56,6 +56,7 @@ class FlightRecord:
 
     @property
     def has_gps_altitude(self) -> bool:
+        """Whether any fix carries an altitude (m above mean sea level)."""
         return "gps_altitude" in self.gnss.columns and bool(self.gnss["gps_altitude"].notna()
                                                             .any())
 
