@@ -402,6 +402,28 @@ def test_a_log_without_valid_pressures_is_one_line(flight: Flight, tmp_path: Pat
     assert not (tmp_path / "test").exists()
 
 
+@pytest.mark.parametrize(("deployments", "expected"), [
+    (("drogue", "drogue"), "deploys an earlier one too"),  # two openings, one event
+    (("drogue", "landed"), "got 'landed'"),  # touchdown deploys nothing
+])
+def test_a_card_deploying_at_no_single_event_is_one_line(
+        flight: Flight, tmp_path: Path, capsys: pytest.CaptureFixture[str],
+        deployments: tuple[str, str], expected: str) -> None:
+    write_mapped(flight, tmp_path / "log.csv", seed=5)
+    (tmp_path / "map.json").write_text(json.dumps(COLUMN_MAP))
+    card = json.loads(json.dumps(CARD))
+    for chute, deployment in zip(card["parachutes"], deployments, strict=True):
+        chute["deployment"] = deployment
+    (tmp_path / "card.json").write_text(json.dumps(card))
+    code = main(["import", str(tmp_path / "log.csv"), "--columns", str(tmp_path / "map.json"),
+                 "--card", str(tmp_path / "card.json"), "--out", str(tmp_path / "test")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1
+    assert err[0].startswith(f"error: {tmp_path / 'card.json'}: parachutes[1].deployment:")
+    assert expected in err[0] and "landed," not in err[0] and "landed)" not in err[0]
+    assert not (tmp_path / "test").exists()
+
+
 def test_state_values_that_name_no_state_leave_the_events_to_detection(
         flight: Flight, tmp_path: Path) -> None:
     """A state column mapped without `names` whose values are no flight state's name
