@@ -1,6 +1,7 @@
 """Every sensor of a test folder is fitted, or the user is told: a manifest without a model
 block fits each sensor kind it has; a model block that predicts none of them is a one-line
-error (exit 2); a misspelt sensor field or a one-component table wind is refused."""
+error (exit 2), one that leaves some out is warned about; a misspelt sensor field or a
+one-component table wind is refused."""
 
 from __future__ import annotations
 
@@ -74,3 +75,21 @@ def test_a_table_wind_needs_both_components(steady: Path, tmp_path: Path,
     assert main(["reconstruct", str(folder), "--out", str(tmp_path / "out")]) == 2
     err = capsys.readouterr().err
     assert "atmosphere.columns" in err and "wind_north" in err
+
+
+def test_a_sensor_no_effect_predicts_is_warned_about(steady: Path, tmp_path: Path,
+                                                      capsys: pytest.CaptureFixture[str]
+                                                      ) -> None:
+    """A model that predicts some sensors but not all: the others are named as unfitted
+    (the fit goes on with those it predicts) and the command line warns about them."""
+    def with_gps(m: dict) -> None:
+        m["sensors"].append({"name": "gps", "kind": "gps_altitude", "file": "gps.csv",
+                             "columns": {"time": "s", "up": "m"},
+                             "sigma": {"altitude": {"value": 5.0, "unit": "m"}}})
+    folder = _copy_with(steady, tmp_path / "t", with_gps)
+    baro = (folder / "baro.csv").read_text().splitlines()
+    (folder / "gps.csv").write_text("\n".join(["time,up", *baro[1::20]]) + "\n")
+    test = load_test(folder)
+    assert unfitted_sensors(test, spec_of_test(test).model(test)) == ["gps"]
+    assert main(["reconstruct", str(folder), "--out", str(tmp_path / "out")]) == 0
+    assert "warning: no effect of the model predicts sensor(s) gps" in capsys.readouterr().err

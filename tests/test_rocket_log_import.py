@@ -378,6 +378,68 @@ def test_column_map_errors_are_one_line(flight: Flight, tmp_path: Path,
     assert not (tmp_path / "test").exists()
 
 
+@pytest.mark.parametrize(("pressure", "field"), [
+    ("", "pressure"),  # a log without barometer readings: the log is named, not the card
+    ("0", "line 4, press_hPa"),  # a pressure of zero has no pressure altitude
+    ("-863.0", "line 4, press_hPa"),
+])
+def test_a_log_without_valid_pressures_is_one_line(flight: Flight, tmp_path: Path,
+                                                  capsys: pytest.CaptureFixture[str],
+                                                  pressure: str, field: str) -> None:
+    write_mapped(flight, tmp_path / "log.csv", seed=5)
+    table = pd.read_csv(tmp_path / "log.csv", dtype=str, keep_default_na=False)
+    if pressure:
+        table.loc[2, "press_hPa"] = pressure
+    else:
+        table["press_hPa"] = ""
+    table.to_csv(tmp_path / "log.csv", index=False)
+    (tmp_path / "map.json").write_text(json.dumps(COLUMN_MAP))
+    code = main(["import", str(tmp_path / "log.csv"), "--columns", str(tmp_path / "map.json"),
+                 "--card", str(_card(tmp_path)), "--out", str(tmp_path / "test")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1
+    assert err[0].startswith(f"error: {tmp_path / 'log.csv'}: {field}:")
+    assert not (tmp_path / "test").exists()
+
+
+@pytest.mark.parametrize(("deployments", "expected"), [
+    (("drogue", "drogue"), "deploys an earlier one too"),  # two openings, one event
+    (("drogue", "landed"), "got 'landed'"),  # touchdown deploys nothing
+])
+def test_a_card_deploying_at_no_single_event_is_one_line(
+        flight: Flight, tmp_path: Path, capsys: pytest.CaptureFixture[str],
+        deployments: tuple[str, str], expected: str) -> None:
+    write_mapped(flight, tmp_path / "log.csv", seed=5)
+    (tmp_path / "map.json").write_text(json.dumps(COLUMN_MAP))
+    card = json.loads(json.dumps(CARD))
+    for chute, deployment in zip(card["parachutes"], deployments, strict=True):
+        chute["deployment"] = deployment
+    (tmp_path / "card.json").write_text(json.dumps(card))
+    code = main(["import", str(tmp_path / "log.csv"), "--columns", str(tmp_path / "map.json"),
+                 "--card", str(tmp_path / "card.json"), "--out", str(tmp_path / "test")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1
+    assert err[0].startswith(f"error: {tmp_path / 'card.json'}: parachutes[1].deployment:")
+    assert expected in err[0] and "landed," not in err[0] and "landed)" not in err[0]
+    assert not (tmp_path / "test").exists()
+
+
+def test_state_values_that_name_no_state_leave_the_events_to_detection(
+        flight: Flight, tmp_path: Path) -> None:
+    """A state column mapped without `names` whose values are no flight state's name
+    (a logger's numeric codes) gives no states: the events are detected, as without it."""
+    write_mapped(flight, tmp_path / "log.csv", seed=5)
+    table = pd.read_csv(tmp_path / "log.csv")
+    table["mode"] = np.where(table["t_ms"] < 0, 1, 3)
+    table.to_csv(tmp_path / "log.csv", index=False, float_format="%.7g")
+    (tmp_path / "map.json").write_text(json.dumps({**COLUMN_MAP, "state": {"column": "mode"}}))
+    report = _import(["import", str(tmp_path / "log.csv"), "--columns",
+                      str(tmp_path / "map.json"), "--card", str(_card(tmp_path))],
+                     tmp_path / "test")
+    assert {"drogue", "main"} <= set(report["flight_events"])
+    assert all(e["source"] != "flight state" for e in report["flight_events"].values())
+
+
 def test_unknown_format_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     (tmp_path / "log.csv").write_text("a,b\n1,2\n")
     code = main(["import", str(tmp_path / "log.csv"), "--format", "eggtimer", "--card",

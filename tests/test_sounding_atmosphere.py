@@ -138,12 +138,13 @@ def test_a_baro_reconstruction_through_a_sounding(simulated: Path, tmp_path: Pat
     (lambda d, c, e: e.__setitem__("surface_pressure", {"value": 900, "unit": "hPa"}),
      "atmosphere.surface_pressure"),
     (lambda d, c, e: c.__setitem__("temperature", "degC"), "atmosphere.columns.temperature"),
+    (lambda d, c, e: d.drop(index=d.index[1:], inplace=True), "altitude"),
 ])
 def test_a_bad_sounding_is_refused_in_one_line(simulated: Path, tmp_path: Path, change,
                                                field: str) -> None:
     """Pressure alone, pressure rising with altitude, a temperature not positive, a
-    surface pressure beside a pressure column, a unit not accepted: InputError naming
-    the field."""
+    surface pressure beside a pressure column, a unit not accepted, a single row (nothing
+    to interpolate between): InputError naming the field."""
     sounding, _ = _site_sounding()
     columns = {"altitude": "m", "pressure": "hPa", "temperature": "K"}
     extra: dict = {}

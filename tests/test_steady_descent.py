@@ -31,7 +31,7 @@ from cpas_ocp.io.problems import load_problem
 from cpas_ocp.physics.atmosphere import density_at
 from cpas_ocp.physics.effects.canopy_inflation import BAND_BLEND_M, banded_cds
 from cpas_ocp.physics.units import G0
-from cpas_ocp.reports.flight_report import descent_rates, steady_descent_text
+from cpas_ocp.reports.flight_report import descent_rates, rate_sigmas, steady_descent_text
 
 SEEDS = (1, 2, 3)
 BANDS_TRUTH = {"CdS[drogue,stage1,band1]": 0.47, "CdS[drogue,stage1,band2]": 0.52}
@@ -159,6 +159,10 @@ def test_banded_drag_areas_recovered_within_4_sigma(steady_fit) -> None:
     rates = descent_rates(fit, cov)
     assert [(r.canopies, r.band) for r in rates] == [
         (("drogue",), "band2"), (("drogue",), "band1"), (("drogue", "main"), "band1")]
+    # Each band's drag area has its own sigma from its own rate, not one band's overwritten.
+    sigmas = rate_sigmas(fit, rates)
+    assert set(sigmas) == {*BANDS_TRUTH, "CdS[main,stage2]"}
+    assert all(np.isfinite(v) and v > 0 for v in sigmas.values())
     assert "CdS[drogue,stage1,band2]" in steady_descent_text(fit, cov)
 
 

@@ -40,7 +40,7 @@ import numpy as np
 import pandas as pd
 
 from cpas_ocp.errors import InputError
-from cpas_ocp.io.flight_record import FlightRecord, new_fixes
+from cpas_ocp.io.flight_record import MIN_SATELLITES, FlightRecord, new_fixes
 from cpas_ocp.io.flight_test import MAX_MAGNITUDE
 
 REQUIRED = ("time", "state_name", "pressure", "altitude", "acceleration")
@@ -55,7 +55,6 @@ SENSOR_COLUMNS = ("pressure", "acceleration", "altitude", "height", "speed", "te
 GPS_COLUMNS = ("latitude", "longitude", "gps_altitude", "nsat")
 # AltOS writes 2^31 - 1 for a quantity the receiver did not report (e.g. hdop).
 MISSING_SENTINEL = 2147483647.0
-MIN_SATELLITES = 4  # a GPS fix needs four satellites for an altitude
 # AltOS names an export <product>-serial-<serial>-flight-<flight>.csv.
 EXPORT_NAME = re.compile(r"^(?P<product>[a-z]+)-serial-(?P<serial>\d+)-flight-(?P<flight>\d+)",
                          re.IGNORECASE)
@@ -94,6 +93,8 @@ class AltusLog:
         return d[~self._repeats()].reset_index(drop=True)
 
     def _repeats(self) -> np.ndarray:
+        """Per row: True where it repeats the previous row's sensor record (see
+        `sensor_samples`)."""
         d = self.data
         x = d[[c for c in SENSOR_COLUMNS if c in d.columns]]
         same = ((x.diff() == 0) | (x.isna() & x.shift().isna())).all(axis=1).to_numpy().copy()

@@ -35,10 +35,12 @@ import pandas as pd
 
 from cpas_ocp.errors import InputError
 from cpas_ocp.io.flight_record import (
+    MIN_SATELLITES,
     FlightRecord,
     axial_from_axes,
     new_fixes,
     numeric,
+    positive,
     read_table,
     samples_frame,
     time_ordered,
@@ -46,7 +48,6 @@ from cpas_ocp.io.flight_record import (
 
 STATES = {3: "boost", 4: "coast", 5: "drogue", 6: "main", 7: "landed"}
 EMPTY = "No data recorded"
-MIN_SATELLITES = 4
 
 
 def _required(folder: Path, name: str, columns: tuple[str, ...]) -> pd.DataFrame:
@@ -86,6 +87,7 @@ def read_cats_log(path: str | Path, axis: str = "auto") -> FlightRecord:
     folder = path if path.is_dir() else path.parent
     imu = _required(folder, "imu.csv", ("ts", "Ax", "Ay", "Az"))
     baro = _required(folder, "baro.csv", ("ts", "P"))
+    positive(baro["P"].to_numpy(float), folder / "baro.csv", "P", "pressure (Pa)")
     fsm = _section(folder, "flightStates.csv", ("ts", "state"))
     gnss = _section(folder, "gnssInfo.csv", ("ts", "latitude", "longitude", "satellites"))
     stamps = np.diff(np.unique(imu["ts"].dropna().to_numpy()))

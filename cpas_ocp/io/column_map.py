@@ -13,7 +13,8 @@ The map (`data_schemas/column_map.schema.json`) names the log's columns:
 * ``gnss``: ``latitude``, ``longitude`` (deg) and optionally ``altitude``
   (m, ft above mean sea level) and ``velocity`` east/north/up;
 * ``state``: a flight-state column, its values mapped by ``names`` to
-  boost, coast, drogue, main, landed.
+  boost, coast, drogue, main, landed (without ``names``, values that are those
+  names, in any case); other values are not states.
 
 Rows are sorted by time and a repeated time stamp keeps its first row (a
 repeated sample is a repeated stamp, not equal readings); GNSS rows that
@@ -37,6 +38,7 @@ from cpas_ocp.io.flight_record import (
     axial_from_axes,
     new_fixes,
     numeric,
+    positive,
     pressure_of_altitude,
     read_table,
     samples_frame,
@@ -45,6 +47,8 @@ from cpas_ocp.io.flight_record import (
 from cpas_ocp.io.flight_test import read_json, validate_block
 from cpas_ocp.physics.units import FACTORS, G0
 
+# The flight states a state column may give (the schema's `names` targets).
+FLIGHT_STATES = ("boost", "coast", "drogue", "main", "landed")
 PRESSURE_UNITS = {**FACTORS["pressure"], "mbar": 100.0}
 Column = Callable[[str, str], np.ndarray]  # a log column by name, its map field for errors
 
@@ -84,8 +88,10 @@ def read_mapped_log(path: str | Path, column_map: dict[str, Any], map_source: st
                           * FACTORS["time"][spec["unit"]]})
     if "pressure" in column_map:
         spec = column_map["pressure"]
-        frame["pressure"] = column(spec["column"], "pressure.column") * PRESSURE_UNITS[
-            spec["unit"]]
+        frame["pressure"] = positive(column(spec["column"], "pressure.column"), path,
+                                     spec["column"], "pressure.column",
+                                     column_map.get("skip_rows", 0) + 1) \
+            * PRESSURE_UNITS[spec["unit"]]
     else:
         spec = column_map["altitude"]
         h = (column(spec["column"], "altitude.column") + spec.get("offset", 0.0)) \
@@ -127,7 +133,7 @@ def read_mapped_log(path: str | Path, column_map: dict[str, Any], map_source: st
             if pd.isna(value) or value == "":
                 continue
             state = names.get(str(value)) if names is not None else str(value).lower()
-            if state is not None:
+            if state in FLIGHT_STATES:
                 states.setdefault(state, float(t))
     notes = () if axis_used is None else (f"axial accelerometer axis: {axis_used}",)
     return FlightRecord(path, column_map.get("recorder", "flight computer"), samples, gnss,

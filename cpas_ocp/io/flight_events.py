@@ -11,7 +11,8 @@ timing sigma (s):
   below zero (axial reading below -1 g: the drag exceeds what thrust is
   left); sigma one sample;
 * ``apogee``: the highest point of the altimeter's running median over
-  `SMOOTH_S`; sigma half the time it stays within the noise of the top;
+  `SMOOTH_S`; sigma half the time that median stays within two noise sigmas
+  (`second_difference_sigma`, at least 5 cm) of the top, at least one sample;
 * ``drogue``, ``main``: the ejection charges.  A charge jolts the
   accelerometer (and the shock cord's snatch follows) and its gas puffs the
   static port, which reads a pressure pulse (on the Prometheus logs 155 and
@@ -92,6 +93,8 @@ def _step_at(t: np.ndarray, t0: float) -> float:
 
 
 def _running_median(t: np.ndarray, x: np.ndarray, window_s: float) -> np.ndarray:
+    """Centred running median of `x` over about `window_s` (s) of samples (an odd count, at
+    least 3, from the median interval of `t`); the ends over the samples there are."""
     n = max(3, round(window_s / _interval(t)) // 2 * 2 + 1)
     return pd.Series(x).rolling(n, center=True, min_periods=1).median().to_numpy()
 

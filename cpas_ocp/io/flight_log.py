@@ -405,23 +405,29 @@ def import_flight(log: FlightRecord | AltusLog, card: FlightCard, out: str | Pat
     record = log if isinstance(log, FlightRecord) else log.record()
     samples = record.samples
     src = str(record.path)
+    baro = samples[["time", "altitude", "pressure"]].dropna()
+    if len(baro) < 20:
+        raise InputError(src, "pressure", "a barometer (pressure or altitude) read in at "
+                         f"least 20 samples; the log has {len(baro)}")
     events, notes = flight_events(record)
     deploy: dict[str, float] = {}
     deploy_sigma: dict[str, float] = {}
     kind = "a flight state of the log" if record.states else \
         "an event detected in the log (it has no flight states)"
+    deploying = [name for name in events if name != "landed"]
     for i, chute in enumerate(card.parachutes):
         state = chute["deployment"]
-        if state not in events or state == "landed":
+        if state not in deploying:
             raise InputError(card.source, f"parachutes[{i}].deployment",
                              f"{kind} {src} that deploys {chute['name']} "
-                             f"({', '.join(events)}); got {state!r}")
+                             f"({', '.join(deploying)}); got {state!r}")
+        # Each canopy's opening is told apart by its own event (its charge, its snatch).
+        if any(card.parachutes[j]["deployment"] == state for j in range(i)):
+            raise InputError(card.source, f"parachutes[{i}].deployment",
+                             f"an event no other canopy of the card deploys at; "
+                             f"{state!r} deploys an earlier one too")
         deploy[chute["name"]] = events[state].time
         deploy_sigma[chute["name"]] = events[state].sigma
-    baro = samples[["time", "altitude", "pressure"]].dropna()
-    if len(baro) < 20:
-        raise InputError(src, "pressure", "a barometer (pressure or altitude) read in at "
-                         f"least 20 samples; the log has {len(baro)}")
     t_boost = events["boost"].time if "boost" in events else 0.0
     pad = baro[baro["time"] < t_boost]
     if pad.empty:

@@ -36,6 +36,7 @@ from cpas_ocp.physics.units import G0
 
 SAMPLE_COLUMNS = ("time", "pressure", "altitude", "acceleration")
 GNSS_COLUMNS = ("time", "latitude", "longitude", "gps_altitude")
+MIN_SATELLITES = 4  # a GNSS fix needs four satellites for a position with an altitude
 EARTH_RADIUS_M = 6371008.8  # mean Earth radius (m): east/north over a few km to < 0.5 %
 BOOST_AXIS_G = 2.0  # an axis counts as boosting where it reads this many g above rest
 BOOST_RUN = 3  # ... for this many samples in a row
@@ -55,6 +56,7 @@ class FlightRecord:
 
     @property
     def has_gps_altitude(self) -> bool:
+        """Whether any fix carries an altitude (m above mean sea level)."""
         return "gps_altitude" in self.gnss.columns and bool(self.gnss["gps_altitude"].notna()
                                                             .any())
 
@@ -194,6 +196,18 @@ def numeric(table: pd.DataFrame, path: Path, column: str, field_name: str,
         raise InputError(str(path), f"line {row + header_line + 1}, {column}",
                          f"a number ({field_name}); got {text.iloc[row]!r}")
     return values.to_numpy(float)
+
+
+def positive(values: np.ndarray, path: Path, column: str, field_name: str,
+             header_line: int = 1) -> np.ndarray:
+    """`values` (column `column` of the table read from `path`, NaN where blank) unchanged
+    where every reading is above zero; InputError naming the line of the first that is not
+    (a pressure of zero or below has no pressure altitude)."""
+    bad = np.flatnonzero(~np.isnan(values) & (values <= 0.0))
+    if bad.size:
+        raise InputError(str(path), f"line {int(bad[0]) + header_line + 1}, {column}",
+                         f"a value above zero ({field_name}); got {values[bad[0]]:g}")
+    return values
 
 
 def time_ordered(frame: pd.DataFrame) -> tuple[pd.DataFrame, int, int]:

@@ -663,6 +663,9 @@ def read_series_table(path: Path, units: dict[str, str],
                       dimensions: dict[str, str]) -> dict[str, np.ndarray]:
     """Read a profile table (no time column) with strictly increasing altitude, in SI."""
     out = _read_columns(path, units, dimensions, "the atmosphere table")
+    if out["altitude"].size < 2:
+        raise InputError(str(path), "altitude", "at least two rows (the profile is "
+                         f"interpolated between rows); got {out['altitude'].size}")
     if (np.diff(out["altitude"]) <= 0).any():
         raise InputError(str(path), "altitude", "strictly increasing altitude")
     return out

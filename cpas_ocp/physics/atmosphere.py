@@ -211,12 +211,16 @@ class SoundingAtmosphere:
         return cls(h, p, temp, rho, wind_east_m_s, wind_north_m_s)
 
     def pressure(self, h: ca.SX | ca.MX | float) -> ca.SX | ca.MX:
+        """Pressure (Pa) at geometric altitude `h` (m): log(p) linear between rows."""
         return ca.exp(self._log_p(h))
 
     def density(self, h: ca.SX | ca.MX | float) -> ca.SX | ca.MX:
+        """Density (kg/m^3) at `h` (m): log(rho) linear between rows."""
         return self._table.density(h)
 
     def wind(self, h: ca.SX | ca.MX | float) -> ca.SX | ca.MX:
+        """Wind velocity (east, north, up = 0) (m/s) at `h` (m), linear between rows; zero
+        where the table has no wind."""
         return self._table.wind(h)
 
     def altitude_at_pressure(self, p: np.ndarray | float) -> np.ndarray:

@@ -276,16 +276,17 @@ def rate_sigmas(fit: Fit, rates: list[DescentRate]) -> dict[str, float]:
     relative sigma is twice the measured rate's (whose sigma counts the
     residuals' autocorrelation: the descent's slow wander, which the fit's
     white-noise sigma leaves out).  A canopy opened after others gets its
-    phase's total less theirs, so their sigmas add in quadrature.
+    phase's total less theirs, so their sigmas add in quadrature.  A canopy with
+    altitude bands has one drag area, and one sigma, per band (the rate's `band`).
     """
     out: dict[str, float] = {}
     for r in rates:
         canopy = r.canopies[-1]
-        total = sum(fit.parameters[_steady_cds(fit, c)] for c in r.canopies)
+        total = sum(fit.parameters[_steady_cds(fit, c, r.band)] for c in r.canopies)
         total += fit.parameters.get("CdS_V", 0.0)
         var = (2.0 * total * r.measured_sigma / r.measured) ** 2
-        var += sum(out.get(_steady_cds(fit, c), 0.0) ** 2 for c in r.canopies[:-1])
-        out[_steady_cds(fit, canopy)] = float(np.sqrt(var))
+        var += sum(out.get(_steady_cds(fit, c, r.band), 0.0) ** 2 for c in r.canopies[:-1])
+        out[_steady_cds(fit, canopy, r.band)] = float(np.sqrt(var))
     return out
 
 
@@ -299,8 +300,10 @@ def nominal_comparisons(fit: Fit, cov: Covariance, nominal: dict[str, dict[str, 
             continue
         value = float(spec["value"]) * FACTORS["area"][spec["unit"]]
         canopy = split_name(name)[1][0]
-        rate = next(r for r in rates if r.canopies[-1] == canopy)
-        others = sum(fit.parameters[_steady_cds(fit, c)] for c in rate.canopies if c != canopy)
+        band = split_name(name)[1][-1] if fit.test.parachute(canopy).band_names else ""
+        rate = next(r for r in rates if r.canopies[-1] == canopy and band in ("", r.band))
+        others = sum(fit.parameters[_steady_cds(fit, c, rate.band)] for c in rate.canopies
+                     if c != canopy)
         v_nom = steady_rate(fit, value + others + fit.parameters.get("CdS_V", 0.0),
                             rate.altitude_m) - mean_updraft(fit, rate.t0, rate.t1)
         out.append(NominalComparison(name, fit.parameters[name], cov.std.get(name, 0.0), value,

@@ -192,6 +192,8 @@ def _band_shapes(row: int) -> list[dict]:
 
 
 def _residual_range(*series: np.ndarray) -> list[float]:
+    """Symmetric axis range (sigmas) of normalised residuals: at least +-4, wide enough
+    for 99.5 % of the largest series (a few outliers do not squash the rest)."""
     lim = max([4.0, *(float(np.percentile(np.abs(s), 99.5)) for s in series if s.size)])
     return [-lim, lim]
 

@@ -119,11 +119,13 @@ def drag_area_curves(fit: Fit) -> list[DragAreaCurves]:
     return curves
 
 
-def plot_drag_areas(fit: Fit, folder: Path, units: DisplayUnits | None = None) -> Path:
-    """Each canopy's reconstructed drag area against its offline (Eq. 3) reduction."""
+def plot_drag_areas(fit: Fit, folder: Path, units: DisplayUnits | None = None,
+                    curves: Sequence[DragAreaCurves] | None = None) -> Path:
+    """Each canopy's reconstructed drag area against its offline (Eq. 3) reduction
+    (`curves`, `drag_area_curves` of the fit where not given), in `units`."""
     units = units or display_units(fit.test)
     k, unit = units.factor("area"), pretty(units.unit("area"))
-    curves = drag_area_curves(fit)
+    curves = drag_area_curves(fit) if curves is None else curves
     fig, axes = plt.subplots(len(curves), 1, figsize=(10, 3.2 * len(curves)), sharex=True,
                              squeeze=False)
     for ax, c in zip(axes[:, 0], curves, strict=True):

@@ -17,12 +17,14 @@ from cpas_ocp.inference.model_comparison import Criteria
 from cpas_ocp.inference.phase_windows import PhaseWindow, phase_windows
 from cpas_ocp.inference.profile_likelihood import Profile
 from cpas_ocp.io.output_folder import atomic_folder
-from cpas_ocp.reports.display_units import DisplayUnits, display_units
+from cpas_ocp.physics.units import SI_UNIT
+from cpas_ocp.reports.display_units import CHANNEL_DIMENSION, DisplayUnits, display_units
 from cpas_ocp.reports.failure_report import RESULT_MARKERS
 from cpas_ocp.reports.flight_report import steady_descent_text
 from cpas_ocp.reports.html_page import Page, drag_area_figure, sensor_figure, window_legend
 from cpas_ocp.reports.html_page import parameter_table as parameter_html
 from cpas_ocp.reports.plots import (
+    DragAreaCurves,
     drag_area_curves,
     plot_correlation,
     plot_drag_areas,
@@ -64,9 +66,9 @@ def strong_correlations(cov: Covariance,
     return sorted(pairs, key=lambda p: -abs(p[2]))
 
 
-SENSOR_UNITS = {"east": "m", "north": "m", "up": "m", "altitude": "m", "v_east": "m/s",
-                "v_north": "m/s", "v_up": "m/s", "load_factor": "g", "tension": "N",
-                "acceleration": "m/s^2"}
+# SI unit of each sensor channel: that of its dimension (one table of channels, in
+# display_units).
+SENSOR_UNITS = {channel: SI_UNIT[dim] for channel, dim in CHANNEL_DIMENSION.items()}
 
 
 def channel_unit(fit: Fit, sensor: str, channel: str) -> str:
@@ -259,9 +261,11 @@ def sensor_figures(page: Page, fit: Fit, units: DisplayUnits,
 
 
 def reconstruction_page(fit: Fit, cov: Covariance | None, claim: Claim | None,
-                        units: DisplayUnits) -> Page:
+                        units: DisplayUnits,
+                        curves: Sequence[DragAreaCurves] | None = None) -> Page:
     """The reconstruction as one HTML page: the claim, the parameters, the fit, each
-    sensor's model against its measurement, and the canopies' drag areas."""
+    sensor's model against its measurement, and the canopies' drag areas (`curves`,
+    `drag_area_curves` of the fit where not given)."""
     page = begin_page(fit, f"Reconstruction of {fit.test.name}", units)
     if claim is not None:
         if not claim.is_result:
@@ -280,7 +284,8 @@ def reconstruction_page(fit: Fit, cov: Covariance | None, claim: Claim | None,
     page.heading("Sensors: model against measurement")
     sensor_figures(page, fit, units, phase_windows(fit))
     page.heading("Canopy drag areas")
-    drag_area_figure(page, drag_area_curves(fit), units.factor("area"), units.unit("area"))
+    drag_area_figure(page, drag_area_curves(fit) if curves is None else curves,
+                     units.factor("area"), units.unit("area"))
     return page
 
 
@@ -303,7 +308,10 @@ def write_report(fit: Fit, cov: Covariance | None, out: str | Path,
                  "unit": fit.model.parameter(n).unit} for n in fit.free]
         pd.DataFrame(rows).to_csv(tmp / "parameters.csv", index=False)
         plot_sensors(fit, tmp, units)
-        plot_drag_areas(fit, tmp, units)
+        # The drag areas against their reduction (which re-reduces the test), drawn in
+        # the figure and the page from one computation.
+        curves = drag_area_curves(fit)
+        plot_drag_areas(fit, tmp, units, curves)
         plot_events(fit, tmp)
         plot_wind(fit, cov, tmp, units)
         if cov is not None:
@@ -322,5 +330,5 @@ def write_report(fit: Fit, cov: Covariance | None, out: str | Path,
             + "".join(f"Profile likelihood, {p.text()}\n\n" for p in profiles)
             + "".join(f"![{p.stem}]({p.name})\n\n" for p in sorted(tmp.glob("*.png")))
             + f"{units_note(units, display_units(fit.test))}  Interactive plots: report.html\n")
-        reconstruction_page(fit, cov, claim, units).write(tmp / "report.html")
+        reconstruction_page(fit, cov, claim, units, curves).write(tmp / "report.html")
     return out
