@@ -31,7 +31,13 @@ from cpas_ocp.io.problems import load_problem
 from cpas_ocp.physics.atmosphere import density_at
 from cpas_ocp.physics.effects.canopy_inflation import BAND_BLEND_M, banded_cds
 from cpas_ocp.physics.units import G0
-from cpas_ocp.reports.flight_report import descent_rates, rate_sigmas, steady_descent_text
+from cpas_ocp.reports.flight_report import (
+    descent_rates,
+    nominal_comparisons,
+    rate_sigmas,
+    steady_descent_text,
+    uncompared,
+)
 
 SEEDS = (1, 2, 3)
 BANDS_TRUTH = {"CdS[drogue,stage1,band1]": 0.47, "CdS[drogue,stage1,band2]": 0.52}
@@ -184,3 +190,38 @@ def test_implied_descent_rates_match_the_measured(steady_fit) -> None:
                                                             r.measured_sigma) + bias, r
     text = steady_descent_text(fit, cov)
     assert "| drogue | CdS[drogue,stage1] | all |" in text
+
+
+def test_a_nominal_without_a_steady_window_is_named_not_compared(steady_fit) -> None:
+    """A nominal drag area whose canopy has no steady window (here: no rates at all) is
+    left out of the comparison and named, not a crash."""
+    fit, cov, _ = steady_fit(1)
+    nominal = {"CdS[main,stage2]": {"value": 5.8, "unit": "m^2", "source": "test"}}
+    rates = descent_rates(fit, cov)
+    assert [c.name for c in nominal_comparisons(fit, cov, nominal, rates)] == \
+        ["CdS[main,stage2]"]
+    assert nominal_comparisons(fit, cov, nominal, []) == []
+    assert uncompared(fit, nominal, []) == ["CdS[main,stage2]"]
+
+
+def test_two_banded_canopies_are_refused(tmp_path: Path) -> None:
+    """One set of bands splits the descent: bands on a second canopy are one-line errors."""
+    manifest = _manifest(altitude_bands=[2000])
+    manifest["parachutes"][1].update(open_at_start=True, altitude_bands=[1500])
+    manifest["events"] = []
+    with pytest.raises(InputError) as err:
+        _load(manifest, tmp_path)
+    assert err.value.field == "parachutes[1].altitude_bands"
+
+
+def test_a_band_the_descent_never_enters_is_refused(tmp_path: Path) -> None:
+    """A band edge above the whole phase leaves the upper band's drag area without data: the
+    reduction refuses it naming the bands, rather than a fit reporting the guess."""
+    manifest = _manifest(altitude_bands=[100_000])
+    series = {"baro": pd.DataFrame({"time": np.arange(0.0, 60.0, 0.1),
+                                    "altitude": np.linspace(2600.0, 1500.0, 600)})}
+    test = flight_test.test_from_manifest(manifest, tmp_path, series=series)
+    with pytest.raises(InputError) as err:
+        initial_guess(test, spec_of_test(test).model(test), {})
+    assert err.value.field == "parachutes[0].altitude_bands"
+    assert "band2" in str(err.value)

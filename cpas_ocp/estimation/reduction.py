@@ -26,9 +26,11 @@ but the test folder.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
+from cpas_ocp.errors import InputError
 from cpas_ocp.estimation.kinematic_track import kinematic_track
 from cpas_ocp.estimation.stage_curve_fit import (
     MAX_WINDOW_S,
@@ -36,7 +38,7 @@ from cpas_ocp.estimation.stage_curve_fit import (
     fit_stage_curve,
     fitted_names,
 )
-from cpas_ocp.io.flight_test import FlightTest, Parachute
+from cpas_ocp.io.flight_test import MANIFEST, FlightTest, Parachute
 from cpas_ocp.physics.atmosphere import density_at, wind_at
 from cpas_ocp.physics.effects.canopy_inflation import steady_parameter_names
 from cpas_ocp.physics.model import Model
@@ -210,6 +212,21 @@ def _steady_names(test: FlightTest, red: Reduction, chute: Parachute, stage: str
     return [(param_name("CdS", chute.name, stage), (-np.inf, np.inf))]
 
 
+def _require_bands_entered(test: FlightTest, red: Reduction, chute: Parachute) -> None:
+    """InputError naming the manifest's altitude bands of `chute` where the phase's
+    altitude track (m MSL) never enters one of them: no data would determine its drag
+    area, and the fit would report the guess as an estimate."""
+    for band in chute.band_names:
+        lo, hi = chute.band_range(band)
+        if not ((red.altitude >= lo) & (red.altitude < hi)).any():
+            i = [c.name for c in test.parachutes].index(chute.name)
+            raise InputError(str((test.path or Path()) / MANIFEST),
+                             f"parachutes[{i}].altitude_bands",
+                             f"edges the descent crosses; {band} ({lo:.0f} to {hi:.0f} m) lies "
+                             f"outside the altitudes of the phase ({red.altitude.min():.0f} to "
+                             f"{red.altitude.max():.0f} m MSL)")
+
+
 def reduce_and_guess(test: FlightTest, model: Model, fixed: dict[str, float] | None = None
                      ) -> tuple[dict[str, float], Reduction]:
     """The initial guess and the reduction it came from (start times from the events).
@@ -229,6 +246,7 @@ def reduce_and_guess(test: FlightTest, model: Model, fixed: dict[str, float] | N
         if name in guess and name not in fixed:
             guess[name] = float(np.clip(s, *bounds[name]))
     for chute in test.parachutes:
+        _require_bands_entered(test, red, chute)
         curve = red.cds_riser.get(chute.name)
         if curve is None:
             continue

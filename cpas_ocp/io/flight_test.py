@@ -443,6 +443,11 @@ def test_from_manifest(manifest: dict[str, Any], folder: Path,
                                     _si(p["line_length"], "length") if "line_length" in p
                                     else None, is_open, bands))
     _unique(mfile, "parachutes", [p.name for p in parachutes])
+    banded = [i for i, p in enumerate(parachutes) if p.altitude_bands]
+    if len(banded) > 1:
+        raise InputError(mfile, f"parachutes[{banded[1]}].altitude_bands", "altitude bands on "
+                         "one canopy at most (a descent rate under canopies open together is "
+                         "split by one set of bands)")
     by_name = {p.name: p for p in parachutes}
 
     sensors = [_load_sensor(mfile, folder, i, s, by_name, series)

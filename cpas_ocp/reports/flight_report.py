@@ -292,7 +292,9 @@ def rate_sigmas(fit: Fit, rates: list[DescentRate]) -> dict[str, float]:
 
 def nominal_comparisons(fit: Fit, cov: Covariance, nominal: dict[str, dict[str, Any]],
                         rates: list[DescentRate]) -> list[NominalComparison]:
-    """Each nominal drag area against the fit, with the descent rate it would give."""
+    """Each nominal drag area against the fit, with the descent rate it would give; a
+    nominal value whose canopy has no steady window among `rates` (none of 5 s or more) is
+    left out (`uncompared` names it)."""
     out = []
     by_rate = rate_sigmas(fit, rates)
     for name, spec in nominal.items():
@@ -301,7 +303,10 @@ def nominal_comparisons(fit: Fit, cov: Covariance, nominal: dict[str, dict[str, 
         value = float(spec["value"]) * FACTORS["area"][spec["unit"]]
         canopy = split_name(name)[1][0]
         band = split_name(name)[1][-1] if fit.test.parachute(canopy).band_names else ""
-        rate = next(r for r in rates if r.canopies[-1] == canopy and band in ("", r.band))
+        rate = next((r for r in rates if r.canopies[-1] == canopy and band in ("", r.band)),
+                    None)
+        if rate is None:
+            continue
         others = sum(fit.parameters[_steady_cds(fit, c, rate.band)] for c in rate.canopies
                      if c != canopy)
         v_nom = steady_rate(fit, value + others + fit.parameters.get("CdS_V", 0.0),
@@ -310,6 +315,13 @@ def nominal_comparisons(fit: Fit, cov: Covariance, nominal: dict[str, dict[str, 
                                      spec.get("source", ""), v_nom, rate,
                                      by_rate.get(name, 0.0)))
     return out
+
+
+def uncompared(fit: Fit, nominal: dict[str, dict[str, Any]],
+               comparisons: list[NominalComparison]) -> list[str]:
+    """The fitted nominal drag areas that `nominal_comparisons` could not compare."""
+    done = {c.name for c in comparisons}
+    return [n for n in nominal if n in fit.parameters and n not in done]
 
 
 def opening_shock(fit: Fit, t_deploy: float, load_factor: np.ndarray
@@ -535,6 +547,8 @@ def flight_text(fit: Fit, cov: Covariance, nominal: dict[str, dict[str, Any]],
               "measured rate (m/s) |",
               "|---|---|---|---|---|---|---|---|"]
     comps = nominal_comparisons(fit, cov, nominal, rates)
+    lines += [f"| {name} | no steady window of 5 s or more under its canopy: not compared "
+              "| | | | | | |" for name in uncompared(fit, nominal, comps)]
     for c in comps:
         lines.append(f"| {c.name} | {c.fitted:.4f} ± {c.sigma:.2g} | {c.sigma_rate:.2g} | "
                      f"{c.nominal:.3f} | {c.fitted / c.nominal:.2f} | {c.z:+.1f} | "
