@@ -45,7 +45,7 @@ def test_compiled_and_interpreted_estimators_agree(drogue_folder, tmp_path,
     np.testing.assert_allclose((r_plus - r_minus) / (2 * eps), jv, rtol=1e-4,
                                atol=1e-6 * np.max(np.abs(jv)))
     # The objective gradient handed to Ipopt is dense J'r.
-    grad = native._solver.get_function("nlp_grad_f")(z, [])[1]
+    grad = native.ipopt.get_function("nlp_grad_f")(z, [])[1]
     r, J = native._residual_jacobian(z)
     assert grad.is_dense()
     np.testing.assert_allclose(np.asarray(grad).ravel(), np.asarray(ca.mtimes(J.T, r)).ravel(),

@@ -32,7 +32,7 @@ def estimators(drogue_folder):
 
 
 def _outputs(est: Estimator, name: str, z: np.ndarray, lam: np.ndarray) -> list[ca.DM]:
-    fn = est._solver.get_function(name)
+    fn = est.ipopt.get_function(name)
     args = [z, np.zeros(0)] + ([0.7, lam] if name == "nlp_hess_l" else [])
     out = fn(*args)
     return list(out) if isinstance(out, tuple | list) else [out]
@@ -59,11 +59,11 @@ def test_levenberg_term_is_on_the_parameters_diagonal_only(estimators) -> None:
     _, est = estimators
     z = est.initial_point()
     lam = np.zeros(est._g.numel())
-    plain = ca.DM(est._solver.get_function("nlp_hess_l")(z, np.zeros(0), 0.7, lam))
+    plain = ca.DM(est.ipopt.get_function("nlp_hess_l")(z, np.zeros(0), 0.7, lam))
     est.settings.levenberg = 2.0
     try:
         est._make_solver()
-        damped = ca.DM(est._solver.get_function("nlp_hess_l")(z, np.zeros(0), 0.7, lam))
+        damped = ca.DM(est.ipopt.get_function("nlp_hess_l")(z, np.zeros(0), 0.7, lam))
     finally:
         est.settings.levenberg = None
         est._make_solver()

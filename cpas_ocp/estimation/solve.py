@@ -275,14 +275,25 @@ class Solving:
         self._monitor = _Monitor(self._z.numel(), self._g.numel(), self._violations,
                                  self._stop_test, s.chi2_step_tol, self._damping,
                                  STALL_ITERATIONS if s.descent_steps > 0 else None)
-        self._make_solver()
+        # Ipopt itself is made by the first solve (`solve`, on the pattern the windows
+        # fitted at its start keep): an estimator that is only linearised (a score
+        # test's) never needs it.
+        self._solver: ca.Function | None = None
+        self._warm = False
+
+    @property
+    def ipopt(self) -> ca.Function:
+        """Ipopt on this NLP (the one the last solve used; made here where none was)."""
+        if self._solver is None:
+            self._make_solver()
+        return self._solver
 
     def _make_solver(self, barrier: float | None = None) -> None:
         """Ipopt on the NLP, its derivatives on the pattern `self._windows` keeps; with
         `barrier`, warm-started (the caller passes the multipliers) at that barrier
         parameter, the bounds not pushed."""
         if self.settings.point_cache:
-            self._ipopt = ipopt_functions(self._points, self._curvature, self._small_rows,
+            self._ipopt = ipopt_functions(self._points, self._curvature(), self._small_rows,
                                           self._windows, self._monitor.window_check,
                                           self._damping, self._levenberg())
             nlp, derivatives = self._ipopt.nlp, self._ipopt.options
@@ -346,7 +357,8 @@ class Solving:
         t0 = time.perf_counter()
         cap = min(max_iter or self.settings.max_iter, self.settings.max_iter)
         self._fit_windows(z0)
-        if self._warm:  # an earlier solve's restart left its warm-started solver behind
+        # No solver yet, or an earlier solve's restart left its warm-started one behind.
+        if self._solver is None or self._warm:
             self._make_solver()
         # A what-if's sensitivities need Ipopt's own multipliers at its own solution.
         run = self._runs(z0, (lbz, ubz), cap, progress, not bounds or not sensitivities)

@@ -270,6 +270,7 @@ class NlpTranscription:
             xe = step(xe, syms["t"] + j * syms["dt"] / s.substeps, syms["dt"] / s.substeps,
                       syms["p"], syms["c"])
         self._ctx = (X, Xp, pfull, Cp, xscale, cscale)
+        self._sweeps: dict[tuple[int, ...], ca.Function] = {}  # `_sweep`'s, by rows
         return _Nlp(X, P, C, Xp, Cp, pfull, ca.vertcat(ca.vec(X), P, C), free_index, xscale,
                     cscale, syms, xe)
 
@@ -419,12 +420,8 @@ class NlpTranscription:
         # free time bends in that time; without it a Pilot's bag-strip constraint made the
         # steps cycle); the curvature of the continuity constraints is neglected.
         small = ca.vertcat(*nlp.curved, _stack(g[1 + len(nlp.curved):nlp.n_small], "symbolic"))
-        lam_small = ca.MX.sym("lam_small", small.numel())
-        hessian = (ca.hessian(ca.dot(lam_small, small), z_all)[0] if small.numel()
-                   else ca.MX(z_all.numel(), z_all.numel()))
-        if nlp.knots:
-            hessian = ca.substitute(hessian, nlp.P_held, nlp.P)
-        curvature = ca.Function("curvature", [z_all, lam_small], [hessian])
+        self._small = (z_all, small, (nlp.P_held, nlp.P) if nlp.knots else None)
+        self._curvature_fn: tuple[ca.Function, ca.Function] | None = None
         nx = self.model.nx
         small_rows = slice(nx * n, nx * n + small.numel())
         self._lbg = np.concatenate([np.ravel(a) for a in nlp.lbg])
@@ -435,13 +432,9 @@ class NlpTranscription:
             (self._points._buffers["rJ"].pattern(1), self._points._buffers["gA"].pattern(1)),
             (_stack_times(pieces), _stack_times(g)), nlp.X.numel(),
             s.window_margin if s.point_cache else None)
-        # Its upper triangle, as Ipopt takes it (compiled, it took as long: 7 ms on `drogue`).
-        self._curvature = ca.Function("curvature_upper", [z_all, lam_small],
-                                      [ca.triu(curvature(z_all, lam_small))])
         self._small_rows = small_rows
         if not s.point_cache:
-            self._expressions = self._plain_nlp(residual, jac, constraint_jac, curvature,
-                                                small_rows)
+            self._expressions = self._plain_nlp(residual, jac, constraint_jac, small_rows)
         self._unpack = ca.Function("unpack", [z_all], [nlp.Xp, nlp.pfull, nlp.Cp])
         self._residuals = ca.Function("residuals", [z_all], [p.value for p in pieces])
         self._has_inequalities = bool(np.any(self._lbg != self._ubg))  # what-if limits
@@ -474,8 +467,30 @@ class NlpTranscription:
                 first = m.state_slice(name).start
                 self._lbz[first:first + 2] = self._ubz[first:first + 2] = 0.0
 
+    def _curvature(self, upper: bool = True) -> ca.Function:
+        """The curvature of the few capture and effect constraints, (z, lam_small) -> the
+        Hessian of lam_small' g_small in z; its upper triangle (as Ipopt takes it) with
+        `upper`.
+
+        Built on first use: only a solve needs it, and the symbolic Hessian took
+        0.6 s of each 3 s build on `drogue`, where most estimators a diagnosis builds
+        (its score tests) are linearised, never solved.
+        """
+        if self._curvature_fn is None:
+            z_all, small, knots = self._small
+            lam_small = ca.MX.sym("lam_small", small.numel())
+            hessian = (ca.hessian(ca.dot(lam_small, small), z_all)[0] if small.numel()
+                       else ca.MX(z_all.numel(), z_all.numel()))
+            if knots is not None:
+                hessian = ca.substitute(hessian, *knots)
+            full = ca.Function("curvature", [z_all, lam_small], [hessian])
+            # Compiled, the upper triangle took as long: 7 ms on `drogue`.
+            self._curvature_fn = (full, ca.Function("curvature_upper", [z_all, lam_small],
+                                                    [ca.triu(full(z_all, lam_small))]))
+        return self._curvature_fn[upper]
+
     def _plain_nlp(self, residual: ca.MX, jac: ca.MX, constraint_jac: ca.MX,
-                   curvature: ca.Function, small_rows: slice) -> tuple[dict, dict]:
+                   small_rows: slice) -> tuple[dict, dict]:
         """The NLP in the decision vector z, objective 0.5 |r(z)|^2, and Ipopt's derivatives.
 
         Gradient J'r and the Gauss-Newton Hessian J'J from the (compiled)
@@ -485,7 +500,8 @@ class NlpTranscription:
         obj = 0.5 * ca.sumsqr(residual)
         sigma_f = ca.MX.sym("sigma_f")
         lam_g = ca.MX.sym("lam_g", self._g.numel())
-        hessian = sigma_f * ca.mtimes(jac.T, jac) + curvature(z, lam_g[small_rows])
+        hessian = sigma_f * ca.mtimes(jac.T, jac) + self._curvature(upper=False)(
+            z, lam_g[small_rows])
         return {"x": z, "f": obj, "g": self._g}, {
             "jac_g": ca.Function("jac_g", [z, empty], [self._g, constraint_jac],
                                  ["x", "p"], ["g", "jac_g_x"]),
@@ -773,16 +789,35 @@ class NlpTranscription:
         X = z[:nx * (n + 1)].reshape(n + 1, nx).T * self._xscale[:, None]
         _, pfull, Cp = self._unpack(z)
         rows = np.concatenate([np.arange(nx)[m.state_slice(name)] for name in states])
-        sub = self.settings.substeps
-        for k in range(n):
-            x = X[:, k]
-            dt = (self.t[k + 1] - self.t[k]) / sub
-            for j in range(sub):
-                x = np.asarray(self._step(x, self.t[k] + j * dt, dt, pfull, Cp)).ravel()
-            X[rows, k + 1] = x[rows]
+        ends = np.asarray(self._sweep(tuple(int(r) for r in rows))(
+            X[:, 0], X[:, :n], self.t[:n], np.diff(self.t), pfull, Cp))
+        X[rows, 1:] = ends[rows]
         out = z.copy()
         out[:nx * (n + 1)] = (X / self._xscale[:, None]).ravel(order="F")
         return out
+
+    def _sweep(self, rows: tuple[int, ...]) -> ca.Function:
+        """(x0, node states, interval starts, lengths, p, c) -> the state at every interval's
+        end, integrated over the grid from x0 in `rows` and restarted at each interval's node
+        values in the other states (`settings.substeps` RK4 steps an interval): `swept`'s
+        loop as one CasADi call (`mapaccum`), made once per set of rows.
+
+        Called from Python interval by interval, the RK4 steps took 26 s of a 350 s
+        discovery on `drogue` (130 ms a sweep over 1,000 intervals)."""
+        cached = self._sweeps.get(rows)
+        if cached is not None:
+            return cached
+        m, sub = self.model, self.settings.substeps
+        carried, node = ca.SX.sym("carried", m.nx), ca.SX.sym("node", m.nx)
+        t, h = ca.SX.sym("t"), ca.SX.sym("h")
+        p, c = ca.SX.sym("p", len(m.parameters)), ca.SX.sym("c", len(m.captures))
+        kept = set(rows)
+        x = ca.vertcat(*[carried[i] if i in kept else node[i] for i in range(m.nx)])
+        for j in range(sub):
+            x = self._step(x, t + j * h / sub, h / sub, p, c)
+        interval = ca.Function("sweep_interval", [carried, node, t, h, p, c], [x])
+        self._sweeps[rows] = interval.mapaccum("sweep", len(self.t) - 1)
+        return self._sweeps[rows]
 
     def feasible_point(self, z: np.ndarray) -> tuple[np.ndarray, float] | None:
         """A feasible point near `z` and its chi-square; None where none is found.
