@@ -252,12 +252,44 @@ def test_a_refit_retried_from_the_effects_defaults_reaches_the_same_optimum(hidd
     est, first = result.refitted
     model = result.spec.model(diag.fit.test)
     elsewhere = {n: result.refit_estimate[n] for n in result.parameters}
-    retried, note = _retry_from_defaults(est, diag.fit, model, result, elsewhere, False)
-    assert retried is not None, note
+    retried, note, failure = _retry_from_defaults(est, diag.fit, model, result, elsewhere,
+                                                  False)
+    assert retried is not None and failure is None, note
     assert retried.solver.iterations <= RETRY_MAX_ITER
     assert abs(retried.chi_square - first.chi_square) < 0.1
     defaults = {n: model.parameter(n).default for n in result.parameters}
-    assert _retry_from_defaults(est, diag.fit, model, result, defaults, False) == (None, "")
+    assert _retry_from_defaults(est, diag.fit, model, result, defaults, False) == (None, "",
+                                                                                    None)
+
+
+def test_a_stiff_effect_whose_score_step_leaves_its_bounds_is_refitted_from_its_defaults(
+        hidden, monkeypatch) -> None:
+    """An elastic riser (brought in by continuation) whose linearised estimates all lie
+    outside their bounds offers no step: the refit from the null it would start at is not
+    made, the one from the riser's defaults is, and on data flown with 6 Hz risers it
+    reaches the optimum the refit from the score step reached."""
+    from cpas_ocp.discrepancy.score_test import RETRY_MAX_ITER, confirm
+
+    diag, _ = hidden("elastic_riser")
+    result = diag.explanation
+    assert result is not None and result.effect == "elastic_riser" and result.refitted
+    model = result.spec.model(diag.fit.test)
+    outside = {n: model.parameter(n).lower - 1.0 for n in result.parameters}
+    stepless = dataclasses.replace(result, estimate=outside, refit=None, refit_estimate={},
+                                   refit_note="", refitted=None)
+    solves = []
+    solve = Estimator.solve
+
+    def counted(self, *args, **kwargs):
+        solves.append(kwargs.get("max_iter"))
+        return solve(self, *args, **kwargs)
+
+    monkeypatch.setattr(Estimator, "solve", counted)
+    confirm(diag.fit, stepless)
+    assert solves == [RETRY_MAX_ITER]
+    assert "from the effect's defaults (the score step offered no start" in stepless.refit_note
+    assert stepless.refit is not None and not stepless.refit.lower_bound
+    assert abs(stepless.refit.statistic - result.refit.statistic) < 0.1
 
 
 def test_a_refit_that_ends_above_the_fit_is_tried_again_from_the_defaults(

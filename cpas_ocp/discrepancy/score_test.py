@@ -64,7 +64,7 @@ from cpas_ocp.errors import InputError, SolverFailure
 from cpas_ocp.estimation.estimator import POLISH_CONSTRAINT_TOL, STOP_CONSTRAINT_TOL, Estimator, Fit
 from cpas_ocp.estimation.uncertainty import NonFiniteCurvature
 from cpas_ocp.inference.hypothesis_tests import chi_bar_square_sf, cone_statistic
-from cpas_ocp.inference.model_comparison import LikelihoodRatio, nested_start
+from cpas_ocp.inference.model_comparison import LikelihoodRatio, nested_start, nested_values
 from cpas_ocp.io.model_spec import RISER_MODELS, ModelSpec
 from cpas_ocp.physics.effects.base import Effect
 from cpas_ocp.physics.effects.registry import BUILTIN, EffectType
@@ -228,7 +228,7 @@ def score_test(fit: Fit, spec: ModelSpec, entry: EffectType,
     # compiling for.
     settings = dataclasses.replace(fit.settings, free=free, fixed=fixed,
                                    compile=fit.settings.compile and bool(effect.states(fit.test)),
-                                   guess={**{f: fit.parameters[f] for f in fit.free}, **null},
+                                   guess={**(nested_values(fit, model, free) or {}), **null},
                                    limits={}, verbose=False)
     est = Estimator(fit.test, extended, settings)
     z, (chi2, violation) = est.extension_start(fit, null)
@@ -295,6 +295,15 @@ def confirm(fit: Fit, result: ScoreTest, progress: bool = False) -> None:
     elastic risers, a refit finished by `feasible_descent` converged at
     chi-square 7,209.7 against the rigid fit's 7,187.7, and the verdict
     became "consistent with the noise".
+
+    An effect brought in by continuation (`Effect.continuation`: an elastic
+    riser, whose null is the singular stiff limit) whose linearised estimates
+    all lie outside their bounds offers no step: its refit would start at the
+    null, from where it does not converge (`_start_on_step`), so it starts from
+    the effect's defaults alone.  On `drogue` flown through a wind shear, the
+    riser's score step (periods -0.14 and -0.12 s, damping ratios -2.6 and
+    -1.6) sent the refit from the null through 150 iterations (41 s) to no end
+    before the try from the defaults.
     """
     if not result.tested or result.spec is None:
         return
@@ -310,26 +319,39 @@ def confirm(fit: Fit, result: ScoreTest, progress: bool = False) -> None:
     est, z0, (chi2, violation) = nested_start(fit, result.spec,
                                               [*fit.free, *result.parameters, *nuisance],
                                               start, CONFIRM_MAX_ITER)
-    z0 = _start_on_step(est, fit, null, target, (_start_chi2(chi2, violation), z0))
     dof = len(result.parameters) - len(result.undetermined)
-    try:
-        refitted: Fit | None = est.solve(progress=progress, start=z0)
-    except SolverFailure as exc:
-        refitted, failure = None, exc
+    refitted: Fit | None = None
+    failure: SolverFailure | None = None
+    stepless = _stepless(result, model, target)
+    if not stepless:
+        z0 = _start_on_step(est, fit, null, target, (_start_chi2(chi2, violation), z0))
+        try:
+            refitted = est.solve(progress=progress, start=z0)
+        except SolverFailure as exc:
+            failure = exc
     origin = tried = ""
     if refitted is None or refitted.chi_square > fit.chi_square:
         # Not converged, or converged to a stationary point above the fit it extends.
-        retried, tried = _retry_from_defaults(est, fit, model, result, start, progress)
+        retried, tried, retry_failure = _retry_from_defaults(est, fit, model, result, start,
+                                                             progress)
+        failure = failure or retry_failure
         if retried is not None and (refitted is None
                                     or retried.chi_square < refitted.chi_square):
-            first = (f"did not converge: {failure.status} after {failure.iterations} "
+            first = ("offered no start: every linearised estimate lies outside its bounds"
+                     if stepless else
+                     f"did not converge: {failure.status} after {failure.iterations} "
                      f"iterations" if refitted is None else
                      f"ended above the fit, at chi-square {refitted.chi_square:.1f}")
             refitted = retried
-            origin = f" from the effect's defaults (the refit from the score step {first})"
+            origin = f" from the effect's defaults (the score step {first})"
         elif refitted is None:
-            result.refit_note = f"the refit did not converge: {failure}{tried}"
-            _bound_from_last_iterate(fit, result, est, failure, dof)
+            result.refit_note = (
+                f"the refit did not converge: {failure}{tried}" if not stepless else
+                "its score step leaves every parameter's bounds, and the refit from the "
+                "effect's defaults " + (f"did not converge: {failure}" if failure is not None
+                                        else "could not start (not nearly feasible)"))
+            if failure is not None:
+                _bound_from_last_iterate(fit, result, est, failure, dof)
             return
     result.refit = LikelihoodRatio(fit.chi_square - refitted.chi_square, dof,
                                    len(result.one_sided))
@@ -363,12 +385,24 @@ def _nuisance(fit: Fit, model: Model, result: ScoreTest) -> list[str]:
 RETRY_MAX_ITER = 60
 
 
+def _stepless(result: ScoreTest, model: Model, target: dict[str, float]) -> bool:
+    """Whether `result`'s effect is one brought in by continuation (`Effect.continuation`)
+    and its score step leaves the bounds of every parameter (`target`, the estimates
+    moved inside the bounds, differs from each estimate): a refit from the step would
+    start at the null."""
+    effect = next((e for e in model.effects if e.name == result.effect), None)
+    return effect is not None and effect.continuation and all(
+        target[n] != result.estimate[n] for n in result.parameters)
+
+
 def _retry_from_defaults(est: Estimator, fit: Fit, model: Model, result: ScoreTest,
-                         tried: dict[str, float], progress: bool) -> tuple[Fit | None, str]:
+                         tried: dict[str, float], progress: bool
+                         ) -> tuple[Fit | None, str, SolverFailure | None]:
     """The refit from `fit` with the effect's parameters at their defaults (the model's
     typical values), where those differ from the start `tried` and start nearly
-    feasible, and converge in RETRY_MAX_ITER iterations (else None); and a note
-    on a try that did not converge, for the refit's note ("" where none was made).
+    feasible, and converge in RETRY_MAX_ITER iterations (else None); a note on a try
+    that did not converge, for the refit's note ("" where none was made); and that
+    try's failure (None where it converged or was not made).
 
     The score step extrapolates from the null, which for some effects is a
     singular limit (a rigid riser is an elastic one with zero period): there
@@ -379,15 +413,15 @@ def _retry_from_defaults(est: Estimator, fit: Fit, model: Model, result: ScoreTe
     """
     defaults = {n: model.parameter(n).default for n in result.parameters}
     if all(np.isclose(defaults[n], tried[n]) for n in defaults):
-        return None, ""
+        return None, "", None
     z0, (chi2, violation) = est.extension_start(fit, defaults)
     if _start_chi2(chi2, violation) == np.inf:
-        return None, ""
+        return None, "", None
     try:
-        return est.solve(progress=progress, start=z0, max_iter=RETRY_MAX_ITER), ""
+        return est.solve(progress=progress, start=z0, max_iter=RETRY_MAX_ITER), "", None
     except SolverFailure as exc:
         return None, (f"; a second try from the effect's defaults stopped too ({exc.status} "
-                      f"after {exc.iterations} iterations)")
+                      f"after {exc.iterations} iterations)"), exc
 
 
 # Fractions of the score test's step at which a confirming refit's start is tried beside

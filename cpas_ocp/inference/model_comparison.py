@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -31,6 +32,7 @@ from cpas_ocp.estimation.uncertainty import Covariance
 from cpas_ocp.inference.continuation import solve
 from cpas_ocp.inference.hypothesis_tests import chi_bar_square_sf
 from cpas_ocp.io.model_spec import ModelSpec
+from cpas_ocp.physics.model import Model
 
 
 @dataclass(frozen=True)
@@ -100,10 +102,27 @@ def nested_start(fit: Fit, spec: ModelSpec, free: list[str] | None = None,
     names = free if free is not None else spec.free_names(model)
     start = {n: fit.parameters[n] for n in names if n in fit.parameters}
     start.update({n: v for n, v in (values or {}).items() if n in names})
-    settings = dataclasses.replace(fit.settings, free=list(names), guess=start, limits={},
+    guess = {**(nested_values(fit, model, names) or {}), **start}
+    settings = dataclasses.replace(fit.settings, free=list(names), guess=guess, limits={},
                                    fixed={}, max_iter=max_iter or fit.settings.max_iter)
     est = Estimator(fit.test, spec, settings)
     return est, *est.extension_start(fit, start)
+
+
+def nested_values(fit: Fit, model: Model, free: Sequence[str]) -> dict[str, float] | None:
+    """Every parameter of `model` (estimating `free`) as it starts when nested around `fit`:
+    the fit's value where the fit has the parameter, the model's default where not.  None
+    where `free` leaves out a parameter the fit estimated: such a model is not nested
+    around the fit, and holds that parameter where its own offline reduction puts it.
+
+    The values the fit holds are those its own start had (the reduction's, or a spec's),
+    and the reduction sets only the baseline's parameters, which every fit has; a new
+    effect's parameters it leaves at their defaults.  So these are the values the
+    reduction would give, without running it (2.3 s a refit on `drogue`, a third of the
+    estimator's build)."""
+    if any(n in fit.free and n not in free for n in model.parameter_names):
+        return None
+    return {n: fit.parameters.get(n, model.parameter(n).default) for n in model.parameter_names}
 
 
 def refit(fit: Fit, spec: ModelSpec, free: list[str] | None = None,
