@@ -152,3 +152,34 @@ def test_the_command_stops_at_its_step_limit_and_says_what_is_left(two_hidden, t
     assert result["stopped"].endswith(f"the last diagnosis confirms {second} too")
     assert f"stopped: {result['stopped']}" in printed
     assert (out / "step_1.json").is_file() and not (out / "step_2.json").exists()
+
+
+def test_dropping_stand_ins_never_tries_the_effect_just_added(monkeypatch) -> None:
+    """After a step adds an effect, the earlier stand-ins are refitted away one by one, and
+    the newest effect is not among them, even once a drop has made its step an earlier one
+    (it was just admitted against the model without it)."""
+    from types import SimpleNamespace
+
+    from cpas_ocp.discrepancy import discovery
+
+    def step(added: str | None, effects: tuple[str, ...], dropped: str | None = None,
+             stand_in: bool = True) -> DiscoveryStep:
+        return DiscoveryStep(added, SimpleNamespace(effect_names=effects),
+                             SimpleNamespace(chi_square=100.0, dof=90),
+                             stand_in=["partial"] if stand_in and added else [],
+                             dropped=dropped)
+
+    out = discovery.Discovery([step(None, ()), step("gps_lag", ("gps_lag",)),
+                               step("loadcell_friction", ("gps_lag", "loadcell_friction")),
+                               step("wind_profile", ("gps_lag", "loadcell_friction",
+                                                     "wind_profile"))])
+    tried = []
+
+    def without(last, name, alpha, progress):
+        tried.append(name)
+        return step(None, tuple(n for n in last.spec.effect_names if n != name), name)
+
+    monkeypatch.setattr(discovery, "_without", without)
+    discovery._drop_stand_ins(out, ALPHA, False)
+    assert tried == ["loadcell_friction", "gps_lag"]
+    assert [s.label for s in out.steps[4:]] == ["without loadcell_friction", "without gps_lag"]

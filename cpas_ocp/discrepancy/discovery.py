@@ -372,10 +372,17 @@ def _drop_stand_ins(out: Discovery, alpha: float, progress: bool) -> None:
     A stand-in fits part of a signal it does not describe; once the effect that does
     describe it is in, the stand-in's share is gone.  On `fbcp` flown through a
     shear layer, a GPS lag and an accelerometer bias were added as partial steps
-    before the wind profile proposed from the residual's altitude signature."""
+    before the wind profile proposed from the residual's altitude signature.
+
+    Only effects added before the newest are candidates: the newest was just
+    admitted by its likelihood ratio against the model without it, so dropping it
+    would undo the step.  Once a drop had made it an earlier step, it was tried
+    too, and on `drogue` flown through a wind shear two refits (21 s) found the
+    wind profile still needed."""
+    newest = max(k for k, s in enumerate(out.steps) if s.dropped is None)
     while True:
         last = out.steps[-1]
-        names = [s.added for s in out.steps[1:-1] if s.stand_in and s.added is not None
+        names = [s.added for s in out.steps[1:newest] if s.stand_in and s.added is not None
                  and s.added in last.spec.effect_names and s.added not in out.dropped]
         for name in reversed(names):
             step = _without(last, name, alpha, progress)
