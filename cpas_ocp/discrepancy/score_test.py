@@ -300,7 +300,8 @@ def confirm(fit: Fit, result: ScoreTest, progress: bool = False) -> None:
     riser, whose null is the singular stiff limit) whose linearised estimates
     all lie outside their bounds offers no step: its refit would start at the
     null, from where it does not converge (`_start_on_step`), so it starts from
-    the effect's defaults alone.  On `drogue` flown through a wind shear, the
+    the effect's defaults alone (from the step where that try cannot be made).
+    On `drogue` flown through a wind shear, the
     riser's score step (periods -0.14 and -0.12 s, damping ratios -2.6 and
     -1.6) sent the refit from the null through 150 iterations (41 s) to no end
     before the try from the defaults.
@@ -322,7 +323,10 @@ def confirm(fit: Fit, result: ScoreTest, progress: bool = False) -> None:
     dof = len(result.parameters) - len(result.undetermined)
     refitted: Fit | None = None
     failure: SolverFailure | None = None
-    stepless = _stepless(result, model, target)
+    stepless, retry = _stepless(result, model, target), None
+    if stepless:
+        retry = _retry_from_defaults(est, fit, model, result, start, progress)
+        stepless = retry[0] is not None or retry[2] is not None  # else no try was made
     if not stepless:
         z0 = _start_on_step(est, fit, null, target, (_start_chi2(chi2, violation), z0))
         try:
@@ -332,8 +336,8 @@ def confirm(fit: Fit, result: ScoreTest, progress: bool = False) -> None:
     origin = tried = ""
     if refitted is None or refitted.chi_square > fit.chi_square:
         # Not converged, or converged to a stationary point above the fit it extends.
-        retried, tried, retry_failure = _retry_from_defaults(est, fit, model, result, start,
-                                                             progress)
+        retried, tried, retry_failure = retry or _retry_from_defaults(est, fit, model, result,
+                                                                      start, progress)
         failure = failure or retry_failure
         if retried is not None and (refitted is None
                                     or retried.chi_square < refitted.chi_square):
@@ -348,10 +352,8 @@ def confirm(fit: Fit, result: ScoreTest, progress: bool = False) -> None:
             result.refit_note = (
                 f"the refit did not converge: {failure}{tried}" if not stepless else
                 "its score step leaves every parameter's bounds, and the refit from the "
-                "effect's defaults " + (f"did not converge: {failure}" if failure is not None
-                                        else "could not start (not nearly feasible)"))
-            if failure is not None:
-                _bound_from_last_iterate(fit, result, est, failure, dof)
+                f"effect's defaults did not converge: {failure}")
+            _bound_from_last_iterate(fit, result, est, failure, dof)
             return
     result.refit = LikelihoodRatio(fit.chi_square - refitted.chi_square, dof,
                                    len(result.one_sided))
