@@ -57,10 +57,13 @@ class Flight:
     events: dict[str, float]
 
 
-def fly(seconds_after_touchdown: float = 10.0) -> Flight:
+def fly(seconds_after_touchdown: float = 10.0,
+        chutes: tuple[str, ...] = ("drogue", "main")) -> Flight:
     """Integrate m dv/dt = T - m g - 1/2 rho v|v| CdS(t) at 2 ms (deterministic), the canopies'
     drag areas growing linearly over their fill from LINE_STRETCH_S after their charge; the
-    vehicle's axis stays vertical, so the axial specific force is (T - drag) / m."""
+    vehicle's axis stays vertical, so the axial specific force is (T - drag) / m.  The
+    first of `chutes` is fired DROGUE_DELAY_S after apogee, the second at MAIN_AGL_M (a
+    single main fired at apogee: ``("main",)``)."""
     dt = 2e-3
     t, h, v = -2.0, 0.0, 0.0
     charge: dict[str, float] = {}
@@ -84,10 +87,11 @@ def fly(seconds_after_touchdown: float = 10.0) -> Flight:
         if apogee is None and t > BURN_S and v < 0.0:
             apogee = t
             events["apogee"] = t
-        if apogee is not None and "drogue" not in charge and t >= apogee + DROGUE_DELAY_S:
-            charge["drogue"] = t
-        if "drogue" in charge and "main" not in charge and h <= MAIN_AGL_M and v < 0:
-            charge["main"] = t
+        if apogee is not None and chutes[0] not in charge and t >= apogee + DROGUE_DELAY_S:
+            charge[chutes[0]] = t
+        if len(chutes) > 1 and chutes[0] in charge and chutes[1] not in charge \
+                and h <= MAIN_AGL_M and v < 0:
+            charge[chutes[1]] = t
         if landed is None and apogee is not None and h <= GROUND_M:
             h, v, landed = GROUND_M, 0.0, t
     every = round(DT / dt)
@@ -97,7 +101,7 @@ def fly(seconds_after_touchdown: float = 10.0) -> Flight:
     return Flight(a[:, 0], a[:, 1], a[:, 2], a[:, 3], events)
 
 
-def _sensors(flight: Flight, seed: int) -> tuple[np.ndarray, np.ndarray]:
+def sensor_readings(flight: Flight, seed: int) -> tuple[np.ndarray, np.ndarray]:
     """Pressure (Pa) and axial reading (m/s^2, 1 g subtracted) with noise, the ejection
     charges' pressure pulses and jolts, the main's snatch and the landing's impact."""
     rng = np.random.default_rng(seed)
@@ -106,11 +110,13 @@ def _sensors(flight: Flight, seed: int) -> tuple[np.ndarray, np.ndarray]:
     a = flight.f - G0 + rng.normal(0.0, A_NOISE, p.size)
     landed = flight.t >= flight.events["landed"]
     a[landed] = -G0 + rng.normal(0.0, A_NOISE, int(landed.sum()))  # lying on its side
-    for name in ("drogue", "main"):
+    charges = [name for name in ("drogue", "main") if name in flight.events]
+    for name in charges:
         k = _index(flight, flight.events[name])
         p[k:k + 3] += (900.0, 400.0, 150.0)  # the charge's gas at the static port
         a[k:k + 2] += (8.0 * G0, -5.0 * G0)
-    a[_index(flight, flight.events["main"] + 1.0)] += 14.0 * G0  # the shock cord's snatch
+    if len(charges) > 1:  # the shock cord's snatch of the later canopy
+        a[_index(flight, flight.events[charges[1]] + 1.0)] += 14.0 * G0
     a[_index(flight, flight.events["landed"])] += 12.0 * G0  # the impact
     return p, a
 
@@ -119,7 +125,7 @@ def _index(flight: Flight, t: float) -> int:
     return int(np.searchsorted(flight.t, t - 1e-9))
 
 
-def _sample_time(flight: Flight, t: float) -> float:
+def sample_time(flight: Flight, t: float) -> float:
     """The first sample at or after `t`: where a logger can first see an event."""
     return float(flight.t[_index(flight, t)])
 
@@ -170,7 +176,7 @@ def write_altus(flight: Flight, path: Path, seed: int) -> tuple[int, int]:
     record's row after every 100th sample repeating it.  Returns the number of those
     repeating rows, and of real samples that by chance repeat every reading of the
     previous one, the filter's height and speed included (no reader can tell those)."""
-    p, a = _sensors(flight, seed)
+    p, a = sensor_readings(flight, seed)
     p, a = np.round(p), np.round(a * 2.0) / 2.0
     # The flight computer's filter steps its speed at every sample, at rest too.
     speed = np.round(flight.v + np.random.default_rng(seed + 30).normal(0.0, 0.05, p.size), 2)
@@ -204,7 +210,7 @@ def write_cats(flight: Flight, folder: Path, seed: int, unit_s: float = 1.0) -> 
     flight states, GNSS at 1 Hz; time stamps from lift-off in units of `unit_s` (1: s,
     0.001: ms as the raw log counts)."""
     folder.mkdir()
-    p, a = _sensors(flight, seed)
+    p, a = sensor_readings(flight, seed)
     rng = np.random.default_rng(seed + 10)
     imu, baro = [], []
     for k, t in enumerate(flight.t):
@@ -240,7 +246,7 @@ def write_mapped(flight: Flight, path: Path, seed: int, end_s: float | None = No
     """Another computer's log: time in ms, pressure in hPa, a three-axis accelerometer in g
     whose axial axis is -y, latitude/longitude only (1 Hz, blank between fixes), no flight
     states; cut at `end_s` where given."""
-    p, a = _sensors(flight, seed)
+    p, a = sensor_readings(flight, seed)
     rng = np.random.default_rng(seed + 20)
     n = flight.t.size
     fix = np.isclose(flight.t % 1.0, 0.0, atol=1e-6)
@@ -277,7 +283,7 @@ def test_column_mapped_log_imports_with_detected_events(
                      tmp_path / "test")
     events = report["flight_events"]
     for name in ("boost", "coast", "drogue", "main"):
-        truth = _sample_time(flight, flight.events[name])
+        truth = sample_time(flight, flight.events[name])
         assert abs(events[name]["time_s"] - truth) <= 2 * DT + 1e-9, name
         assert events[name]["sigma_s"] <= 2 * DT + 1e-9, name
         # The stated sigma covers the error (a sigma too small to hold it would mislead the
@@ -301,7 +307,7 @@ def test_column_mapped_log_imports_with_detected_events(
     assert charge.sigma == pytest.approx(events["main"]["sigma_s"], abs=1e-3)
     # The main's snatch, a second after its charge, is its full-open event.
     assert test.event("full_open", "main").time == pytest.approx(
-        _sample_time(flight, flight.events["main"] + 1.0))
+        sample_time(flight, flight.events["main"] + 1.0))
     assert "flight events:" in capsys.readouterr().out
 
 
@@ -340,7 +346,7 @@ def test_altus_log_labels_keeps_real_samples_and_detects_touchdown(
     assert equal_pairs > 2 * (copies + chance)
     events = report["flight_events"]
     assert abs(events["landed"]["time_s"] - flight.events["landed"]) <= 5 * DT
-    assert events["main"]["time_s"] == pytest.approx(_sample_time(flight, flight.events["main"]))
+    assert events["main"]["time_s"] == pytest.approx(sample_time(flight, flight.events["main"]))
     # The same log through --format altus gives the same folder.
     again = _import(["import", str(path), "--format", "altus", "--card",
                      str(_card(tmp_path))], tmp_path / "again")
@@ -357,7 +363,7 @@ def test_log_ending_before_touchdown_ends_the_phase_at_its_end(flight: Flight,
                      tmp_path / "test")
     assert "landed" not in report["flight_events"]
     assert any("the log ends at" in n for n in report["notes"])
-    assert report["phase_s"][1] == pytest.approx(_sample_time(flight, end) - 0.5, abs=DT)
+    assert report["phase_s"][1] == pytest.approx(sample_time(flight, end) - 0.5, abs=DT)
 
 
 @pytest.mark.parametrize("change, field", [
@@ -502,7 +508,7 @@ def test_column_map_with_altitude_states_and_gnss_altitude(flight: Flight,
     from cpas_ocp.io.flight_record import enu_about
     from cpas_ocp.physics.units import FACTORS
 
-    p, _ = _sensors(flight, seed=6)
+    p, _ = sensor_readings(flight, seed=6)
     pad = float(pressure_altitude(SITE.pressure_pa))
     ft = FACTORS["length"]["ft"]
     fix = np.isclose(flight.t % 1.0, 0.0, atol=1e-6)
@@ -531,7 +537,7 @@ def test_column_map_with_altitude_states_and_gnss_altitude(flight: Flight,
     (tmp_path / "map.json").write_text(json.dumps(column_map))
     record = read_mapped_log(tmp_path / "log.csv", load_column_map(tmp_path / "map.json"),
                              "map.json")
-    assert record.states == pytest.approx({k: _sample_time(flight, ev[k])
+    assert record.states == pytest.approx({k: sample_time(flight, ev[k])
                                            for k in ("boost", "coast", "drogue", "main")})
     assert record.samples["pressure"].iloc[0] == pytest.approx(SITE.pressure_pa, abs=10.0)
     assert record.gnss["v_east"].iloc[0] == pytest.approx(2.0)

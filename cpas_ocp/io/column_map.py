@@ -11,10 +11,18 @@ The map (`data_schemas/column_map.schema.json`) names the log's columns:
   axial ``axis`` and its sign (``"-y"``) or ``"auto"``
   (`flight_record.axial_from_axes`); in m/s^2, g or ft/s^2;
 * ``gnss``: ``latitude``, ``longitude`` (deg) and optionally ``altitude``
-  (m, ft above mean sea level) and ``velocity`` east/north/up;
+  (m, ft above mean sea level), ``velocity`` east/north/up and
+  ``satellites`` (fixes with fewer than four are left out);
 * ``state``: a flight-state column, its values mapped by ``names`` to
   boost, coast, drogue, main, landed (without ``names``, values that are those
   names, in any case); other values are not states.
+
+Each block reads its columns against the main ``time`` column, or against
+its own: a block may name a ``time`` column (with its unit and an ``offset``
+in s onto the main time base: a 400 Hz accelerometer logged beside a 20 Hz
+altimeter, each with its own time column) and a ``file`` (a second CSV beside
+the log: GNSS fixes written apart).  The sensors' samples are merged on time,
+NaN where a sensor did not read.
 
 Rows are sorted by time and a repeated time stamp keeps its first row (a
 repeated sample is a repeated stamp, not equal readings); GNSS rows that
@@ -25,7 +33,7 @@ what was expected.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -34,6 +42,7 @@ import pandas as pd
 
 from cpas_ocp.errors import InputError
 from cpas_ocp.io.flight_record import (
+    MIN_SATELLITES,
     FlightRecord,
     axial_from_axes,
     new_fixes,
@@ -50,7 +59,6 @@ from cpas_ocp.physics.units import FACTORS, G0
 # The flight states a state column may give (the schema's `names` targets).
 FLIGHT_STATES = ("boost", "coast", "drogue", "main", "landed")
 PRESSURE_UNITS = {**FACTORS["pressure"], "mbar": 100.0}
-Column = Callable[[str, str], np.ndarray]  # a log column by name, its map field for errors
 
 
 def load_column_map(path: str | Path) -> dict[str, Any]:
@@ -69,66 +77,121 @@ def load_column_map(path: str | Path) -> dict[str, Any]:
     return raw
 
 
+@dataclass
+class _Source:
+    """One time base of the log: a CSV table (the log, or a file beside it) and the time
+    column a block reads its columns against, in s on the main time base."""
+
+    path: Path
+    table: pd.DataFrame
+    header_line: int
+    time: np.ndarray
+
+
+class _Sources:
+    """The tables a column map reads, each file read once, and the time base of each block:
+    the main ``time`` unless the block names its own ``time`` column or ``file``."""
+
+    def __init__(self, log: Path, column_map: dict[str, Any], map_source: str) -> None:
+        self.log, self.map, self.map_source = log, column_map, map_source
+        self._tables: dict[Path, pd.DataFrame] = {}
+
+    def table(self, path: Path) -> pd.DataFrame:
+        if path not in self._tables:
+            self._tables[path] = read_table(path, "flight-log CSV", self.map.get("delimiter"),
+                                            self.map.get("skip_rows", 0))
+        return self._tables[path]
+
+    def column(self, source: _Source, name: str, field_name: str) -> np.ndarray:
+        """Column `name` of the source's table as numbers; InputError naming the map's
+        field where the table has no such column."""
+        if name not in source.table.columns:
+            raise InputError(self.map_source, field_name, f"a column of {source.path} (its "
+                             f"columns: {', '.join(source.table.columns)}); got {name!r}")
+        return numeric(source.table, source.path, name, field_name, source.header_line)
+
+    def of(self, block: str) -> _Source:
+        """The source of map block `block` (``"time"`` for the main time base)."""
+        spec = self.map.get(block, {})
+        main = self.map["time"]
+        path = self.log if "file" not in spec else self.log.parent / spec["file"]
+        if "file" in spec and not path.is_file():
+            raise InputError(self.map_source, f"{block}.file", f"a CSV file beside the log "
+                             f"(relative to {self.log.parent}); {path} does not exist")
+        time = spec.get("time", main) if block != "time" else main
+        field = f"{block}.time.column" if "time" in spec and block != "time" else "time.column"
+        source = _Source(path, self.table(path), self.map.get("skip_rows", 0) + 1,
+                         np.empty(0))
+        unit = time.get("unit", main["unit"])
+        source.time = (self.column(source, time["column"], field) * FACTORS["time"][unit]
+                       + time.get("offset", 0.0))
+        return source
+
+
 def read_mapped_log(path: str | Path, column_map: dict[str, Any], map_source: str
                     ) -> FlightRecord:
-    """Read the CSV log `path` through `column_map` (already validated; `map_source` names
-    it in errors) into the common cleaned log."""
+    """Read the CSV log `path` (and the files beside it that the map names) through
+    `column_map` (already validated; `map_source` names it in errors) into the common
+    cleaned log: every sensor on its own time base, merged into one sample table."""
     path = Path(path)
-    table = read_table(path, "flight-log CSV", column_map.get("delimiter"),
-                       column_map.get("skip_rows", 0))
+    sources = _Sources(path, column_map, map_source)
+    dropped = {"rows_without_time": 0, "repeated_time_stamps": 0}
 
-    def column(name: str, field_name: str) -> np.ndarray:
-        if name not in table.columns:
-            raise InputError(map_source, field_name, f"a column of {path} (its columns: "
-                             f"{', '.join(table.columns)}); got {name!r}")
-        return numeric(table, path, name, field_name, column_map.get("skip_rows", 0) + 1)
+    def ordered(frame: pd.DataFrame) -> pd.DataFrame:
+        frame, no_time, repeated = time_ordered(frame)
+        dropped["rows_without_time"] += no_time
+        dropped["repeated_time_stamps"] += repeated
+        return frame
 
-    spec = column_map["time"]
-    frame = pd.DataFrame({"time": column(spec["column"], "time.column")
-                          * FACTORS["time"][spec["unit"]]})
+    parts = []
     if "pressure" in column_map:
-        spec = column_map["pressure"]
-        frame["pressure"] = positive(column(spec["column"], "pressure.column"), path,
-                                     spec["column"], "pressure.column",
-                                     column_map.get("skip_rows", 0) + 1) \
-            * PRESSURE_UNITS[spec["unit"]]
+        spec, src = column_map["pressure"], sources.of("pressure")
+        p = positive(sources.column(src, spec["column"], "pressure.column"), src.path,
+                     spec["column"], "pressure.column", src.header_line)
+        parts.append(ordered(pd.DataFrame({"time": src.time,
+                                           "pressure": p * PRESSURE_UNITS[spec["unit"]]})))
     else:
-        spec = column_map["altitude"]
-        h = (column(spec["column"], "altitude.column") + spec.get("offset", 0.0)) \
+        spec, src = column_map["altitude"], sources.of("altitude")
+        h = (sources.column(src, spec["column"], "altitude.column") + spec.get("offset", 0.0)) \
             * FACTORS["length"][spec["unit"]]
-        frame["pressure"] = np.where(np.isnan(h), np.nan, pressure_of_altitude(np.nan_to_num(h)))
+        parts.append(ordered(pd.DataFrame({
+            "time": src.time,
+            "pressure": np.where(np.isnan(h), np.nan, pressure_of_altitude(np.nan_to_num(h)))})))
     axis_used = None
     if "acceleration" in column_map:
-        frame["acceleration"], axis_used = _acceleration(table, column_map["acceleration"],
-                                                         column, map_source)
-    gnss_cols = _gnss(column_map.get("gnss"), column)
-    for name, values in gnss_cols.items():
-        frame[name] = values
-    states_raw = None
-    if "state" in column_map:
-        name = column_map["state"]["column"]
-        if name not in table.columns:
-            column(name, "state.column")
-        states_raw = table[name].astype("string").str.strip()
-        frame["state"] = states_raw.to_numpy()
-    frame, no_time, repeated = time_ordered(frame)
-    if len(frame) < 2:
+        src = sources.of("acceleration")
+        a, axis_used = _acceleration(src, column_map["acceleration"], sources, map_source)
+        parts.append(ordered(pd.DataFrame({"time": src.time, "acceleration": a})))
+    merged = parts[0]
+    for part in parts[1:]:
+        merged = pd.merge(merged, part, on="time", how="outer", sort=True)
+    if "acceleration" not in merged:
+        merged["acceleration"] = np.nan
+    read = merged[["pressure", "acceleration"]].notna().any(axis=1).to_numpy()
+    if read.sum() < 2:
         raise InputError(str(path), "time", "numeric sample times in at least two rows")
-    sensors = frame[["pressure", "acceleration"] if "acceleration" in frame else ["pressure"]]
-    read = sensors.notna().any(axis=1).to_numpy()
-    samples = samples_frame(frame["time"].to_numpy()[read], frame["pressure"].to_numpy()[read],
-                            frame["acceleration"].to_numpy()[read]
-                            if "acceleration" in frame else None)
-    dropped = {"rows_without_time": no_time, "repeated_time_stamps": repeated}
+    merged = merged[read]
+    samples = samples_frame(merged["time"].to_numpy(), merged["pressure"].to_numpy(),
+                            merged["acceleration"].to_numpy())
     gnss = pd.DataFrame(columns=["time", "latitude", "longitude"])
-    if gnss_cols:
-        g = frame[["time", *gnss_cols]]
+    if "gnss" in column_map:
+        src = sources.of("gnss")
+        g = ordered(pd.DataFrame({"time": src.time, **_gnss(column_map["gnss"], src, sources)}))
         none = (g["latitude"] == 0.0) & (g["longitude"] == 0.0)
-        gnss, repeats = new_fixes(g[~none])
+        few = (g.pop("satellites") < MIN_SATELLITES if "satellites" in g
+               else pd.Series(False, index=g.index))
+        gnss, repeats = new_fixes(g[~none & ~few])
         dropped["gnss_rows_without_a_new_fix"] = repeats + int(none.sum())
+        if few.any():
+            dropped["gnss_fixes_with_too_few_satellites"] = int((few & ~none).sum())
     states: dict[str, float] = {}
-    if states_raw is not None:
-        names = column_map["state"].get("names")
+    if "state" in column_map:
+        spec, src = column_map["state"], sources.of("state")
+        if spec["column"] not in src.table.columns:
+            sources.column(src, spec["column"], "state.column")
+        raw = src.table[spec["column"]].astype("string").str.strip().to_numpy()
+        frame = ordered(pd.DataFrame({"time": src.time, "state": raw}))
+        names = spec.get("names")
         for t, value in zip(frame["time"], frame["state"], strict=True):
             if pd.isna(value) or value == "":
                 continue
@@ -140,14 +203,15 @@ def read_mapped_log(path: str | Path, column_map: dict[str, Any], map_source: st
                         states, dropped, notes)
 
 
-def _acceleration(table: pd.DataFrame, spec: dict[str, Any], column: Column, map_source: str
+def _acceleration(src: _Source, spec: dict[str, Any], sources: _Sources, map_source: str
                   ) -> tuple[np.ndarray, str | None]:
     """The axial reading (m/s^2, 1 g subtracted) and, for three axes, the axis used."""
     factor = FACTORS["acceleration"][spec["unit"]]
     if "column" in spec:
-        a = column(spec["column"], "acceleration.column") * factor * spec.get("sign", 1)
+        a = sources.column(src, spec["column"], "acceleration.column") * factor \
+            * spec.get("sign", 1)
         return (a - G0 if spec.get("gravity", "included") == "included" else a), None
-    axes = pd.DataFrame({name: column(col, f"acceleration.axes.{name}")
+    axes = pd.DataFrame({name: sources.column(src, col, f"acceleration.axes.{name}")
                          for name, col in spec["axes"].items()})
     axis = spec["axis"]
     if axis != "auto" and axis.lstrip("+-") not in axes.columns:
@@ -160,18 +224,20 @@ def _acceleration(table: pd.DataFrame, spec: dict[str, Any], column: Column, map
     return out, used
 
 
-def _gnss(spec: dict[str, Any] | None, column: Column) -> dict[str, np.ndarray]:
-    """Latitude, longitude (deg), altitude (m) and velocities (m/s) of the map's GNSS."""
-    if spec is None:
-        return {}
-    out = {"latitude": column(spec["latitude"], "gnss.latitude"),
-           "longitude": column(spec["longitude"], "gnss.longitude")}
+def _gnss(spec: dict[str, Any], src: _Source, sources: _Sources) -> dict[str, np.ndarray]:
+    """Latitude, longitude (deg), altitude (m), velocities (m/s) and satellite count of the
+    map's GNSS."""
+    out = {"latitude": sources.column(src, spec["latitude"], "gnss.latitude"),
+           "longitude": sources.column(src, spec["longitude"], "gnss.longitude")}
     if "altitude" in spec:
-        out["gps_altitude"] = column(spec["altitude"]["column"], "gnss.altitude.column") \
+        out["gps_altitude"] = sources.column(src, spec["altitude"]["column"],
+                                             "gnss.altitude.column") \
             * FACTORS["length"][spec["altitude"]["unit"]]
     velocity = spec.get("velocity", {})
     for axis in ("east", "north", "up"):
         if axis in velocity:
-            out[f"v_{axis}"] = column(velocity[axis], f"gnss.velocity.{axis}") \
+            out[f"v_{axis}"] = sources.column(src, velocity[axis], f"gnss.velocity.{axis}") \
                 * FACTORS["velocity"][velocity["unit"]]
+    if "satellites" in spec:
+        out["satellites"] = sources.column(src, spec["satellites"], "gnss.satellites")
     return out

@@ -56,7 +56,8 @@ SNATCH_LAG_S = 1.0  # an opening's snatch comes up to this long after its charge
 DROGUE_WINDOW_S = 5.0  # the drogue's charge comes within this long after apogee (s)
 CLUSTER_GAP_S = 3.0  # spikes closer than this are one ejection (charge, then snatch)
 AFTER_BURNOUT_S = 1.0  # charges are looked for from this long after burnout (s)
-HOLD_S = 3.0  # landed: still for this long (s)
+HOLD_S = 3.0  # landed: still for this long (s) ...
+MIN_HOLD_S = 1.5  # ... or, where the log ends sooner, for what is left of it, at least this
 STILL_RATE_M_S = 0.5  # ... the altitude's slope within this (m/s)
 STILL_BAND_SIGMAS = 6.0  # ... its range within this many noise sigmas (+ STILL_BAND_M)
 STILL_BAND_M = 1.0
@@ -214,7 +215,8 @@ def touchdown(tb: np.ndarray, h: np.ndarray, ta: np.ndarray, a: np.ndarray,
     """Touchdown after `after` (s), or None where the log ends before the vehicle is down.
 
     Landed: the altitude's slope within STILL_RATE_M_S and its range within
-    STILL_BAND_SIGMAS noise sigmas (+ STILL_BAND_M) over HOLD_S, and the
+    STILL_BAND_SIGMAS noise sigmas (+ STILL_BAND_M) over HOLD_S (or to the log's end,
+    where that comes sooner but after MIN_HOLD_S), and the
     accelerometer's scatter there within REST_ACCEL_M_S2 (or three times the
     pad's).  The touchdown time is where the line through the last 2 s
     of the descent above the ground's noise meets the ground level (the median
@@ -229,17 +231,19 @@ def touchdown(tb: np.ndarray, h: np.ndarray, ta: np.ndarray, a: np.ndarray,
     step = max(1, round(0.1 / dtb))
     candidates = np.flatnonzero(tb > after)[::step]
     for i in candidates:
-        w = (tb >= tb[i]) & (tb <= tb[i] + HOLD_S)
-        if tb[i] + HOLD_S > tb[-1] or w.sum() < 5:
+        # A log that ends soon after landing holds still for what is left, MIN_HOLD_S at least.
+        hold = min(HOLD_S, float(tb[-1] - tb[i]))
+        w = (tb >= tb[i]) & (tb <= tb[i] + hold)
+        if hold < MIN_HOLD_S or w.sum() < 5:
             return None
         hw = h[w]
         if np.ptp(hw) > band or abs(np.polyfit(tb[w] - tb[i], hw, 1)[0]) > STILL_RATE_M_S:
             continue
-        wa = (ta >= tb[i]) & (ta <= tb[i] + HOLD_S)
+        wa = (ta >= tb[i]) & (ta <= tb[i] + hold)
         if wa.sum() >= 5 and np.std(a[wa]) > rest_a:
             continue
         ground = float(np.median(hw))
-        above = np.flatnonzero((tb < tb[i] + HOLD_S) & (h > ground + 3.0 * noise + 0.5)
+        above = np.flatnonzero((tb < tb[i] + hold) & (h > ground + 3.0 * noise + 0.5)
                                & (tb > after))
         if above.size == 0:
             return FlightEvent(float(tb[i]), _step_at(tb, tb[i]), "altimeter")

@@ -85,11 +85,12 @@ from scipy.signal import savgol_filter
 from cpas_ocp.errors import InputError
 from cpas_ocp.io.altus_metrum import AltusLog
 from cpas_ocp.io.flight_events import (
+    DROGUE_WINDOW_S,
     FlightEvent,
     detect_events,
     second_difference_sigma,
 )
-from cpas_ocp.io.flight_record import FlightRecord, enu_about
+from cpas_ocp.io.flight_record import FlightRecord, enu_about, pressure_of_altitude
 from cpas_ocp.io.flight_test import (
     FORMAT,
     MANIFEST,
@@ -100,7 +101,14 @@ from cpas_ocp.io.flight_test import (
     validate_manifest,
 )
 from cpas_ocp.io.problems import problem_names
-from cpas_ocp.physics.atmosphere import ISA_LAPSE_K_M, R_AIR, SiteAtmosphere, pressure_altitude
+from cpas_ocp.physics.atmosphere import (
+    ISA_LAPSE_K_M,
+    R_AIR,
+    SiteAtmosphere,
+    StandardAtmosphere,
+    pressure_altitude,
+)
+from cpas_ocp.physics.effects.canopy_inflation import MAX_CD
 from cpas_ocp.physics.units import FACTORS, G0
 
 TOUCHDOWN_MARGIN_S = 0.5  # phase ends this long before the detected touchdown (s)
@@ -117,6 +125,16 @@ STEADY_RATE_S = 10.0  # the settled descent rate under a canopy is taken over th
 OPENING_WINDOW_S = 3.0  # an opening-load peak is looked for this long after the charge (s)
 OPENING_BASELINE_S = 5.0  # the steady reading before a charge is taken over this long (s)
 OPENING_PEAK_SIGMAS = 5.0  # a peak counts when this many scatter sigmas off the steady reading
+MIN_DESCENT_S = 5.0  # a log must go on this long after the first deployment to be fitted (s)
+MIN_DESCENT_SAMPLES = 20  # ... with this many altimeter samples
+LAUNCH_RISE_M = 10.0  # launch: the altitude has risen this far above its lowest so far (m) ...
+LAUNCH_LEAD_S = 1.0  # ... and the pad's samples end this long before that (s)
+MIN_PAD_SAMPLES = 10  # the pad's level is their median where the log has this many
+STUCK_RUN_S = 2.0  # a reading repeated exactly for this long (s) ...
+STUCK_RUN_SAMPLES = 10  # ... and this many samples is a dead channel
+CLIP_RUN_SAMPLES = 3  # a channel's extreme reading met this often is its range's end: clipped
+ASSUMED_CD = 0.75  # drag coefficient on pi D_o^2 / 4 of a canopy whose card gives no diameter
+DEFAULT_DRY_MASS_FRACTION = 0.005  # of the vehicle's mass: a canopy's where the card gives none
 
 
 @dataclass(frozen=True)
@@ -134,17 +152,45 @@ class FlightCard:
     model: dict[str, Any]
     nominal: dict[str, dict[str, Any]]
     source: str
+    events: dict[str, dict[str, Any]] = field(default_factory=dict)
 
 
 def card_from_dict(raw: dict[str, Any], source: str) -> FlightCard:
     """A card from its JSON object; InputError naming the field that breaks
-    `data_schemas/flight_card.schema.json` (or whose numbers are beyond any test's)."""
+    `data_schemas/flight_card.schema.json` (or whose numbers are beyond any test's).
+
+    The canopies' optional fields are filled in here (`canopy_defaults`), and the vehicle's
+    forebody drag area is 0 where the card gives none (the canopies' drag areas then carry
+    the body's), so that the manifest the import writes states every value it was built
+    with."""
     validate_block(raw, "flight_card.schema.json", source)
     check_magnitudes(raw, source)
+    data = raw.get("data", {})
     return FlightCard(raw["name"], raw.get("title", raw["name"]), raw.get("label", ""),
-                      raw["data"].get("folder", ""), tuple(raw["data"].get("logs", ())),
-                      raw["vehicle"], tuple(raw["parachutes"]), raw["site"], raw["model"],
-                      raw.get("nominal", {}), source)
+                      data.get("folder", ""), tuple(data.get("logs", ())),
+                      {"forebody_cds": {"value": 0.0, "unit": "m^2"}, **raw["vehicle"]},
+                      tuple(canopy_defaults(raw["parachutes"], raw["vehicle"], source)),
+                      raw["site"], raw.get("model") or {}, raw.get("nominal", {}), source,
+                      raw.get("events", {}))
+
+
+def canopy_defaults(parachutes: list[dict[str, Any]], vehicle: dict[str, Any], source: str
+                    ) -> list[dict[str, Any]]:
+    """The card's canopies with what they leave out filled in: ``type`` drogue for the
+    first and main for the others, ``inflation`` finite mass, one stage ``open``, and a
+    ``dry_mass`` of `DEFAULT_DRY_MASS_FRACTION` of the vehicle's (a canopy's mass only adds
+    to the descent mass it flies with).  A missing ``diameter`` stays missing: the import
+    takes it from the descent (`diameter_from_descent`)."""
+    out = []
+    for i, chute in enumerate(parachutes):
+        filled = {"type": "drogue" if i == 0 else "main", "inflation": "finite_mass",
+                  "stages": ["open"], **chute}
+        if "dry_mass" not in chute:
+            mass = _si(vehicle.get("mass"), "mass", source, "vehicle.mass")
+            filled["dry_mass"] = {"value": round(DEFAULT_DRY_MASS_FRACTION * mass, 4),
+                                  "unit": "kg"}
+        out.append(filled)
+    return out
 
 
 def load_card(name_or_path: str) -> FlightCard:
@@ -379,6 +425,221 @@ class ImportSummary:
                 "notes": self.notes, "samples": self.samples, "dropped": self.dropped}
 
 
+def dead_samples(t: np.ndarray, values: np.ndarray, clipped: bool = False) -> np.ndarray:
+    """Which samples a channel did not measure: runs of one exact reading repeated for at
+    least `STUCK_RUN_S` and `STUCK_RUN_SAMPLES` samples (a dead or zeroed channel: a real
+    sensor's noise, or a descent of metres per second, changes the reading within that),
+    and with `clipped`, every sample at the channel's largest or smallest reading where that
+    exact reading comes `CLIP_RUN_SAMPLES` times or more (the sensor's range: the force went
+    beyond it; a real peak of a noisy channel is not matched to the last digit).  `t` in
+    s."""
+    if values.size < 2:
+        return np.zeros(values.size, dtype=bool)
+    change = np.flatnonzero(np.diff(values) != 0.0) + 1
+    first, end = np.r_[0, change], np.r_[change, values.size]  # runs [first, end)
+    run = end - first
+    dead_run = (run >= STUCK_RUN_SAMPLES) & (t[end - 1] - t[first] >= STUCK_RUN_S)
+    dead = np.repeat(dead_run, run)
+    if clipped:
+        for rail in (values.max(), values.min()):
+            at_rail = values == rail
+            if at_rail.sum() >= CLIP_RUN_SAMPLES:
+                dead |= at_rail
+    return dead
+
+
+def dead_note(channel: str, t: np.ndarray, values: np.ndarray, unit: str) -> str:
+    """A sentence on the samples `dead_samples` left out of `channel`."""
+    readings = ", ".join(f"{v:g}" for v in np.unique(values)[:3])
+    return (f"{channel}: {t.size} samples between {t.min():.2f} and {t.max():.2f} s left out: "
+            f"the channel repeats one reading ({readings} {unit}) for {STUCK_RUN_S:g} s or "
+            "more, or sits at its range's end: it did not measure there")
+
+
+def diameter_from_descent(name: str, deploy: dict[str, float], parachutes: list[dict[str, Any]],
+                          card: FlightCard, site: SiteAtmosphere, t: np.ndarray,
+                          h: np.ndarray, t_end: float) -> tuple[float, str]:
+    """A nominal diameter D_o (m) for canopy `name`, whose card gives none, and a sentence
+    saying so.  Under the canopies open in its steady descent (the second half of the span
+    from its settled time to the next deployment or `t_end`) the drag carries the weight:
+    the drag area open is 2 m g / (rho v^2) at that descent rate v and air density rho
+    (`site` at the mean pressure altitude `h`, m, of those samples at times `t`, s), m the
+    flown mass; the canopy's own is that less what the earlier canopies showed, and D_o is
+    the diameter whose area pi D_o^2 / 4 gives it at Cd `ASSUMED_CD`.  D_o sets the fill
+    time's length scale and the drag area's upper bound (`canopy_inflation.MAX_CD` times
+    that area), which the report names where a fit presses it.  InputError naming the
+    card's field where no steady descent under the canopy can be told."""
+    mass = _si(card.vehicle.get("mass"), "mass", card.source, "vehicle.mass") + sum(
+        _si(c["dry_mass"], "mass", card.source, "parachutes.dry_mass") for c in parachutes)
+    order = sorted(deploy, key=deploy.__getitem__)
+
+    def open_area(k: int) -> float:
+        t_from = deploy[order[k]]
+        t_to = deploy[order[k + 1]] if k + 1 < len(order) else t_end
+        a = settled_time(t, h, t_from, t_to)
+        mid = 0.5 * (a + t_to)
+        rate = -_slope(t, h, mid, t_to)
+        if not rate > 0.0:
+            return float("nan")
+        sel = (t >= mid) & (t <= t_to)
+        altitude = site.altitude_at_pressure(pressure_of_altitude(h[sel]))
+        rho = float(np.mean(np.asarray(site.density(altitude), float)))
+        return 2.0 * mass * G0 / (rho * rate**2)
+
+    k = order.index(name)
+    total = open_area(k)
+    before = open_area(k - 1) if k > 0 else 0.0
+    own = total - before if np.isfinite(before) and total > before else total
+    i = next(j for j, c in enumerate(parachutes) if c["name"] == name)
+    if not (np.isfinite(own) and own > 0.0):
+        raise InputError(card.source, f"parachutes[{i}].diameter", f"a value: {name}'s "
+                         "diameter cannot be taken from the log, which shows no steady descent "
+                         "under it")
+    diameter = float(np.sqrt(4.0 * own / (np.pi * ASSUMED_CD)))
+    return diameter, (f"{name}: no diameter in the card; D_o {diameter:.2f} m from the "
+                      f"steady descent under it (drag area {own:.3f} m^2 at Cd {ASSUMED_CD:g}); "
+                      f"its drag area is bounded at {MAX_CD:g} pi D_o^2 / 4 = "
+                      f"{MAX_CD * np.pi * diameter**2 / 4.0:.3f} m^2")
+
+
+# The rocket-log model where the card lists no effects: the air's vertical motion (an
+# Ornstein-Uhlenbeck process with a 1 m/s prior, knots every 4 s: a rocket's descent rate
+# of metres per second is moved by the air as much as by its canopy), the canopies' drag on
+# a rigid riser, and the altimeter with its bias and lag; the other sensors' effects where
+# the folder has them.
+ROCKET_EFFECTS: tuple[str | dict[str, Any], ...] = (
+    {"effect": "wind_process", "components": ["up"], "knot_s": 4.0, "tau_s": 20.0,
+     "sigma_vertical": 1.0},
+    "canopy_inflation", "forebody_drag", "rigid_riser", "baro", "baro_bias", "baro_lag")
+ROCKET_SENSOR_EFFECTS = {"gps_altitude": "gps_altitude",
+                         "axial_accelerometer": "axial_accelerometer"}
+# Held opening shape of a canopy deployed near apogee (the effect's default fill constant,
+# linear growth): its fill time n D_o / V_i divides by the small speed at deployment, and
+# no sensor of a rocket log resolves that opening.
+HELD_FILL_CONSTANT = 8.0
+HELD_EXPOPEN = 1.0
+MIN_START_WINDOW_S = 2.0  # least half-width of an inflation start's window about its event
+
+
+def held_openings(deploy: dict[str, float], events: dict[str, FlightEvent]) -> list[str]:
+    """Canopies deployed within `flight_events.DROGUE_WINDOW_S` of apogee (after it, or
+    before it by less than apogee's sigma plus a second), whose opening shape the default
+    model holds."""
+    if "apogee" not in events:
+        return []
+    top = events["apogee"]
+    return [name for name, t in deploy.items()
+            if top.time - top.sigma - 1.0 <= t <= top.time + DROGUE_WINDOW_S]
+
+
+def rocket_model(block: dict[str, Any], sensor_kinds: list[str], held: list[tuple[str, str]],
+                 deploy_sigma: dict[str, float]) -> dict[str, Any]:
+    """The manifest's model block: the card's where it lists effects; else `ROCKET_EFFECTS`
+    with the sensors' (`sensor_kinds`), each start window at least three of its deployment's
+    sigmas (and `MIN_START_WINDOW_S`), and the opening shape (n, expopen) of the canopies
+    in `held` held (`HELD_FILL_CONSTANT`, `HELD_EXPOPEN`) under the card's own fixes, frees
+    and priors, which win; `held` names each such canopy with its first stage."""
+    if "effects" in block:
+        return block
+    window = max(MIN_START_WINDOW_S, *(3.0 * s for s in deploy_sigma.values()))
+    effects = [{"effect": "canopy_inflation", "start_window": round(window, 3)}
+               if e == "canopy_inflation" else e for e in ROCKET_EFFECTS]
+    effects += [ROCKET_SENSOR_EFFECTS[k] for k in dict.fromkeys(sensor_kinds)
+                if k in ROCKET_SENSOR_EFFECTS]
+    fix: dict[str, Any] = {}
+    for name, stage in held:
+        fix[f"n[{name},{stage}]"] = HELD_FILL_CONSTANT
+        fix[f"expopen[{name},{stage}]"] = HELD_EXPOPEN
+    return {**block, "effects": effects, "fix": {**fix, **block.get("fix", {})}}
+
+
+TEMPERATURE_UNITS = {"K": (1.0, 0.0), "degC": (1.0, 273.15), "degF": (5.0 / 9.0, 255.372222)}
+
+
+def pad_temperature(site: dict[str, Any], p0: float, elevation: float, source: str
+                    ) -> tuple[float, str]:
+    """The air temperature on the pad (K) and where it came from: the card's
+    ``temperature``, or its ``surface_density`` with the pad pressure `p0` (Pa) through the
+    gas law T = p / (R rho), or the standard atmosphere's at the site's `elevation` (m)."""
+    if "temperature" in site:
+        scale, offset = TEMPERATURE_UNITS[site["temperature"]["unit"]]
+        t0 = scale * float(site["temperature"]["value"]) + offset
+        if not t0 > 0.0:
+            raise InputError(source, "site.temperature", f"a temperature above absolute zero; "
+                             f"got {t0:.2f} K")
+        return t0, f"pad temperature {t0:.1f} K from the card's site.temperature"
+    if "surface_density" in site:
+        rho0 = _si(site["surface_density"], "density", source, "site.surface_density")
+        t0 = p0 / (R_AIR * rho0)
+        return t0, (f"pad temperature {t0:.1f} K from the card's surface density "
+                    f"{rho0:.3f} kg/m^3 and the pad pressure (T = p / (R rho))")
+    standard = StandardAtmosphere()
+    t0 = float(standard.pressure(elevation)) / (R_AIR * float(standard.density(elevation)))
+    return t0, (f"pad temperature {t0:.1f} K: the standard atmosphere's at {elevation:.0f} m "
+                "(the card gives neither site.temperature nor site.surface_density)")
+
+
+def pad_pressure(baro: pd.DataFrame, events: dict[str, FlightEvent], card: FlightCard
+                 ) -> tuple[float, str]:
+    """The air pressure on the pad (Pa) and a sentence saying where it came from.
+
+    The card's ``site.pressure`` where it gives one; else the median of the barometer's
+    samples before launch, launch being the boost the accelerometer saw or, without one,
+    `LAUNCH_LEAD_S` before the altitude first stands `LAUNCH_RISE_M` above its lowest
+    reading so far (a log that starts on the pad); where fewer than `MIN_PAD_SAMPLES`
+    precede it (the log starts at launch), the lowest reading before the rise: the
+    recorder's first samples, taken as the rocket left the pad."""
+    if "pressure" in card.site:
+        p0 = _si(card.site["pressure"], "pressure", card.source, "site.pressure")
+        return p0, f"pad pressure {p0:.0f} Pa from the card's site.pressure"
+    t, h = baro["time"].to_numpy(), baro["altitude"].to_numpy()
+    rise = np.flatnonzero(h - np.minimum.accumulate(h) > LAUNCH_RISE_M)
+    k_rise = int(rise[0]) if rise.size else len(h) - 1
+    t_launch = events["boost"].time if "boost" in events else float(t[k_rise]) - LAUNCH_LEAD_S
+    pad = baro[baro["time"] < t_launch]
+    if len(pad) >= MIN_PAD_SAMPLES:
+        p0 = float(pad["pressure"].median())
+        return p0, (f"pad pressure {p0:.0f} Pa: the median of the {len(pad)} barometer "
+                    f"samples before launch ({t_launch:.2f} s)")
+    k = int(np.argmin(h[:k_rise + 1]))
+    p0 = float(baro["pressure"].iloc[k])
+    return p0, (f"pad pressure {p0:.0f} Pa: the log starts at launch (only {len(pad)} "
+                f"samples before it), so the pad is its lowest reading before the climb, "
+                f"at {t[k]:.2f} s; give site.pressure in the card where that is not the pad")
+
+
+def card_events(card: FlightCard, baro: pd.DataFrame, pad_altitude: float,
+                events: dict[str, FlightEvent]) -> dict[str, FlightEvent]:
+    """The events the card gives (``events``): at a time, or where the descent first
+    crosses below a height above the pad after apogee (a main fired by an altimeter at
+    its set height), the crossing interpolated between the barometer's samples; each with
+    the card's sigma.  InputError naming the card's field where the descent never comes
+    down to that height."""
+    out: dict[str, FlightEvent] = {}
+    for name, spec in card.events.items():
+        field_name = f"events.{name}"
+        sigma = _si(spec["sigma"], "time", card.source, f"{field_name}.sigma")
+        if "time" in spec:
+            out[name] = FlightEvent(_si(spec["time"], "time", card.source,
+                                        f"{field_name}.time"), sigma, "the card")
+            continue
+        height = _si(spec["altitude"], "length", card.source, f"{field_name}.altitude")
+        t, h = baro["time"].to_numpy(), baro["altitude"].to_numpy() - pad_altitude
+        top = events["apogee"].time if "apogee" in events else float(t[np.argmax(h)])
+        below = np.flatnonzero((t > top) & (h <= height))
+        if below.size == 0 or below[0] == 0:
+            after = h[t > top]
+            raise InputError(card.source, f"{field_name}.altitude", f"a height above the pad "
+                             f"the descent passes below; after apogee at {top:.2f} s the log "
+                             f"reads {float(after.min()) if after.size else float('nan'):.1f}"
+                             " m at the lowest")
+        k = int(below[0])
+        frac = (h[k - 1] - height) / (h[k - 1] - h[k]) if h[k - 1] != h[k] else 1.0
+        out[name] = FlightEvent(float(t[k - 1] + frac * (t[k] - t[k - 1])), sigma,
+                                f"the card: the {height:.0f} m crossing")
+    return out
+
+
 def flight_events(record: FlightRecord) -> tuple[dict[str, FlightEvent], list[str]]:
     """The record's flight events with their sigmas: its logged states (sigma
     `EVENT_SIGMA_S`) where it has them, else those `detect_events` finds; touchdown
@@ -410,17 +671,23 @@ def import_flight(log: FlightRecord | AltusLog, card: FlightCard, out: str | Pat
         raise InputError(src, "pressure", "a barometer (pressure or altitude) read in at "
                          f"least 20 samples; the log has {len(baro)}")
     events, notes = flight_events(record)
+    p0, pad_note = pad_pressure(baro, events, card)
+    pad_altitude = float(pressure_altitude(p0))
+    notes.append(pad_note)
+    events.update(card_events(card, baro, pad_altitude, events))
     deploy: dict[str, float] = {}
     deploy_sigma: dict[str, float] = {}
     kind = "a flight state of the log" if record.states else \
         "an event detected in the log (it has no flight states)"
-    deploying = [name for name in events if name != "landed"]
+    deploying = {name: e for name, e in events.items() if name != "landed"}
     for i, chute in enumerate(card.parachutes):
         state = chute["deployment"]
         if state not in deploying:
+            listed = ", ".join(f"{n} {e.time:.2f} ± {e.sigma:.2f} s ({e.source})"
+                               for n, e in deploying.items())
             raise InputError(card.source, f"parachutes[{i}].deployment",
-                             f"{kind} {src} that deploys {chute['name']} "
-                             f"({', '.join(deploying)}); got {state!r}")
+                             f"{kind} {src} that deploys {chute['name']}, or one the card's "
+                             f"'events' gives (found: {listed or 'none'}); got {state!r}")
         # Each canopy's opening is told apart by its own event (its charge, its snatch).
         if any(card.parachutes[j]["deployment"] == state for j in range(i)):
             raise InputError(card.source, f"parachutes[{i}].deployment",
@@ -428,13 +695,15 @@ def import_flight(log: FlightRecord | AltusLog, card: FlightCard, out: str | Pat
                              f"{state!r} deploys an earlier one too")
         deploy[chute["name"]] = events[state].time
         deploy_sigma[chute["name"]] = events[state].sigma
-    t_boost = events["boost"].time if "boost" in events else 0.0
-    pad = baro[baro["time"] < t_boost]
-    if pad.empty:
-        pad = baro.iloc[:50]
-    p0 = float(pad["pressure"].median())
-    pad_altitude = float(pressure_altitude(p0))
     t_begin = min(deploy.values())
+    descent = baro[baro["time"] > t_begin]
+    if len(descent) < MIN_DESCENT_SAMPLES or \
+            float(descent["time"].max()) - t_begin < MIN_DESCENT_S:
+        span = float(descent["time"].max()) - t_begin if len(descent) else 0.0
+        raise InputError(src, "(time)", f"a descent of at least {MIN_DESCENT_S:g} s and "
+                         f"{MIN_DESCENT_SAMPLES} altimeter samples after the first deployment "
+                         f"({min(deploy, key=deploy.__getitem__)} at {t_begin:.2f} s) to fit; "
+                         f"the log ends {span:.2f} s after it, with {len(descent)} samples")
     if "landed" in events:
         t_down = events["landed"].time
         ground = baro[(baro["time"] >= t_down) & (baro["time"] <= t_down + 3.0)]["altitude"]
@@ -460,12 +729,16 @@ def import_flight(log: FlightRecord | AltusLog, card: FlightCard, out: str | Pat
         near_charge |= ((baro["time"] >= t_dep - EVENT_SIGMA_S)
                         & (baro["time"] <= t_dep + EJECTION_EXCLUDE_S)).to_numpy()
     baro_phase = baro[in_phase.to_numpy() & ~near_charge]
+    dead_baro = dead_samples(baro_phase["time"].to_numpy(), baro_phase["altitude"].to_numpy())
+    if dead_baro.any():
+        notes.append(dead_note("altimeter", baro_phase["time"].to_numpy()[dead_baro],
+                               baro_phase["altitude"].to_numpy()[dead_baro], "m"))
+        baro_phase = baro_phase[~dead_baro]
 
     site_spec = card.site
     elevation = _si(site_spec.get("elevation"), "length", card.source, "site.elevation")
-    rho0 = _si(site_spec.get("surface_density"), "density", card.source,
-               "site.surface_density")
-    t0 = p0 / (R_AIR * rho0)
+    t0, t0_note = pad_temperature(site_spec, p0, elevation, card.source)
+    notes.append(t0_note)
     lapse_spec = site_spec.get("lapse_rate", {"value": 1e3 * ISA_LAPSE_K_M, "unit": "K/km"})
     fixes = record.gps_fixes()
     lapse_fit = None
@@ -485,15 +758,31 @@ def import_flight(log: FlightRecord | AltusLog, card: FlightCard, out: str | Pat
     starts = sorted(deploy.values())
     bounds = [starts[0], *(settled_time(t_baro, h_baro, a, b)
                            for a, b in pairwise([*starts[1:], t_end])), t_end]
+    parachutes = [dict(c) for c in card.parachutes]
+    for chute in parachutes:
+        if "diameter" not in chute:
+            diameter, note = diameter_from_descent(chute["name"], deploy, parachutes, card,
+                                                   site, t_baro, h_baro, t_end)
+            chute["diameter"] = {"value": round(diameter, 4), "unit": "m"}
+            notes.append(note)
     baro_sigmas = []
     for a, b in pairwise(bounds):
         part = baro_phase[(baro_phase["time"] >= a) & (baro_phase["time"] <= b)]
+        if len(part) < MIN_DESCENT_SAMPLES:  # too short a segment: the whole phase's scatter
+            part = baro_phase
         baro_sigmas.append(max(MIN_BARO_SIGMA_M, scatter_sigma(part["time"].to_numpy(),
                                                                part["altitude"].to_numpy())))
 
     fixes_phase = fixes[(fixes["time"] >= lo) & (fixes["time"] <= hi)]
     accel = samples[["time", "acceleration"]].dropna()
-    accel = accel[(accel["time"] >= lo) & (accel["time"] <= hi)]
+    dead_accel = dead_samples(accel["time"].to_numpy(), accel["acceleration"].to_numpy(),
+                              clipped=True)
+    accel_in = ((accel["time"] >= lo) & (accel["time"] <= hi)).to_numpy()
+    if (dead_accel & accel_in).any():
+        notes.append(dead_note("accelerometer", accel["time"].to_numpy()[dead_accel & accel_in],
+                               accel["acceleration"].to_numpy()[dead_accel & accel_in],
+                               "m/s^2"))
+    accel = accel[accel_in & ~dead_accel]
     full_open = {name: peak for name, t in deploy.items() if t > t_begin
                  and (peak := opening_peak(accel, t)) is not None}
     # The accelerometer loses the same charge windows as the altimeter (the charge's jolt
@@ -511,11 +800,12 @@ def import_flight(log: FlightRecord | AltusLog, card: FlightCard, out: str | Pat
     snatch = np.zeros(len(accel), dtype=bool)
     # A later canopy's opening lasts from its charge until its descent has settled, and at
     # least the OPENING_WINDOW_S its load peak is looked for in.
+    # The next deployment (or the phase's end) after each later canopy's.
+    nexts = [*starts[1:], t_end][1:]
     opening_ends = [min(max(t_settled, t_charge + OPENING_WINDOW_S), t_next) for t_charge,
-                    t_settled, t_next in zip(starts[1:], bounds[1:-1], [*starts[2:], t_end],
-                                             strict=True)]
+                    t_settled, t_next in zip(starts[1:], bounds[1:-1], nexts, strict=True)]
     for (t_charge, name), t_settled, t_open, t_next in zip(
-            later, bounds[1:-1], opening_ends, [*starts[2:], t_end], strict=True):
+            later, bounds[1:-1], opening_ends, nexts, strict=True):
         ceiling = drag_ceiling(t_baro, h_baro, density, t_charge, t_settled, t_next)
         if ceiling is None:
             continue
@@ -533,10 +823,17 @@ def import_flight(log: FlightRecord | AltusLog, card: FlightCard, out: str | Pat
     # apart in each later canopy's opening.
     accel_bounds = [*sorted({*starts, *opening_ends} - {t_end}), t_end]
     accel_sigmas = []
-    has_accel = len(accel) >= 10
+    # A test folder's sensors each cover the whole phase: an accelerometer that stops
+    # reading inside it (dead, or logged in the boost only) is left out.
+    has_accel = len(accel) >= 10 and float(accel["time"].min()) <= t_begin + SERIES_MARGIN_S \
+        and float(accel["time"].max()) >= t_end - SERIES_MARGIN_S
     if not has_accel:
         accel_bounds = []
-        notes.append("no accelerometer in the log's phase: the folder has the altimeter only")
+        span = (f" (its samples there span {accel['time'].min():.2f}-"
+                f"{accel['time'].max():.2f} s, not the phase {t_begin:.2f}-{t_end:.2f} s)"
+                if len(accel) else "")
+        notes.append(f"no accelerometer over the log's phase{span}: the folder has the "
+                     "altimeter only")
     for a, b in pairwise(accel_bounds):
         part = accel[(accel["time"] >= a) & (accel["time"] < b)]
         accel_sigmas.append(max(MIN_ACCEL_SIGMA, scatter_rms(
@@ -574,7 +871,7 @@ def import_flight(log: FlightRecord | AltusLog, card: FlightCard, out: str | Pat
         "label": card.label,
         "vehicle": card.vehicle,
         "parachutes": [{k: v for k, v in c.items() if k != "deployment"}
-                       for c in card.parachutes],
+                       for c in parachutes],
         "events": [{"name": "mortar_fire", "parachute": name,
                     "time": {"value": round(t, 3), "unit": "s"},
                     "sigma": {"value": round(deploy_sigma[name], 3), "unit": "s"}}
@@ -591,7 +888,9 @@ def import_flight(log: FlightRecord | AltusLog, card: FlightCard, out: str | Pat
                        "lapse_rate": {"value": round(1e3 * lapse, 4), "unit": "K/km"}},
         "phase": {"start": {"value": t_begin, "unit": "s"},
                   "end": {"value": round(t_end, 3), "unit": "s"}},
-        "model": card.model,
+        "model": rocket_model(card.model, [s["kind"] for s in sensors],
+                              [(c["name"], c["stages"][0]) for c in parachutes
+                               if c["name"] in held_openings(deploy, events)], deploy_sigma),
     }
     validate_manifest(manifest, card.source)
     summary = ImportSummary(

@@ -208,16 +208,17 @@ def spec_from_block(block: dict[str, Any] | None, file: str, base_dir: Path,
 
 
 def spec_of_test(test: FlightTest, allow_external: bool = False) -> ModelSpec:
-    """The model a test folder's manifest declares; where it declares none, the baseline
-    with the measurement effect of every sensor kind the test has (an altimeter-only log
-    is fitted to its altimeter); `allow_external` as in `spec_from_block`."""
+    """The model a test folder's manifest declares; where it lists no effects (no model
+    block, an empty one, or one with only ``fix``, ``free`` or ``priors``), the baseline with
+    the measurement effect of every sensor kind the test has (an altimeter-only log is
+    fitted to its altimeter), under the block's fixes, frees and priors;
+    `allow_external` as in `spec_from_block`."""
     base = test.path if test.path is not None else Path()
     block = test.manifest.get("model")
-    if block is None:
+    if block is None or "effects" not in block:
         kinds = dict.fromkeys(s.kind for s in test.sensors)
         extra = [SENSOR_EFFECTS[k] for k in kinds if SENSOR_EFFECTS[k] not in BASELINE]
-        return ModelSpec((*baseline_effects(),
-                          *(BUILTIN[n].build({}, "(baseline)", n) for n in extra)))
+        block = {**(block or {}), "effects": [*BASELINE, *extra]}
     return spec_from_block(block, str(base / MANIFEST), base, allow_external=allow_external)
 
 

@@ -1,0 +1,310 @@
+"""Real exports come in shapes a tidy log does not: one canopy, a log that ends at its
+deployment, a dead accelerometer, a log that starts at launch, several files and time
+bases, a charge no detector sees, a card that gives only what its author knows.
+
+Each test flies the known rocket of `test_rocket_log_import` (seeded noise), writes
+the log in the shape at hand, and imports it with one command.  Expectations come
+from the generator's truth: event times within the stated sigmas, the pad's level
+within the barometer's noise, the descent's drag area within what the forebody's and
+the air's share allow.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from cpas_ocp.cli import main
+from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.io.model_spec import spec_of_test
+from cpas_ocp.physics.atmosphere import pressure_altitude
+from cpas_ocp.physics.units import G0
+from tests.test_rocket_log_import import (
+    CARD,
+    CDS,
+    CDS_BODY,
+    DT,
+    GROUND_M,
+    H_TABLE,
+    MAIN_AGL_M,
+    P_TABLE,
+    SITE,
+    Flight,
+    fly,
+    sample_time,
+    sensor_readings,
+    write_mapped,
+)
+
+FT = 0.3048
+
+
+@pytest.fixture(scope="module")
+def flight() -> Flight:
+    return fly()
+
+
+def _write(tmp_path: Path, name: str, obj: dict) -> str:
+    path = tmp_path / name
+    path.write_text(json.dumps(obj))
+    return str(path)
+
+
+def _import(tmp_path: Path, log: Path, column_map: dict, card: dict,
+            capsys: pytest.CaptureFixture[str] | None = None) -> tuple[int, dict | None, str]:
+    """Run `cpas-ocp import`; (exit code, import.json or None, stderr)."""
+    code = main(["import", str(log), "--columns", _write(tmp_path, "map.json", column_map),
+                 "--card", _write(tmp_path, "card.json", card), "--out",
+                 str(tmp_path / "test")])
+    err = capsys.readouterr().err if capsys is not None else ""
+    report = json.loads((tmp_path / "test" / "import.json").read_text()) if code == 0 else None
+    return code, report, err
+
+
+AXIAL_MAP = {"recorder": "one-axis logger", "time": {"column": "t", "unit": "s"},
+             "pressure": {"column": "p", "unit": "Pa"},
+             "acceleration": {"column": "acc", "unit": "m/s^2", "gravity": "subtracted"}}
+
+
+def _table(flight: Flight, seed: int) -> pd.DataFrame:
+    p, a = sensor_readings(flight, seed)
+    return pd.DataFrame({"t": flight.t, "p": np.round(p, 1), "acc": np.round(a, 3)})
+
+
+def test_single_canopy_main_at_apogee(tmp_path: Path) -> None:
+    """One main fired at apogee (the charge near apogee is the log's ``drogue`` event): the
+    card with one canopy imports, with its charge as the canopy's mortar fire within two
+    samples of the truth, and the folder builds its model (the card's diameter bounds the
+    drag area above the truth)."""
+    single = fly(chutes=("main",))
+    _table(single, 5).to_csv(tmp_path / "log.csv", index=False)
+    card = {**CARD, "parachutes": [{**CARD["parachutes"][1], "deployment": "drogue"}]}
+    code, _, _ = _import(tmp_path, tmp_path / "log.csv", AXIAL_MAP, card)
+    assert code == 0
+    test = load_test(tmp_path / "test")
+    [charge] = [e for e in test.events if e.name == "mortar_fire"]
+    assert charge.parachute == "main"
+    assert abs(charge.time - sample_time(single, single.events["main"])) <= 2 * DT + 1e-9
+    assert test.t_start == pytest.approx(charge.time)
+    model = spec_of_test(test).model(test)
+    assert "CdS[main,stage2]" in model.parameter_names
+
+
+def test_log_ending_at_its_deployment_is_one_line(flight: Flight, tmp_path: Path,
+                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    """A log that ends a second after the drogue's charge holds no descent to fit: one line
+    naming the log, what was expected and how long it went on, exit 2, no folder."""
+    table = _table(flight, 6)
+    table[flight.t <= flight.events["drogue"] + 1.0].to_csv(tmp_path / "log.csv", index=False)
+    card = {**CARD, "parachutes": CARD["parachutes"][:1]}
+    code, _, err = _import(tmp_path, tmp_path / "log.csv", AXIAL_MAP, card, capsys)
+    lines = err.strip().splitlines()
+    assert code == 2 and len(lines) == 1
+    assert "log.csv" in lines[0] and "descent of at least" in lines[0]
+    assert "the log ends" in lines[0]
+    assert not (tmp_path / "test").exists()
+
+
+def test_dead_accelerometer_is_left_out_with_a_note(flight: Flight, tmp_path: Path) -> None:
+    """An accelerometer that reads exactly 0.0 from apogee on (a recorder that stops
+    logging it) is not data: its dead samples are left out with a note naming the channel
+    and the span, so the folder fits the altimeter alone; the boost it did measure still
+    gives the boost event."""
+    table = _table(flight, 7)
+    table.loc[flight.t >= flight.events["apogee"], "acc"] = 0.0
+    table.to_csv(tmp_path / "log.csv", index=False)
+    code, report, _ = _import(tmp_path, tmp_path / "log.csv", AXIAL_MAP, CARD)
+    assert code == 0 and report is not None
+    [note] = [n for n in report["notes"] if n.startswith("accelerometer:")]
+    assert "did not measure" in note and "(0 m/s^2)" in note
+    assert not (tmp_path / "test" / "accelerometer.csv").exists()
+    assert abs(report["flight_events"]["boost"]["time_s"] - flight.events["boost"]) <= 2 * DT
+
+
+def test_a_clipped_accelerometer_loses_its_rail_samples(flight: Flight, tmp_path: Path) -> None:
+    """An accelerometer whose range ends at 8 g reads exactly 8 g through a snatch that
+    lasts five samples at 14 g: those samples are the range, not the force, and are left
+    out with a note; the rest of the channel stays."""
+    table = _table(flight, 8)
+    k = int(np.searchsorted(flight.t, flight.events["main"] + 1.5))
+    table.loc[k:k + 4, "acc"] += 14.0 * G0
+    table["acc"] = np.minimum(table["acc"], 8.0 * G0)
+    table.to_csv(tmp_path / "log.csv", index=False)
+    code, report, _ = _import(tmp_path, tmp_path / "log.csv", AXIAL_MAP, CARD)
+    assert code == 0 and report is not None
+    assert any(n.startswith("accelerometer:") for n in report["notes"])
+    accel = pd.read_csv(tmp_path / "test" / "accelerometer.csv")
+    assert accel["acceleration"].max() < 8.0 * G0
+    assert len(accel) > 1000
+
+
+def test_log_starting_at_launch_takes_the_pad_from_its_first_reading(
+        flight: Flight, tmp_path: Path) -> None:
+    """An altitude-only log (feet above the pad) that starts as the rocket leaves the pad has
+    no samples before launch: the pad is its lowest reading before the climb, so the
+    landing, 7 m above the pad, reads 7 m in pressure altitude within the barometer's noise
+    (taking the pad from the first 50 samples, already in the boost, put it 29 m off)."""
+    p, _ = sensor_readings(flight, 9)
+    h_agl = (pressure_altitude(p) - pressure_altitude(SITE.pressure_pa)) / FT
+    table = pd.DataFrame({"time": flight.t, "alt_ft": np.round(h_agl, 1)})
+    table[flight.t >= 0.0].to_csv(tmp_path / "log.csv", index=False)
+    column_map = {"time": {"column": "time", "unit": "s"},
+                  "altitude": {"column": "alt_ft", "unit": "ft",
+                               "offset": float(pressure_altitude(SITE.pressure_pa)) / FT}}
+    code, report, _ = _import(tmp_path, tmp_path / "log.csv", column_map, CARD)
+    assert code == 0 and report is not None
+    assert any("the log starts at launch" in n for n in report["notes"])
+    [landing] = [n for n in report["notes"] if n.startswith("touchdown at")]
+    expected = float(pressure_altitude(np.interp(GROUND_M, H_TABLE, P_TABLE))
+                     - pressure_altitude(SITE.pressure_pa))
+    # The pad's reading carries the barometer's noise (2 Pa, 0.2 m) and the log's 0.1 ft
+    # rounding; the touchdown's, its median of three seconds.
+    assert float(landing.split(", ")[1].split(" m")[0]) == pytest.approx(expected, abs=0.8)
+
+
+def test_two_files_and_two_time_bases(flight: Flight, tmp_path: Path) -> None:
+    """An accelerometer at 100 Hz and an altimeter at 20 Hz, each with its own time column
+    in one CSV (the shorter column blank below its end), and GNSS fixes in a second file
+    whose clock runs 2 s behind: all three read, the boost from the accelerometer within
+    two of its samples, the main's charge from the 20 Hz altimeter within two of its, and
+    every GNSS fix with enough satellites kept."""
+    p, a = sensor_readings(flight, 10)
+    baro = slice(None, None, 5)
+    n_baro = flight.t[baro].size
+    table = pd.DataFrame({"t_acc": flight.t, "acc_g": np.round((a + G0) / G0, 4)})
+    table["t_alt"] = pd.Series(flight.t[baro])
+    table["p_hpa"] = pd.Series(np.round(p[baro] / 100.0, 3))
+    assert table["t_alt"].notna().sum() == n_baro
+    table.to_csv(tmp_path / "log.csv", index=False)
+    fix_t = np.arange(0.0, float(flight.t[-1]), 1.0)
+    sats = np.where(np.arange(fix_t.size) % 10 == 3, 3, 8)  # every tenth fix too weak
+    pd.DataFrame({"gps_time": fix_t - 2.0, "lat": 32.94 + 1e-5 * fix_t,
+                  "lon": -106.9 + 1e-5 * fix_t, "sats": sats}).to_csv(
+        tmp_path / "gnss.csv", index=False)
+    column_map = {"time": {"column": "t_alt", "unit": "s"},
+                  "pressure": {"column": "p_hpa", "unit": "hPa"},
+                  "acceleration": {"column": "acc_g", "unit": "g",
+                                   "time": {"column": "t_acc", "unit": "s"}},
+                  "gnss": {"file": "gnss.csv", "time": {"column": "gps_time", "offset": 2.0},
+                           "latitude": "lat", "longitude": "lon", "satellites": "sats"}}
+    code, report, _ = _import(tmp_path, tmp_path / "log.csv", column_map, CARD)
+    assert code == 0 and report is not None
+    events = report["flight_events"]
+    assert abs(events["boost"]["time_s"] - flight.events["boost"]) <= 2 * DT + 1e-9
+    assert abs(events["main"]["time_s"] - flight.events["main"]) <= 2 * 5 * DT + 1e-9
+    assert report["dropped"]["gnss_fixes_with_too_few_satellites"] == int((sats < 4).sum())
+    [gnss] = [n for n in report["notes"] if n.startswith("GNSS:")]
+    assert f"{int((sats >= 4).sum())} fixes" in gnss
+    baro_rows = pd.read_csv(tmp_path / "test" / "baro.csv")
+    assert np.median(np.diff(baro_rows["time"])) == pytest.approx(5 * DT)
+
+
+def _without_main_charge(flight: Flight, seed: int) -> pd.DataFrame:
+    """The log with the main's charge invisible: no pressure pulse, jolt or snatch (a
+    recorder whose filter smooths them away)."""
+    table = _table(flight, seed)
+    k = int(np.searchsorted(flight.t, flight.events["main"] - 1e-9))
+    table.loc[k:k + 2, "p"] -= np.array([900.0, 400.0, 150.0])
+    table.loc[k:k + 1, "acc"] -= np.array([8.0 * G0, -5.0 * G0])
+    snatch = int(np.searchsorted(flight.t, flight.events["main"] + 1.0 - 1e-9))
+    table.loc[snatch, "acc"] -= 14.0 * G0
+    return table
+
+
+def test_an_event_the_card_gives_at_a_trigger_altitude(flight: Flight, tmp_path: Path,
+                                                       capsys: pytest.CaptureFixture[str]
+                                                       ) -> None:
+    """A main charge no detector sees: without the card's word the import stops with one
+    line that lists the events it found with their times and sigmas; with "main at the
+    300 m crossing ± 0.5 s" the main's mortar fire is the time the altimeter read 300 m
+    above the pad on the way down, within two of its samples (an altimeter fires on its
+    own reading, the standard atmosphere's height of the pressure: on this hot day 300 m
+    of it is 19 m of real height, 0.8 s at the drogue's rate), and carries the card's
+    sigma."""
+    _without_main_charge(flight, 11).to_csv(tmp_path / "log.csv", index=False)
+    code, _, err = _import(tmp_path, tmp_path / "log.csv", AXIAL_MAP, CARD, capsys)
+    lines = err.strip().splitlines()
+    assert code == 2 and len(lines) == 1
+    assert "parachutes[1].deployment" in lines[0] and "'events'" in lines[0]
+    assert "drogue " in lines[0] and " ± " in lines[0] and "apogee" in lines[0]
+    card = {**CARD, "events": {"main": {"altitude": {"value": MAIN_AGL_M, "unit": "m"},
+                                        "sigma": {"value": 0.5, "unit": "s"}}}}
+    code, report, _ = _import(tmp_path, tmp_path / "log.csv", AXIAL_MAP, card)
+    assert code == 0 and report is not None
+    main_event = report["flight_events"]["main"]
+    assert main_event["sigma_s"] == 0.5 and "300 m crossing" in main_event["source"]
+    reading = pressure_altitude(np.interp(flight.h, H_TABLE, P_TABLE)) \
+        - pressure_altitude(SITE.pressure_pa)
+    crossing = flight.t[(flight.t > flight.events["apogee"]) & (reading <= MAIN_AGL_M)][0]
+    assert abs(main_event["time_s"] - crossing) <= 2 * DT
+    charge = load_test(tmp_path / "test").event("mortar_fire", "main")
+    assert charge.time == pytest.approx(main_event["time_s"], abs=1e-3)
+    assert charge.sigma == pytest.approx(0.5)
+
+
+def test_an_event_the_card_gives_at_a_time(flight: Flight, tmp_path: Path) -> None:
+    """An event at a time with its sigma (from a video or a pyro log) is taken as given."""
+    _without_main_charge(flight, 12).to_csv(tmp_path / "log.csv", index=False)
+    t_main = round(flight.events["main"], 2)
+    card = {**CARD, "events": {"main": {"time": {"value": t_main, "unit": "s"},
+                                        "sigma": {"value": 50, "unit": "ms"}}}}
+    code, report, _ = _import(tmp_path, tmp_path / "log.csv", AXIAL_MAP, card)
+    assert code == 0 and report is not None
+    assert report["flight_events"]["main"]["time_s"] == t_main
+    assert report["flight_events"]["main"]["sigma_s"] == pytest.approx(0.05)
+
+
+def test_a_card_with_only_what_its_author_knows(flight: Flight, tmp_path: Path) -> None:
+    """A card without data, model, diameters, dry masses, canopy types, stages or air
+    density imports: the canopies get the documented defaults; each diameter comes from
+    the steady descent under it, within 5 % of the diameter whose area at Cd 0.75 is the
+    canopy's drag area with the forebody's share (the descent rate measures the whole
+    vehicle's); the model is the rocket default for the sensors present, the air's motion
+    included, with the drogue's opening (at apogee) held; the notes say each default."""
+    write_mapped(flight, tmp_path / "log.csv", seed=13)
+    card = {"name": "bare", "vehicle": {"name": "rocket", "mass": {"value": 16.31,
+                                                                  "unit": "kg"}},
+            "parachutes": [{"name": "drogue", "deployment": "drogue"},
+                           {"name": "main", "deployment": "main"}],
+            "site": {"elevation": {"value": 1401, "unit": "m"}}}
+    from tests.test_rocket_log_import import COLUMN_MAP
+    code, report, _ = _import(tmp_path, tmp_path / "log.csv", COLUMN_MAP, card)
+    assert code == 0 and report is not None
+    manifest = json.loads((tmp_path / "test" / "manifest.json").read_text())
+    chutes = {c["name"]: c for c in manifest["parachutes"]}
+    assert chutes["drogue"]["type"] == "drogue" and chutes["main"]["type"] == "main"
+    assert chutes["main"]["stages"] == ["open"]
+    for name in ("drogue", "main"):
+        expected = np.sqrt(4.0 * (CDS[name] + (CDS_BODY if name == "drogue" else 0.0))
+                           / (np.pi * 0.75))
+        assert chutes[name]["diameter"]["value"] == pytest.approx(expected, rel=0.05), name
+        assert any(n.startswith(f"{name}: no diameter in the card") for n in report["notes"])
+    assert any("standard atmosphere" in n for n in report["notes"])
+    effects = [e if isinstance(e, str) else e["effect"] for e in manifest["model"]["effects"]]
+    assert {"wind_process", "baro", "axial_accelerometer", "canopy_inflation"} <= set(effects)
+    assert set(manifest["model"]["fix"]) == {"n[drogue,open]", "expopen[drogue,open]"}
+    test = load_test(tmp_path / "test")
+    assert "wind_up[0]" in spec_of_test(test).model(test).parameter_names
+
+
+def test_an_empty_model_block_is_the_baseline_for_the_sensors_present(
+        flight: Flight, tmp_path: Path) -> None:
+    """A manifest whose model block lists no effects (empty, or only fixes) gets the baseline
+    with the measurement effect of each sensor kind it has, under its fixes."""
+    write_mapped(flight, tmp_path / "log.csv", seed=14)
+    from tests.test_rocket_log_import import COLUMN_MAP
+    card = {**CARD, "model": {"fix": {"expopen[main,stage2]": 1.0}}}
+    code, _, _ = _import(tmp_path, tmp_path / "log.csv", COLUMN_MAP, card)
+    assert code == 0
+    manifest_path = tmp_path / "test" / "manifest.json"
+    manifest = json.loads(manifest_path.read_text())
+    manifest["model"] = {"fix": {"expopen[main,stage2]": 1.0}}
+    manifest_path.write_text(json.dumps(manifest))
+    test = load_test(tmp_path / "test")
+    spec = spec_of_test(test)
+    assert {"baro", "axial_accelerometer", "canopy_inflation"} <= set(spec.effect_names)
+    assert spec.fix == {"expopen[main,stage2]": 1.0}
