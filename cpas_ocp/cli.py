@@ -270,9 +270,15 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("card", metavar="CARD", help="a built-in flight card (prometheus) or a file")
     s.add_argument("--out", required=True, type=Path)
     s.add_argument("--data", type=Path, default=None,
-                   help="folder holding the card's logs (default ../shared/data/<card folder>)")
+                   help="folder holding the card's logs (default: the card's data.folder, "
+                        "beside a card file, or under ../shared/data for a built-in card)")
     s.add_argument("--log", action="append", default=[], metavar="FILE",
                    help="reconstruct only this log of the card (repeatable)")
+    s.add_argument("--format", default=None, metavar="NAME",
+                   help="the logs' built-in format: altus, cats (default: the card's "
+                        "data.format, else altus)")
+    s.add_argument("--columns", type=Path, default=None, metavar="MAP.json",
+                   help="a column map for the logs (default: the card's data.columns)")
     _solver_options(s)
     s.set_defaults(run=_flight)
 
@@ -646,13 +652,25 @@ def _import(args: argparse.Namespace) -> int:
 def _flight(args: argparse.Namespace) -> int:
     from cpas_ocp.io.flight_log import load_card
     card = load_card(args.card)
-    data = args.data if args.data is not None else Path("../shared/data") / card.data_folder
+    beside = Path(card.source).parent if Path(card.source).suffix == ".json" \
+        and Path(card.source).is_file() else Path("../shared/data")
+    data = args.data if args.data is not None else beside / card.data_folder
     logs = args.log or list(card.logs)
+    if not logs:
+        raise InputError(card.source, "data.logs", "the flight logs to reconstruct (or give "
+                         "--log FILE)")
     for name in logs:
-        if not (data / name).is_file():
+        if not (data / name).exists():
             raise InputError(str(data / name), "(file)", f"the flight log of card {card.name!r} "
                              "(give the folder holding it with --data)")
-    recorders = [_flight_log(args, card, data / name) for name in logs]
+    # The command line's format or map, else the card's, else an Altus Metrum export.
+    log_format, columns = args.format, args.columns
+    if log_format is None and columns is None:
+        log_format = card.data_format
+        columns = beside / card.data_columns if card.data_columns is not None else None
+        if log_format is None and columns is None:
+            log_format = "altus"
+    recorders = [_flight_log(args, card, data / name, log_format, columns) for name in logs]
     if len(recorders) > 1:
         from cpas_ocp.io.recorder_clocks import recorders_text
         text = recorders_text(recorders)
@@ -663,22 +681,23 @@ def _flight(args: argparse.Namespace) -> int:
     return 0
 
 
-def _flight_log(args: argparse.Namespace, card: FlightCard, log: Path) -> RecorderEstimates:
+def _flight_log(args: argparse.Namespace, card: FlightCard, log: Path, log_format: str | None,
+                columns: Path | None) -> RecorderEstimates:
     """Import, reconstruct, diagnose and compare one log of the `flight` command (a function
     of its own so that one log's fits and refits are freed before the next log's): its
     drag areas and start times, for the recorders' comparison."""
     from cpas_ocp.discrepancy.diagnosis import diagnose
     from cpas_ocp.inference.process_intensity import without_wind
-    from cpas_ocp.io.altus_metrum import read_altus_log
     from cpas_ocp.io.flight_log import import_flight
     from cpas_ocp.io.flight_test import load_test
+    from cpas_ocp.io.log_formats import read_flight_log
     from cpas_ocp.io.recorder_clocks import RecorderEstimates
     from cpas_ocp.reports.discrepancy_report import write_diagnosis
     from cpas_ocp.reports.flight_report import air_motion_text, flight_text, held_opening_profiles
     folder = args.out / log.stem
     print(f"== {log.name}: import", flush=True)
-    altus = read_altus_log(log)
-    summary = import_flight(altus, card, folder / "test")
+    record = read_flight_log(log, log_format, columns)
+    summary = import_flight(record, card, folder / "test")
     print(summary.text())
     test = load_test(folder / "test")
     est, fit, cov, out = _run_reconstruction(test, args, _spec(test, args), folder / "report")
@@ -697,7 +716,7 @@ def _flight_log(args: argparse.Namespace, card: FlightCard, log: Path) -> Record
     print()
     print(text)
     print(f"flight comparison written to {out / 'flight.md'}")
-    return RecorderEstimates(altus, {n: (fit.parameters[n], cov.std.get(n, float("nan")))
+    return RecorderEstimates(record, {n: (fit.parameters[n], cov.std.get(n, float("nan")))
                                      for n in fit.free if n.startswith(("CdS", "t_start"))})
 
 

@@ -210,7 +210,7 @@ def test_the_two_recorders_clocks_are_put_on_one_time_base() -> None:
     """Each recorder counts from its own boost detection: the offset measured on the motor's
     burn (100 Hz) is the one measured on the drogue's opening (10 Hz, within a sample),
     either way round, and larger than the boost's sample spacing."""
-    mega, metrum = read_altus_log(DATA / MEGA), read_altus_log(DATA / METRUM)
+    mega, metrum = read_altus_log(DATA / MEGA).record(), read_altus_log(DATA / METRUM).record()
     boost = clock_offset(mega, metrum)
     assert abs(boost) > 0.02
     assert clock_offset(metrum, mega) == pytest.approx(-boost, abs=0.002)

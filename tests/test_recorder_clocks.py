@@ -5,10 +5,9 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 import pytest
 
-from cpas_ocp.io.altus_metrum import AltusLog
+from cpas_ocp.io.flight_record import FlightRecord, samples_frame
 from cpas_ocp.io.recorder_clocks import RecorderEstimates, clock_offset, recorders_text
 
 SHIFT_S = 0.037  # the second recorder's clock reads this much more for the same instant
@@ -21,14 +20,13 @@ def _thrust(t: np.ndarray) -> np.ndarray:
                     np.where(t >= 4.0, -9.0, 0.0))
 
 
-def _log(name: str, clock_shift: float, seed: int) -> AltusLog:
+def _log(name: str, clock_shift: float, seed: int) -> FlightRecord:
     """A 100 Hz log of the thrust curve on a clock that reads `clock_shift` more."""
     rng = np.random.default_rng(seed)
     t_true = np.arange(-1.0, 7.0, 0.01) + rng.uniform(0.0, 0.01)
-    data = pd.DataFrame({"time": t_true + clock_shift,
-                         "acceleration": _thrust(t_true) + NOISE * rng.normal(size=t_true.size),
-                         "pressure": 86000.0 - 10.0 * np.arange(t_true.size)})
-    return AltusLog(Path(name), "TeleMetrum", data, {}, 0)
+    data = samples_frame(t_true + clock_shift, 86000.0 - 10.0 * np.arange(t_true.size),
+                         _thrust(t_true) + NOISE * rng.normal(size=t_true.size))
+    return FlightRecord(Path(name), "TeleMetrum", data)
 
 
 def test_a_known_shift_between_two_noisy_clocks_is_recovered() -> None:

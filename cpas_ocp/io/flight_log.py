@@ -153,6 +153,8 @@ class FlightCard:
     nominal: dict[str, dict[str, Any]]
     source: str
     events: dict[str, dict[str, Any]] = field(default_factory=dict)
+    data_format: str | None = None  # the logs' built-in format, for `flight`
+    data_columns: str | None = None  # or their column map (relative to the card's folder)
 
 
 def card_from_dict(raw: dict[str, Any], source: str) -> FlightCard:
@@ -171,7 +173,7 @@ def card_from_dict(raw: dict[str, Any], source: str) -> FlightCard:
                       {"forebody_cds": {"value": 0.0, "unit": "m^2"}, **raw["vehicle"]},
                       tuple(canopy_defaults(raw["parachutes"], raw["vehicle"], source)),
                       raw["site"], raw.get("model") or {}, raw.get("nominal", {}), source,
-                      raw.get("events", {}))
+                      raw.get("events", {}), data.get("format"), data.get("columns"))
 
 
 def canopy_defaults(parachutes: list[dict[str, Any]], vehicle: dict[str, Any], source: str

@@ -22,20 +22,20 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cpas_ocp.io.altus_metrum import AltusLog
+from cpas_ocp.io.flight_record import FlightRecord
 
 GRID_S = 0.001  # the alignment's grid (s)
 BOOST_WINDOW_S = (-0.3, 6.0)  # the motor's burn in a log's own time (s)
 
 
-def _acceleration(log: AltusLog, t0: float, t1: float) -> tuple[np.ndarray, np.ndarray]:
+def _acceleration(log: FlightRecord, t0: float, t1: float) -> tuple[np.ndarray, np.ndarray]:
     """The log's own axial acceleration samples (m/s^2) within [t0, t1] of its time (s)."""
-    d = log.sensor_samples()
+    d = log.samples
     d = d[(d.time >= t0) & (d.time <= t1) & d.acceleration.notna()]
     return d.time.to_numpy(float), d.acceleration.to_numpy(float)
 
 
-def clock_offset(a: AltusLog, b: AltusLog, window: tuple[float, float] = BOOST_WINDOW_S,
+def clock_offset(a: FlightRecord, b: FlightRecord, window: tuple[float, float] = BOOST_WINDOW_S,
                  search_s: float = 0.5) -> float:
     """The time (s) to add to `a`'s log time to get `b`'s for the same instant, from the
     axial accelerations both recorded over `window` of `a`'s time, shifts searched
@@ -62,7 +62,7 @@ class RecorderEstimates:
     """One recorder's reconstruction: its log, and the estimate and sigma (SI) of each
     drag area and start time."""
 
-    log: AltusLog
+    log: FlightRecord
     estimates: dict[str, tuple[float, float]]
 
 
