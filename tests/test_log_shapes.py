@@ -308,3 +308,23 @@ def test_an_empty_model_block_is_the_baseline_for_the_sensors_present(
     spec = spec_of_test(test)
     assert {"baro", "axial_accelerometer", "canopy_inflation"} <= set(spec.effect_names)
     assert spec.fix == {"expopen[main,stage2]": 1.0}
+
+
+def test_a_diameter_too_small_for_the_descent_is_named(flight: Flight, tmp_path: Path) -> None:
+    """A main's diameter written as 12 in instead of 72 bounds its drag area at 0.22 m^2,
+    far below the 5.8 m^2 its descent shows: the import says so before any fit presses
+    the bound; the right diameter draws no such note."""
+    write_mapped(flight, tmp_path / "log.csv", seed=15)
+    from tests.test_rocket_log_import import COLUMN_MAP
+    small = {**CARD["parachutes"][1], "diameter": {"value": 12, "unit": "in"}}
+    card = {**CARD, "parachutes": [CARD["parachutes"][0], small]}
+    code, report, _ = _import(tmp_path, tmp_path / "log.csv", COLUMN_MAP, card)
+    assert code == 0 and report is not None
+    [note] = [n for n in report["notes"] if "check the diameter" in n]
+    assert note.startswith("main: the card's diameter 0.30 m")
+    right = tmp_path / "right"
+    right.mkdir()
+    write_mapped(flight, right / "log.csv", seed=15)
+    code, report, _ = _import(right, right / "log.csv", COLUMN_MAP, CARD)
+    assert code == 0 and report is not None
+    assert not any("check the diameter" in n for n in report["notes"])

@@ -458,50 +458,73 @@ def dead_note(channel: str, t: np.ndarray, values: np.ndarray, unit: str) -> str
             "more, or sits at its range's end: it did not measure there")
 
 
-def diameter_from_descent(name: str, deploy: dict[str, float], parachutes: list[dict[str, Any]],
-                          card: FlightCard, site: SiteAtmosphere, t: np.ndarray,
-                          h: np.ndarray, t_end: float) -> tuple[float, str]:
-    """A nominal diameter D_o (m) for canopy `name`, whose card gives none, and a sentence
-    saying so.  Under the canopies open in its steady descent (the second half of the span
-    from its settled time to the next deployment or `t_end`) the drag carries the weight:
-    the drag area open is 2 m g / (rho v^2) at that descent rate v and air density rho
-    (`site` at the mean pressure altitude `h`, m, of those samples at times `t`, s), m the
-    flown mass; the canopy's own is that less what the earlier canopies showed, and D_o is
-    the diameter whose area pi D_o^2 / 4 gives it at Cd `ASSUMED_CD`.  D_o sets the fill
-    time's length scale and the drag area's upper bound (`canopy_inflation.MAX_CD` times
-    that area), which the report names where a fit presses it.  InputError naming the
-    card's field where no steady descent under the canopy can be told."""
+def descent_drag_areas(deploy: dict[str, float], parachutes: list[dict[str, Any]],
+                       card: FlightCard, site: SiteAtmosphere, t: np.ndarray, h: np.ndarray,
+                       t_end: float) -> dict[str, float]:
+    """Each canopy's own drag area (m^2) as its steady descent shows it; NaN where none can
+    be told.  Under the canopies open in a canopy's steady descent (the second half of the
+    span from its settled time to the next deployment or `t_end`) the drag carries the
+    weight: the drag area open is 2 m g / (rho v^2) at that descent rate v and air density
+    rho (`site` at the mean pressure altitude `h`, m, of those samples at times `t`, s), m
+    the flown mass; the canopy's own is that less what the earlier canopies showed (all of
+    it where that is not less: a canopy cut away).  The forebody's drag area is in the
+    first canopy's."""
     mass = _si(card.vehicle.get("mass"), "mass", card.source, "vehicle.mass") + sum(
         _si(c["dry_mass"], "mass", card.source, "parachutes.dry_mass") for c in parachutes)
     order = sorted(deploy, key=deploy.__getitem__)
-
-    def open_area(k: int) -> float:
-        t_from = deploy[order[k]]
+    areas = []
+    for k, name in enumerate(order):
         t_to = deploy[order[k + 1]] if k + 1 < len(order) else t_end
-        a = settled_time(t, h, t_from, t_to)
-        mid = 0.5 * (a + t_to)
+        mid = 0.5 * (settled_time(t, h, deploy[name], t_to) + t_to)
         rate = -_slope(t, h, mid, t_to)
-        if not rate > 0.0:
-            return float("nan")
         sel = (t >= mid) & (t <= t_to)
+        if not rate > 0.0:
+            areas.append(float("nan"))
+            continue
         altitude = site.altitude_at_pressure(pressure_of_altitude(h[sel]))
         rho = float(np.mean(np.asarray(site.density(altitude), float)))
-        return 2.0 * mass * G0 / (rho * rate**2)
+        areas.append(2.0 * mass * G0 / (rho * rate**2))
+    own = {}
+    for k, name in enumerate(order):
+        before = areas[k - 1] if k > 0 else 0.0
+        own[name] = areas[k] - before if np.isfinite(before) and areas[k] > before \
+            else areas[k]
+    return own
 
-    k = order.index(name)
-    total = open_area(k)
-    before = open_area(k - 1) if k > 0 else 0.0
-    own = total - before if np.isfinite(before) and total > before else total
-    i = next(j for j, c in enumerate(parachutes) if c["name"] == name)
-    if not (np.isfinite(own) and own > 0.0):
-        raise InputError(card.source, f"parachutes[{i}].diameter", f"a value: {name}'s "
-                         "diameter cannot be taken from the log, which shows no steady descent "
-                         "under it")
-    diameter = float(np.sqrt(4.0 * own / (np.pi * ASSUMED_CD)))
-    return diameter, (f"{name}: no diameter in the card; D_o {diameter:.2f} m from the "
-                      f"steady descent under it (drag area {own:.3f} m^2 at Cd {ASSUMED_CD:g}); "
-                      f"its drag area is bounded at {MAX_CD:g} pi D_o^2 / 4 = "
-                      f"{MAX_CD * np.pi * diameter**2 / 4.0:.3f} m^2")
+
+def canopy_diameters(parachutes: list[dict[str, Any]], areas: dict[str, float],
+                     card: FlightCard) -> list[str]:
+    """Fill in the diameter D_o of each canopy whose card gives none from its descent drag
+    area (`descent_drag_areas`): the diameter whose area pi D_o^2 / 4 gives it at Cd
+    `ASSUMED_CD`.  D_o sets the fill time's length scale and the drag area's upper bound
+    (`canopy_inflation.MAX_CD` pi D_o^2 / 4), which the report names where a fit presses it.
+    Returns a note per canopy filled in, and per canopy whose card's diameter bounds its
+    drag area below what its descent shows (the fit would press that bound).  InputError
+    naming the card's field where a diameter is missing and no steady descent under the
+    canopy can be told."""
+    notes = []
+    for i, chute in enumerate(parachutes):
+        name, own = chute["name"], areas[chute["name"]]
+        if "diameter" in chute:
+            d = _si(chute["diameter"], "length", card.source, f"parachutes[{i}].diameter")
+            bound = MAX_CD * np.pi * d**2 / 4.0
+            if np.isfinite(own) and own > bound:
+                notes.append(f"{name}: the card's diameter {d:.2f} m bounds its drag area at "
+                             f"{bound:.3f} m^2 ({MAX_CD:g} pi D_o^2 / 4), below the {own:.3f} "
+                             "m^2 its steady descent shows: check the diameter (or leave it "
+                             "out to take it from the descent)")
+            continue
+        if not (np.isfinite(own) and own > 0.0):
+            raise InputError(card.source, f"parachutes[{i}].diameter", f"a value: {name}'s "
+                             "diameter cannot be taken from the log, which shows no steady "
+                             "descent under it")
+        diameter = float(np.sqrt(4.0 * own / (np.pi * ASSUMED_CD)))
+        chute["diameter"] = {"value": round(diameter, 4), "unit": "m"}
+        notes.append(f"{name}: no diameter in the card; D_o {diameter:.2f} m from the steady "
+                     f"descent under it (drag area {own:.3f} m^2 at Cd {ASSUMED_CD:g}); its "
+                     f"drag area is bounded at {MAX_CD:g} pi D_o^2 / 4 = "
+                     f"{MAX_CD * np.pi * diameter**2 / 4.0:.3f} m^2")
+    return notes
 
 
 # The rocket-log model where the card lists no effects: the air's vertical motion (an
@@ -761,12 +784,8 @@ def import_flight(log: FlightRecord | AltusLog, card: FlightCard, out: str | Pat
     bounds = [starts[0], *(settled_time(t_baro, h_baro, a, b)
                            for a, b in pairwise([*starts[1:], t_end])), t_end]
     parachutes = [dict(c) for c in card.parachutes]
-    for chute in parachutes:
-        if "diameter" not in chute:
-            diameter, note = diameter_from_descent(chute["name"], deploy, parachutes, card,
-                                                   site, t_baro, h_baro, t_end)
-            chute["diameter"] = {"value": round(diameter, 4), "unit": "m"}
-            notes.append(note)
+    notes += canopy_diameters(parachutes, descent_drag_areas(deploy, parachutes, card, site,
+                                                             t_baro, h_baro, t_end), card)
     baro_sigmas = []
     for a, b in pairwise(bounds):
         part = baro_phase[(baro_phase["time"] >= a) & (baro_phase["time"] <= b)]
