@@ -328,3 +328,48 @@ def test_a_diameter_too_small_for_the_descent_is_named(flight: Flight, tmp_path:
     code, report, _ = _import(right, right / "log.csv", COLUMN_MAP, CARD)
     assert code == 0 and report is not None
     assert not any("check the diameter" in n for n in report["notes"])
+
+
+@pytest.mark.parametrize(("change", "field"), [
+    ({"site": {**CARD["site"], "lapse_rate": {"value": 0.0, "unit": "K/km"}}},
+     "site.lapse_rate"),
+    ({"site": {**CARD["site"], "lapse_rate": {"value": -2.0, "unit": "K/km"}}},
+     "site.lapse_rate"),
+    ({"events": {"main": {"altitude": {"value": 5000, "unit": "m"},
+                          "sigma": {"value": 1, "unit": "s"}}}}, "events.main.altitude"),
+    ({"parachutes": [CARD["parachutes"][0], {**CARD["parachutes"][1], "open_at_start": True}]},
+     "parachutes[1].open_at_start"),
+    ({"parachutes": [CARD["parachutes"][0], {**CARD["parachutes"][1],
+                                             "stages": ["reefed", "full"]}]},
+     "parachutes[1].stages"),
+])
+def test_card_mistakes_are_one_line_naming_the_card_field(
+        flight: Flight, tmp_path: Path, capsys: pytest.CaptureFixture[str], change: dict,
+        field: str) -> None:
+    """A card the import cannot honour (a lapse rate of zero or an inversion the site
+    atmosphere cannot hold, a trigger height above apogee, a canopy open before the log
+    sees it deploy, reefing stages no rocket log times) is refused in one line naming the
+    card's field, exit 2, nothing written."""
+    _table(flight, 16).to_csv(tmp_path / "log.csv", index=False)
+    code, _, err = _import(tmp_path, tmp_path / "log.csv", AXIAL_MAP, {**CARD, **change},
+                           capsys)
+    lines = err.strip().splitlines()
+    assert code == 2 and len(lines) == 1
+    assert lines[0].startswith(f"error: {tmp_path / 'card.json'}: {field}:")
+    assert not (tmp_path / "test").exists()
+
+
+def test_a_log_with_states_holds_the_drogue_opening_at_apogee(tmp_path: Path) -> None:
+    """A CATS export logs its flight states but no apogee: the altimeter's apogee is added,
+    so the default model holds the opening of the drogue fired at it, as for a log without
+    states."""
+    from tests.test_rocket_log_import import write_cats
+    write_cats(fly(), tmp_path / "export", seed=17)
+    card = {k: v for k, v in CARD.items() if k != "model"}
+    code = main(["import", str(tmp_path / "export"), "--format", "cats", "--card",
+                 _write(tmp_path, "card.json", card), "--out", str(tmp_path / "test")])
+    assert code == 0
+    report = json.loads((tmp_path / "test" / "import.json").read_text())
+    assert report["flight_events"]["apogee"]["source"] == "altimeter"
+    manifest = json.loads((tmp_path / "test" / "manifest.json").read_text())
+    assert manifest["model"]["fix"]["n[drogue,stage1]"] == 8.0

@@ -138,7 +138,9 @@ def read_mapped_log(path: str | Path, column_map: dict[str, Any], map_source: st
     dropped = {"rows_without_time": 0, "repeated_time_stamps": 0}
 
     def ordered(frame: pd.DataFrame) -> pd.DataFrame:
-        frame, no_time, repeated = time_ordered(frame)
+        # A row with neither a time nor a reading is the blank tail of a shorter column.
+        blank = frame["time"].isna() & frame.drop(columns="time").isna().all(axis=1)
+        frame, no_time, repeated = time_ordered(frame[~blank])
         dropped["rows_without_time"] += no_time
         dropped["repeated_time_stamps"] += repeated
         return frame

@@ -81,7 +81,7 @@ def second_difference_sigma(values: np.ndarray) -> float:
     return float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / np.sqrt(6.0))
 
 
-def _interval(t: np.ndarray) -> float:
+def sample_interval(t: np.ndarray) -> float:
     """Median sample interval (s)."""
     return float(np.median(np.diff(t))) if t.size > 1 else float("nan")
 
@@ -90,13 +90,13 @@ def _step_at(t: np.ndarray, t0: float) -> float:
     """The sample interval (s) that ends at the sample at `t0`: the timing sigma of an event
     first seen in that sample (loggers slow down in the descent)."""
     k = int(np.searchsorted(t, t0))
-    return float(t[k] - t[k - 1]) if 0 < k < t.size else _interval(t)
+    return float(t[k] - t[k - 1]) if 0 < k < t.size else sample_interval(t)
 
 
 def _running_median(t: np.ndarray, x: np.ndarray, window_s: float) -> np.ndarray:
     """Centred running median of `x` over about `window_s` (s) of samples (an odd count, at
     least 3, from the median interval of `t`); the ends over the samples there are."""
-    n = max(3, round(window_s / _interval(t)) // 2 * 2 + 1)
+    n = max(3, round(window_s / sample_interval(t)) // 2 * 2 + 1)
     return pd.Series(x).rolling(n, center=True, min_periods=1).median().to_numpy()
 
 
@@ -227,7 +227,7 @@ def touchdown(tb: np.ndarray, h: np.ndarray, ta: np.ndarray, a: np.ndarray,
     band = STILL_BAND_SIGMAS * noise + STILL_BAND_M
     rest_a = (max(REST_ACCEL_M_S2, 3.0 * float(np.std(a[: max(10, ta.size // 20)])))
               if ta.size > 20 else np.inf)
-    dtb = _interval(tb)
+    dtb = sample_interval(tb)
     step = max(1, round(0.1 / dtb))
     candidates = np.flatnonzero(tb > after)[::step]
     for i in candidates:

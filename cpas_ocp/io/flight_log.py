@@ -88,6 +88,7 @@ from cpas_ocp.io.flight_events import (
     DROGUE_WINDOW_S,
     FlightEvent,
     detect_events,
+    sample_interval,
     second_difference_sigma,
 )
 from cpas_ocp.io.flight_record import FlightRecord, enu_about, pressure_of_altitude
@@ -127,6 +128,7 @@ OPENING_BASELINE_S = 5.0  # the steady reading before a charge is taken over thi
 OPENING_PEAK_SIGMAS = 5.0  # a peak counts when this many scatter sigmas off the steady reading
 MIN_DESCENT_S = 5.0  # a log must go on this long after the first deployment to be fitted (s)
 MIN_DESCENT_SAMPLES = 20  # ... with this many altimeter samples
+ACF_FLOOR = 0.05  # a noise's autocorrelation counts until it first falls below this
 LAUNCH_RISE_M = 10.0  # launch: the altitude has risen this far above its lowest so far (m) ...
 LAUNCH_LEAD_S = 1.0  # ... and the pad's samples end this long before that (s)
 MIN_PAD_SAMPLES = 10  # the pad's level is their median where the log has this many
@@ -185,6 +187,14 @@ def canopy_defaults(parachutes: list[dict[str, Any]], vehicle: dict[str, Any], s
     takes it from the descent (`diameter_from_descent`)."""
     out = []
     for i, chute in enumerate(parachutes):
+        if chute.get("open_at_start"):
+            raise InputError(source, f"parachutes[{i}].open_at_start", "a canopy the log sees "
+                             "deploy (a flight card's canopies each open at an event of the "
+                             "log; open_at_start is for a test folder whose phase begins "
+                             "under an open canopy)")
+        if len(chute.get("stages", ())) > 1:
+            raise InputError(source, f"parachutes[{i}].stages", "one stage: the import finds "
+                             "no disreef events in a rocket log")
         filled = {"type": "drogue" if i == 0 else "main", "inflation": "finite_mass",
                   "stages": ["open"], **chute}
         if "dry_mass" not in chute:
@@ -265,6 +275,58 @@ def scatter_sigma(t: np.ndarray, values: np.ndarray) -> float:
     if r is None:
         return second_difference_sigma(values)
     return float(1.4826 * np.median(np.abs(r - np.median(r))))
+
+
+def correlation_length(t: np.ndarray, values: np.ndarray) -> int:
+    """The integrated autocorrelation time (samples) of `values`' scatter about their local
+    trend (`_scatter`): 1 + 2 sum_k rho_k, the sum over the lags before rho first falls
+    below `ACF_FLOOR`; the number of samples that carry as much information as one
+    independent sample.  1 for white noise or too few samples."""
+    r = _scatter(t, values)
+    if r is None or r.size < 4 * MIN_DESCENT_SAMPLES:
+        return 1
+    r = r - r.mean()
+    var = float(np.dot(r, r))
+    if var == 0.0:
+        return 1
+    total = 1.0
+    for k in range(1, r.size // 4):
+        rho = float(np.dot(r[:-k], r[k:])) / var
+        if rho < ACF_FLOOR:
+            break
+        total += 2.0 * rho
+    return max(1, round(total))
+
+
+def independent_blocks(frame: pd.DataFrame, steady_end: float = np.inf
+                       ) -> tuple[pd.DataFrame, int]:
+    """`frame` (``time`` s and one channel) averaged in consecutive blocks of
+    `correlation_length` samples, each block's mean at its mean time, blocks never spanning
+    a gap (a left-out charge window: over 1.5 sample intervals); with the block size.  The
+    correlation is measured over the later half of the frame's span up to `steady_end` (s:
+    the next canopy's charge), where the descent has settled: an opening's deceleration,
+    which a local quadratic trend does not follow, would read as correlated noise.
+
+    Block means of correlated noise are about as independent as white samples, and their
+    scatter is their sigma: a fit that weighs every raw sample at the raw scatter would
+    count each piece of information that many times over, and state sigmas that many
+    times too small.  Over a block (well under a second) the descent's curvature moves the
+    mean from the mid-time value by a·L²/24, centimetres against metres of noise."""
+    if len(frame) < 2:
+        return frame.reset_index(drop=True), 1
+    t = frame["time"].to_numpy(float)
+    end = min(float(t[-1]), steady_end)
+    steady = (t >= 0.5 * (t[0] + end)) & (t <= end)  # the descent settled, no opening
+    size = correlation_length(t[steady], frame.iloc[:, 1].to_numpy(float)[steady])
+    if size <= 1:
+        return frame.reset_index(drop=True), 1
+    run = np.r_[0, np.cumsum(np.diff(t) > 1.5 * sample_interval(t))]
+    position = np.zeros(t.size, dtype=int)
+    for r in np.unique(run):
+        sel = run == r
+        position[sel] = np.arange(sel.sum()) // size
+    keys = run * (t.size + 1) + position
+    return frame.groupby(keys, sort=True).mean().reset_index(drop=True), size
 
 
 def scatter_rms(t: np.ndarray, values: np.ndarray) -> float:
@@ -530,17 +592,21 @@ def canopy_diameters(parachutes: list[dict[str, Any]], areas: dict[str, float],
 # The rocket-log model where the card lists no effects: the air's vertical motion (an
 # Ornstein-Uhlenbeck process with a 1 m/s prior, knots every 4 s: a rocket's descent rate
 # of metres per second is moved by the air as much as by its canopy), the canopies' drag on
-# a rigid riser, and the altimeter with its bias and lag; the other sensors' effects where
-# the folder has them.
+# a rigid riser, the altimeter, and the other sensors' effects where the folder has them.
+# The altimeter's bias and lag only with a second sensor: against the altimeter alone a
+# bias is the initial altitude and a lag a shift of every event, which no fit can tell.
 ROCKET_EFFECTS: tuple[str | dict[str, Any], ...] = (
     {"effect": "wind_process", "components": ["up"], "knot_s": 4.0, "tau_s": 20.0,
      "sigma_vertical": 1.0},
-    "canopy_inflation", "forebody_drag", "rigid_riser", "baro", "baro_bias", "baro_lag")
+    "canopy_inflation", "forebody_drag", "rigid_riser", "baro")
 ROCKET_SENSOR_EFFECTS = {"gps_altitude": "gps_altitude",
                          "axial_accelerometer": "axial_accelerometer"}
+ALTIMETER_ERRORS = ("baro_bias", "baro_lag")
 # Held opening shape of a canopy deployed near apogee (the effect's default fill constant,
 # linear growth): its fill time n D_o / V_i divides by the small speed at deployment, and
-# no sensor of a rocket log resolves that opening.
+# no sensor of a rocket log resolves that opening.  A later canopy whose opening no
+# accelerometer reads has its shape exponent held (linear growth): the altimeter sees the
+# opening's duration, not the curve's shape.
 HELD_FILL_CONSTANT = 8.0
 HELD_EXPOPEN = 1.0
 MIN_START_WINDOW_S = 2.0  # least half-width of an inflation start's window about its event
@@ -557,24 +623,31 @@ def held_openings(deploy: dict[str, float], events: dict[str, FlightEvent]) -> l
             if top.time - top.sigma - 1.0 <= t <= top.time + DROGUE_WINDOW_S]
 
 
-def rocket_model(block: dict[str, Any], sensor_kinds: list[str], held: list[tuple[str, str]],
+def rocket_model(block: dict[str, Any], sensor_kinds: list[str],
+                 canopies: list[tuple[str, str]], held: list[str],
                  deploy_sigma: dict[str, float]) -> dict[str, Any]:
     """The manifest's model block: the card's where it lists effects; else `ROCKET_EFFECTS`
-    with the sensors' (`sensor_kinds`), each start window at least three of its deployment's
-    sigmas (and `MIN_START_WINDOW_S`), and the opening shape (n, expopen) of the canopies
-    in `held` held (`HELD_FILL_CONSTANT`, `HELD_EXPOPEN`) under the card's own fixes, frees
-    and priors, which win; `held` names each such canopy with its first stage."""
+    with the sensors' (`sensor_kinds`) and, with a second sensor, the altimeter's errors;
+    each start window at least three of its deployment's sigmas (and `MIN_START_WINDOW_S`);
+    the opening shape (n, expopen) of the canopies named in `held` held at
+    `HELD_FILL_CONSTANT`, `HELD_EXPOPEN`, and without an accelerometer every canopy's
+    expopen (`canopies`: each canopy's name and first stage); the card's own fixes, frees
+    and priors win."""
     if "effects" in block:
         return block
     window = max(MIN_START_WINDOW_S, *(3.0 * s for s in deploy_sigma.values()))
     effects = [{"effect": "canopy_inflation", "start_window": round(window, 3)}
                if e == "canopy_inflation" else e for e in ROCKET_EFFECTS]
-    effects += [ROCKET_SENSOR_EFFECTS[k] for k in dict.fromkeys(sensor_kinds)
-                if k in ROCKET_SENSOR_EFFECTS]
+    others = [ROCKET_SENSOR_EFFECTS[k] for k in dict.fromkeys(sensor_kinds)
+              if k in ROCKET_SENSOR_EFFECTS]
+    effects += [*(ALTIMETER_ERRORS if others else ()), *others]
     fix: dict[str, Any] = {}
-    for name, stage in held:
-        fix[f"n[{name},{stage}]"] = HELD_FILL_CONSTANT
-        fix[f"expopen[{name},{stage}]"] = HELD_EXPOPEN
+    accelerometer = "axial_accelerometer" in sensor_kinds
+    for name, stage in canopies:
+        if name in held:
+            fix[f"n[{name},{stage}]"] = HELD_FILL_CONSTANT
+        if name in held or not accelerometer:
+            fix[f"expopen[{name},{stage}]"] = HELD_EXPOPEN
     return {**block, "effects": effects, "fix": {**fix, **block.get("fix", {})}}
 
 
@@ -659,7 +732,11 @@ def card_events(card: FlightCard, baro: pd.DataFrame, pad_altitude: float,
                              f"reads {float(after.min()) if after.size else float('nan'):.1f}"
                              " m at the lowest")
         k = int(below[0])
-        frac = (h[k - 1] - height) / (h[k - 1] - h[k]) if h[k - 1] != h[k] else 1.0
+        if not h[k - 1] > height:
+            raise InputError(card.source, f"{field_name}.altitude", f"a height below apogee, "
+                             f"which the log reads {float(np.max(h)):.1f} m above the pad; got "
+                             f"{height:.1f} m")
+        frac = (h[k - 1] - height) / (h[k - 1] - h[k])
         out[name] = FlightEvent(float(t[k - 1] + frac * (t[k] - t[k - 1])), sigma,
                                 f"the card: the {height:.0f} m crossing")
     return out
@@ -667,15 +744,16 @@ def card_events(card: FlightCard, baro: pd.DataFrame, pad_altitude: float,
 
 def flight_events(record: FlightRecord) -> tuple[dict[str, FlightEvent], list[str]]:
     """The record's flight events with their sigmas: its logged states (sigma
-    `EVENT_SIGMA_S`) where it has them, else those `detect_events` finds; touchdown
-    (``landed``) always detected from the data, never taken from a state or the log's
-    end.  Notes say what could not be found."""
+    `EVENT_SIGMA_S`) where it has them, with apogee from the altimeter where they hold
+    none, else those `detect_events` finds; touchdown (``landed``) always detected from the
+    data, never taken from a state or the log's end.  Notes say what could not be found."""
     detected, notes = detect_events(record.samples)
     if record.states:
         events = {name: FlightEvent(t, EVENT_SIGMA_S, "flight state")
                   for name, t in record.states.items() if name != "landed"}
-        if "landed" in detected:
-            events["landed"] = detected["landed"]
+        for name in ("apogee", "landed"):  # the altimeter's, where the log logged no such state
+            if name in detected and name not in events:
+                events[name] = detected[name]
         notes = [n for n in notes if "touchdown" in n]
     else:
         events = detected
@@ -776,6 +854,13 @@ def import_flight(log: FlightRecord | AltusLog, card: FlightCard, out: str | Pat
         lapse = lapse_fit[0]
     else:
         lapse = _si(lapse_spec, "lapse_rate", card.source, "site.lapse_rate")
+        if not 0.0 < lapse <= LAPSE_BOUNDS_K_M[1]:
+            raise InputError(card.source, "site.lapse_rate", f"a lapse rate above 0 and at "
+                             f"most the dry adiabat's {1e3 * LAPSE_BOUNDS_K_M[1]:g} K/km (or "
+                             f"'gps'); got {1e3 * lapse:g} K/km")
+        if record.has_gps_altitude:
+            notes.append("the GNSS altitudes are not fitted: the card's lapse rate is given "
+                         "('gps' fits it to them and fits them)")
     site = SiteAtmosphere(elevation, p0, t0, lapse)
     # One altimeter sigma per canopy phase, from the scatter about the local trend; a later
     # phase's from the time its descent has settled.
@@ -786,13 +871,28 @@ def import_flight(log: FlightRecord | AltusLog, card: FlightCard, out: str | Pat
     parachutes = [dict(c) for c in card.parachutes]
     notes += canopy_diameters(parachutes, descent_drag_areas(deploy, parachutes, card, site,
                                                              t_baro, h_baro, t_end), card)
-    baro_sigmas = []
-    for a, b in pairwise(bounds):
-        part = baro_phase[(baro_phase["time"] >= a) & (baro_phase["time"] <= b)]
-        if len(part) < MIN_DESCENT_SAMPLES:  # too short a segment: the whole phase's scatter
-            part = baro_phase
-        baro_sigmas.append(max(MIN_BARO_SIGMA_M, scatter_sigma(part["time"].to_numpy(),
-                                                               part["altitude"].to_numpy())))
+    # The altimeter's noise is correlated over a fraction of a second (a recorder's filter,
+    # the static port's pressure swings as the vehicle swings): each canopy phase's samples
+    # are averaged in blocks as long as that correlation (`independent_blocks`), so that the
+    # fit weighs what the altimeter measured independently, and each sigma is the scatter of
+    # the block means.
+    edges = [lo, *bounds[1:-1], hi + 1.0]
+    parts, baro_sigmas = [], []
+    for (a, b), name, steady_end in zip(pairwise(edges), sorted(deploy, key=deploy.__getitem__),
+                                        [*starts[1:], np.inf], strict=True):
+        part = baro_phase[(baro_phase["time"] >= a) & (baro_phase["time"] < b)]
+        blocks, size = independent_blocks(part[["time", "altitude"]], steady_end)
+        parts.append(blocks)
+        if size > 1:
+            seconds = size * sample_interval(part["time"].to_numpy())
+            notes.append(f"altimeter under the {name} (from {a:.2f} s): noise correlated over "
+                         f"{size} samples ({seconds:.2f} s), averaged in blocks of that "
+                         f"length: {len(part)} samples -> {len(blocks)}")
+        if len(blocks) < MIN_DESCENT_SAMPLES:  # too short a segment: the whole phase's
+            blocks = independent_blocks(baro_phase[["time", "altitude"]])[0]
+        baro_sigmas.append(max(MIN_BARO_SIGMA_M, scatter_sigma(blocks["time"].to_numpy(),
+                                                               blocks["altitude"].to_numpy())))
+    baro_blocks = pd.concat(parts, ignore_index=True)
 
     fixes_phase = fixes[(fixes["time"] >= lo) & (fixes["time"] <= hi)]
     accel = samples[["time", "acceleration"]].dropna()
@@ -828,7 +928,8 @@ def import_flight(log: FlightRecord | AltusLog, card: FlightCard, out: str | Pat
     for (t_charge, name), t_settled, t_open, t_next in zip(
             later, bounds[1:-1], opening_ends, nexts, strict=True):
         ceiling = drag_ceiling(t_baro, h_baro, density, t_charge, t_settled, t_next)
-        if ceiling is None:
+        opening = (accel["time"] >= t_charge) & (accel["time"] < t_open)
+        if ceiling is None or not opening.any():  # no accelerometer reading of the opening
             continue
         above = ((accel["time"] >= t_charge) & (accel["time"] < t_open)
                  & (accel["acceleration"] > ceiling)).to_numpy()
@@ -860,7 +961,7 @@ def import_flight(log: FlightRecord | AltusLog, card: FlightCard, out: str | Pat
         accel_sigmas.append(max(MIN_ACCEL_SIGMA, scatter_rms(
             part["time"].to_numpy(), part["acceleration"].to_numpy()) if len(part) > 10
             else second_difference_sigma(accel["acceleration"].to_numpy())))
-    files = {"baro.csv": baro_phase[["time", "altitude"]]}
+    files = {"baro.csv": baro_blocks}
     sensors: list[dict[str, Any]] = [
         {"name": "baro", "kind": "baro", "file": "baro.csv",
          "columns": {"time": "s", "altitude": "m"},
@@ -911,7 +1012,8 @@ def import_flight(log: FlightRecord | AltusLog, card: FlightCard, out: str | Pat
                   "end": {"value": round(t_end, 3), "unit": "s"}},
         "model": rocket_model(card.model, [s["kind"] for s in sensors],
                               [(c["name"], c["stages"][0]) for c in parachutes
-                               if c["name"] in held_openings(deploy, events)], deploy_sigma),
+                               if not c.get("open_at_start")],
+                              held_openings(deploy, events), deploy_sigma),
     }
     validate_manifest(manifest, card.source)
     summary = ImportSummary(
