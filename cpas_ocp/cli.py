@@ -43,7 +43,7 @@ import time
 import traceback
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from cpas_ocp import interrupts
 from cpas_ocp.errors import InputError, NotAResult, SolverFailure
@@ -252,10 +252,12 @@ def _parser() -> argparse.ArgumentParser:
     s = sub.add_parser("import", help="a rocketry flight log into a test folder: Altus "
                                       "Metrum, CATS, or any CSV through a column map")
     s.add_argument("log", type=Path, help="the log file (for cats: the export folder)")
-    source = s.add_mutually_exclusive_group(required=True)
-    source.add_argument("--format", metavar="NAME", help="a built-in format: altus, cats")
+    source = s.add_mutually_exclusive_group()
+    source.add_argument("--format", metavar="NAME", help="a built-in format: altus, cats "
+                                                          "(default: the card's data.format)")
     source.add_argument("--columns", type=Path, metavar="MAP.json",
-                        help="a column map: which column holds what, in which unit")
+                        help="a column map: which column holds what, in which unit (default: "
+                             "the card's data.columns)")
     _card_options(s)
     s.set_defaults(run=_import)
 
@@ -642,7 +644,16 @@ def _import(args: argparse.Namespace) -> int:
     from cpas_ocp.io.flight_log import import_flight, load_card
     from cpas_ocp.io.log_formats import read_flight_log
     card = load_card(args.card)
-    record = read_flight_log(args.log, args.format, args.columns)
+    log_format, columns = args.format, args.columns
+    if log_format is None and columns is None:  # the card says how its logs are read
+        if card.data_format is None and card.data_columns is None:
+            raise InputError("(command line)", "--format/--columns", "one of the two (a "
+                             "built-in format, or a column map), or a card whose data block "
+                             "gives its logs' format or columns")
+        log_format = card.data_format
+        columns = card.data_columns if not isinstance(card.data_columns, str) \
+            else _beside(card) / card.data_columns
+    record = read_flight_log(args.log, log_format, columns, f"{card.source}: data.columns")
     summary = import_flight(record, card, args.out)
     print(summary.text())
     print(f"test folder written to {args.out}")
@@ -652,9 +663,9 @@ def _import(args: argparse.Namespace) -> int:
 def _flight(args: argparse.Namespace) -> int:
     from cpas_ocp.io.flight_log import load_card
     card = load_card(args.card)
-    beside = Path(card.source).parent if Path(card.source).suffix == ".json" \
-        and Path(card.source).is_file() else Path("../shared/data")
-    data = args.data if args.data is not None else beside / card.data_folder
+    beside = _beside(card)
+    data = args.data if args.data is not None else (
+        beside if _is_file(card) else Path("../shared/data")) / card.data_folder
     logs = args.log or list(card.logs)
     if not logs:
         raise InputError(card.source, "data.logs", "the flight logs to reconstruct (or give "
@@ -667,7 +678,8 @@ def _flight(args: argparse.Namespace) -> int:
     log_format, columns = args.format, args.columns
     if log_format is None and columns is None:
         log_format = card.data_format
-        columns = beside / card.data_columns if card.data_columns is not None else None
+        columns = beside / card.data_columns if isinstance(card.data_columns, str) \
+            else card.data_columns
         if log_format is None and columns is None:
             log_format = "altus"
     recorders = [_flight_log(args, card, data / name, log_format, columns) for name in logs]
@@ -681,8 +693,19 @@ def _flight(args: argparse.Namespace) -> int:
     return 0
 
 
+def _is_file(card: FlightCard) -> bool:
+    """Whether `card` was read from a card file (not a built-in card)."""
+    return Path(card.source).suffix == ".json" and Path(card.source).is_file()
+
+
+def _beside(card: FlightCard) -> Path:
+    """The folder a card's relative paths start from: a card file's own folder (the
+    working folder for a built-in card)."""
+    return Path(card.source).parent if _is_file(card) else Path()
+
+
 def _flight_log(args: argparse.Namespace, card: FlightCard, log: Path, log_format: str | None,
-                columns: Path | None) -> RecorderEstimates:
+                columns: Path | dict[str, Any] | None) -> RecorderEstimates:
     """Import, reconstruct, diagnose and compare one log of the `flight` command (a function
     of its own so that one log's fits and refits are freed before the next log's): its
     drag areas and start times, for the recorders' comparison."""
@@ -696,7 +719,7 @@ def _flight_log(args: argparse.Namespace, card: FlightCard, log: Path, log_forma
     from cpas_ocp.reports.flight_report import air_motion_text, flight_text, held_opening_profiles
     folder = args.out / log.stem
     print(f"== {log.name}: import", flush=True)
-    record = read_flight_log(log, log_format, columns)
+    record = read_flight_log(log, log_format, columns, f"{card.source}: data.columns")
     summary = import_flight(record, card, folder / "test")
     print(summary.text())
     test = load_test(folder / "test")

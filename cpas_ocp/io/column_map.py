@@ -65,14 +65,19 @@ def load_column_map(path: str | Path) -> dict[str, Any]:
     """The column map in `path`, validated against its schema (InputError on the first
     field that breaks it)."""
     path = Path(path)
-    raw = read_json(path, "an existing column-map JSON file")
-    validate_block(raw, "column_map.schema.json", str(path))
+    return check_column_map(read_json(path, "an existing column-map JSON file"), str(path))
+
+
+def check_column_map(raw: dict[str, Any], source: str) -> dict[str, Any]:
+    """`raw` as a column map, validated against its schema and the rules the schema cannot
+    state; InputError naming `source` and the field."""
+    validate_block(raw, "column_map.schema.json", source)
     if ("pressure" in raw) == ("altitude" in raw):
-        raise InputError(str(path), "pressure/altitude", "exactly one of the two: the "
+        raise InputError(source, "pressure/altitude", "exactly one of the two: the "
                          "barometer's pressure column, or the altimeter's altitude column")
     accel = raw.get("acceleration")
     if accel is not None and ("column" in accel) == ("axes" in accel):
-        raise InputError(str(path), "acceleration", "exactly one of 'column' (the axial "
+        raise InputError(source, "acceleration", "exactly one of 'column' (the axial "
                          "reading) or 'axes' with 'axis' (a two- or three-axis accelerometer)")
     return raw
 

@@ -156,7 +156,8 @@ class FlightCard:
     source: str
     events: dict[str, dict[str, Any]] = field(default_factory=dict)
     data_format: str | None = None  # the logs' built-in format, for `flight`
-    data_columns: str | None = None  # or their column map (relative to the card's folder)
+    # or their column map: a file relative to the card's folder, or the map inline
+    data_columns: str | dict[str, Any] | None = None
 
 
 def card_from_dict(raw: dict[str, Any], source: str) -> FlightCard:
