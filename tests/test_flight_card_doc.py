@@ -16,7 +16,8 @@ true as printed.
   beside a log in that layout, flown by the seeded generator of
   `tests/test_rocket_log_import.py`, and the page's `cpas-ocp import` command exits 0 with
   a folder that loads.  The main of (d) is the card's crossing, with the card's sigma.
-  No reconstruction: a few seconds.
+  The Altus Metrum (a) and CATS (b) examples are imported the same way from the
+  generator's AltOS export and CATS export folder.  No reconstruction: a few seconds.
 """
 
 from __future__ import annotations
@@ -213,11 +214,14 @@ def place(tag: str, folder: Path) -> tuple[list[str], dict[str, Any], dict[str, 
     """The example's card and map written under the names its command gives; (argv with
     paths under `folder`, card, map, log path)."""
     argv = command(tag)
-    card_text, map_text = example("json card", tag), example("json map", tag)
+    card_text = example("json card", tag)
+    map_text = example("json map", tag) if "--columns" in argv else "{}"
     log = folder / argv[1]
     (folder / argv[argv.index("--card") + 1]).write_text(card_text)
-    (folder / argv[argv.index("--columns") + 1]).write_text(map_text)
-    argv = [a if a.startswith("-") or i == 0 else str(folder / a) for i, a in enumerate(argv)]
+    if "--columns" in argv:
+        (folder / argv[argv.index("--columns") + 1]).write_text(map_text)
+    keep = {0, argv.index("--format") + 1} if "--format" in argv else {0}  # import, altus
+    argv = [a if a.startswith("-") or i in keep else str(folder / a) for i, a in enumerate(argv)]
     return argv, json.loads(card_text), json.loads(map_text), log
 
 
@@ -345,3 +349,20 @@ def test_example_d_imports_as_printed_with_the_cards_main(tmp_path: Path) -> Non
                for n in report["notes"])
     assert report["lapse_fit"] is not None
     assert report["dropped"]["gnss_fixes_with_too_few_satellites"] > 0
+
+
+def test_examples_a_and_b_import_as_printed(tmp_path: Path) -> None:
+    """The Altus Metrum and CATS cards, with the generator's AltOS export and CATS export
+    folder under the names the commands give: both import; the card's apogee event in (a)
+    holds the drogue's opening in the rocket default model (an AltOS log has states, so
+    no apogee of its own), and (b)'s canopies get their diameters from the descent."""
+    flight = fly()
+    argv, _, _, log = place("a", tmp_path)
+    generator.write_altus(flight, log, seed=23)
+    import_example(argv)
+    manifest = json.loads((Path(argv[argv.index("--out") + 1]) / "manifest.json").read_text())
+    assert set(manifest["model"]["fix"]) == {"n[drogue,open]", "expopen[drogue,open]"}
+    argv, _, _, log = place("b", tmp_path)
+    generator.write_cats(flight, log, seed=24)
+    report = import_example(argv)
+    assert sum(": no diameter in the card;" in n for n in report["notes"]) == 2
