@@ -195,14 +195,14 @@ def test_a_value_on_or_within_one_sigma_of_a_bound_is_flagged() -> None:
                           parameters={names[0]: 5.9993, names[1]: 9.9, names[2]: 0.01},
                           guess={}, test=None)
     cov = Covariance(names, np.diag([84.0, 2.3, 0.0]) ** 2, [names[2]], 1.0)
-    assert bound_flag(fit, cov, names[0]) == "within 1σ of its guessed upper bound (6)"
+    assert bound_flag(fit, cov, names[0]) == "within 1σ of its upper bound (6, guessed)"
     assert bound_flag(fit, cov, names[1]) == ""
-    assert bound_flag(fit, cov, names[2]) == "on its physical lower bound (0.01)"
+    assert bound_flag(fit, cov, names[2]) == "on its lower bound (0.01, physical)"
     fit.parameters[names[0]] = 6.0
-    assert bound_flag(fit, None, names[0]) == "on its guessed upper bound (6)"
+    assert bound_flag(fit, None, names[0]) == "on its upper bound (6, guessed)"
     rows = parameter_rows(fit, cov, DisplayUnits("si"))
-    assert [r.flag for r in rows] == ["on its guessed upper bound (6)", "",
-                                      "on its physical lower bound (0.01)"]
+    assert [r.flag for r in rows] == ["on its upper bound (6, guessed)", "",
+                                      "on its lower bound (0.01, physical)"]
 
 
 # --- the worst window ------------------------------------------------------------------------
@@ -301,7 +301,7 @@ def test_a_parameter_on_a_guessed_bound_is_flagged_in_every_output(problem_folde
     out = tmp_path / "out"
     assert main(["reconstruct", str(test), "--out", str(out)]) == 4
     captured = capsys.readouterr()
-    flag = "on its guessed upper bound"
+    flag = "on its upper bound"
     line = next(s for s in captured.out.splitlines() if s.startswith("CdS[main,stage2]"))
     assert flag in line
     table = pd.read_csv(out / "parameters.csv").set_index("parameter")

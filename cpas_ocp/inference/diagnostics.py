@@ -3,6 +3,7 @@ phase window (deployment, inflation, steady flight of each canopy)."""
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -90,7 +91,7 @@ def _windows(r: SensorResidual, width: float) -> list[Window]:
     blocks = np.array_split(np.arange(t.size), max(1, t.size // n))
     runs = list(blocks)
     runs += [np.concatenate([a[a.size // 2:], b[:b.size // 2]])
-             for a, b in zip(blocks[:-1], blocks[1:], strict=True)]
+             for a, b in itertools.pairwise(blocks)]
     return [Window(r.sensor, r.channel, float(t[i[0]]), float(t[i[-1]]),
                    float(np.sqrt(z2[i].mean())), int(i.size)) for i in runs]
 

@@ -79,9 +79,9 @@ def sensor_spans(fit: Fit, windows: Sequence[PhaseWindow]) -> dict[str, list[Spa
 
 def bound_flag(fit: Fit, cov: Covariance | None, name: str) -> str:
     """Where a free parameter's estimate stands against its bounds, or '' where clear of them:
-    "on its guessed upper bound (6)" where the fit left it on a bound (within the solver's
+    "on its upper bound (6, guessed)" where the fit left it on a bound (within the solver's
     tolerance, `Parameter.held_side`, or held there by the covariance), "within 1σ of its
-    physical lower bound (0.001)" where its sigma reaches past the bound (a 6 ± 84 on an
+    lower bound (0.001, physical)" where its sigma reaches past the bound (a 6 ± 84 on an
     upper bound of 6: the interval means nothing there).  Bounds in SI."""
     prm, value = fit.model.parameter(name), fit.parameters[name]
     side = prm.held_side(value)
@@ -95,7 +95,7 @@ def bound_flag(fit: Fit, cov: Covariance | None, name: str) -> str:
             return ""
         side, where = near, "within 1σ of"
     kind = "physical" if prm.is_physical(side) else "guessed"
-    return f"{where} its {kind} {side} bound ({prm.lower if side == 'lower' else prm.upper:.6g})"
+    return f"{where} its {side} bound ({prm.lower if side == 'lower' else prm.upper:.6g}, {kind})"
 
 
 def parameter_flag(fit: Fit, cov: Covariance | None, name: str) -> str:
