@@ -358,7 +358,8 @@ class Claim:
 
 def overstated_text(ratio: float, low_p_value: float) -> str:
     """The sentence for a chi^2/dof far below 1."""
-    return (f"chi-square/dof = {ratio:.3g} (P(chi-square this small) = {low_p_value:.2g}): "
+    chance = f"= {low_p_value:.2g}" if low_p_value > 0.0 else "< 1e-300"
+    return (f"chi-square/dof = {ratio:.3g} (P(chi-square this small) {chance}): "
             f"the stated sigmas are too large by about 1/sqrt(chi-square/dof) = "
             f"{1.0 / np.sqrt(max(ratio, 1e-300)):.1f}; the uncertainties are overstated "
             f"by that factor")
