@@ -77,8 +77,7 @@ def run(folder: Path, truth: dict, checked: bool) -> str:
     wall = time.perf_counter() - t0
     err_s, err_z = start_errors(est, fit, truth)
     verdict = ("converged (reported as a result)" if claim is None else
-               "result" if claim.is_result and claim.fits_noise else
-               "result with misfit" if claim.is_result else "NOT A RESULT (exit 4)")
+               claim.verdict() + ("" if claim.is_result else " (exit 4)"))
     moves = len({m.parameter for m in claim.moves}) if claim else 0
     rounds = len({(m.chi_square_before) for m in claim.moves}) if claim else 0
     return (f"{verdict:32s} chi2/dof {fit.chi_square / fit.dof:7.2f}  windows moved {moves} "

@@ -12,8 +12,10 @@
     comp = rec.compare("model.json")  # this model against another, nested or not
 
 A fit that did not converge raises `SolverFailure` (its status and iteration
-count), never a result; a fit that converged but presses a guessed bound is
-returned with `rec.is_result` False and `rec.problems` saying why.
+count), never a result; a fit that converged but is not a result (a guessed bound
+pressed, chi-square/dof beyond 10, a process beyond its prior, a drag area
+undetermined: `result_claim`) is returned with `rec.is_result` False and
+`rec.problems` saying why.
 """
 
 from __future__ import annotations
@@ -34,7 +36,7 @@ from cpas_ocp.estimation.uncertainty import Covariance
 from cpas_ocp.inference.diagnostics import window_statistics, worst_of
 from cpas_ocp.inference.model_comparison import Comparison, compare
 from cpas_ocp.inference.phase_windows import phase_windows
-from cpas_ocp.inference.result_claim import Claim
+from cpas_ocp.inference.result_claim import Claim, check_drag_areas
 from cpas_ocp.io.flight_test import FlightTest, load_test
 from cpas_ocp.io.model_spec import ModelSpec, load_model_file, spec_of_test
 from cpas_ocp.io.problems import load_problem
@@ -42,6 +44,7 @@ from cpas_ocp.physics.effects.base import Effect
 from cpas_ocp.physics.effects.registry import EffectType, load_plugins
 from cpas_ocp.reports.discrepancy_report import write_comparison, write_diagnosis, write_discovery
 from cpas_ocp.reports.report import write_report
+from cpas_ocp.reports.report_data import bound_flag
 
 __all__ = ["Reconstruction", "load_model", "load_test", "reconstruct", "simulate"]
 
@@ -77,7 +80,8 @@ def reconstruct(test: FlightTest | str | Path, model: ModelSpec | str | Path | N
     spec = model if isinstance(model, ModelSpec) else (
         spec_of_test(test) if model is None else load_model_file(model, effects))
     est, fit, claim = solve_checked(Estimator(test, spec))
-    return Reconstruction(est, fit, est.covariance(fit, rescale_sigmas), claim, effects)
+    cov = est.covariance(fit, rescale_sigmas)
+    return Reconstruction(est, fit, cov, check_drag_areas(claim, fit, cov), effects)
 
 
 @dataclass
@@ -97,8 +101,7 @@ class Reconstruction:
 
     @property
     def is_result(self) -> bool:
-        """Whether the fit may be read as a result (no free parameter pressed against a
-        bound that was only a guess)."""
+        """Whether the fit may be read as a result (`result_claim.Claim.is_result`)."""
         return self.claim.is_result
 
     @property
@@ -108,8 +111,9 @@ class Reconstruction:
 
     @property
     def parameters(self) -> pd.DataFrame:
-        """The free parameters: value, 1 sigma, 95 % interval (value -+ 1.96 sigma) and unit,
-        SI, indexed by name."""
+        """The free parameters: value, 1 sigma, 95 % interval (value -+ 1.96 sigma), unit and
+        where the value stands against its bounds (`report_data.bound_flag`, '' where
+        clear), SI, indexed by name."""
         model = self.estimator.model
         rows = []
         for name in self.fit.free:
@@ -117,7 +121,8 @@ class Reconstruction:
             sigma = self.covariance.std.get(name, np.nan)
             rows.append({"parameter": name, "value": value, "sigma": sigma,
                          "low_95": value - 1.96 * sigma, "high_95": value + 1.96 * sigma,
-                         "unit": model.parameter(name).unit})
+                         "unit": model.parameter(name).unit,
+                         "bound": bound_flag(self.fit, self.covariance, name)})
         return pd.DataFrame(rows).set_index("parameter")
 
     @property

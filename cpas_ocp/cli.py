@@ -27,9 +27,10 @@ file); 2 bad input (one line naming file, field and expectation); 3 the solver
 did not converge (status and iteration count; also a campaign none of whose
 tests gave a result); 4 the fit converged but is not a result: the data press
 parameters against bounds that are guesses, not physical limits, even after
-the start windows were moved (the report is written and says why, see
-`result_claim`); 130 and 143 interrupted by SIGINT (Ctrl-C) or SIGTERM,
-with nothing written.
+the start windows were moved; or chi-square/dof beyond 10; or a process (the
+air's motion) beyond 5 sigma of its prior; or a drag area the data do not
+determine (the report is written and says why, see `result_claim`); 130 and
+143 interrupted by SIGINT (Ctrl-C) or SIGTERM, with nothing written.
 """
 
 from __future__ import annotations
@@ -611,6 +612,7 @@ def _montecarlo(args: argparse.Namespace) -> int:
     )
     from cpas_ocp.estimation.estimator import Estimator
     from cpas_ocp.inference.continuation import solve_checked
+    from cpas_ocp.inference.result_claim import check_drag_areas
     from cpas_ocp.io.flight_test import load_test
     from cpas_ocp.io.output_folder import atomic_folder
     from cpas_ocp.reports.study_reports import write_monte_carlo
@@ -622,6 +624,7 @@ def _montecarlo(args: argparse.Namespace) -> int:
         check_columns(est.model, stages)
         print(f"reconstructing {test.name}: {est.size_text()} ...", flush=True)
         est, fit, claim = solve_checked(est, progress=True)
+        check_drag_areas(claim, fit, est.covariance(fit))
         if not claim.is_result:  # no cases are flown through a fit that is not a result
             raise NotAResult(f"the fit of {test.name} is not a result: {claim.problems()[0]}")
         print(f"flying {sum(len(s.cases) for s in stages):,} cases of "
@@ -855,6 +858,7 @@ def _fit_and_covariance(est: Estimator, args: argparse.Namespace
     the estimator returned is the one that gave the fit), and the covariance the command
     line asks for (a warning where the data leave a parameter combination undetermined)."""
     from cpas_ocp.inference.continuation import solve_checked
+    from cpas_ocp.inference.result_claim import check_drag_areas
     if getattr(args, "wind_intensity", None):
         from cpas_ocp.inference.process_intensity import choose_intensity
         from cpas_ocp.inference.result_claim import check_claim
@@ -871,6 +875,7 @@ def _fit_and_covariance(est: Estimator, args: argparse.Namespace
     if args.hessian == "exact":
         print("exact-Hessian covariance ...", flush=True)
     cov = est.covariance(fit, args.rescale_sigmas, args.hessian)
+    check_drag_areas(claim, fit, cov)
     if cov.undetermined:
         print(f"warning: the data do not determine {', '.join(cov.undetermined)} "
               f"(see the identifiability lines)", file=sys.stderr)

@@ -84,6 +84,7 @@ def reconstruct_folder(folder: str) -> TestOutcome:
     top-level function, run in a worker process)."""
     from cpas_ocp.estimation.estimator import Estimator
     from cpas_ocp.inference.continuation import solve_checked
+    from cpas_ocp.inference.result_claim import check_drag_areas
     from cpas_ocp.io.flight_test import load_test
     t0 = time.perf_counter()
     name = Path(folder).name
@@ -91,10 +92,10 @@ def reconstruct_folder(folder: str) -> TestOutcome:
         test = load_test(folder)
         name = test.name
         est, fit, claim = solve_checked(Estimator(test))
-        if not claim.is_result:
+        cov = est.covariance(fit)
+        if not check_drag_areas(claim, fit, cov).is_result:
             return TestOutcome(folder, name, "claim", "; ".join(claim.problems()),
                                wall_s=time.perf_counter() - t0)
-        cov = est.covariance(fit)
     except InputError as exc:
         return TestOutcome(folder, name, "input", str(exc), wall_s=time.perf_counter() - t0)
     except SolverFailure as exc:

@@ -1,7 +1,8 @@
 """Whether a converged fit is a result: no free parameter pressed against a bound that was
-only guessed, and a chi-square the stated noise allows.
+only guessed, a chi-square some honest reading of the noise allows, every process within
+its prior, and every drag area determined.
 
-A fit that Ipopt calls converged is a claim about the test.  Two things
+A fit that Ipopt calls converged is a claim about the test.  These things
 make it less than one.
 
 *A guessed bound the data press against.*  Some bounds are physical (an
@@ -31,8 +32,61 @@ that misfits its noise by 3x is not flagged for the misfit alone.
 *A chi-square beyond the noise.*  P(chi^2_dof > chi^2) below ALPHA says the
 model or the stated noise is wrong somewhere; the covariance's sigmas then
 assume a noise the residuals do not show and are too small by about
-sqrt(chi^2/dof).  This is reported with every fit (real flights misfit
-their noise: Prometheus at chi^2/dof 6-9); it is a warning, not a refusal.
+sqrt(chi^2/dof).  Up to MAX_MISFIT this is a warning, not a refusal: real
+flights misfit their noise (Prometheus in still air at chi^2/dof 5.3 and 4.0
+on its two logs, 6-9 before its altimeter's sigma was taken per phase), and
+the quasi-likelihood reading, every sigma scaled by sqrt(chi^2/dof)
+(--rescale-sigmas), still holds where the model error is a modest, roughly
+white addition to the noise.  Beyond it no honest reading of the noise is
+left: chi^2/dof > 10 puts the residuals at more than sqrt(10) = 3.2 times the
+stated sigma, i.e. the model's error is at least sqrt(10 - 1) = 3 times the
+noise on every sample on average.  A sensor's sigma is at worst misjudged by
+a factor of about 2 (a datasheet against the scatter about a local trend),
+and a factor of 3.2 on every sample is a structure the model lacks (a canopy
+that opened late, a process the air had), which the fit's parameters absorb:
+their values, not only their sigmas, are then the model's compensation.  So
+a fit beyond MAX_MISFIT is not a result (the sentence names the sensor that
+misfits most).  The limit is not a tail probability: with thousands of
+samples P(chi^2_dof > chi^2) is below any level at chi^2/dof 1.2, which
+would refuse every real flight.
+
+*A chi-square far below the noise.*  chi^2/dof well below 1 says the stated
+sigmas are too large by about 1/sqrt(chi^2/dof), and every uncertainty with
+them.  It is said (not refused) where both P(chi^2_dof < chi^2) < ALPHA (the
+shortfall is not chance: with 100 dof that is chi^2/dof < 0.62, with 1000 <
+0.87) and chi^2/dof < LOW_MISFIT = 0.5 (the sigmas overstated by more than
+sqrt(2), so a stated 95 % interval holds at least 99.4 %): a well-fitted
+process prior and a few hundred samples give chi^2/dof 0.90-0.97 on
+simulated tests whose sigmas are right (`rocket_gusts`, `drogue` through
+gusts), which the tail alone could flag.
+
+*A process beyond its prior.*  An effect's stochastic process (`wind_process`:
+the air's vertical motion, knots with a Gauss-Markov prior of stated sigma)
+enters chi-square through its standardised innovations (`Effect.penalties`).
+Where the data put a knot more than PROCESS_SIGMAS = 5 prior sigmas from zero
+(`Effect.process_priors`), or an innovation beyond 5 sigma, the process is not
+the stated one: it has absorbed something the model lacks (knots at -18 and
+-21 m/s under a prior of 1 m/s, taking up a main canopy that opened 6 s late).
+Five sigma: a Gaussian prior puts a knot there with probability 5.7e-7, so
+among the hundred knots (and as many innovations) of a long descent a fit
+whose prior is right is refused about once in 9,000.  The whole block departs
+where its chi-square is beyond the tail a single 5-sigma deviate has
+(two-sided, 5.7e-7) and also beyond MAX_MISFIT per innovation, the standard a
+sensor's residuals are held to: the prior's sigma would have to be more than
+3.2 times the stated one.  The tail alone is not enough: on the Prometheus
+TeleMega log the card's 1 m/s prior gives 50 innovations of chi-square 118
+(P = 2.0e-7, normalised RMS 1.54, no knot beyond 2.7 sigma), the air a little
+livelier than stated, which the evidence puts at 2 m/s (`--wind-intensity`);
+a sensor's sigma misjudged by that factor is a misfit to state, not a wrong
+fit, and so is a prior's.  A block significant at ALPHA that does not depart
+is said as such a misfit.  A departure is not a result: the sentence names the
+process, the knot's time and its value in sigma.
+
+*An undetermined drag area.*  A drag area (CdS) is the product a reconstruction
+is for.  Where the covariance finds it undetermined (in a combination the data
+do not fix), leaves it on a bound, or gives it a sigma (scaled by
+sqrt(chi^2/dof) where that exceeds 1) larger than its value, the data have not
+measured it, whatever its value: not a result (`check_drag_areas`).
 
 A fit that is not a plain result (a guessed bound pressed, or a chi-square
 beyond the noise) with start times at their windows' edges is retried
@@ -49,8 +103,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.stats import chi2 as chi2_law
+from scipy.stats import norm
 
 from cpas_ocp.estimation.estimator import Estimator, Fit
+from cpas_ocp.estimation.uncertainty import Covariance
+from cpas_ocp.inference.diagnostics import sensor_summary
 from cpas_ocp.inference.hypothesis_tests import chi_bar_square_sf, cone_statistic
 from cpas_ocp.inference.restarts import Restart
 from cpas_ocp.io.model_spec import ModelSpec
@@ -69,6 +126,16 @@ MAX_WINDOW_MOVES = 3
 # A start time within this fraction of its window's half-width from a guessed edge is at
 # that edge, for a fit that is not a plain result (`moved_windows`).
 EDGE_FRACTION = 0.1
+# chi^2/dof beyond which no reading of the noise is honest: the fit is not a result.
+MAX_MISFIT = 10.0
+# chi^2/dof below which (where also significant at ALPHA) the sigmas are said overstated.
+LOW_MISFIT = 0.5
+# Prior sigmas beyond which a process parameter or innovation departs from its prior, and
+# the tail probability of that (two-sided standard normal) for a whole prior block.
+PROCESS_SIGMAS = 5.0
+PROCESS_TAIL = float(2.0 * norm.sf(PROCESS_SIGMAS))
+# The drag areas a reconstruction is for (the steady drag area of each canopy and stage).
+DRAG_AREA = "CdS"
 
 
 @dataclass(frozen=True)
@@ -105,10 +172,39 @@ class WindowMove(Restart):
                 f"(chi-square {self.chi_square_before:.1f} -> {self.chi_square_after:.1f})")
 
 
+@dataclass(frozen=True)
+class ProcessDeparture:
+    """Where an effect's stochastic process departs from its stated prior: a knot whose
+    value is `sigmas` prior sigmas from zero (`kind` "knot", at time `t` s), an
+    innovation as large (`kind` "innovation"), or the prior block's chi-square
+    (`kind` "block": `sigmas` is chi-square, `count` its terms)."""
+
+    effect: str
+    kind: str
+    name: str
+    t: float
+    sigmas: float
+    value: float = float("nan")
+    unit: str = ""
+    count: int = 0
+
+    def text(self) -> str:
+        if self.kind == "knot":
+            return (f"{self.effect}: {self.name} at t = {self.t:.2f} s is "
+                    f"{self.value:+.3g} {self.unit}, {self.sigmas:+.1f} sigma of its prior")
+        if self.kind == "innovation":
+            return (f"{self.effect}: the innovation of {self.name} at t = {self.t:.2f} s is "
+                    f"{self.sigmas:+.1f} sigma of its prior")
+        return (f"{self.effect}: the {self.count} innovations of {self.name} sum to "
+                f"chi-square {self.sigmas:.1f} (P = {chi2_law.sf(self.sigmas, self.count):.2g},"
+                f" beyond the {PROCESS_TAIL:.2g} of a {PROCESS_SIGMAS:g}-sigma deviate)")
+
+
 @dataclass
 class Claim:
     """What a converged fit may claim: its goodness of fit, the bounds it holds parameters on,
-    the bound test, and any start windows moved to reach it."""
+    the bound test, its processes against their priors, its drag areas against its
+    covariance (`check_drag_areas`), and any start windows moved to reach it."""
 
     chi_square: float
     dof: int
@@ -120,6 +216,17 @@ class Claim:
     alpha: float = ALPHA
     # How the fit was reached beyond one solve (a process intensity chosen by evidence).
     notes: list[str] = field(default_factory=list)
+    # The sensor whose normalised residual RMS is largest, and that RMS ('' without one).
+    worst_sensor: str = ""
+    worst_sensor_rms: float = float("nan")
+    # P(chi^2_dof < chi^2): the lower tail, small where the stated sigmas are too large.
+    low_p_value: float = 1.0
+    # Where a process departs from its prior (`process_departures`).
+    departures: list[ProcessDeparture] = field(default_factory=list)
+    # Drag areas the covariance does not determine, each with why (`check_drag_areas`).
+    undetermined_drag_areas: list[str] = field(default_factory=list)
+    # Process prior blocks beyond their noise that do not depart (`process_misfits`).
+    process_misfits: list[str] = field(default_factory=list)
 
     @property
     def pressed(self) -> list[HeldBound]:
@@ -130,22 +237,45 @@ class Claim:
             [h for h in self.held if not h.physical]
 
     @property
+    def ratio(self) -> float:
+        """chi^2/dof."""
+        return self.chi_square / max(self.dof, 1)
+
+    @property
+    def beyond_noise(self) -> bool:
+        """chi^2/dof beyond MAX_MISFIT: no honest reading of the noise allows the residuals."""
+        return self.ratio > MAX_MISFIT
+
+    @property
     def is_result(self) -> bool:
-        """No guessed bound pressed: the fit is a result (its sigmas may still need the
-        misfit's scaling; see `fits_noise`)."""
-        return not self.pressed
+        """No guessed bound pressed, chi^2/dof within MAX_MISFIT, every process within its
+        prior and every drag area determined: the fit is a result (its sigmas may still
+        need the misfit's scaling; see `fits_noise`)."""
+        return not (self.pressed or self.beyond_noise or self.departures
+                    or self.undetermined_drag_areas)
 
     @property
     def fits_noise(self) -> bool:
         return self.fit_p_value >= self.alpha
 
     @property
+    def overstates_noise(self) -> bool:
+        """chi^2/dof significantly (at `alpha`) and materially (below LOW_MISFIT) under 1:
+        the stated sigmas are too large."""
+        return self.low_p_value < self.alpha and self.ratio < LOW_MISFIT
+
+    @property
     def misfit_factor(self) -> float:
         """sqrt(chi^2/dof): how much larger the residuals are than their stated noise."""
-        return float(np.sqrt(self.chi_square / max(self.dof, 1)))
+        return float(np.sqrt(self.ratio))
+
+    def _worst(self) -> str:
+        return (f"; the worst sensor is {self.worst_sensor} (normalised RMS "
+                f"{self.worst_sensor_rms:.2f})" if self.worst_sensor else "")
 
     def problems(self) -> list[str]:
-        """One line per reason the fit is less than a plain result (empty when none)."""
+        """One line per reason the fit is less than a plain result (empty when none); those
+        that make it no result first."""
         out = []
         if self.pressed:
             out.append(f"the data press {len(self.pressed)} parameter(s) against bounds that "
@@ -153,18 +283,51 @@ class Claim:
                        + "; ".join(h.text() for h in self.pressed)
                        + ". The optimum lies beyond them: check the events that seed the "
                          "start windows and the model")
-        if not self.fits_noise:
-            out.append(f"chi-square/dof = {self.chi_square / max(self.dof, 1):.2f} "
+        if self.beyond_noise:
+            out.append(f"chi-square/dof = {self.ratio:.4g}, beyond the {MAX_MISFIT:g} any "
+                       f"honest reading of the noise allows: the residuals are "
+                       f"{self.misfit_factor:.1f} times their stated noise, so the model "
+                       f"lacks an effect or the sigmas are wrong{self._worst()}")
+        if self.departures:
+            worst = max(self.departures, key=lambda d: (d.kind != "block", abs(d.sigmas)))
+            more = len(self.departures) - 1
+            out.append(f"a process departs from its prior beyond {PROCESS_SIGMAS:g} sigma: "
+                       f"{worst.text()}" + (f" (and {more} more)" if more else "")
+                       + "; it has absorbed something the model lacks (a late opening, a "
+                         "wrong sigma): check the events and the model")
+        for text in self.undetermined_drag_areas:
+            out.append(f"the data do not determine the drag area {text}")
+        if not self.fits_noise and not self.beyond_noise:
+            out.append(f"chi-square/dof = {self.ratio:.2f} "
                        f"(p = {self.fit_p_value:.2g}): the residuals are "
                        f"{self.misfit_factor:.1f} times their stated noise, so the model or "
                        f"the noise is wrong somewhere and the sigmas are too small by about "
-                       f"that factor (--rescale-sigmas scales them)")
+                       f"that factor (--rescale-sigmas scales them){self._worst()}")
+        out += self.process_misfits
+        if self.overstates_noise:
+            out.append(overstated_text(self.ratio, self.low_p_value))
         return out
 
+    def verdict(self) -> str:
+        """"a result", "a result, with a misfit", "a result, with overstated sigmas" or
+        "NOT A RESULT"."""
+        if not self.is_result:
+            return "NOT A RESULT"
+        if not self.fits_noise:
+            return "a result, with a misfit"
+        return "a result, with overstated sigmas" if self.overstates_noise else "a result"
+
+    def headline(self) -> str:
+        """What a report says above all else, or '': the fit is not a result, or its
+        uncertainties are overstated."""
+        if not self.is_result:
+            return "Not a result. " + " ".join(f"{p}." for p in self.problems())
+        if self.overstates_noise:
+            return f"Uncertainties overstated. {overstated_text(self.ratio, self.low_p_value)}."
+        return ""
+
     def text(self) -> str:
-        verdict = ("a result" if self.is_result and self.fits_noise else
-                   "a result, with a misfit" if self.is_result else "NOT A RESULT")
-        lines = [f"claim: {verdict}"]
+        lines = [f"claim: {self.verdict()}"]
         lines += [f"  - {p}" for p in self.problems()]
         lines += [f"  - moved {m.text()}" for m in self.moves]
         lines += [f"  - {note}" for note in self.notes]
@@ -172,15 +335,98 @@ class Claim:
 
     def as_dict(self) -> dict:
         pressed = self.pressed
-        return {"result": self.is_result, "fits_noise": self.fits_noise,
+        return {"result": self.is_result, "verdict": self.verdict(),
+                "fits_noise": self.fits_noise, "overstates_noise": self.overstates_noise,
+                "beyond_noise": self.beyond_noise,
                 "chi_square": self.chi_square, "dof": self.dof,
-                "fit_p_value": self.fit_p_value, "misfit_factor": self.misfit_factor,
+                "fit_p_value": self.fit_p_value, "low_p_value": self.low_p_value,
+                "misfit_factor": self.misfit_factor,
+                "worst_sensor": self.worst_sensor or None,
+                "worst_sensor_normalized_rms": _number(self.worst_sensor_rms),
                 "bound_statistic": self.bound_statistic, "bound_p_value": self.bound_p_value,
                 "held_bounds": [{**vars(h), "physical": bool(h.physical),
                                  "beyond": _number(h.beyond), "beyond_z": _number(h.beyond_z),
                                  "pressed": h in pressed} for h in self.held],
+                "process_departures": [{**vars(d), "t": _number(d.t),
+                                        "value": _number(d.value), "text": d.text()}
+                                       for d in self.departures],
+                "undetermined_drag_areas": self.undetermined_drag_areas,
+                "process_misfits": self.process_misfits,
                 "window_moves": [vars(m) for m in self.moves], "notes": self.notes,
                 "problems": self.problems(), "alpha": self.alpha}
+
+
+def overstated_text(ratio: float, low_p_value: float) -> str:
+    """The sentence for a chi^2/dof far below 1."""
+    chance = f"= {low_p_value:.2g}" if low_p_value > 0.0 else "< 1e-300"
+    return (f"chi-square/dof = {ratio:.3g} (P(chi-square this small) {chance}): "
+            f"the stated sigmas are too large by about 1/sqrt(chi-square/dof) = "
+            f"{1.0 / np.sqrt(max(ratio, 1e-300)):.1f}; the uncertainties are overstated "
+            f"by that factor")
+
+
+def worst_sensor(fit: Fit) -> tuple[str, float]:
+    """The sensor (not events, priors or a process's innovations) whose normalised residual
+    RMS is largest, and that RMS; ('', nan) where the fit has none."""
+    rms = {s: e["normalized_rms"] for s, e in sensor_summary(fit).items()
+           if s not in fit.pseudo_sensors}
+    if not rms:
+        return "", float("nan")
+    name = max(rms, key=rms.__getitem__)
+    return name, rms[name]
+
+
+def process_departures(fit: Fit) -> list[ProcessDeparture]:
+    """Where the fit's stochastic processes depart from their priors (module docstring):
+    each free process parameter beyond PROCESS_SIGMAS of its prior's marginal sigma
+    (`Effect.process_priors`), each standardised innovation (the effects' penalty
+    residuals) beyond PROCESS_SIGMAS, and each prior block whose chi-square has a tail
+    probability below PROCESS_TAIL."""
+    out: list[ProcessDeparture] = []
+    free = set(fit.free)
+    for effect in fit.model.effects:
+        for name, (t, sigma) in effect.process_priors(fit.test).items():
+            if name not in free:
+                continue
+            value = fit.parameters[name]
+            if abs(value) > PROCESS_SIGMAS * sigma:
+                out.append(ProcessDeparture(effect.name, "knot", name, t, value / sigma, value,
+                                            fit.model.parameter(name).unit))
+    penalised = {e for e, *_ in fit.model.penalties}
+    for r in fit.residuals:
+        if r.sensor not in penalised or r.t.size == 0:
+            continue
+        innovation = -r.normalized  # the penalty is the model; its measurement is 0
+        k = int(np.argmax(np.abs(innovation)))
+        if abs(innovation[k]) > PROCESS_SIGMAS and not any(
+                d.effect == r.sensor and d.kind == "knot" for d in out):
+            out.append(ProcessDeparture(r.sensor, "innovation", r.channel, float(r.t[k]),
+                                        float(innovation[k])))
+        block = float(np.sum(innovation**2))
+        if chi2_law.sf(block, innovation.size) < PROCESS_TAIL \
+                and block > MAX_MISFIT * innovation.size:
+            out.append(ProcessDeparture(r.sensor, "block", r.channel, float("nan"), block,
+                                        count=int(innovation.size)))
+    return out
+
+
+def process_misfits(fit: Fit, alpha: float = ALPHA) -> list[str]:
+    """One line per prior block of the fit's processes whose chi-square exceeds its noise at
+    level `alpha` without departing from it (`process_departures`): the prior's sigma is
+    smaller than the data would have it, by about the innovations' normalised RMS."""
+    penalised = {e for e, *_ in fit.model.penalties}
+    out = []
+    for r in fit.residuals:
+        if r.sensor not in penalised or r.t.size == 0:
+            continue
+        block = float(np.sum(r.normalized**2))
+        p = float(chi2_law.sf(block, r.t.size))
+        if p < alpha and block <= MAX_MISFIT * r.t.size:
+            out.append(f"the {r.t.size} innovations of {r.sensor} {r.channel} have normalised "
+                       f"RMS {np.sqrt(block / r.t.size):.2f} (p = {p:.2g}): the process is "
+                       f"livelier than its prior's sigma says (for the air's motion, "
+                       f"--wind-intensity lets the evidence choose it)")
+    return out
 
 
 def _number(x: float) -> float | None:
@@ -198,7 +444,9 @@ def check_claim(est: Estimator, fit: Fit, alpha: float = ALPHA) -> Claim:
         if side is not None:
             held.append(HeldBound(name, side, fit.parameters[name], prm.is_physical(side)))
     claim = Claim(fit.chi_square, fit.dof, float(chi2_law.sf(fit.chi_square, fit.dof)), held,
-                  alpha=alpha)
+                  alpha=alpha, low_p_value=float(chi2_law.cdf(fit.chi_square, fit.dof)),
+                  departures=process_departures(fit), process_misfits=process_misfits(fit, alpha))
+    claim.worst_sensor, claim.worst_sensor_rms = worst_sensor(fit)
     guessed = [h for h in held if not h.physical]
     if not guessed:
         return claim
@@ -220,6 +468,34 @@ def check_claim(est: Estimator, fit: Fit, alpha: float = ALPHA) -> Claim:
                   if h.name in by_name else h for h in held]
     claim.bound_statistic = statistic
     claim.bound_p_value = chi_bar_square_sf(statistic, 0, len(tested))
+    return claim
+
+
+def check_drag_areas(claim: Claim, fit: Fit, cov: Covariance) -> Claim:
+    """`claim` with the drag areas (CdS) of `fit` that `cov` does not determine listed
+    (module docstring): undetermined, on a bound, or with a sigma larger than the value
+    (the sigma scaled by sqrt(chi^2/dof) where that exceeds 1 and `cov` is not scaled
+    already).  Returns `claim` itself, changed."""
+    inflation = 1.0 if cov.scaled else float(np.sqrt(max(1.0, fit.chi_square / fit.dof)))
+    std = cov.std
+    found = []
+    for name in fit.free:
+        if split_name(name)[0] != DRAG_AREA:
+            continue
+        prm, value = fit.model.parameter(name), fit.parameters[name]
+        side = prm.held_side(value)
+        if name in cov.undetermined:
+            found.append(f"{name} = {value:.4g} {prm.unit}: it lies in a combination of "
+                         "parameters the data do not fix (the identifiability lines)")
+        elif side is not None or name in cov.at_bound:
+            side = side or prm.nearer_bound(value)
+            kind = "physical" if prm.is_physical(side) else "guessed"
+            found.append(f"{name} = {value:.4g} {prm.unit}: it is on its {kind} {side} "
+                         "bound, where the data leave it no sigma")
+        elif name in std and std[name] * inflation > abs(value):
+            found.append(f"{name} = {value:.4g} {prm.unit}: its sigma "
+                         f"{std[name] * inflation:.3g} {prm.unit} is larger than its value")
+    claim.undetermined_drag_areas = found
     return claim
 
 

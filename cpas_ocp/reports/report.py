@@ -35,6 +35,7 @@ from cpas_ocp.reports.plots import (
 )
 from cpas_ocp.reports.report_data import (
     Z95,
+    bound_flag,
     channel_series,
     event_rows,
     parameter_rows,
@@ -97,9 +98,12 @@ def result_dict(fit: Fit, cov: Covariance | None,
         prm = fit.model.parameter(name)
         entry = {"value": fit.parameters[name], "unit": prm.unit,
                  "initial": fit.guess.get(name, prm.default)}
+        flag = bound_flag(fit, cov, name)
+        entry["bound"] = flag or None
+        if flag:
+            entry["bounds"] = [prm.lower, prm.upper]
         if cov is not None and name in cov.at_bound:
             entry["at_bound"] = prm.nearer_bound(fit.parameters[name])
-            entry["bounds"] = [prm.lower, prm.upper]
         elif cov is not None and name in cov.undetermined:
             entry["undetermined"] = True
         elif name in std:
@@ -268,8 +272,8 @@ def reconstruction_page(fit: Fit, cov: Covariance | None, claim: Claim | None,
     `drag_area_curves` of the fit where not given)."""
     page = begin_page(fit, f"Reconstruction of {fit.test.name}", units)
     if claim is not None:
-        if not claim.is_result:
-            page.warning("Not a result. " + " ".join(f"{p}." for p in claim.problems()))
+        if claim.headline():
+            page.warning(claim.headline())
         page.heading("Claim")
         page.preformatted(claim.text())
     parameter_section(page, fit, cov, units)
@@ -305,7 +309,8 @@ def write_report(fit: Fit, cov: Covariance | None, out: str | Path,
         (tmp / "result.json").write_text(json.dumps(result, indent=2))
         std = cov.std if cov is not None else {}
         rows = [{"parameter": n, "value": fit.parameters[n], "std": std.get(n, np.nan),
-                 "unit": fit.model.parameter(n).unit} for n in fit.free]
+                 "unit": fit.model.parameter(n).unit, "bound": bound_flag(fit, cov, n)}
+                for n in fit.free]
         pd.DataFrame(rows).to_csv(tmp / "parameters.csv", index=False)
         plot_sensors(fit, tmp, units)
         # The drag areas against their reduction (which re-reduces the test), drawn in
@@ -318,8 +323,8 @@ def write_report(fit: Fit, cov: Covariance | None, out: str | Path,
             plot_correlation(cov, fit.test.name, tmp)
         for prof in profiles:
             plot_profile(prof, fit.test.name, tmp)
-        warning = ("**Not a result.** " + " ".join(f"{p}." for p in claim.problems()) + "\n\n"
-                   if claim is not None and not claim.is_result else "")
+        headline = claim.headline() if claim is not None else ""
+        warning = f"**{headline.replace('. ', '.** ', 1)}\n\n" if headline else ""
         (tmp / "report.md").write_text(
             f"# Reconstruction of {fit.test.name}\n\n{fit.test.label}\n\n{warning}```\n"
             f"{parameter_table(fit, cov, units)}\n\n{fit_summary(fit, units)}\n"

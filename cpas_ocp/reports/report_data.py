@@ -77,13 +77,34 @@ def sensor_spans(fit: Fit, windows: Sequence[PhaseWindow]) -> dict[str, list[Spa
                 for w in windows_for_sensor(fit.test, s, windows)] for s in sensors}
 
 
+def bound_flag(fit: Fit, cov: Covariance | None, name: str) -> str:
+    """Where a free parameter's estimate stands against its bounds, or '' where clear of them:
+    "on its upper bound (6, guessed)" where the fit left it on a bound (within the solver's
+    tolerance, `Parameter.held_side`, or held there by the covariance), "within 1σ of its
+    lower bound (0.001, physical)" where its sigma reaches past the bound (a 6 ± 84 on an
+    upper bound of 6: the interval means nothing there).  Bounds in SI."""
+    prm, value = fit.model.parameter(name), fit.parameters[name]
+    side = prm.held_side(value)
+    if side is None and cov is not None and name in cov.at_bound:
+        side = prm.nearer_bound(value)
+    where = "on"
+    if side is None:
+        std = cov.std.get(name) if cov is not None else None
+        near = prm.nearer_bound(value)
+        if std is None or abs(value - (prm.lower if near == "lower" else prm.upper)) >= std:
+            return ""
+        side, where = near, "within 1σ of"
+    kind = "physical" if prm.is_physical(side) else "guessed"
+    return f"{where} its {side} bound ({prm.lower if side == 'lower' else prm.upper:.6g}, {kind})"
+
+
 def parameter_flag(fit: Fit, cov: Covariance | None, name: str) -> str:
-    """What the covariance says is wrong with a free parameter's estimate, or ''."""
-    if cov is not None and name in cov.at_bound:
-        return f"on its {fit.model.parameter(name).nearer_bound(fit.parameters[name])} bound"
-    if cov is not None and name in cov.undetermined:
+    """What is wrong with a free parameter's estimate (`bound_flag`, or undetermined by the
+    covariance), or ''."""
+    flag = bound_flag(fit, cov, name)
+    if not flag and cov is not None and name in cov.undetermined:
         return "undetermined"
-    return ""
+    return flag
 
 
 def parameter_rows(fit: Fit, cov: Covariance | None, units: DisplayUnits

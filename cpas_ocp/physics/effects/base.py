@@ -157,6 +157,13 @@ class Effect:
         parameters, such as a stochastic process's innovations (`wind_process`)."""
         return {}
 
+    def process_priors(self, test: FlightTest) -> dict[str, tuple[float, float]]:
+        """The stochastic process parameters among this effect's, each with its time (s)
+        and the marginal standard deviation of its stated prior (the parameter's unit):
+        a fit that puts one far beyond that sigma is not a result (`result_claim`).
+        Parameters not named have no such prior."""
+        return {}
+
     def plausible(self, test: FlightTest) -> dict[str, tuple[float, float]]:
         """The range (SI) within which each named parameter's estimate is physically
         plausible, narrower than its bounds (which only keep the solver in the model's

@@ -191,7 +191,7 @@ def load_plugins(paths: Sequence[str | Path]) -> dict[str, EffectType]:
 # The hooks of `Effect` a model calls, and those of them through which an effect changes
 # a prediction or chi-square.
 HOOKS = ("parameters", "states", "captures", "event_timings", "state_guess", "forces",
-         "observations", "constraints", "penalties", "null_values")
+         "observations", "constraints", "penalties", "process_priors", "null_values")
 ACTING_HOOKS = ("forces", "observations", "constraints", "penalties")
 
 

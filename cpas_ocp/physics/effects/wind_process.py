@@ -118,6 +118,12 @@ class WindProcess(Effect):
                           description=f"air velocity, {c}, at t = {t:.3f} s")
                 for c in self.components for k, t in enumerate(self.knot_times(test))]
 
+    def process_priors(self, test: FlightTest) -> dict[str, tuple[float, float]]:
+        """Each knot's time (s) and the process's stationary sigma (m/s): the marginal prior
+        of every knot value."""
+        return {param_name(f"wind_{c}", str(k)): (float(t), self.sigma(c))
+                for c in self.components for k, t in enumerate(self.knot_times(test))}
+
     def null_values(self, test: FlightTest) -> dict[str, float]:
         """Still air: every knot zero (the prior's residuals are then zero too)."""
         return {p.name: 0.0 for p in self.parameters(test)}
