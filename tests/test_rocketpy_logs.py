@@ -97,3 +97,11 @@ def test_each_log_reconstructs_to_its_noise_or_says_why(tmp_path: Path, card: st
     for name in nominal:
         estimate = result["parameters"][name]
         assert np.isfinite(estimate["std"]) and 0.0 < estimate["std"] < estimate["value"]
+    # The report of an imported log sets each drag area against the card's nominal value,
+    # with the steady descent rates, in report.md and on the page.
+    report = (tmp_path / "report" / "report.md").read_text()
+    assert "## Steady descent rates" in report
+    for name in nominal:
+        assert f"| {name} | {result['parameters'][name]['value']:.4f} ± " in report
+    page = (tmp_path / "report" / "report.html").read_text()
+    assert "Drag areas against the card&#x27;s nominal values" in page

@@ -417,18 +417,38 @@ class Snatch:
                 f"cord's snatch, the largest {self.largest_m_s2 / G0:.1f} g at {self.at_s:.2f} s")
 
 
-def import_snatches(folder: Path | None) -> dict[str, Snatch]:
-    """The snatches an import left out of the test folder `folder` (its ``import.json``);
-    empty for a folder that was not imported, holds none, or whose import report was
-    edited out of shape (the report then only lacks that line)."""
+def _import_report(folder: Path | None, key: str) -> Any:
+    """Entry `key` of the import report (``import.json``) of the test folder `folder`; None
+    for a folder that was not imported, or whose report lacks it or was edited out of
+    shape (the reports then only lack what it would have said)."""
     report = None if folder is None else folder / "import.json"
     if report is None or not report.is_file():
-        return {}
+        return None
+    try:
+        return json.loads(report.read_text()).get(key)
+    except (ValueError, AttributeError):
+        return None
+
+
+def import_snatches(folder: Path | None) -> dict[str, Snatch]:
+    """The snatches an import left out of the test folder `folder` (its ``import.json``);
+    empty where it holds none (`_import_report`)."""
     try:
         return {name: Snatch(**fields)
-                for name, fields in json.loads(report.read_text()).get("snatch", {}).items()}
-    except (ValueError, TypeError, AttributeError):
+                for name, fields in (_import_report(folder, "snatch") or {}).items()}
+    except (TypeError, AttributeError):
         return {}
+
+
+def import_nominal(folder: Path | None) -> dict[str, dict[str, Any]]:
+    """The card's nominal drag areas an import kept in the test folder `folder` (its
+    ``import.json``): ``{parameter: {value, unit, source}}``; empty where it holds none, or
+    an entry that is not such an area."""
+    nominal = _import_report(folder, "nominal")
+    if not isinstance(nominal, dict):
+        return {}
+    return {name: spec for name, spec in nominal.items() if isinstance(spec, dict)
+            and isinstance(spec.get("value"), int | float) and spec.get("unit") in FACTORS["area"]}
 
 
 @dataclass(frozen=True)
@@ -447,6 +467,7 @@ class ImportSummary:
     snatches: dict[str, Snatch] = field(default_factory=dict)  # per later canopy
     flight_events: dict[str, FlightEvent] = field(default_factory=dict)  # time, sigma, source
     notes: list[str] = field(default_factory=list)
+    nominal: dict[str, dict[str, Any]] = field(default_factory=dict)  # the card's, as given
 
     def text(self) -> str:
         """A few lines for the terminal."""
@@ -487,7 +508,8 @@ class ImportSummary:
                 "snatch": {k: dataclasses.asdict(v) for k, v in self.snatches.items()},
                 "flight_events": {k: {"time_s": e.time, "sigma_s": e.sigma, "source": e.source}
                                   for k, e in self.flight_events.items()},
-                "notes": self.notes, "samples": self.samples, "dropped": self.dropped}
+                "notes": self.notes, "samples": self.samples, "dropped": self.dropped,
+                "nominal": self.nominal}
 
 
 def dead_samples(t: np.ndarray, values: np.ndarray, clipped: bool = False) -> np.ndarray:
@@ -1026,7 +1048,7 @@ def import_flight(log: FlightRecord | AltusLog, card: FlightCard, out: str | Pat
          "ejection_charge_samples": int((in_phase.to_numpy() & near_charge).sum()),
          "ejection_charge_accelerometer_samples": int(accel_charge.sum()),
          "snatch_samples_above_drag_ceiling": int(snatch.sum())},
-        accel_sigmas, snatches, events, [*record.notes, *notes])
+        accel_sigmas, snatches, events, [*record.notes, *notes], card.nominal)
     _write_folder(out, manifest, files, summary, card.source, src)
     return summary
 

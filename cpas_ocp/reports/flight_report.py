@@ -526,26 +526,36 @@ def missing_text(fit: Fit, diagnosis: Diagnosis | None) -> str:
     return "\n".join(lines) + "\n"
 
 
-def flight_text(fit: Fit, cov: Covariance, nominal: dict[str, dict[str, Any]],
-                diagnosis: Diagnosis | None = None,
-                held: dict[str, Profile] | None = None) -> str:
-    """The markdown sections comparing the reconstruction with nominal values and the data,
-    and saying what the model misses (with `diagnosis`, its verdict too; with `held`, the
-    profiles of the opening's held parameters, `held_opening_profiles`)."""
-    rates = descent_rates(fit, cov)
-    lines = ["## Steady descent rates", "",
-             "| canopies open | window (s) | mean altitude (m MSL) | measured (m/s) | "
-             "implied by the fitted CdS (m/s) | difference (σ) |",
-             "|---|---|---|---|---|---|"]
-    for r in rates:
-        lines.append(f"| {' + '.join(r.canopies)} | {r.t0:.1f}-{r.t1:.1f} | "
-                     f"{r.altitude_m:.0f} | {r.measured:.2f} ± {r.measured_sigma:.2f} | "
-                     f"{r.implied:.2f} ± {r.implied_sigma:.2g} | {r.z:+.1f} |")
-    lines += ["", "## Drag areas against the published nominal values", "",
-              "| parameter | fitted (m²) | σ from the measured rate (m²) | nominal (m²) | "
-              "fitted / nominal | difference (σ) | rate with the nominal CdS (m/s) | "
-              "measured rate (m/s) |",
-              "|---|---|---|---|---|---|---|---|"]
+DESCENT_RATE_HEADER = ("canopies open", "window (s)", "mean altitude (m MSL)", "measured (m/s)",
+                       "implied by the fitted CdS (m/s)", "difference (σ)")
+
+
+def descent_rate_rows(rates: list[DescentRate]) -> list[list[str]]:
+    """One row per steady window (`DESCENT_RATE_HEADER`): the measured descent rate against
+    the one the fitted drag areas imply there."""
+    return [[" + ".join(r.canopies), f"{r.t0:.1f}-{r.t1:.1f}", f"{r.altitude_m:.0f}",
+             f"{r.measured:.2f} ± {r.measured_sigma:.2f}",
+             f"{r.implied:.2f} ± {r.implied_sigma:.2g}", f"{r.z:+.1f}"] for r in rates]
+
+
+def descent_rate_text(rates: list[DescentRate]) -> str:
+    """The markdown table of `descent_rate_rows`."""
+    return "\n".join(["## Steady descent rates", "", f"| {' | '.join(DESCENT_RATE_HEADER)} |",
+                      "|---|---|---|---|---|---|",
+                      *(f"| {' | '.join(row)} |" for row in descent_rate_rows(rates))])
+
+
+def nominal_text(fit: Fit, cov: Covariance, nominal: dict[str, dict[str, Any]],
+                 rates: list[DescentRate] | None = None) -> str:
+    """The markdown section setting each fitted drag area against its published nominal
+    value (`nominal_comparisons`), with the descent rate the nominal would give; `rates`
+    the fit's `descent_rates` where already computed."""
+    rates = descent_rates(fit, cov) if rates is None else rates
+    lines = ["## Drag areas against the published nominal values", "",
+             "| parameter | fitted (m²) | σ from the measured rate (m²) | nominal (m²) | "
+             "fitted / nominal | difference (σ) | rate with the nominal CdS (m/s) | "
+             "measured rate (m/s) |",
+             "|---|---|---|---|---|---|---|---|"]
     comps = nominal_comparisons(fit, cov, nominal, rates)
     lines += [f"| {name} | no steady window of 5 s or more under its canopy: not compared "
               "| | | | | | |" for name in uncompared(fit, nominal, comps)]
@@ -580,6 +590,17 @@ def flight_text(fit: Fit, cov: Covariance, nominal: dict[str, dict[str, Any]],
                      "forebody drag area at "
                      f"{fit.parameters.get('CdS_V', 0.0):.3f} m²) and, for a later canopy, "
                      "whatever the canopies opened before it lose or add to the wake.")
+    return "\n".join(lines)
+
+
+def flight_text(fit: Fit, cov: Covariance, nominal: dict[str, dict[str, Any]],
+                diagnosis: Diagnosis | None = None,
+                held: dict[str, Profile] | None = None) -> str:
+    """The markdown sections comparing the reconstruction with nominal values and the data,
+    and saying what the model misses (with `diagnosis`, its verdict too; with `held`, the
+    profiles of the opening's held parameters, `held_opening_profiles`)."""
+    rates = descent_rates(fit, cov)
+    lines = [descent_rate_text(rates), "", nominal_text(fit, cov, nominal, rates)]
     lines += opening_lines(fit, cov, held)
     return "\n".join(lines) + "\n\n" + missing_text(fit, diagnosis)
 

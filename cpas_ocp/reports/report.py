@@ -16,11 +16,19 @@ from cpas_ocp.inference.diagnostics import sensor_summary, worst_windows
 from cpas_ocp.inference.model_comparison import Criteria
 from cpas_ocp.inference.phase_windows import PhaseWindow, phase_windows
 from cpas_ocp.inference.profile_likelihood import Profile
+from cpas_ocp.io.flight_log import import_nominal
 from cpas_ocp.io.output_folder import atomic_folder
 from cpas_ocp.physics.units import SI_UNIT
 from cpas_ocp.reports.display_units import CHANNEL_DIMENSION, DisplayUnits, display_units
 from cpas_ocp.reports.failure_report import RESULT_MARKERS
-from cpas_ocp.reports.flight_report import steady_descent_text
+from cpas_ocp.reports.flight_report import (
+    DESCENT_RATE_HEADER,
+    descent_rate_rows,
+    descent_rate_text,
+    descent_rates,
+    nominal_text,
+    steady_descent_text,
+)
 from cpas_ocp.reports.html_page import Page, drag_area_figure, sensor_figure, window_legend
 from cpas_ocp.reports.html_page import parameter_table as parameter_html
 from cpas_ocp.reports.plots import (
@@ -266,10 +274,12 @@ def sensor_figures(page: Page, fit: Fit, units: DisplayUnits,
 
 def reconstruction_page(fit: Fit, cov: Covariance | None, claim: Claim | None,
                         units: DisplayUnits,
-                        curves: Sequence[DragAreaCurves] | None = None) -> Page:
+                        curves: Sequence[DragAreaCurves] | None = None,
+                        nominal: dict[str, dict[str, Any]] | None = None) -> Page:
     """The reconstruction as one HTML page: the claim, the parameters, the fit, each
     sensor's model against its measurement, and the canopies' drag areas (`curves`,
-    `drag_area_curves` of the fit where not given)."""
+    `drag_area_curves` of the fit where not given); with a flight card's `nominal` drag
+    areas (an imported log), the steady descent rates and the nominal comparison."""
     page = begin_page(fit, f"Reconstruction of {fit.test.name}", units)
     if claim is not None:
         if claim.headline():
@@ -290,7 +300,21 @@ def reconstruction_page(fit: Fit, cov: Covariance | None, claim: Claim | None,
     page.heading("Canopy drag areas")
     drag_area_figure(page, drag_area_curves(fit) if curves is None else curves,
                      units.factor("area"), units.unit("area"))
+    if cov is not None and nominal:
+        rates = descent_rates(fit, cov)
+        page.heading("Steady descent rates")
+        page.table(DESCENT_RATE_HEADER, descent_rate_rows(rates),
+                   flagged=[abs(r.z) > 3.0 for r in rates])
+        page.heading("Drag areas against the card's nominal values")
+        page.preformatted(nominal_text(fit, cov, nominal, rates).split("\n", 2)[2])
     return page
+
+
+def flight_markdown(fit: Fit, cov: Covariance, nominal: dict[str, dict[str, Any]]) -> str:
+    """report.md's sections for an imported log with nominal drag areas: the steady descent
+    rates and the drag areas against the card's nominal values."""
+    rates = descent_rates(fit, cov)
+    return f"{descent_rate_text(rates)}\n\n{nominal_text(fit, cov, nominal, rates)}\n\n"
 
 
 def write_report(fit: Fit, cov: Covariance | None, out: str | Path,
@@ -303,6 +327,7 @@ def write_report(fit: Fit, cov: Covariance | None, out: str | Path,
     out = Path(out)
     units = units or display_units(fit.test)
     with atomic_folder(out, RESULT_MARKERS) as tmp:
+        nominal = import_nominal(fit.test.path)
         result = result_dict(fit, cov, profiles)
         if claim is not None:
             result["claim"] = claim.as_dict()
@@ -332,8 +357,9 @@ def write_report(fit: Fit, cov: Covariance | None, out: str | Path,
             + (correlation_markdown(cov) if cov is not None else "")
             + (steady_descent_text(fit, cov, units) + "\n" if cov is not None
                and any(c.open_at_start for c in fit.test.parachutes) else "")
+            + (flight_markdown(fit, cov, nominal) if cov is not None and nominal else "")
             + "".join(f"Profile likelihood, {p.text()}\n\n" for p in profiles)
             + "".join(f"![{p.stem}]({p.name})\n\n" for p in sorted(tmp.glob("*.png")))
             + f"{units_note(units, display_units(fit.test))}  Interactive plots: report.html\n")
-        reconstruction_page(fit, cov, claim, units, curves).write(tmp / "report.html")
+        reconstruction_page(fit, cov, claim, units, curves, nominal).write(tmp / "report.html")
     return out
