@@ -30,7 +30,8 @@ parameters against bounds that are guesses, not physical limits, even after
 the start windows were moved; or chi-square/dof beyond 10; or a process (the
 air's motion) beyond 5 sigma of its prior; or a drag area the data do not
 determine (the report is written and says why, see `result_claim`); 130 and
-143 interrupted by SIGINT (Ctrl-C) or SIGTERM, with nothing written.
+143 interrupted by SIGINT (Ctrl-C) or SIGTERM, with nothing written; 141 the
+output's reader went away (`| head`).
 """
 
 from __future__ import annotations
@@ -91,6 +92,10 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("interrupted (SIGINT); nothing written", file=sys.stderr)
         return 128 + signal.SIGINT
+    except BrokenPipeError:  # the reader of the output went away (`| head`): stop quietly,
+        # as a Unix tool does, and keep the interpreter's last flush from failing again
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 128 + signal.SIGPIPE
     except SystemExit as exc:  # a plug-in or library code ending the process mid-command
         print(f"error: code run by the command called sys.exit({exc.code!r}) before it "
               f"finished (a plug-in?)", file=sys.stderr)
