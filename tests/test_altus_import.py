@@ -322,9 +322,10 @@ def test_card_errors_name_the_field(tmp_path: Path) -> None:
         load_card("no_such_flight")
     _write_log(tmp_path / "log.csv", seed=4)
     log = read_altus_log(tmp_path / "log.csv")
-    late = {**CARD, "parachutes": [{**CARD["parachutes"][0], "deployment": "apogee"}]}
+    late = {**CARD, "parachutes": [{**CARD["parachutes"][0], "deployment": "cutter"}]}
     with pytest.raises(InputError,
-                       match=r"parachutes\[0\]\.deployment: a flight state .*got 'apogee'"):
+                       match=r"parachutes\[0\]\.deployment: a flight state .*drogue "
+                             r"\d+\.\d\d ± 0\.10 s \(flight state\).*got 'cutter'"):
         import_flight(log, card_from_dict(late, "card.json"), tmp_path / "t")
     assert not (tmp_path / "t").exists()
 

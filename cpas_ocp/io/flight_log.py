@@ -278,25 +278,50 @@ def scatter_sigma(t: np.ndarray, values: np.ndarray) -> float:
     return float(1.4826 * np.median(np.abs(r - np.median(r))))
 
 
-def correlation_length(t: np.ndarray, values: np.ndarray) -> int:
-    """The integrated autocorrelation time (samples) of `values`' scatter about their local
-    trend (`_scatter`): 1 + 2 sum_k rho_k, the sum over the lags before rho first falls
-    below `ACF_FLOOR`; the number of samples that carry as much information as one
-    independent sample.  1 for white noise or too few samples."""
-    r = _scatter(t, values)
-    if r is None or r.size < 4 * MIN_DESCENT_SAMPLES:
-        return 1
+def integrated_time(r: np.ndarray) -> float:
+    """The integrated autocorrelation time (samples) of the residual series `r`:
+    1 + 2 sum_k rho_k, the sum over the lags before rho first falls below `ACF_FLOOR` or
+    below 2/sqrt(n), the band within which white noise's sample autocorrelation of n
+    samples stays (so that chance correlations of a white series do not add up); 1 for
+    fewer than 20 samples."""
+    if r.size < MIN_DESCENT_SAMPLES:
+        return 1.0
     r = r - r.mean()
     var = float(np.dot(r, r))
     if var == 0.0:
-        return 1
+        return 1.0
+    floor = max(ACF_FLOOR, 2.0 / np.sqrt(r.size))
     total = 1.0
     for k in range(1, r.size // 4):
         rho = float(np.dot(r[:-k], r[k:])) / var
-        if rho < ACF_FLOOR:
+        if rho < floor:
             break
         total += 2.0 * rho
-    return max(1, round(total))
+    return total
+
+
+def correlation_length(t: np.ndarray, values: np.ndarray) -> int:
+    """The integrated autocorrelation time (`integrated_time`, rounded, samples) of
+    `values`' scatter about their local trend (`_scatter`): the number of samples that
+    carry as much information as one independent sample.  1 for white noise or too few
+    samples (under 80)."""
+    r = _scatter(t, values)
+    if r is None or r.size < 4 * MIN_DESCENT_SAMPLES:
+        return 1
+    return max(1, round(integrated_time(r)))
+
+
+def block_sigma(blocks: pd.DataFrame) -> float:
+    """The noise sigma to weigh block means (`independent_blocks`) by: their robust
+    scatter about the local trend (`scatter_sigma`) times the square root of their own
+    integrated autocorrelation time.  Adjacent blocks of a correlated noise still share
+    its tail (for an AR(1) noise in blocks of its integrated time, adjacent means correlate
+    at 0.36), and weighing them as independent would state sigmas too small by that
+    root."""
+    t, values = blocks["time"].to_numpy(float), blocks.iloc[:, 1].to_numpy(float)
+    r = _scatter(t, values)
+    tail = 1.0 if r is None else max(1.0, integrated_time(r))
+    return scatter_sigma(t, values) * float(np.sqrt(tail))
 
 
 def independent_blocks(frame: pd.DataFrame, steady_end: float = np.inf
@@ -305,8 +330,9 @@ def independent_blocks(frame: pd.DataFrame, steady_end: float = np.inf
     `correlation_length` samples, each block's mean at its mean time, blocks never spanning
     a gap (a left-out charge window: over 1.5 sample intervals); with the block size.  The
     correlation is measured over the later half of the frame's span up to `steady_end` (s:
-    the next canopy's charge), where the descent has settled: an opening's deceleration,
-    which a local quadratic trend does not follow, would read as correlated noise.
+    the next canopy's charge, or the phase's end), where the descent has settled: an
+    opening's deceleration or the landing, which a local quadratic trend does not follow,
+    would read as correlated noise.
 
     Block means of correlated noise are about as independent as white samples, and their
     scatter is their sigma: a fit that weighs every raw sample at the raw scatter would
@@ -902,7 +928,7 @@ def import_flight(log: FlightRecord | AltusLog, card: FlightCard, out: str | Pat
     edges = [lo, *bounds[1:-1], hi + 1.0]
     parts, baro_sigmas = [], []
     for (a, b), name, steady_end in zip(pairwise(edges), sorted(deploy, key=deploy.__getitem__),
-                                        [*starts[1:], np.inf], strict=True):
+                                        [*starts[1:], t_end], strict=True):
         part = baro_phase[(baro_phase["time"] >= a) & (baro_phase["time"] < b)]
         blocks, size = independent_blocks(part[["time", "altitude"]], steady_end)
         parts.append(blocks)
@@ -913,8 +939,7 @@ def import_flight(log: FlightRecord | AltusLog, card: FlightCard, out: str | Pat
                          f"length: {len(part)} samples -> {len(blocks)}")
         if len(blocks) < MIN_DESCENT_SAMPLES:  # too short a segment: the whole phase's
             blocks = independent_blocks(baro_phase[["time", "altitude"]])[0]
-        baro_sigmas.append(max(MIN_BARO_SIGMA_M, scatter_sigma(blocks["time"].to_numpy(),
-                                                               blocks["altitude"].to_numpy())))
+        baro_sigmas.append(max(MIN_BARO_SIGMA_M, block_sigma(blocks)))
     baro_blocks = pd.concat(parts, ignore_index=True)
 
     fixes_phase = fixes[(fixes["time"] >= lo) & (fixes["time"] <= hi)]
