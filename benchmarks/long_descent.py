@@ -23,7 +23,13 @@ sigmas; then the ratios (baseline / this tree).  A baseline that runs past
 `--timeout` seconds is stopped and its ratio printed as a lower bound.
 
     python benchmarks/long_descent.py [--baseline REV] [--seed N] [--timeout S]
-                                      [--thrust N] [--no-baseline]
+                                      [--thrust N] [--no-baseline] [--normal-points]
+    python benchmarks/long_descent.py --per-iteration TEST_DIR
+
+The wall times of whole runs meet whatever else the machine runs; the
+second form alternates this grid and the one-step grid (intervals capped at
+MAX_STEP_S, the earlier grid) in one process and prints seconds per
+iteration.
 """
 
 from __future__ import annotations
@@ -165,6 +171,40 @@ def run_tree(code: Path, folder: Path, timeout: float, thin: bool = False
     return (outs[0] or {}).get("build_s", float("nan")), outs[1]
 
 
+def per_iteration(folder: Path, iterations: int = 20, repeats: int = 2) -> None:
+    """Seconds per solver iteration on the imported folder's NLP with this tree's grid and
+    with the grid's intervals capped at one RK4 step (`shooting_grid.MAX_INTERVAL_S` =
+    MAX_STEP_S, the earlier grid), alternating in one process so that both meet the
+    same load: `iterations` iterations from the reduction, `repeats` times each."""
+    import time
+
+    import cpas_ocp.estimation.shooting_grid as grid
+    from cpas_ocp.errors import SolverFailure
+    from cpas_ocp.estimation.estimator import Estimator
+    from cpas_ocp.io.flight_test import load_test
+    test = load_test(folder)
+    estimators = {}
+    for label, cap in (("this grid", grid.MAX_INTERVAL_S), ("one-step grid", grid.MAX_STEP_S)):
+        saved, grid.MAX_INTERVAL_S = grid.MAX_INTERVAL_S, cap
+        try:
+            estimators[label] = Estimator(test)
+        finally:
+            grid.MAX_INTERVAL_S = saved
+    seconds: dict[str, list[float]] = {label: [] for label in estimators}
+    for _ in range(repeats):
+        for label, est in estimators.items():
+            t0 = time.perf_counter()
+            try:
+                done = est.solve(max_iter=iterations).solver.iterations
+            except SolverFailure as exc:
+                done = exc.iterations
+            seconds[label].append((time.perf_counter() - t0) / max(done, 1))
+    for label, est in estimators.items():
+        print(f"{label}: {len(est.t)} nodes, {min(seconds[label]):.3f} s per iteration "
+              f"(best of {repeats})")
+    print(f"per iteration: ratio {min(seconds['one-step grid']) / min(seconds['this grid']):.2f}")
+
+
 def summary(label: str, run: dict) -> str:
     """One block of text: times, grid, solver and the drag areas against the truth."""
     res = run["result"]
@@ -201,7 +241,13 @@ def main() -> None:
                         help="stop a tree's run after this many seconds")
     parser.add_argument("--folder", type=Path, default=None,
                         help="where to write the log and the folders (default: a temporary one)")
+    parser.add_argument("--per-iteration", type=Path, default=None, metavar="TEST_DIR",
+                        help="only time solver iterations on an imported folder, this grid "
+                             "against the one-step grid (`per_iteration`)")
     args = parser.parse_args()
+    if args.per_iteration is not None:
+        per_iteration(args.per_iteration)
+        return
     import tempfile
     with tempfile.TemporaryDirectory(prefix="cpas-ocp-long-descent-") as tmp:
         base = args.folder or Path(tmp)

@@ -22,7 +22,6 @@ import numpy as np
 import pytest
 
 from cpas_ocp.api import reconstruct
-from cpas_ocp.cli import main
 from cpas_ocp.estimation.fit import default_grid_step
 from cpas_ocp.estimation.reduction import initial_guess
 from cpas_ocp.estimation.shooting_grid import (
@@ -37,7 +36,7 @@ from cpas_ocp.estimation.stage_curve_fit import inside_bounds
 from cpas_ocp.io.flight_test import FlightTest, load_test
 from cpas_ocp.io.model_spec import spec_of_test
 from cpas_ocp.io.problems import load_problem
-from tests.test_rocket_log_import import CARD, COLUMN_MAP, Flight, fly, write_mapped
+from tests.rocket_logs import altimeter_log
 
 START_ALTITUDE_M = 9000.0  # m MSL, under the drogue at 40 m/s
 MAIN_START_S = 240.0
@@ -119,27 +118,6 @@ def test_long_descent_recovers_the_drag_areas(long_steady) -> None:
         assert abs(rec.fit.parameters[name] - truth[name]) < 3.0 * sigma, name
 
 
-def _altimeter_log(folder: Path, rate_hz: float) -> Path:
-    """A rocket log of the altimeter alone at `rate_hz` (thrust for a 17.6 s apogee, the
-    drogue's charge at apogee, the main at 300 m), imported with a card whose model
-    estimates the air's vertical motion, the altimeter's bias and its lag."""
-    flight = fly(thrust_n=1600.0, drogue_delay_s=0.0)
-    every = round(1.0 / (rate_hz * (flight.t[1] - flight.t[0])))
-    flight = Flight(flight.t[::every], flight.h[::every], flight.v[::every],
-                    flight.f[::every], flight.events)
-    write_mapped(flight, folder / "log.csv", seed=5)
-    (folder / "map.json").write_text(json.dumps(
-        {k: v for k, v in COLUMN_MAP.items() if k != "acceleration"}))
-    card = {**CARD, "model": {"effects": [
-        {"effect": "wind_process", "components": ["up"], "knot_s": 4.0, "tau_s": 20.0,
-         "sigma_vertical": 1.0},
-        "canopy_inflation", "forebody_drag", "rigid_riser", "baro", "baro_bias", "baro_lag"]}}
-    (folder / "card.json").write_text(json.dumps(card))
-    assert main(["import", str(folder / "log.csv"), "--columns", str(folder / "map.json"),
-                 "--card", str(folder / "card.json"), "--out", str(folder / "test")]) == 0
-    return folder / "test"
-
-
 @pytest.mark.slow
 def test_altimeter_only_rocket_fit_starts_inside_the_bounds_and_converges(
         tmp_path: Path) -> None:
@@ -147,7 +125,7 @@ def test_altimeter_only_rocket_fit_starts_inside_the_bounds_and_converges(
     pressure near zero: the reduction falls back to the shape defaults there rather
     than to the 0.3 bounds, every shape start lies inside its bounds by the curve fit's
     margin, and the default fit converges."""
-    test = load_test(_altimeter_log(tmp_path, 20.0))
+    test = load_test(altimeter_log(tmp_path, 20.0))
     model = spec_of_test(test).model(test)
     guess = initial_guess(test, model)
     for chute, stage in (("drogue", "stage1"), ("main", "stage2")):
