@@ -323,10 +323,7 @@ def test_example_d_imports_as_printed_with_the_cards_main(tmp_path: Path) -> Non
     main's mortar fire is where the altimeter's reading first comes below the card's
     870 m above the pad, with the card's sigma; the dead accelerometer is left out with a
     note; GNSS from the second file fits the lapse rate and is the gps_altitude sensor."""
-    with pytest.MonkeyPatch.context() as patch:  # a flight high enough for an 870 m main
-        patch.setattr(generator, "THRUST_N", 1500.0)
-        patch.setattr(generator, "MAIN_AGL_M", 870.0)
-        flight = fly()
+    flight = fly(thrust_n=1500.0, main_agl_m=870.0)  # high enough for an 870 m main
     argv, card, column_map, log = place("d", tmp_path)
     write_example_d(flight, column_map, log, seed=22)
     report = import_example(argv)

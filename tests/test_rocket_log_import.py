@@ -40,9 +40,9 @@ MAIN_AGL_M = 300.0
 GROUND_M = 7.0  # the landing site is this far above the pad
 P_NOISE_PA, A_NOISE = 2.0, 0.3  # barometer (Pa) and accelerometer (m/s^2) noise sigmas
 # The site atmosphere tabulated every metre above the pad (linear between: < 1 mPa off).
-H_TABLE = np.arange(-50.0, 2000.0, 1.0)
-P_TABLE = np.array([float(SITE.pressure(SITE.elevation_m + x)) for x in H_TABLE])
-RHO_TABLE = np.array([float(SITE.density(SITE.elevation_m + x)) for x in H_TABLE])
+H_TABLE = np.arange(-50.0, 12000.0, 1.0)
+P_TABLE = np.asarray(SITE.pressure(SITE.elevation_m + H_TABLE), dtype=float)
+RHO_TABLE = np.asarray(SITE.density(SITE.elevation_m + H_TABLE), dtype=float)
 
 
 @dataclass(frozen=True)
@@ -57,13 +57,20 @@ class Flight:
     events: dict[str, float]
 
 
-def fly(seconds_after_touchdown: float = 10.0,
+def fly(seconds_after_touchdown: float = 10.0, thrust_n: float = THRUST_N,
+        drogue_delay_s: float = DROGUE_DELAY_S, cds: dict[str, float] | None = None,
+        main_agl_m: float = MAIN_AGL_M, rate_hz: float = RATE_HZ,
         chutes: tuple[str, ...] = ("drogue", "main")) -> Flight:
     """Integrate m dv/dt = T - m g - 1/2 rho v|v| CdS(t) at 2 ms (deterministic), the canopies'
     drag areas growing linearly over their fill from LINE_STRETCH_S after their charge; the
-    vehicle's axis stays vertical, so the axial specific force is (T - drag) / m.  The
-    first of `chutes` is fired DROGUE_DELAY_S after apogee, the second at MAIN_AGL_M (a
-    single main fired at apogee: ``("main",)``)."""
+    vehicle's axis stays vertical, so the axial specific force is (T - drag) / m.
+
+    `thrust_n` (N, for BURN_S) sets the apogee, `drogue_delay_s` (s) the first canopy's
+    charge after apogee, `cds` (m^2) the canopies' full drag areas, `main_agl_m` (m above
+    the pad) the second canopy's charge, and `rate_hz` (Hz) the logged sample rate; the
+    canopies flown are `chutes` (a single main fired at apogee: ``("main",)``).
+    """
+    cds_full = CDS if cds is None else cds
     dt = 2e-3
     t, h, v = -2.0, 0.0, 0.0
     charge: dict[str, float] = {}
@@ -72,11 +79,12 @@ def fly(seconds_after_touchdown: float = 10.0,
     apogee = None
     landed = None
     while landed is None or t < landed + seconds_after_touchdown:
-        thrust = THRUST_N if 0.0 <= t < BURN_S else 0.0
-        cds = CDS_BODY + sum(CDS[c] * min(max((t - tc - LINE_STRETCH_S) / FILL_S[c], 0.0), 1.0)
-                             for c, tc in charge.items())
+        thrust = thrust_n if 0.0 <= t < BURN_S else 0.0
+        cds_now = CDS_BODY + sum(
+            cds_full[c] * min(max((t - tc - LINE_STRETCH_S) / FILL_S[c], 0.0), 1.0)
+            for c, tc in charge.items())
         rho = float(np.interp(h, H_TABLE, RHO_TABLE))
-        drag = -0.5 * rho * v * abs(v) * cds
+        drag = -0.5 * rho * v * abs(v) * cds_now
         on_ground = landed is not None or (t < 0.0)
         f = (thrust + drag) / FLOWN if not on_ground else G0
         rows.append((t, h, v, f))
@@ -87,14 +95,14 @@ def fly(seconds_after_touchdown: float = 10.0,
         if apogee is None and t > BURN_S and v < 0.0:
             apogee = t
             events["apogee"] = t
-        if apogee is not None and chutes[0] not in charge and t >= apogee + DROGUE_DELAY_S:
+        if apogee is not None and chutes[0] not in charge and t >= apogee + drogue_delay_s:
             charge[chutes[0]] = t
         if len(chutes) > 1 and chutes[0] in charge and chutes[1] not in charge \
-                and h <= MAIN_AGL_M and v < 0:
+                and h <= main_agl_m and v < 0:
             charge[chutes[1]] = t
         if landed is None and apogee is not None and h <= GROUND_M:
             h, v, landed = GROUND_M, 0.0, t
-    every = round(DT / dt)
+    every = round(1.0 / (rate_hz * dt))
     a = np.array(rows)[::every]
     events.update(charge)
     events["landed"] = landed

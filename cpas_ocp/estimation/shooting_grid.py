@@ -3,9 +3,13 @@ steady descent.
 
 Every node lies on the fine lattice t_0 + i h (h the sensor-rate step of
 `estimation.default_grid_step`), and every interval is h times a power of
-two, at most MAX_STEP_S.  The model is simulated once from the offline
-reduction's values on the lattice, and an interval of length H may start at
-lattice point i (a multiple of H / h) where
+two, at most MAX_INTERVAL_S.  An interval longer than MAX_STEP_S is
+integrated in RK4 sub-steps of at most MAX_STEP_S (`substeps_of`), and a
+sample inside it is predicted by cubic Hermite interpolation between its
+nodes (states and their derivatives), not by stepping from the node before.
+The model is simulated once from the offline reduction's values on the
+lattice, and an interval of length H <= MAX_STEP_S may start at lattice
+point i (a multiple of H / h) where
 
 * **accuracy**: one RK4 step of length H from the simulated state lands
   within ERROR_PER_SECOND * H state scales of where the lattice's steps
@@ -16,6 +20,16 @@ lattice point i (a multiple of H / h) where
   of the dynamics' Jacobian d f / d x there (RK4 is stable to |lambda h|
   about 2.8; at 0.5 its error in the fastest mode is 2e-4 per step, so
   that mode may stiffen fivefold during the fit before RK4 loses it).
+
+A longer interval (seconds in a steady descent under a canopy, whose drag
+relaxes the speed to its terminal value in v / 2g, a few tenths of a
+second: stiff for one RK4 step, slow for the motion) may stand where every
+lattice interval it covers allows the longest single step, its sub-steps
+land within ERROR_PER_SECOND * H state scales of the lattice's end, and the
+Hermite interpolant lies within the longest single step's ERROR_PER_SECOND *
+MAX_STEP_S of the lattice's states at every lattice point inside it (at the
+altitude's 1,000 m scale, 2.5 mm: a hundredth of a barometric altimeter's
+noise).
 
 An inflation happens where its start time ends up, not where the reduction
 guessed it: every fine demand after a free start time's guess is repeated
@@ -28,6 +42,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -35,7 +50,8 @@ import numpy as np
 from cpas_ocp.estimation.simulate import Trajectory, rk4_step, simulate
 from cpas_ocp.physics.model import Model
 
-MAX_STEP_S = 0.25  # longest shooting interval (s)
+MAX_STEP_S = 0.25  # longest RK4 step (s): of an interval, or of its sub-steps
+MAX_INTERVAL_S = 4.0  # longest shooting interval (s), integrated in sub-steps
 ERROR_PER_SECOND = 1e-5  # RK4 step error per second of flight, in state scales (1/s)
 STABILITY = 0.5  # largest |lambda| H of the dynamics on an interval of length H
 SUPPORT = 3  # fine intervals either side of a capture time's window (the B-spline's support)
@@ -61,6 +77,7 @@ def dynamics_grid(model: Model, values: dict[str, float], x0: np.ndarray, t0: fl
     levels = _accuracy_levels(model, values, traj.x, traj.t, traj.captures, fine_step)
     levels = np.minimum(levels, _stability_levels(model, values, traj.x, traj.t,
                                                   traj.captures, fine_step))
+    levels = _long_levels(model, values, traj, fine_step, levels)
     n = len(levels)
     demanded = levels.copy()
     for w in windows:
@@ -96,6 +113,86 @@ def stable_refinement(nodes: np.ndarray, model: Model, values: dict[str, float],
                                       fine_step))
     given = np.rint((np.asarray(nodes) - t0) / fine_step).astype(int)
     return t0 + fine_step * np.union1d(given, stable)
+
+
+def substeps_of(t: np.ndarray) -> np.ndarray:
+    """RK4 sub-steps of each interval of the grid `t` (s): one for an interval of at most
+    MAX_STEP_S, else the least power of two that cuts it into steps of at most MAX_STEP_S
+    (the steps the grid's accuracy and stability rules checked)."""
+    ratio = np.diff(np.asarray(t, dtype=float)) / MAX_STEP_S
+    out = np.ones(ratio.size, dtype=int)
+    long = ratio > 1.0 + 1e-9
+    out[long] = 2 ** np.ceil(np.log2(ratio[long] - 1e-9)).astype(int)
+    return out
+
+
+def hermite_state(x_a: Any, x_b: Any, f_a: Any, f_b: Any, length: Any, dt: Any) -> Any:
+    """The cubic Hermite interpolant (state units) at dt (s) into an interval of `length`
+    (s) from its end states `x_a`, `x_b` and their time derivatives `f_a`, `f_b`; CasADi
+    or NumPy (broadcast over leading axes).  Its error is length^4/384 times the state's
+    fourth derivative: millimetres over seconds of a steady descent."""
+    s = dt / length
+    s2, s3 = s * s, s * s * s
+    return ((2 * s3 - 3 * s2 + 1) * x_a + (s3 - 2 * s2 + s) * length * f_a
+            + (3 * s2 - 2 * s3) * x_b + (s3 - s2) * length * f_b)
+
+
+def _rhs_function(model: Model) -> ca.Function:
+    """(x, t, p, c) -> dx/dt of `model`."""
+    xs, ts = ca.SX.sym("x", model.nx), ca.SX.sym("t")
+    ps = ca.SX.sym("p", len(model.parameters))
+    cs = ca.SX.sym("c", len(model.captures))
+    return ca.Function("rhs", [xs, ts, ps, cs], [model.rhs(xs, ts, ps, cs)])
+
+
+def _long_levels(model: Model, values: dict[str, float], traj: Trajectory, fine_step: float,
+                 levels: np.ndarray) -> np.ndarray:
+    """`levels` raised, per lattice interval, to the largest j <= the MAX_INTERVAL_S level
+    at which an interval of 2^j h made of `substeps_of` RK4 steps is accurate and its
+    Hermite interpolant too, at every level up to j (module docstring), where every
+    lattice interval it covers allows the longest single step."""
+    top = _max_level(fine_step)
+    last = max(top, int(np.floor(np.log2(MAX_INTERVAL_S / fine_step + 1e-9))))
+    n = len(levels)
+    out = levels.copy()
+    allowed = levels >= top
+    if last == top or not allowed.any():
+        return out
+    x, t = traj.x, traj.t
+    p, c = model.parameter_vector(values), model.capture_vector(traj.captures)
+    scale = model.state_scales()
+    with np.errstate(all="ignore"):
+        f = np.asarray(_rhs_function(model).map(len(t))(x.T, t, p, c)).T
+    step = rk4_step(model)
+    sub = 2**top
+    for j in range(top + 1, last + 1):
+        span = 2**j
+        starts = np.arange(0, n - span + 1, span)
+        good = np.zeros(n, dtype=bool)
+        cover = np.array([allowed[i:i + span].all() for i in starts], dtype=bool)
+        starts = starts[cover]
+        if starts.size:
+            xe = x[starts].T
+            for k in range(span // sub):
+                xe = step.map(starts.size)(xe, t[starts + k * sub], sub * fine_step, p, c)
+            with np.errstate(all="ignore"):
+                error = np.max(np.abs(np.asarray(xe) - x[starts + span].T) / scale[:, None],
+                               axis=0)
+                inner = starts[:, None] + np.arange(1, span)[None, :]
+                guess = hermite_state(x[starts][:, None, :], x[starts + span][:, None, :],
+                                      f[starts][:, None, :], f[starts + span][:, None, :],
+                                      span * fine_step,
+                                      (np.arange(1, span) * fine_step)[None, :, None])
+                between = np.max(np.abs(guess - x[inner]) / scale, axis=(1, 2))
+            # The sub-steps' error grows with the interval as the lattice's would; the
+            # interpolant's may not exceed one longest single step's.
+            ok = ((error <= ERROR_PER_SECOND * span * fine_step)
+                  & (between <= ERROR_PER_SECOND * sub * fine_step))
+            for i in starts[ok]:
+                good[i:i + span] = True
+        out[good] = j
+        allowed = good
+    return out
 
 
 def _lattice_trajectory(model: Model, values: dict[str, float], x0: np.ndarray, t0: float,

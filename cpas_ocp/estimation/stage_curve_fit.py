@@ -12,10 +12,24 @@ previous stage's CdS_{i-1} held at their steady-window values:
 
 The fill time uses the reduction's airspeed at t_i (m/s) and the canopy's
 fill length, exactly as the model does.  The fit minimises the sum of
-squared drag-area differences (m^2) from a few starting shapes (expopen 1,
-2 and 3) and keeps the best; the start time starts where the curve first
-climbs a fifth of the way from CdS_{i-1} to CdS_i.  A stage whose data do
-not show the rise (no samples, or no climb) is left to the caller's defaults.
+squared drag-force differences, q (CdS - data) in N with q the reduction's
+dynamic pressure (Pa), from a few starting shapes (expopen 1, 2 and 3) and
+keeps the best; the start time starts where the curve first climbs a fifth
+of the way from CdS_{i-1} to CdS_i.  The reduced drag area is a measured
+force (or acceleration) divided by q, so its noise grows as 1/q: a rocket's
+drogue opening at apogee, near zero airspeed, gives drag areas that are
+noise alone until the vehicle has fallen fast enough, and weighted equally
+they drove the fill constant and the shape exponent onto their 0.3 lower
+bounds.  Weighted by q they count as little as they say.
+
+A shape parameter the fit does not determine (its standard error from the
+fit's Jacobian above half its value: the rise hides in the noise, or the
+fill is shorter than a sample) or leaves within BOUND_MARGIN of a bound (the
+data pull it outside the range the model allows) falls back to the
+parameter's default, and every value returned lies inside its bounds by
+BOUND_MARGIN: a start on a bound is a start an interior-point solver
+leaves only slowly.  A stage whose data do not show the rise (no samples,
+or no climb) is left to the caller's defaults.
 """
 
 from __future__ import annotations
@@ -40,6 +54,11 @@ CLIMB_FRACTION = 0.2
 # Longest stretch of data after the observed start used for one stage (s).
 MAX_WINDOW_S = 4.0
 STARTING_EXPOPEN = (1.0, 2.0, 3.0)
+# A returned value keeps this fraction of its bounds' range from either bound (in log space
+# for a positive shape parameter, whose range spans decades: 0.3-60 for a fill constant).
+BOUND_MARGIN = 0.05
+# Largest standard error, as a fraction of the value, of a shape parameter the fit keeps.
+DETERMINED_RELATIVE_SIGMA = 0.5
 
 
 @dataclass(frozen=True)
@@ -49,7 +68,10 @@ class StageData:
     `t`, `cds` and `airspeed` (s, m^2, m/s) cover the stage's window only;
     `bounds` maps each fitted parameter name to the model's (lower, upper);
     `fixed` holds shape parameters the model keeps fixed (e.g. a Pilot's
-    expopen = 1), which the fit keeps too.
+    expopen = 1), which the fit keeps too.  `dynamic_pressure` (Pa, on `t`) weights
+    each sample's drag area by the force it stands for (None: equal weights);
+    `defaults` are the model's defaults of the fitted parameters, which replace a
+    shape the fit does not determine.
     """
 
     chute: Parachute
@@ -62,6 +84,8 @@ class StageData:
     cds_full_open: float
     bounds: dict[str, tuple[float, float]]
     fixed: dict[str, float] = field(default_factory=dict)
+    dynamic_pressure: np.ndarray | None = None
+    defaults: dict[str, float] = field(default_factory=dict)
 
 
 def fitted_names(chute: Parachute, stage: str) -> list[str]:
@@ -94,10 +118,13 @@ def fit_stage_curve(data: StageData) -> dict[str, float] | None:
         out[free] = theta
         return out
 
+    q = np.ones_like(data.t) if data.dynamic_pressure is None else data.dynamic_pressure
+    weight = q / max(float(np.max(q)), 1e-12)  # drag force per unit of the largest q
+
     def residual(theta: np.ndarray) -> np.ndarray:
         values = full(theta)
         v_i = float(np.interp(values[0], data.t, data.airspeed))
-        return np.asarray(curve(data.t[None, :], *values, v_i)).ravel() - data.cds
+        return weight * (np.asarray(curve(data.t[None, :], *values, v_i)).ravel() - data.cds)
 
     if not free.any():
         return dict(zip(names, (float(v) for v in held), strict=True))
@@ -110,7 +137,51 @@ def fit_stage_curve(data: StageData) -> dict[str, float] | None:
         sol = least_squares(residual, theta0, bounds=(lower, upper), x_scale="jac")
         if best is None or sol.cost < best.cost:
             best = sol
-    return dict(zip(names, (float(v) for v in full(best.x)), strict=True))
+    fitted = dict(zip(names, (float(v) for v in full(best.x)), strict=True))
+    sigma = dict(zip(np.asarray(names)[free], _standard_errors(best), strict=True))
+    for name in names[1:]:
+        if name in data.fixed:
+            continue
+        lo, hi = data.bounds[name]
+        value = fitted[name]
+        undetermined = not sigma[name] <= DETERMINED_RELATIVE_SIGMA * abs(value)
+        if (undetermined or _near_bound(value, lo, hi)) and name in data.defaults:
+            value = data.defaults[name]
+        fitted[name] = inside_bounds(value, lo, hi)
+    return fitted
+
+
+def inside_bounds(value: float, lower: float, upper: float) -> float:
+    """`value` moved inside [lower, upper] by BOUND_MARGIN of the range (of its logarithm
+    where both bounds are positive): a start for a fit, off its bounds."""
+    if lower > 0.0:
+        span = np.log(upper / lower)
+        lo, hi = lower * np.exp(BOUND_MARGIN * span), upper * np.exp(-BOUND_MARGIN * span)
+    else:
+        lo, hi = lower + BOUND_MARGIN * (upper - lower), upper - BOUND_MARGIN * (upper - lower)
+    return float(np.clip(value, lo, hi))
+
+
+def _near_bound(value: float, lower: float, upper: float) -> bool:
+    """Whether `value` lies within BOUND_MARGIN of a bound (`inside_bounds` would move it)."""
+    return inside_bounds(value, lower, upper) != value
+
+
+def _standard_errors(sol: object) -> np.ndarray:
+    """Standard errors of a least-squares solution's parameters (their units): the
+    Gauss-Newton covariance (J^T J)^-1 s^2, s^2 the residual variance; infinite where the
+    Jacobian leaves a direction undetermined."""
+    jac = np.asarray(sol.jac)  # type: ignore[attr-defined]
+    res = np.asarray(sol.fun)  # type: ignore[attr-defined]
+    dof = max(res.size - jac.shape[1], 1)
+    s2 = float(res @ res) / dof
+    info = jac.T @ jac
+    try:
+        cov = np.linalg.inv(info) * s2
+    except np.linalg.LinAlgError:
+        return np.full(jac.shape[1], np.inf)
+    diag = np.diag(cov)
+    return np.where(np.isfinite(diag) & (diag >= 0.0), np.sqrt(np.abs(diag)), np.inf)
 
 
 def _starting_point(data: StageData, t_cross: float, i_peak: int, expopen: float) -> np.ndarray:

@@ -30,7 +30,13 @@ from cpas_ocp.estimation.fit import (
 from cpas_ocp.estimation.kinematic_track import kinematic_track
 from cpas_ocp.estimation.nlp_functions import MarquardtDamping, PointEvaluations
 from cpas_ocp.estimation.reduction import initial_guess
-from cpas_ocp.estimation.shooting_grid import TimeWindow, dynamics_grid, stable_refinement
+from cpas_ocp.estimation.shooting_grid import (
+    TimeWindow,
+    dynamics_grid,
+    hermite_state,
+    stable_refinement,
+    substeps_of,
+)
 from cpas_ocp.estimation.simulate import rk4_step, simulate
 from cpas_ocp.io.flight_test import FlightTest
 from cpas_ocp.io.model_spec import ModelSpec, spec_from_effects, spec_of_test, unfitted_sensors
@@ -247,7 +253,7 @@ class NlpTranscription:
     def _variables(self, n: int) -> _Nlp:
         """The decision variables (node states X, free parameters P, captured values C, all
         scaled to order one), their physical values, and the RK4 step of one interval."""
-        m, s = self.model, self.settings
+        m = self.model
         nx, ncap = m.nx, len(m.captures)
         xscale = m.state_scales()
         self.pscale = np.array([m.parameter(f).scale for f in self.free])
@@ -261,18 +267,24 @@ class NlpTranscription:
         pfull = ca.vertcat(*[
             P[free_index[p.name]] * self.pscale[free_index[p.name]] if p.name in free_index
             else ca.MX(self.values.get(p.name, p.default)) for p in m.parameters])
-        step = self._step = rk4_step(m)
+        self._step = rk4_step(m)
         syms = {"x": ca.SX.sym("x", nx), "x1": ca.SX.sym("x1", nx), "t": ca.SX.sym("t"),
                 "dt": ca.SX.sym("dt"), "p": ca.SX.sym("p", len(m.parameters)),
                 "c": ca.SX.sym("c", ncap)}
-        xe = syms["x"]
-        for j in range(s.substeps):
-            xe = step(xe, syms["t"] + j * syms["dt"] / s.substeps, syms["dt"] / s.substeps,
-                      syms["p"], syms["c"])
+        xe = self._interval_end(syms["x"], syms["t"], syms["dt"], syms["p"], syms["c"], 1)
         self._ctx = (X, Xp, pfull, Cp, xscale, cscale)
         self._sweeps: dict[tuple[int, ...], ca.Function] = {}  # `_sweep`'s, by rows
         return _Nlp(X, P, C, Xp, Cp, pfull, ca.vertcat(ca.vec(X), P, C), free_index, xscale,
                     cscale, syms, xe)
+
+    def _interval_end(self, x: ca.SX, t: ca.SX, dt: ca.SX, p: ca.SX, c: ca.SX,
+                      substeps: int) -> ca.SX:
+        """The state one shooting interval of length dt (s) after `x` at `t`: `substeps`
+        (the interval's, `shooting_grid.substeps_of`) times `settings.substeps` RK4 steps."""
+        m = substeps * self.settings.substeps
+        for j in range(m):
+            x = self._step(x, t + j * dt / m, dt / m, p, c)
+        return x
 
     def _gaps_and_sensors(self, nlp: _Nlp, n: int, h: float) -> None:
         """The continuity gap of every shooting interval and the weighted residuals of every
@@ -280,10 +292,20 @@ class NlpTranscription:
         with its Jacobian (sensors sampled between nodes are predicted one partial RK4
         step after the node before the sample)."""
         y = nlp.syms
-        ks = np.arange(n)
-        gap = ca.Function("gap", [y["x"], y["x1"], y["t"], y["dt"], y["p"], y["c"]],
-                          [(y["x1"] - nlp.xe) / nlp.xscale])
-        blocks = [_Block(gap, [ks, ks + 1], self.t[:n], [np.diff(self.t)])]
+        counts = substeps_of(self.t)
+        blocks, gap_rows = [], []
+        # One gap function per number of sub-steps; the gaps' rows stay node-major.
+        for m in np.unique(counts):
+            ks = np.flatnonzero(counts == m)
+            xe = nlp.xe if m == 1 else self._interval_end(y["x"], y["t"], y["dt"], y["p"],
+                                                          y["c"], int(m))
+            gap = ca.Function("gap" if m == 1 else f"gap_{m}",
+                              [y["x"], y["x1"], y["t"], y["dt"], y["p"], y["c"]],
+                              [(y["x1"] - xe) / nlp.xscale])
+            blocks.append(_Block(gap, [ks, ks + 1], self.t[ks], [np.diff(self.t)[ks]]))
+            gap_rows.append((ks[:, None] * self.model.nx
+                             + np.arange(self.model.nx)[None, :]).ravel())
+        n_gap_blocks = len(blocks)
         sensor_blocks, destinations, offsets = self._sensor_blocks(self._step, n, h)
         blocks += sensor_blocks
         # Each block's values (the line search's trial points) and its values with the
@@ -295,8 +317,9 @@ class NlpTranscription:
             native = compile_functions(native)
         mapped = [self._mapped_block(b, value_fn, jac_fn) for b, value_fn, jac_fn
                   in zip(blocks, native[:len(blocks)], native[len(blocks):], strict=True)]
-        nlp.residuals = _gathered(mapped[1:], destinations, offsets)
-        nlp.g = [mapped[0]]
+        nlp.residuals = _gathered(mapped[n_gap_blocks:], destinations, offsets)
+        nlp.g = (mapped[:1] if n_gap_blocks == 1 else
+                 _gathered(mapped[:n_gap_blocks], gap_rows, [0, self.model.nx * n]))
         nlp.lbg = [np.zeros(self.model.nx * n)]
         nlp.ubg = [np.zeros(self.model.nx * n)]
 
@@ -519,7 +542,9 @@ class NlpTranscription:
         each block's rows go; records `self._samples`, one entry per sensor.
 
         A sample at a node is predicted from that node's state; a sample between
-        nodes one partial RK4 step after the node before it.  Sensors sampled at the
+        nodes one partial RK4 step after the node before it, or, inside an interval
+        integrated in sub-steps, by the cubic Hermite interpolant of its two nodes
+        (`shooting_grid.hermite_state`).  Sensors sampled at the
         same times (an IMU and the load cells) share one block, so the step to each
         sample time is taken once for all of them: per such set of times, one block
         of the samples at nodes and one of those between.  The rows of every block
@@ -552,27 +577,37 @@ class NlpTranscription:
             else:
                 same.append(number)
         blocks, destinations = [], []
+        long = substeps_of(self.t) > 1  # intervals integrated in sub-steps
+        x1s, lengths = ca.SX.sym("x1", m.nx), ca.SX.sym("H")
+        rhs = ca.Function("rhs", [xs, ts, ps, cs], [m.rhs(xs, ts, ps, cs)])
         for tsamp, members in groups:
             k = np.clip(np.searchsorted(self.t, tsamp + 1e-7 * h, side="right") - 1, 0, n - 1)
             dt = tsamp - self.t[k]
             between = np.abs(dt) >= 1e-7
-            for samples in (np.flatnonzero(~between), np.flatnonzero(between)):
+            kinds = (~between, between & ~long[k], between & long[k])
+            for kind, samples in enumerate(np.flatnonzero(c) for c in kinds):
                 if samples.size == 0:
                     continue
                 names = [self._samples[i][0] for i in members]
                 meas = np.vstack([self._samples[i][3][:, samples] for i in members])
                 sig = np.vstack([self._samples[i][4][:, samples] for i in members])
                 ym, sg = ca.SX.sym("ym", meas.shape[0]), ca.SX.sym("sg", meas.shape[0])
-                if between[samples[0]]:
+                nodes, states = [k[samples]], [xs]
+                if kind == 0:
+                    x_at, t_at, sym_extra, extra = xs, ts, [], []
+                elif kind == 1:
                     x_at, t_at, sym_extra, extra = (step(xs, ts, dts, ps, cs), ts + dts,
                                                     [dts], [dt[samples]])
-                else:
-                    x_at, t_at, sym_extra, extra = xs, ts, [], []
+                else:  # inside a long interval: between its nodes (`hermite_state`)
+                    x_at = hermite_state(xs, x1s, rhs(xs, ts, ps, cs),
+                                         rhs(x1s, ts + lengths, ps, cs), lengths, dts)
+                    t_at, sym_extra = ts + dts, [dts, lengths]
+                    extra = [dt[samples], np.diff(self.t)[k[samples]]]
+                    nodes, states = [k[samples], k[samples] + 1], [xs, x1s]
                 y_at = ca.vertcat(*[m.outputs[name](x_at, t_at, ps, cs) for name in names])
-                fn = ca.Function(f"residual_{len(blocks)}", [xs, ts, *sym_extra, ym, sg, ps, cs],
-                                 [(ym - y_at) / sg])
-                blocks.append(_Block(fn, [k[samples]], self.t[k[samples]],
-                                     [*extra, meas, sig]))
+                fn = ca.Function(f"residual_{len(blocks)}",
+                                 [*states, ts, *sym_extra, ym, sg, ps, cs], [(ym - y_at) / sg])
+                blocks.append(_Block(fn, nodes, self.t[k[samples]], [*extra, meas, sig]))
                 # Row (sample j, channel c) of sensor i lies at offsets[i] + j n_i + c.
                 destinations.append(np.concatenate([
                     offsets[i] + samples[:, None] * len(self._samples[i][1])
@@ -754,8 +789,9 @@ class NlpTranscription:
 
     def _fit_states(self, fit: Fit) -> np.ndarray:
         """The fit's states at this grid's nodes (len(t) x the fit's nx): its own nodes, and
-        between them (this grid refined, `_stable_grid`) one RK4 step of the fit's model
-        from the node before, as its shooting intervals predict."""
+        between them (this grid refined, `_stable_grid`) RK4 steps of the fit's model
+        from the node before (one, or as many as the fit's longest interval there has
+        sub-steps), as its shooting intervals predict."""
         if fit.t.shape == self.t.shape and np.allclose(fit.t, self.t):
             return fit.x
         k = np.clip(np.searchsorted(fit.t, self.t + 1e-9, side="right") - 1, 0, len(fit.t) - 1)
@@ -767,10 +803,14 @@ class NlpTranscription:
         x = fit.x[k].copy()
         if np.any(between):
             step = rk4_step(fit.model).map(int(between.sum()))
-            x[between] = np.asarray(step(
-                fit.x[k[between]].T, fit.t[k[between]], dt[between],
-                fit.model.parameter_vector(fit.parameters),
-                fit.model.capture_vector(fit.captures))).T
+            # Within a long interval of the fit, in its sub-steps' length at the most.
+            count = int(np.max(substeps_of(fit.t)[k[between]]))
+            xb, tb = fit.x[k[between]].T, fit.t[k[between]]
+            for j in range(count):
+                xb = step(xb, tb + j * dt[between] / count, dt[between] / count,
+                          fit.model.parameter_vector(fit.parameters),
+                          fit.model.capture_vector(fit.captures))
+            x[between] = np.asarray(xb).T
         return x
 
     def swept(self, z: np.ndarray, states: Sequence[str]) -> np.ndarray:
@@ -790,17 +830,19 @@ class NlpTranscription:
         _, pfull, Cp = self._unpack(z)
         rows = np.concatenate([np.arange(nx)[m.state_slice(name)] for name in states])
         ends = np.asarray(self._sweep(tuple(int(r) for r in rows))(
-            X[:, 0], X[:, :n], self.t[:n], np.diff(self.t), pfull, Cp))
+            X[:, 0], X[:, :n], self.t[:n], np.diff(self.t), substeps_of(self.t), pfull, Cp))
         X[rows, 1:] = ends[rows]
         out = z.copy()
         out[:nx * (n + 1)] = (X / self._xscale[:, None]).ravel(order="F")
         return out
 
     def _sweep(self, rows: tuple[int, ...]) -> ca.Function:
-        """(x0, node states, interval starts, lengths, p, c) -> the state at every interval's
-        end, integrated over the grid from x0 in `rows` and restarted at each interval's node
-        values in the other states (`settings.substeps` RK4 steps an interval): `swept`'s
-        loop as one CasADi call (`mapaccum`), made once per set of rows.
+        """(x0, node states, interval starts, lengths, sub-steps, p, c) -> the state at every
+        interval's end, integrated over the grid from x0 in `rows` and restarted at each
+        interval's node values in the other states (its sub-steps times
+        `settings.substeps` RK4 steps, as its gap; steps past an interval's count have
+        zero length): `swept`'s loop as one CasADi call (`mapaccum`), made once per set
+        of rows.
 
         Called from Python interval by interval, the RK4 steps took 26 s of a 350 s
         discovery on `drogue` (130 ms a sweep over 1,000 intervals)."""
@@ -809,13 +851,14 @@ class NlpTranscription:
             return cached
         m, sub = self.model, self.settings.substeps
         carried, node = ca.SX.sym("carried", m.nx), ca.SX.sym("node", m.nx)
-        t, h = ca.SX.sym("t"), ca.SX.sym("h")
+        t, h, count = ca.SX.sym("t"), ca.SX.sym("h"), ca.SX.sym("count")
         p, c = ca.SX.sym("p", len(m.parameters)), ca.SX.sym("c", len(m.captures))
         kept = set(rows)
         x = ca.vertcat(*[carried[i] if i in kept else node[i] for i in range(m.nx)])
-        for j in range(sub):
-            x = self._step(x, t + j * h / sub, h / sub, p, c)
-        interval = ca.Function("sweep_interval", [carried, node, t, h, p, c], [x])
+        steps = sub * count
+        for j in range(sub * int(np.max(substeps_of(self.t), initial=1))):
+            x = self._step(x, t + j * h / steps, ca.if_else(j < steps, h / steps, 0.0), p, c)
+        interval = ca.Function("sweep_interval", [carried, node, t, h, count, p, c], [x])
         self._sweeps[rows] = interval.mapaccum("sweep", len(self.t) - 1)
         return self._sweeps[rows]
 

@@ -41,6 +41,7 @@ from cpas_ocp.inference.result_claim import (
     moved_windows,
     start_shifts,
 )
+from cpas_ocp.inference.shape_restarts import restart_shapes
 from cpas_ocp.io.flight_test import FlightTest
 from cpas_ocp.io.model_spec import ModelSpec
 from cpas_ocp.physics.effects import Effect
@@ -83,10 +84,13 @@ DIRECT_ITERATIONS = 100
 
 def solve(est: Estimator, progress: bool = False) -> Fit:
     """Fit `est`'s model from the reduction; where it has continuation effects and the
-    direct start fails, through its relaxed model (see the module docstring); then
-    restarted with the start times that misfit moved (`restarts`).  Raises
-    SolverFailure as `Estimator.solve` does, for the last attempt."""
-    return restart_start_times(est, _solve_from_reduction(est, progress), progress)[0]
+    direct start fails, through its relaxed model (see the module docstring); where
+    that fails or leaves an opening's shape on a guessed bound, from the reduction
+    with other shapes (`shape_restarts`); then restarted with the start times that
+    misfit moved (`restarts`).  Raises SolverFailure as `Estimator.solve` does, for
+    the first attempt where no other converges."""
+    fit = restart_shapes(est, lambda: _solve_from_reduction(est, progress), progress)
+    return restart_start_times(est, fit, progress)[0]
 
 
 def solve_checked(est: Estimator, progress: bool = False
