@@ -646,6 +646,9 @@ def _card_options(s: argparse.ArgumentParser) -> None:
     s.add_argument("--card", required=True, metavar="CARD",
                    help="a flight card: a built-in name (prometheus) or a JSON file")
     s.add_argument("--out", required=True, type=Path)
+    s.add_argument("--still-air", action="store_true",
+                   help="where the card gives no model: the rocket default without the air's "
+                        "vertical motion (wind_process)")
 
 
 def _import(args: argparse.Namespace) -> int:
@@ -662,7 +665,7 @@ def _import(args: argparse.Namespace) -> int:
         columns = card.data_columns if not isinstance(card.data_columns, str) \
             else _beside(card) / card.data_columns
     record = read_flight_log(args.log, log_format, columns, f"{card.source}: data.columns")
-    summary = import_flight(record, card, args.out)
+    summary = import_flight(record, card, args.out, args.still_air)
     print(summary.text())
     print(f"test folder written to {args.out}")
     return 0

@@ -401,3 +401,24 @@ def test_correlation_length_of_white_and_correlated_noise() -> None:
         assert len(blocks) == int(np.ceil(t.size / size))
         assert block_sigma(blocks) / np.sqrt(len(blocks)) == pytest.approx(truth, rel=0.15)
         assert np.std(ar) / np.sqrt(t.size) < truth / 2.5
+
+
+def test_still_air_leaves_the_air_motion_out_of_the_default(flight: Flight,
+                                                            tmp_path: Path) -> None:
+    """`import --still-air` writes the rocket default without the wind process; a card's own
+    model is written as it is either way."""
+    from tests.test_rocket_log_import import COLUMN_MAP
+    write_mapped(flight, tmp_path / "log.csv", seed=18)
+    card = {k: v for k, v in CARD.items() if k != "model"}
+    args = ["import", str(tmp_path / "log.csv"), "--columns",
+            _write(tmp_path, "map.json", COLUMN_MAP), "--card",
+            _write(tmp_path, "card.json", card)]
+    assert main([*args, "--out", str(tmp_path / "still"), "--still-air"]) == 0
+    assert main([*args, "--out", str(tmp_path / "air")]) == 0
+
+    def effects(folder: str) -> list[str]:
+        model = json.loads((tmp_path / folder / "manifest.json").read_text())["model"]
+        return [e if isinstance(e, str) else e["effect"] for e in model["effects"]]
+
+    assert "wind_process" not in effects("still") and "wind_process" in effects("air")
+    assert set(effects("air")) - set(effects("still")) == {"wind_process"}

@@ -674,19 +674,20 @@ def held_openings(deploy: dict[str, float], events: dict[str, FlightEvent]) -> l
 
 def rocket_model(block: dict[str, Any], sensor_kinds: list[str],
                  canopies: list[tuple[str, str]], held: list[str],
-                 deploy_sigma: dict[str, float]) -> dict[str, Any]:
+                 deploy_sigma: dict[str, float], still_air: bool = False) -> dict[str, Any]:
     """The manifest's model block: the card's where it lists effects; else `ROCKET_EFFECTS`
     with the sensors' (`sensor_kinds`) and, with a second sensor, the altimeter's errors;
     each start window at least three of its deployment's sigmas (and `MIN_START_WINDOW_S`);
     the opening shape (n, expopen) of the canopies named in `held` held at
     `HELD_FILL_CONSTANT`, `HELD_EXPOPEN`, and without an accelerometer every canopy's
     expopen (`canopies`: each canopy's name and first stage); the card's own fixes, frees
-    and priors win."""
+    and priors win.  `still_air` leaves the air's motion out."""
     if "effects" in block:
         return block
     window = max(MIN_START_WINDOW_S, *(3.0 * s for s in deploy_sigma.values()))
     effects = [{"effect": "canopy_inflation", "start_window": round(window, 3)}
-               if e == "canopy_inflation" else e for e in ROCKET_EFFECTS]
+               if e == "canopy_inflation" else e for e in ROCKET_EFFECTS
+               if not (still_air and isinstance(e, dict) and e["effect"] == "wind_process")]
     others = [ROCKET_SENSOR_EFFECTS[k] for k in dict.fromkeys(sensor_kinds)
               if k in ROCKET_SENSOR_EFFECTS]
     effects += [*(ALTIMETER_ERRORS if others else ()), *others]
@@ -811,9 +812,10 @@ def flight_events(record: FlightRecord) -> tuple[dict[str, FlightEvent], list[st
     return events, notes
 
 
-def import_flight(log: FlightRecord | AltusLog, card: FlightCard, out: str | Path
-                  ) -> ImportSummary:
-    """Write the test folder of `log` under `card` to `out` (see the module docstring)."""
+def import_flight(log: FlightRecord | AltusLog, card: FlightCard, out: str | Path,
+                  still_air: bool = False) -> ImportSummary:
+    """Write the test folder of `log` under `card` to `out` (see the module docstring);
+    `still_air`: the default model (`rocket_model`) without the air's motion."""
     out = Path(out)
     record = log if isinstance(log, FlightRecord) else log.record()
     samples = record.samples
@@ -1061,7 +1063,7 @@ def import_flight(log: FlightRecord | AltusLog, card: FlightCard, out: str | Pat
         "model": rocket_model(card.model, [s["kind"] for s in sensors],
                               [(c["name"], c["stages"][0]) for c in parachutes
                                if not c.get("open_at_start")],
-                              held_openings(deploy, events), deploy_sigma),
+                              held_openings(deploy, events), deploy_sigma, still_air),
     }
     validate_manifest(manifest, card.source)
     summary = ImportSummary(
