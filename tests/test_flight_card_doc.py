@@ -350,9 +350,10 @@ def test_example_d_imports_as_printed_with_the_cards_main(tmp_path: Path) -> Non
 
 def test_examples_a_and_b_import_as_printed(tmp_path: Path) -> None:
     """The Altus Metrum and CATS cards, with the generator's AltOS export and CATS export
-    folder under the names the commands give: both import; the card's apogee event in (a)
-    holds the drogue's opening in the rocket default model (an AltOS log has states, so
-    no apogee of its own), and (b)'s canopies get their diameters from the descent."""
+    folder under the names the commands give: both import, (a) read as its card's
+    data.format says; the altimeter's apogee holds the drogue's opening in (a)'s rocket
+    default model (an AltOS log has states, none for apogee), and (b)'s canopies get
+    their diameters from the descent."""
     flight = fly()
     argv, _, _, log = place("a", tmp_path)
     generator.write_altus(flight, log, seed=23)
