@@ -51,11 +51,7 @@ from cpas_ocp.estimation.simulate import Trajectory, rk4_step, simulate
 from cpas_ocp.physics.model import Model
 
 MAX_STEP_S = 0.25  # longest RK4 step (s): of an interval, or of its sub-steps
-# Longest shooting interval (s), integrated in sub-steps: 1.28 s on a 10 ms lattice, eight
-# sub-steps.  Sixteen (2.56 s) cut a 10-minute descent's nodes from 1,782 to 1,568 and its
-# time per iteration by 5-9 %, but their differentiated gap compiled to 4.7 MB of native
-# code against 1.2 MB: a first build of 68 s against 27 s.
-MAX_INTERVAL_S = 2.0
+MAX_INTERVAL_S = 4.0  # longest shooting interval (s), integrated in sub-steps
 ERROR_PER_SECOND = 1e-5  # RK4 step error per second of flight, in state scales (1/s)
 STABILITY = 0.5  # largest |lambda| H of the dynamics on an interval of length H
 SUPPORT = 3  # fine intervals either side of a capture time's window (the B-spline's support)
