@@ -27,7 +27,7 @@ sys.path.insert(0, str(ROOT))
 from benchmarks.revisions import code_at, run_child  # noqa: E402
 
 BASELINE = "bac75cc"
-PROMETHEUS = ROOT.parents[1] / "shared" / "data" / "prometheus-2022"
+PROMETHEUS = ROOT.parent / "shared" / "data" / "prometheus-2022"
 CASES = ["rocket_steady:1", "rocket_steady:2", "rocket_gusts:1", "rocket_gusts:2",
          "altimeter_20hz:5", "prometheus:telemega-serial-6583-flight-0003.csv",
          "prometheus:telemetrum-serial-5115-flight-0001.csv"]
@@ -47,7 +47,7 @@ name, arg = case.split(":")
 if name == "prometheus":
     from cpas_ocp.io.altus_metrum import read_altus_log
     from cpas_ocp.io.flight_log import import_flight, load_card
-    import_flight(read_altus_log(Path(root).parents[1] / "shared" / "data" / "prometheus-2022"
+    import_flight(read_altus_log(Path(root).parent / "shared" / "data" / "prometheus-2022"
                                  / arg), load_card("prometheus"), work / "test")
     test = load_test(work / "test")
 elif name == "altimeter_20hz":

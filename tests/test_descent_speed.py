@@ -77,7 +77,7 @@ def test_long_intervals_stay_within_a_hundredth_of_the_altimeter_noise(long_stea
 
     counts = substeps_of(nodes)
     long = np.flatnonzero(counts > 1)
-    assert np.diff(nodes)[long].max() >= 1.6  # eight sub-steps of the 50 ms lattice's 0.2 s
+    assert np.diff(nodes)[long].max() >= 2.0
     assert np.diff(nodes)[long].sum() > 0.8 * (MAIN_START_S - test.t_start)
     p, c = model.parameter_vector(values), model.capture_vector(ref.captures)
     length = np.diff(nodes)[long]
@@ -111,7 +111,7 @@ def test_long_descent_recovers_the_drag_areas(long_steady) -> None:
     drag area within 3 reported sigma of the truth."""
     test, truth = long_steady
     rec = reconstruct(test)
-    assert np.diff(rec.estimator.t).max() >= 1.6
+    assert np.diff(rec.estimator.t).max() >= 2.0
     assert rec.fit.chi_square / rec.fit.dof < 1.2
     for name in ("CdS[drogue,stage1]", "CdS[main,stage2]"):
         sigma = rec.covariance.std[name]

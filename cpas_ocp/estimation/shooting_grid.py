@@ -31,6 +31,12 @@ MAX_STEP_S of the lattice's states at every lattice point inside it (at the
 altitude's 1,000 m scale, 2.5 mm: a hundredth of a barometric altimeter's
 noise).
 
+Not with a process of the air's motion (`wind_process`): its knots start at
+rest, so the simulation from the guesses cannot show how fast the descent
+will follow the air the fit puts in.  On the Prometheus TeleMega log (wind
+knots every 4 s, 58 parameters) intervals of 3.2 s took 42 iterations at 1.9
+s each where the one-step grid takes 16 at 0.46 s.
+
 An inflation happens where its start time ends up, not where the reduction
 guessed it: every fine demand after a free start time's guess is repeated
 for every shift of that time within its bounds, and the bounds' window
@@ -51,11 +57,7 @@ from cpas_ocp.estimation.simulate import Trajectory, rk4_step, simulate
 from cpas_ocp.physics.model import Model
 
 MAX_STEP_S = 0.25  # longest RK4 step (s): of an interval, or of its sub-steps
-# Longest shooting interval (s), integrated in sub-steps: 1.28 s on a 10 ms lattice, eight
-# sub-steps.  Sixteen (2.56 s) cut a 10-minute descent's nodes from 1,782 to 1,568 and its
-# time per iteration by 5-9 %, but their differentiated gap compiled to 4.7 MB of native
-# code against 1.2 MB: a first build of 68 s against 27 s.
-MAX_INTERVAL_S = 2.0
+MAX_INTERVAL_S = 4.0  # longest shooting interval (s), integrated in sub-steps
 ERROR_PER_SECOND = 1e-5  # RK4 step error per second of flight, in state scales (1/s)
 STABILITY = 0.5  # largest |lambda| H of the dynamics on an interval of length H
 SUPPORT = 3  # fine intervals either side of a capture time's window (the B-spline's support)
@@ -162,6 +164,8 @@ def _long_levels(model: Model, values: dict[str, float], traj: Trajectory, fine_
     allowed = levels >= top
     if last == top or not allowed.any():
         return out
+    if any(prm.process_knot for prm in model.parameters):
+        return out  # the air held still at the guesses: its motion's time scale is unseen
     x, t = traj.x, traj.t
     p, c = model.parameter_vector(values), model.capture_vector(traj.captures)
     scale = model.state_scales()
