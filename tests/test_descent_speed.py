@@ -122,8 +122,8 @@ def test_long_descent_recovers_the_drag_areas(long_steady) -> None:
 def test_altimeter_only_rocket_fit_starts_inside_the_bounds_and_converges(
         tmp_path: Path) -> None:
     """The drogue opens at apogee, where the reduced drag area is noise over a dynamic
-    pressure near zero: the reduction falls back to the shape defaults there rather
-    than to the 0.3 bounds, every shape start lies inside its bounds by the curve fit's
+    pressure near zero: weighted by that pressure, the reduction no longer drives the
+    shape to its 0.3 bounds, every shape start lies inside its bounds by the curve fit's
     margin, and the default fit converges."""
     test = load_test(altimeter_log(tmp_path, 20.0))
     model = spec_of_test(test).model(test)

@@ -17,7 +17,8 @@ def test_the_notebook_runs_and_finds_the_hidden_added_mass(capsys) -> None:
     ns = runpy.run_path(str(NOTEBOOK), run_name="__main__")
     rec, diag, comparison = ns["rec"], ns["diag"], ns["comparison"]
     assert rec.is_result
-    assert list(rec.parameters.columns) == ["value", "sigma", "low_95", "high_95", "unit"]
+    assert list(rec.parameters.columns) == ["value", "sigma", "low_95", "high_95", "unit",
+                                            "bound"]
     assert (rec.parameters["sigma"] > 0).all()
     assert diag.explanation is not None and diag.explanation.effect == "added_mass"
     lr = comparison.lr

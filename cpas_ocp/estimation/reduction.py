@@ -174,10 +174,9 @@ def initial_guess(test: FlightTest, model: Model,
 
 def _fit_stage(test: FlightTest, red: Reduction, chute: Parachute, k: int,
                starts: dict[tuple[str, str], float], guess: dict[str, float],
-               bounds: dict[str, tuple[float, float]], fixed: dict[str, float],
-               defaults: dict[str, float]) -> dict[str, float] | None:
-    """Curve-fitted shape and start of stage k of `chute` (`stage_curve_fit`), or None;
-    `defaults` (the model's) replace a shape the data do not determine.
+               bounds: dict[str, tuple[float, float]], fixed: dict[str, float]
+               ) -> dict[str, float] | None:
+    """Curve-fitted shape and start of stage k of `chute` (`stage_curve_fit`), or None.
 
     The window runs from halfway back to the previous stage's observed start
     (at most 1 s before this one) to just before the next stage's, at most
@@ -199,7 +198,7 @@ def _fit_stage(test: FlightTest, red: Reduction, chute: Parachute, k: int,
                      red.stage_scale.get(stage, 1.0) * red.cds_riser[chute.name][sel],
                      red.airspeed[sel], cds_of[k - 1] if k else 0.0, cds_of[k], cds_of[-1],
                      fit_bounds, {n: v for n, v in fixed.items() if n in names},
-                     red.dynamic_pressure[sel], {n: defaults[n] for n in names})
+                     red.dynamic_pressure[sel])
     return fit_stage_curve(data)
 
 
@@ -236,8 +235,7 @@ def reduce_and_guess(test: FlightTest, model: Model, fixed: dict[str, float] | N
     Parameters in `fixed` keep their values, and the curve fits hold them.
     """
     fixed = dict(fixed or {})
-    defaults = {p.name: p.default for p in model.parameters}
-    guess = defaults | fixed
+    guess = {p.name: p.default for p in model.parameters} | fixed
     starts = stage_starts(test, guess)
     flyout = {(c.name, s): guess[param_name("flyout_angle", c.name, s)]
               for c in test.parachutes for s in c.stages
@@ -267,7 +265,7 @@ def reduce_and_guess(test: FlightTest, model: Model, fixed: dict[str, float] | N
         if chute.open_at_start:
             continue  # no opening: nothing to fit but the steady drag areas
         for k in range(len(chute.stages)):
-            shape = _fit_stage(test, red, chute, k, starts, guess, bounds, fixed, defaults)
+            shape = _fit_stage(test, red, chute, k, starts, guess, bounds, fixed)
             if shape is not None:
                 guess.update(shape)
     return guess, red

@@ -311,15 +311,25 @@ def correlation_length(t: np.ndarray, values: np.ndarray) -> int:
     return max(1, round(integrated_time(r)))
 
 
-def block_sigma(blocks: pd.DataFrame) -> float:
+def settled(t: np.ndarray, steady_end: float = np.inf) -> np.ndarray:
+    """Which of the times `t` (s, one canopy's segment) lie in its settled descent: the
+    later half of the span up to `steady_end` (the next canopy's charge, or the phase's
+    end).  An opening's deceleration or the landing, which a local quadratic trend does
+    not follow, would read there as correlated noise."""
+    end = min(float(t[-1]), steady_end)
+    return (t >= 0.5 * (t[0] + end)) & (t <= end)
+
+
+def block_sigma(blocks: pd.DataFrame, steady_end: float = np.inf) -> float:
     """The noise sigma to weigh block means (`independent_blocks`) by: their robust
     scatter about the local trend (`scatter_sigma`) times the square root of their own
-    integrated autocorrelation time.  Adjacent blocks of a correlated noise still share
-    its tail (for an AR(1) noise in blocks of its integrated time, adjacent means correlate
-    at 0.36), and weighing them as independent would state sigmas too small by that
-    root."""
+    integrated autocorrelation time in the settled descent (`settled`).  Adjacent blocks
+    of a correlated noise still share its tail (for an AR(1) noise in blocks of its
+    integrated time, adjacent means correlate at 0.36), and weighing them as independent
+    would state sigmas too small by that root."""
     t, values = blocks["time"].to_numpy(float), blocks.iloc[:, 1].to_numpy(float)
-    r = _scatter(t, values)
+    steady = settled(t, steady_end)
+    r = _scatter(t[steady], values[steady]) if steady.sum() >= 2 else None
     tail = 1.0 if r is None else max(1.0, integrated_time(r))
     return scatter_sigma(t, values) * float(np.sqrt(tail))
 
@@ -329,10 +339,7 @@ def independent_blocks(frame: pd.DataFrame, steady_end: float = np.inf
     """`frame` (``time`` s and one channel) averaged in consecutive blocks of
     `correlation_length` samples, each block's mean at its mean time, blocks never spanning
     a gap (a left-out charge window: over 1.5 sample intervals); with the block size.  The
-    correlation is measured over the later half of the frame's span up to `steady_end` (s:
-    the next canopy's charge, or the phase's end), where the descent has settled: an
-    opening's deceleration or the landing, which a local quadratic trend does not follow,
-    would read as correlated noise.
+    correlation is measured in the settled descent (`settled`, up to `steady_end`).
 
     Block means of correlated noise are about as independent as white samples, and their
     scatter is their sigma: a fit that weighs every raw sample at the raw scatter would
@@ -342,8 +349,7 @@ def independent_blocks(frame: pd.DataFrame, steady_end: float = np.inf
     if len(frame) < 2:
         return frame.reset_index(drop=True), 1
     t = frame["time"].to_numpy(float)
-    end = min(float(t[-1]), steady_end)
-    steady = (t >= 0.5 * (t[0] + end)) & (t <= end)  # the descent settled, no opening
+    steady = settled(t, steady_end)
     size = correlation_length(t[steady], frame.iloc[:, 1].to_numpy(float)[steady])
     if size <= 1:
         return frame.reset_index(drop=True), 1
@@ -940,8 +946,8 @@ def import_flight(log: FlightRecord | AltusLog, card: FlightCard, out: str | Pat
                          f"{size} samples ({seconds:.2f} s), averaged in blocks of that "
                          f"length: {len(part)} samples -> {len(blocks)}")
         if len(blocks) < MIN_DESCENT_SAMPLES:  # too short a segment: the whole phase's
-            blocks = independent_blocks(baro_phase[["time", "altitude"]])[0]
-        baro_sigmas.append(max(MIN_BARO_SIGMA_M, block_sigma(blocks)))
+            blocks, steady_end = independent_blocks(baro_phase[["time", "altitude"]])[0], t_end
+        baro_sigmas.append(max(MIN_BARO_SIGMA_M, block_sigma(blocks, steady_end)))
     baro_blocks = pd.concat(parts, ignore_index=True)
 
     fixes_phase = fixes[(fixes["time"] >= lo) & (fixes["time"] <= hi)]
