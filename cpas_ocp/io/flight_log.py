@@ -110,6 +110,7 @@ from cpas_ocp.physics.atmosphere import (
     pressure_altitude,
 )
 from cpas_ocp.physics.effects.canopy_inflation import MAX_CD
+from cpas_ocp.physics.effects.registry import SENSOR_EFFECTS
 from cpas_ocp.physics.units import FACTORS, G0
 
 TOUCHDOWN_MARGIN_S = 0.5  # phase ends this long before the detected touchdown (s)
@@ -185,7 +186,7 @@ def canopy_defaults(parachutes: list[dict[str, Any]], vehicle: dict[str, Any], s
     first and main for the others, ``inflation`` finite mass, one stage ``open``, and a
     ``dry_mass`` of `DEFAULT_DRY_MASS_FRACTION` of the vehicle's (a canopy's mass only adds
     to the descent mass it flies with).  A missing ``diameter`` stays missing: the import
-    takes it from the descent (`diameter_from_descent`)."""
+    takes it from the descent (`canopy_diameters`)."""
     out = []
     for i, chute in enumerate(parachutes):
         if chute.get("open_at_start"):
@@ -341,8 +342,8 @@ def independent_blocks(frame: pd.DataFrame, steady_end: float = np.inf
     a gap (a left-out charge window: over 1.5 sample intervals); with the block size.  The
     correlation is measured in the settled descent (`settled`, up to `steady_end`).
 
-    Block means of correlated noise are about as independent as white samples, and their
-    scatter is their sigma: a fit that weighs every raw sample at the raw scatter would
+    Block means of correlated noise are nearly independent, weighed at `block_sigma`: a
+    fit that weighs every raw sample at the raw scatter would
     count each piece of information that many times over, and state sigmas that many
     times too small.  Over a block (well under a second) the descent's curvature moves the
     mean from the mid-time value by a·L²/24, centimetres against metres of noise."""
@@ -654,8 +655,6 @@ ROCKET_EFFECTS: tuple[str | dict[str, Any], ...] = (
     {"effect": "wind_process", "components": ["up"], "knot_s": 4.0, "tau_s": 20.0,
      "sigma_vertical": 1.0},
     "canopy_inflation", "forebody_drag", "rigid_riser", "baro")
-ROCKET_SENSOR_EFFECTS = {"gps_altitude": "gps_altitude",
-                         "axial_accelerometer": "axial_accelerometer"}
 ALTIMETER_ERRORS = ("baro_bias", "baro_lag")
 # Held opening shape of a canopy deployed near apogee (the effect's default fill constant,
 # linear growth): its fill time n D_o / V_i divides by the small speed at deployment, and
@@ -694,8 +693,7 @@ def rocket_model(block: dict[str, Any], sensor_kinds: list[str],
     effects = [{"effect": "canopy_inflation", "start_window": round(window, 3)}
                if e == "canopy_inflation" else e for e in ROCKET_EFFECTS
                if not (still_air and isinstance(e, dict) and e["effect"] == "wind_process")]
-    others = [ROCKET_SENSOR_EFFECTS[k] for k in dict.fromkeys(sensor_kinds)
-              if k in ROCKET_SENSOR_EFFECTS]
+    others = [SENSOR_EFFECTS[k] for k in dict.fromkeys(sensor_kinds) if k != "baro"]
     effects += [*(ALTIMETER_ERRORS if others else ()), *others]
     fix: dict[str, Any] = {}
     accelerometer = "axial_accelerometer" in sensor_kinds
