@@ -215,6 +215,7 @@ def _parser() -> argparse.ArgumentParser:
     _diagnosis_options(s)
     s.add_argument("--max-steps", type=_ranged(int, 1), default=4, metavar="K",
                    help="add at most K effects (default 4)")
+    _units_option(s)
     s.set_defaults(run=_discover)
 
     s = sub.add_parser("compare", help="fit two effect sets and test which the data prefer")
@@ -513,17 +514,17 @@ def _discover(args: argparse.Namespace) -> int:
 
     print("diagnosing, step by step ...", flush=True)
     found = discover(fit, est.spec, plugins, args.max_steps, args.alpha, args.confirm,
-                     progress=not args.verbose, on_step=said)
+                     progress=not args.verbose, on_step=said, estimator=est)
     # The chain is read from its start: a first fit the data press against guessed bounds
     # is said so in the report, not only on the terminal (a misfit is what the chain is
     # for, and its table shows it).
     if not claim.is_result:
         found.notes.append(f"the first fit is not a result: {claim.problems()[0]}")
-    out = write_discovery(found, args.out, plugins)
+    out = write_discovery(found, args.out, plugins, _units(test, args))
     print()
     print(found.text())
-    print(f"\ndiscovery written to {out} (discovery.md, discovery.json, discovery.png, "
-          "step_K.json)")
+    print(f"\ndiscovery written to {out} (discovery.md, discovery.html, discovery.json, "
+          "discovery.png, step_K.json)")
     return 0
 
 

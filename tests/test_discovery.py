@@ -81,6 +81,7 @@ def test_each_hidden_effect_is_added_in_a_step_of_its_own(two_hidden) -> None:
     assert all(s.explained > 0.0 and s.windows_explained for s in steps[1:])
     assert last.diagnosis.consistent_with_noise
     assert found.stopped == "the residuals are consistent with the noise"
+    assert found.state == "consistent" and found.noise.p_value >= ALPHA
     assert last.fit.chi_square < chi2.ppf(0.999, last.fit.dof)
     est = Estimator(last.fit.test, last.spec, last.fit.settings)
     assert_truth_within_noise(last.fit, est.covariance(last.fit), truth)
@@ -91,7 +92,7 @@ def test_each_step_is_a_model_file_and_the_report_shows_the_fall(two_hidden) -> 
     for k, step in enumerate(found.steps):
         reloaded = load_model_file(out / f"step_{k}.json")
         assert reloaded.effect_names == step.spec.effect_names
-    result = json.loads((out / "discovery.json").read_text())
+    result = json.loads((out / "discovery.json").read_text(), parse_constant=_not_json)
     chi = [s["chi_square"] for s in result["steps"]]
     assert chi == sorted(chi, reverse=True) and len(chi) == len(found.steps)
     assert (out / "discovery.png").stat().st_size > 0
@@ -102,7 +103,20 @@ def test_each_step_is_a_model_file_and_the_report_shows_the_fall(two_hidden) -> 
     text = (out / "discovery.md").read_text()
     header = next(line for line in text.splitlines() if line.startswith("| channel"))
     assert header.count("|") == len(found.steps) + 2  # a column per step
-    assert "stopped: the residuals are consistent with the noise" in text
+    assert "ending: consistent with the noise: chi-square" in text
+    assert result["ending"]["state"] == "consistent"
+    assert result["ending"]["noise_test"]["p_value"] >= ALPHA
+    # Each step's time, and the last model's parameters with their sigma.
+    assert all(s["seconds_to_diagnose"] > 0 for s in result["steps"])
+    final = result["final_parameters"]
+    assert final and all(v["std"] is not None and v["std"] > 0 for v in final.values())
+    assert "## The last model's parameters" in text and "± 1σ" in text
+    assert (out / "discovery.html").stat().st_size > 0
+
+
+def _not_json(name: str) -> None:
+    """A strict JSON parser's answer to NaN or Infinity."""
+    raise ValueError(f"{name} is not JSON")
 
 
 def test_a_stand_in_leading_the_score_tests_does_not_hide_the_effect_behind_it(two_hidden
@@ -150,7 +164,7 @@ def test_the_command_stops_at_its_step_limit_and_says_what_is_left(two_hidden, t
     result = json.loads((out / "discovery.json").read_text())
     assert [s["added"] for s in result["steps"]] == [None, first]
     assert result["stopped"].endswith(f"the last diagnosis confirms {second} too")
-    assert f"stopped: {result['stopped']}" in printed
+    assert result["stopped"] in printed and result["ending"]["state"] == "stopped early"
     assert (out / "step_1.json").is_file() and not (out / "step_2.json").exists()
 
 

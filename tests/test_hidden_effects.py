@@ -175,6 +175,7 @@ def test_a_significant_effect_whose_refit_failed_leaves_the_verdict_undecided() 
     risers on `drogue` with elastic risers hidden) must not read as noise."""
     from cpas_ocp.discrepancy.diagnosis import Diagnosis
     from cpas_ocp.discrepancy.score_test import ScoreTest
+    from cpas_ocp.inference.noise_test import NoiseTest
 
     failed = ScoreTest("elastic_riser", "library", ("riser_period[d]",), statistic=145.0,
                        dof=4, p_value=2e-31,
@@ -186,8 +187,9 @@ def test_a_significant_effect_whose_refit_failed_leaves_the_verdict_undecided() 
     assert "consistent with the sensor noise" not in verdict
     failed.refit_note = ""  # not significant enough to be refitted: no claim either way
     failed.p_value = 0.5
+    at_noise = NoiseTest(5700.0, 5723, 0.6, 0.01, 40)  # the chi-square test passed
     assert "consistent with the sensor noise" in Diagnosis(
-        None, [], [], [failed, quiet], []).verdict()  # type: ignore[arg-type]
+        None, [], [], [failed, quiet], [], _noise=at_noise).verdict()  # type: ignore[arg-type]
 
 
 def test_an_unconverged_refit_bounds_the_likelihood_ratio_from_below(hidden, monkeypatch

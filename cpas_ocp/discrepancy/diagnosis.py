@@ -27,6 +27,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
+from scipy.stats import chi2 as chi2_law
 from scipy.stats import norm
 
 from cpas_ocp.discrepancy.residual_diagnosis import Finding, diagnose_residuals, signature_text
@@ -35,6 +36,7 @@ from cpas_ocp.discrepancy.wind_evidence import WindEvidence, wind_evidence
 from cpas_ocp.estimation.estimator import Fit
 from cpas_ocp.estimation.uncertainty import NonFiniteCurvature
 from cpas_ocp.inference.diagnostics import (
+    MIN_TESTED_SAMPLES,
     WindowStatistic,
     departs,
     excess_removed,
@@ -42,6 +44,7 @@ from cpas_ocp.inference.diagnostics import (
     window_statistics,
     worst_of,
 )
+from cpas_ocp.inference.noise_test import NoiseTest, noise_test
 from cpas_ocp.inference.phase_windows import PhaseWindow, phase_windows
 from cpas_ocp.io.model_spec import ModelSpec
 from cpas_ocp.physics.effects.registry import EffectType
@@ -68,6 +71,7 @@ class Diagnosis:
     air: WindEvidence | None = None  # the air motion's evidence, where it was asked
     _stand_in: dict[str, list[str]] = field(default_factory=dict, repr=False)
     _implausible: dict[str, list[str]] = field(default_factory=dict, repr=False)
+    _noise: NoiseTest | None = field(default=None, repr=False)
 
     @property
     def worst(self) -> str:
@@ -106,11 +110,40 @@ class Diagnosis:
         return [f for f in self.findings if f.significant]
 
     @property
+    def noise(self) -> NoiseTest:
+        """The fit's overall and per-window chi-square against the noise (`noise_test`)."""
+        if self._noise is None:
+            self._noise = noise_test(self.fit, self.statistics, self.alpha)
+        return self._noise
+
+    @property
     def consistent_with_noise(self) -> bool:
-        """Nothing to add: no effect confirmed or left unresolved, no air motion named, and
-        no residual structure beyond the noise."""
+        """Nothing to add and nothing left: no effect confirmed or left unresolved, no air
+        motion named, no residual structure, and the fit's chi-square, overall and in
+        every window tested, within the noise at the level `alpha` (`noise`)."""
         return (self.explanation is None and not (self.air is not None and self.air.decisive)
-                and not self._unresolved(None) and not self.structure)
+                and not self._unresolved(None) and not self.structure and self.noise.passes)
+
+    @property
+    def state(self) -> str:
+        """How the diagnosis ends, in one word: "missing effect" (one is confirmed, or the
+        air's motion is named), "undecided" (significant effects whose refits did not
+        converge), "consistent" (`consistent_with_noise`) or "misfit" (nothing found,
+        and the residuals are not noise)."""
+        if (self.air is not None and self.air.decisive) or self.explanation is not None:
+            return "missing effect"
+        if self._unresolved(None):
+            return "undecided"
+        return "consistent" if self.consistent_with_noise else "misfit"
+
+    def misfit_text(self) -> str:
+        """What remains where nothing is found but the residuals are not noise: the noise
+        test, the signature, and the next move to try."""
+        lines = [f"a misfit nothing tested explains: {self.noise.text()}"]
+        if self.structure:
+            lines.append("the residual's signature:\n" + signature_text(self.structure))
+        lines.append("next: " + next_move(self.noise, self.statistics, bool(self.structure)))
+        return "\n".join(lines)
 
     @property
     def departure_level(self) -> float:
@@ -242,11 +275,11 @@ class Diagnosis:
                     + f" are significant at the family-wise level {self.alpha:g}, but their "
                     "refits did not converge, so nothing is confirmed and nothing ruled out "
                     "(see the refits above)" + signature)
-        if self.structure:
-            return ("no effect in the library explains the residual; its signature:\n"
-                    + signature_text(self.structure))
-        return ("the residuals are consistent with the sensor noise: no effect is significant "
-                f"at the family-wise level {self.alpha:g}")
+        if not self.consistent_with_noise:
+            return ("no effect tested explains the residual; " + self.misfit_text())
+        return ("the residuals are consistent with the sensor noise: "
+                f"{self.noise.text()}; no effect is significant at the family-wise level "
+                f"{self.alpha:g}")
 
     def text(self) -> str:
         """The diagnosis as the command line prints it."""
@@ -318,3 +351,33 @@ def confirm_past_stand_ins(diag: Diagnosis, tests: list[ScoreTest], progress: bo
         confirm(diag.fit, t, progress)
         release_freed_memory()
         diag.effects = confirmed_ranking(tests)
+
+
+def next_move(noise: NoiseTest, statistics: list[WindowStatistic], structure: bool) -> str:
+    """The next thing to try on a misfit nothing tested explains, read from where it sits.
+
+    Where every window tested passes once its chi-square is divided by the fit's
+    chi^2/dof (phi), the excess is uniform: the sensors' sigma are about sqrt(phi)
+    too small, or an effect acts everywhere alike.  Otherwise the misfit sits in the
+    windows that still fail so scaled, which are named."""
+    phi = noise.chi_square / noise.dof if noise.dof > 0 else 1.0
+    tested = [w for w in statistics if w.samples >= MIN_TESTED_SAMPLES]
+    level = noise.alpha / max(len(tested), 1)
+    local = [w for w in tested if chi2_law.sf(w.chi_square / max(phi, 1.0), w.samples) < level]
+    if not local:
+        return (f"the excess is spread evenly (every window passes once scaled by chi2/dof "
+                f"{phi:.3f}): either the sensors' stated sigma are about "
+                f"{100 * (phi**0.5 - 1):.0f} % too small (check each sensor's sigma against "
+                "its settled residual), or a small effect acts everywhere alike (a plug-in; "
+                "see docs/plugins.md)")
+    local.sort(key=lambda w: chi2_law.sf(w.chi_square / max(phi, 1.0), w.samples))
+    channels = list(dict.fromkeys(f"{w.sensor}.{w.channel}" for w in local))
+    windows = list(dict.fromkeys(w.window for w in local))
+    where = (channels[0] if len(channels) == 1 else
+             f"{len(channels)} channels ({', '.join(channels[:4])})") \
+        + f" in {', '.join(windows[:4])}"
+    hint = ("write an effect that acts there as a plug-in (docs/plugins.md; `discover` "
+            "proposes some from the signature above)" if structure else
+            "look at that sensor's residual plot there: an effect acting on it (a plug-in, "
+            "docs/plugins.md), a wrong sigma, or a start the fit did not reach")
+    return f"the misfit sits in {where}; {hint}; `--confirm N` refits more candidates"

@@ -108,6 +108,12 @@ class ScoreTest:
     refit_note: str = ""
     spec: ModelSpec | None = field(default=None, repr=False)
     refitted: tuple[Estimator, Fit] | None = field(default=None, repr=False)
+    # Which start the refit kept came from, once other starts were tried
+    # (`discovery.from_other_starts`: "" where the nested refit stayed lowest); None before.
+    start: str | None = None
+    # Parameters whose linearised estimate lies beyond the bounds of the parameter: the
+    # score step points there, but that is no value the model can take.
+    beyond: tuple[str, ...] = ()
 
     @property
     def tested(self) -> bool:
@@ -121,7 +127,9 @@ class ScoreTest:
         """One line: statistic, p-value and the estimates, or why it was not tested."""
         if not self.tested:
             return f"{self.effect:18s} not tested: {self.note}"
-        shown = ", ".join(f"{n} = {self.estimate[n]:.4g} +- {self.std[n]:.2g}"
+        shown = ", ".join(f"{n}: linearised step beyond its bounds (no estimate)"
+                          if n in self.beyond else
+                          f"{n} = {self.estimate[n]:.4g} +- {self.std[n]:.2g}"
                           for n in self.parameters if n in self.std)
         extra = f"; undetermined here: {', '.join(self.undetermined)}" if self.undetermined \
             else ""
@@ -143,6 +151,8 @@ class ScoreTest:
             value = getattr(self, f.name)
             if f.name in ("spec", "refitted"):
                 continue
+            if f.name in ("estimate", "std"):  # an estimate beyond the bounds is none
+                value = {n: None if n in self.beyond else v for n, v in value.items()}
             if f.name == "refit":
                 value = None if value is None else {**dataclasses.asdict(value),
                                                     "p_value": value.p_value}
@@ -555,6 +565,9 @@ def _statistic(result: ScoreTest, model, values: dict[str, float], cov) -> None:
     names = [n for n in result.parameters if n not in undetermined]
     result.undetermined = tuple(n for n in result.parameters if n in undetermined)
     result.estimate = {n: values[n] for n in result.parameters}
+    result.beyond = tuple(n for n in result.parameters
+                          if not model.parameter(n).lower <= values[n]
+                          <= model.parameter(n).upper)
     std = cov.std
     result.std = {n: std[n] for n in names}
     if not names:

@@ -8,6 +8,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.stats import chi2 as chi2_law
+from scipy.stats import norm
 
 from cpas_ocp.estimation.estimator import Fit, SensorResidual
 from cpas_ocp.inference.phase_windows import OUTSIDE, PhaseWindow, window_index, windows_for_sensor
@@ -203,10 +205,26 @@ def excess_removed(before: Sequence[WindowStatistic], after: Sequence[WindowStat
     return out
 
 
+# Fewest samples of a window whose chi-square is tested against the noise.  A window of a
+# handful of samples (a deployment instant, a stage that lasts two GPS fixes) holds one or
+# two residuals: its test is a test of one outlier, and among thousands of samples a 4
+# sigma one is expected (p = 0.3 over 5,720).  Such windows neither fail a verdict nor make
+# an effect a stand-in; they still count in the total chi-square.
+MIN_TESTED_SAMPLES = 10
+
+
+def window_p_value(w: WindowStatistic) -> float:
+    """The chi-square tail probability of a window's residuals under the noise: its
+    chi-square on as many degrees of freedom as it has samples (exact, where the normal
+    approximation (chi^2 - n) / sqrt(2 n) makes one 4-sigma sample a 10-sigma window)."""
+    return float(chi2_law.sf(w.chi_square, w.samples)) if w.samples else 1.0
+
+
 def departs(w: WindowStatistic, sigmas: float) -> bool:
-    """Whether a window's chi-square excess is more than `sigmas` times the spread the noise
-    gives it, sqrt(2 n)."""
-    return w.excess > sigmas * np.sqrt(2.0 * w.samples)
+    """Whether a window of at least MIN_TESTED_SAMPLES samples departs from the noise: the
+    tail probability of its chi-square (`window_p_value`) is below the normal tail at
+    `sigmas` (the level a family-wise test over the windows sets)."""
+    return w.samples >= MIN_TESTED_SAMPLES and window_p_value(w) < float(norm.sf(sigmas))
 
 
 def explained_share(chi2_before: float, dof_before: int, chi2_after: float) -> float:

@@ -9,8 +9,10 @@ compare:   comparison.md, comparison.json, windows.csv (both models, per
            compare_<sensor>.png (normalised residuals side by side),
            comparison.html (the test, tables and zoomable plots in one page).
 Figures and tables are in the display units (`display_units`); JSON and CSV in SI.
-discover:  discovery.md (the chain of models, per-channel normalised RMS after
-           each step, the last diagnosis), discovery.json, discovery.png,
+discover:  discovery.md (the chain of models with each step's time, how it
+           ended, the last model's parameters with sigma, per-channel normalised
+           RMS after each step, the last diagnosis), discovery.html, discovery.json
+           (strict JSON: null where a number is not defined), discovery.png,
            step_<k>.json (each step's model as a model file), and the last
            model's residuals_<sensor>.png (what remains, windows shaded).
 """
@@ -26,12 +28,13 @@ import pandas as pd
 
 from cpas_ocp.discrepancy.diagnosis import Diagnosis
 from cpas_ocp.discrepancy.discovery import Discovery
-from cpas_ocp.estimation.uncertainty import Covariance
+from cpas_ocp.estimation.uncertainty import Covariance, NonFiniteCurvature
 from cpas_ocp.inference.diagnostics import WindowStatistic, window_statistics
 from cpas_ocp.inference.model_comparison import Comparison
 from cpas_ocp.inference.phase_windows import PhaseWindow, phase_windows
 from cpas_ocp.io.model_spec import model_block
 from cpas_ocp.io.output_folder import atomic_folder
+from cpas_ocp.io.strict_json import json_text
 from cpas_ocp.physics.effects.registry import EffectType
 from cpas_ocp.reports.display_units import DisplayUnits, display_units, pretty
 from cpas_ocp.reports.html_page import Page, residual_comparison_figure, window_legend
@@ -81,7 +84,7 @@ def write_diagnosis(diag: Diagnosis, cov: Covariance | None, out: str | Path,
                 "two_ln_bayes_factor": diag.air.two_ln_b, "named": diag.air.decisive},
             "verdict": diag.verdict(),
         }
-        (tmp / "diagnosis.json").write_text(json.dumps(result, indent=2, default=float))
+        (tmp / "diagnosis.json").write_text(json_text(result))
         figures = plot_sensor_residuals(fit, diag.windows, tmp, units)
         shown = _display_frame(table, units)
         (tmp / "diagnosis.md").write_text(
@@ -139,7 +142,7 @@ def write_comparison(comparison: Comparison, out: str | Path,
             "likelihood_ratio": None if comparison.lr is None else {
                 **dataclasses.asdict(comparison.lr), "p_value": comparison.lr.p_value},
         }
-        (tmp / "comparison.json").write_text(json.dumps(result, indent=2, default=float))
+        (tmp / "comparison.json").write_text(json_text(result))
         figures = []
         for label, fit in zip(comparison.labels, comparison.fits, strict=True):
             sub = tmp / file_stem(label)
@@ -232,13 +235,19 @@ def _markdown(frame: pd.DataFrame) -> str:
 
 
 def write_discovery(discovery: Discovery, out: str | Path,
-                    plugins: dict[str, EffectType] | None = None) -> Path:
-    """Write the discovery folder atomically: discovery.md (the chain, each step's
+                    plugins: dict[str, EffectType] | None = None,
+                    units: DisplayUnits | None = None) -> Path:
+    """Write the discovery folder atomically: discovery.md (the chain with each step's
+    time, how it ended, the last model's parameters with sigma, each step's
     normalised RMS per channel, the figure, the last diagnosis with the last model's
-    residual figures), discovery.json, and each step's model as a model file
-    (`step_K.json`, reusable with `reconstruct --model`)."""
+    residual figures), discovery.html (the same, interactive), discovery.json (strict
+    JSON), and each step's model as a model file (`step_K.json`, reusable with
+    `reconstruct --model`)."""
     out = Path(out)
     steps = discovery.steps
+    final = steps[-1].fit
+    cov = final_covariance(discovery)
+    units = units or display_units(final.test)
     with atomic_folder(out, "discovery.json") as tmp:
         labels = [s.label for s in steps]
         registry = {**(plugins or {}), **discovery.plugins}
@@ -271,6 +280,8 @@ def write_discovery(discovery: Discovery, out: str | Path,
                             "excess_before": w.excess, "share": share}
                            for w, _, share in s.windows_explained],
                        "stand_in": s.stand_in,
+                       "start": s.start or None,
+                       "seconds_to_find": s.found_s, "seconds_to_diagnose": s.diagnosed_s,
                        "worst_window": None if w is None else {"where": w[0],
                                                                "normalized_rms": w[1]},
                        "verdict": None if s.diagnosis is None else s.diagnosis.verdict()}
@@ -285,14 +296,22 @@ def write_discovery(discovery: Discovery, out: str | Path,
                            else t.test.refitted[1].chi_square}
                           for t in discovery.proposals],
             "stopped": discovery.stopped,
+            "ending": {"state": discovery.state, "text": discovery.ending(),
+                       "noise_test": discovery.noise.as_dict()},
+            "seconds": discovery.seconds,
+            "final_parameters": {n: {"value": final.parameters[n],
+                                     "std": (cov.std.get(n) if cov is not None else None)}
+                                 for n in final.free},
             "notes": discovery.notes,
         }
-        (tmp / "discovery.json").write_text(json.dumps(result, indent=2, default=float))
+        (tmp / "discovery.json").write_text(json_text(result))
         last = steps[-1].diagnosis
         figures = [] if last is None else plot_sensor_residuals(last.fit, last.windows, tmp)
+        final_table = parameter_table(final, cov, units)
         (tmp / "discovery.md").write_text(
             f"# Discovery on {steps[0].fit.test.name}\n\n```\n{discovery.text()}\n```\n\n"
             "![the error falling step by step](discovery.png)\n\n"
+            f"## The last model's parameters\n\n```\n{final_table}\n```\n\n"
             "## Normalised RMS per sensor channel after each step\n\n"
             + _markdown(rms.reset_index(names="channel")) + "\n\n"
             + "Each step's model is `step_K.json` here (a model file: `cpas-ocp reconstruct "
@@ -302,4 +321,26 @@ def write_discovery(discovery: Discovery, out: str | Path,
                if discovery.proposals else "")
             + ("" if last is None else f"\n## The last diagnosis\n\n```\n{last.text()}\n```\n\n")
             + "".join(f"![{p.stem}]({p.name})\n\n" for p in figures))
+        page = begin_page(final, f"Discovery on {final.test.name}", units)
+        page.heading("Ending")
+        page.preformatted(discovery.ending())
+        page.heading("The chain, step by step")
+        page.preformatted(discovery.text())
+        parameter_section(page, final, cov, units)
+        if last is not None:
+            page.heading("Sensors: the last model against measurement, by phase window")
+            sensor_figures(page, last.fit, units, last.windows)
+        page.write(tmp / "discovery.html")
     return out
+
+
+def final_covariance(discovery: Discovery) -> Covariance | None:
+    """The covariance of the chain's last fit, where its estimator was kept and its
+    curvature is finite (None otherwise: the parameters are then shown without sigma)."""
+    last = discovery.steps[-1]
+    if last.estimator is None:
+        return None
+    try:
+        return last.estimator.covariance(last.fit)
+    except NonFiniteCurvature:
+        return None

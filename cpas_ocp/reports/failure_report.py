@@ -13,7 +13,6 @@ as estimates.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any
 
@@ -21,6 +20,7 @@ from cpas_ocp.errors import SolverFailure
 from cpas_ocp.estimation.estimator import Fit
 from cpas_ocp.inference.diagnostics import sensor_summary, worst_windows
 from cpas_ocp.io.output_folder import atomic_folder
+from cpas_ocp.io.strict_json import json_text
 
 # Files that mark a reconstruction's output folder, converged or not: either may be
 # replaced by the next run's.
@@ -91,7 +91,7 @@ def write_failure_report(exc: SolverFailure, out: str | Path) -> Path:
     reconstruction's output) and return the folder."""
     out = Path(out)
     with atomic_folder(out, RESULT_MARKERS) as tmp:
-        (tmp / FAILURE_MARKER).write_text(json.dumps(failure_dict(exc), indent=2))
+        (tmp / FAILURE_MARKER).write_text(json_text(failure_dict(exc)))
         (tmp / "failure.md").write_text(failure_markdown(exc))
     return out
 

@@ -8,7 +8,6 @@ from the test folder alone.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import matplotlib
@@ -21,6 +20,7 @@ from cpas_ocp.estimation.reduction import Reduction, reduce_and_guess, stage_sta
 from cpas_ocp.io.flight_test import FlightTest
 from cpas_ocp.io.model_spec import ModelSpec
 from cpas_ocp.io.output_folder import atomic_folder
+from cpas_ocp.io.strict_json import json_text
 from cpas_ocp.physics.model import Model
 from cpas_ocp.reports.display_units import DisplayUnits, display_units, pretty
 
@@ -58,13 +58,13 @@ def write_reduction(test: FlightTest, out: str | Path, spec: ModelSpec,
     with atomic_folder(out, "initial_guess.json") as tmp:
         reduction_frame(red).to_csv(tmp / "reduction.csv", index=False)
         units = {p.name: p.unit for p in model.parameters}
-        (tmp / "initial_guess.json").write_text(json.dumps({
+        (tmp / "initial_guess.json").write_text(json_text({
             "test": test.name,
             "parameters": {n: {"value": guess[n], "unit": units[n]}
                            for n in units if model.parameter(n).estimable},
             "stage_scale": red.stage_scale,
             "stage_windows_s": {k: list(v) for k, v in red.stage_windows.items()},
-        }, indent=2))
+        }))
         _plot(test, red, stage_starts(test, guess), tmp / "reduction.png", shown)
     return out, model, guess
 

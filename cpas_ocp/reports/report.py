@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -18,6 +17,7 @@ from cpas_ocp.inference.phase_windows import PhaseWindow, phase_windows
 from cpas_ocp.inference.profile_likelihood import Profile
 from cpas_ocp.io.flight_log import import_nominal
 from cpas_ocp.io.output_folder import atomic_folder
+from cpas_ocp.io.strict_json import json_text
 from cpas_ocp.physics.units import SI_UNIT
 from cpas_ocp.reports.display_units import CHANNEL_DIMENSION, DisplayUnits, display_units
 from cpas_ocp.reports.failure_report import RESULT_MARKERS
@@ -331,7 +331,7 @@ def write_report(fit: Fit, cov: Covariance | None, out: str | Path,
         result = result_dict(fit, cov, profiles)
         if claim is not None:
             result["claim"] = claim.as_dict()
-        (tmp / "result.json").write_text(json.dumps(result, indent=2))
+        (tmp / "result.json").write_text(json_text(result))
         std = cov.std if cov is not None else {}
         rows = [{"parameter": n, "value": fit.parameters[n], "std": std.get(n, np.nan),
                  "unit": fit.model.parameter(n).unit, "bound": bound_flag(fit, cov, n)}

@@ -9,7 +9,6 @@ figures of `reports.plots`, which take the studies' results as plain data.
 from __future__ import annotations
 
 import dataclasses
-import json
 from pathlib import Path
 
 import pandas as pd
@@ -19,6 +18,7 @@ from cpas_ocp.campaign.drag_area_envelope import drag_area_envelope, stage_condi
 from cpas_ocp.campaign.peak_load_study import MARKER, StageLoads, summary_text
 from cpas_ocp.estimation.estimator import Fit
 from cpas_ocp.io.output_folder import atomic_folder
+from cpas_ocp.io.strict_json import json_text
 from cpas_ocp.reports.plots import (
     plot_dispersion_histograms,
     plot_drag_area_envelope,
@@ -65,8 +65,7 @@ def write_dispersions(models: list[DispersionModel], skipped: list[str], cases: 
                         envelope.corner_labels, envelope.corner_inside, strict=True)
                         if inside is False]},
                 "figures": [f.name for f in figures]})
-        (tmp / "dispersions.json").write_text(json.dumps({"models": summary, "skipped": skipped},
-                                                         indent=2, default=float))
+        (tmp / "dispersions.json").write_text(json_text({"models": summary, "skipped": skipped}))
         (tmp / "dispersions.md").write_text(
             "# Monte Carlo dispersions\n\n```\n" + "\n\n".join(m.text() for m in models)
             + ("\n\nnot dispersed:\n" + "\n".join(skipped) if skipped else "") + "\n```\n\n"
