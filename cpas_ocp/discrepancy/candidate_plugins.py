@@ -6,13 +6,14 @@ kind of physics that is missing.  Three signatures have a parametric answer
 that can be written down without knowing more:
 
 * **a periodic line** at f Hz in some windows: the canopies' drag area
-  modulated at f, from the first such window's start to the last one's end
-  (canopy breathing, a coning or swinging canopy):
-  CdS (1 + g(t) (a_P cos 2 pi f (t - t0) + b_P sin 2 pi f (t - t0))), with g a
-  smooth gate and the in-phase and quadrature amplitudes a_P, b_P linear
-  (null 0); f starts at the found value and is estimated;
+  modulated at f, for each canopy from the first of its own windows the line
+  is seen in to the last one's end (canopy breathing, a coning or swinging
+  canopy): CdS (1 + g_P(t) (a_P cos 2 pi f (t - t_P) + b_P sin 2 pi f
+  (t - t_P))), with g_P a smooth gate and the in-phase and quadrature
+  amplitudes a_P, b_P linear (null 0); f starts at the found value and is
+  estimated;
 * **a load-cell residual that follows the load's level** (correlated with the
-  tension, the drag area or the dynamic pressure): a load-cell gain that
+  tension or the drag area of its own canopy, or the dynamic pressure): a load-cell gain that
   varies with the tension, reading = T (1 + k_P T / T_ref), k_P the change of
   gain at the phase's peak tension T_ref (null 0);
 * **a residual that follows altitude** (a GPS or an altimeter): a horizontal
@@ -74,7 +75,8 @@ def propose(diagnosis: Diagnosis, spec: ModelSpec) -> list[Proposal]:
     order; effects the fitted model (`spec`) already has are not proposed."""
     structure = diagnosis.structure
     fit = diagnosis.fit
-    out = [p for p in (_periodic(structure, fit), _load_gain(structure, fit),
+    canopy_of = {w.name: w.parachute for w in diagnosis.windows}
+    out = [p for p in (_periodic(structure, fit, canopy_of), _load_gain(structure, fit),
                        _wind_profile(structure, fit)) if p is not None]
     return [p for p in out if p.name not in spec.effect_names]
 
@@ -84,7 +86,14 @@ def _base(name: str) -> str:
     return name.split("[")[0]
 
 
-def _periodic(structure: list[Finding], fit: Fit) -> Proposal | None:
+def _periodic(structure: list[Finding], fit: Fit, canopy_of: dict[str, str]
+              ) -> Proposal | None:
+    """A drag-area modulation at the strongest line, gated for each canopy from the first
+    to the last of that canopy's own windows the line is seen in (the union of all
+    where a canopy has none: its amplitudes may still be small but not zero).  Two
+    canopies of a cluster open at different times and breathe from their own openings:
+    one gate for both, opened at the earlier, asks the later canopy to breathe while
+    it is still filling."""
     lines = [f for f in structure if PERIODICITY in f.rejected
              and f.frequency_hz * (f.t1 - f.t0) >= MIN_CYCLES]
     if not lines:
@@ -93,28 +102,45 @@ def _periodic(structure: list[Finding], fit: Fit) -> Proposal | None:
     f0 = top.frequency_hz
     same = [f for f in lines if abs(f.frequency_hz - f0)
             <= max(SAME_LINE_SHARE * f0, 1.0 / max(f.t1 - f.t0, 1e-9))]
-    t0 = min(f.t0 for f in same)
-    t1 = max(f.t1 for f in same)
-    end = "math.inf" if t1 >= float(fit.t[-1]) - OPEN_END_S else f"{t1:.3f}"
+    t_end = float(fit.t[-1]) - OPEN_END_S
+
+    def span(findings: list[Finding]) -> str:
+        t0, t1 = min(f.t0 for f in findings), max(f.t1 for f in findings)
+        return f"({t0:.3f}, {'math.inf' if t1 >= t_end else f'{t1:.3f}'})"
+
+    gates = {c.name: span([f for f in same if canopy_of.get(f.window) == c.name] or same)
+             for c in fit.test.parachutes}
     where = ", ".join(sorted({f"{f.sensor} {f.window}" for f in same}))
     reason = (f"a {f0:.2f} Hz line in {where} (strongest: {top.text()})")
+    windows = "".join(f"\n    {name!r}: {gate}," for name, gate in gates.items())
     return Proposal("drag_area_modulation", reason, _PERIODIC.substitute(
-        frequency=f"{f0:.4f}", t_start=f"{t0:.3f}", t_end=end, reason=_wrap(reason)))
+        frequency=f"{f0:.4f}", windows=windows, reason=_wrap(reason)))
 
 
-def _strongest(structure: list[Finding], sensors: set[str] | None, signatures: tuple[str, ...]
-               ) -> tuple[Finding, Correlation] | None:
+def _strongest(structure: list[Finding], sensors: dict[str, str | None] | None,
+               signatures: tuple[str, ...]) -> tuple[Finding, Correlation] | None:
     """The finding (of `sensors`, or of any sensor) and its significant correlation with a
     signature of one of the kinds `signatures` that has the smallest p-value; None where
-    there is none."""
+    there is none.  `sensors` maps each sensor to its own canopy (None for a vehicle
+    sensor): a signature of another canopy (``cds[drogue2]`` for the load cell of
+    drogue1) is no signature of that sensor, only its own canopy's or a shared
+    quantity's (``dynamic_pressure``).  Two canopies' drag areas and loads rise
+    together, so one canopy's residual correlates with the other's too; a gain
+    proposed from that correlation was fitted with opposite signs on two identical
+    cells."""
+    def own(f: Finding, c: Correlation) -> bool:
+        canopy = None if sensors is None else sensors.get(f.sensor)
+        index = c.signature.partition("[")[2].rstrip("]")
+        return canopy is None or not index or index == canopy
+
     hits = [(f, c) for f in structure if sensors is None or f.sensor in sensors
             for c in f.correlations
-            if c.signature in f.rejected and _base(c.signature) in signatures]
+            if c.signature in f.rejected and _base(c.signature) in signatures and own(f, c)]
     return min(hits, key=lambda h: h[1].p_value) if hits else None
 
 
 def _load_gain(structure: list[Finding], fit: Fit) -> Proposal | None:
-    cells = {s.name for s in fit.test.sensors_of("load_cell")}
+    cells = {s.name: s.parachute for s in fit.test.sensors_of("load_cell")}
     hit = _strongest(structure, cells, LOAD_LEVEL)
     if hit is None:
         return None
@@ -175,11 +201,13 @@ _PERIODIC = Template('''"""Drag-area modulation at the residual's frequency (pro
 Proposed from the residual's signature:
 $reason
 
-Every canopy's drag area is CdS (1 + g(t) (a cos 2 pi f (t - T_START_S)
-+ b sin 2 pi f (t - T_START_S))): canopy breathing, or a coning or swinging
-canopy seen through its drag.  g is a smooth gate, 0 before T_START_S and 1
-RAMP_S after it (and back to 0 over RAMP_S before T_END_S where that is
-finite).  The in-phase and quadrature amplitudes ``modulation_cos[P]`` and
+Every canopy P's drag area is CdS (1 + g_P(t) (a cos 2 pi f (t - t_P)
++ b sin 2 pi f (t - t_P))): canopy breathing, or a coning or swinging
+canopy seen through its drag.  g_P is a smooth gate, 0 before the start t_P
+of P's window in WINDOWS_S and 1 RAMP_S after it (and back to 0 over RAMP_S
+before the window's end where that is finite): each canopy's window is where
+the line was seen in its own phases.  The in-phase and quadrature amplitudes
+``modulation_cos[P]`` and
 ``modulation_sin[P]`` (fractions of CdS) enter linearly and vanish at the null;
 ``modulation_frequency`` (Hz) starts at FREQUENCY_HZ and is estimated.  Edit
 the window or the gate to fit what you know; list the effect after
@@ -187,17 +215,19 @@ canopy_inflation, before the riser effects.
 """
 ''' + _HEADER + '''
 FREQUENCY_HZ = $frequency  # the residual's line (Hz)
-T_START_S = $t_start  # where the line was first seen (s)
-T_END_S = $t_end  # where it was last seen (s; math.inf: to the phase's end)
+# Each canopy's window (s): where the line was first and last seen in its own phases
+# (math.inf: to the phase's end).
+WINDOWS_S = {$windows
+}
 RAMP_S = 0.1  # the gate's opening time (s)
 
 
-def gate(t):
-    """0 before T_START_S, 1 from T_START_S + RAMP_S (to T_END_S - RAMP_S), smooth."""
-    opened = 0.5 * (1.0 + ca.tanh(4.0 * (t - T_START_S - 0.5 * RAMP_S) / RAMP_S))
-    if math.isinf(T_END_S):
+def gate(t, start, end):
+    """0 before `start`, 1 from start + RAMP_S (to end - RAMP_S), smooth."""
+    opened = 0.5 * (1.0 + ca.tanh(4.0 * (t - start - 0.5 * RAMP_S) / RAMP_S))
+    if math.isinf(end):
         return opened
-    return opened * 0.5 * (1.0 + ca.tanh(4.0 * (T_END_S - 0.5 * RAMP_S - t) / RAMP_S))
+    return opened * 0.5 * (1.0 + ca.tanh(4.0 * (end - 0.5 * RAMP_S - t) / RAMP_S))
 
 
 @dataclass(frozen=True)
@@ -220,9 +250,10 @@ class DragAreaModulation(Effect):
         return {p.name: 0.0 for p in self.parameters(test)[1:]}
 
     def forces(self, ctx):
-        phase = 2.0 * math.pi * ctx.p["modulation_frequency"] * (ctx.t - T_START_S)
-        g = gate(ctx.t)
         for chute in ctx.test.parachutes:
+            start, end = WINDOWS_S[chute.name]
+            phase = 2.0 * math.pi * ctx.p["modulation_frequency"] * (ctx.t - start)
+            g = gate(ctx.t, start, end)
             a = ctx.p[param_name("modulation_cos", chute.name)]
             b = ctx.p[param_name("modulation_sin", chute.name)]
             factor = 1.0 + g * (a * ca.cos(phase) + b * ca.sin(phase))
