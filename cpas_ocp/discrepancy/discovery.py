@@ -22,11 +22,19 @@ alone.  `discover` repeats the diagnosis on the model each step ends with:
    model no longer needs (its removal refitted from the last fit, and
    keeping it not significant: `_drop_stand_ins`), a step of its own, and
    never test it again;
-5. stop where the residuals are consistent with the noise, where nothing
-   left is significant (the last diagnosis then describes what remains: its
-   signature), where the refit that would add the effect did not converge
-   (its likelihood ratio is only a bound, and a bound is not a step), or
-   after `max_steps` steps.
+5. where a confirming refit (nested in the fit before) looks like a wrong
+   basin (far above the noise, implausible estimates, identical canopies
+   given different constants), fit the same model from other starts too and
+   keep the lowest (`from_other_starts`); before the verdict, the same for
+   the last model, then every effect added tested again against the last
+   model and dropped where not significant (`_drop_unneeded`);
+6. end in one of three states (`Discovery.state`): consistent with the
+   noise (the last fit's chi-square passes its test overall and in every
+   window, `noise_test`), a misfit nothing tested explains (the last
+   diagnosis describes what remains: its signature and the next move), or
+   stopped early (the step limit, or a refit that would add the effect did
+   not converge: its likelihood ratio is only a bound, and a bound is not a
+   step).
 
 Every step keeps its fit, so each fall in chi-square is the likelihood ratio
 of one nested pair, tested at the diagnosis's family-wise level.  Each step
@@ -55,7 +63,7 @@ from cpas_ocp.discrepancy.candidate_plugins import Proposal, propose
 from cpas_ocp.discrepancy.diagnosis import ALPHA, CONFIRM_TOP, Diagnosis, diagnose
 from cpas_ocp.discrepancy.score_test import CONFIRM_MAX_ITER, ScoreTest, confirm, score_test
 from cpas_ocp.errors import InputError, SolverFailure
-from cpas_ocp.estimation.estimator import Estimator, Fit
+from cpas_ocp.estimation.estimator import Estimator, Fit, Settings
 from cpas_ocp.estimation.uncertainty import NonFiniteCurvature
 from cpas_ocp.inference.continuation import solve as solve_with_continuation
 from cpas_ocp.inference.diagnostics import (
@@ -69,6 +77,7 @@ from cpas_ocp.inference.model_comparison import Criteria, LikelihoodRatio, one_s
 from cpas_ocp.inference.noise_test import NoiseTest, noise_test
 from cpas_ocp.inference.phase_windows import phase_windows
 from cpas_ocp.inference.restarts import IMPROVEMENT_CHI2, restart_start_times
+from cpas_ocp.io.flight_test import FlightTest
 from cpas_ocp.io.model_spec import ModelSpec
 from cpas_ocp.physics.effects.registry import EffectType, load_plugin
 from cpas_ocp.physics.parameters import split_name
@@ -265,11 +274,12 @@ def next_step(diag: Diagnosis, progress: bool = False) -> DiscoveryStep | str:
     if best is None:
         return ("the residuals are consistent with the noise" if diag.consistent_with_noise
                 else "nothing left is confirmed: the last diagnosis says what remains")
+    if best.refit is not None and best.spec is not None:
+        from_other_starts(diag, best, progress)
     if best.refit is None or best.refit.lower_bound or best.refitted is None \
             or best.spec is None:
-        return (f"the refit that would add {best.effect} did not converge: its likelihood "
-                "ratio is only a bound")
-    from_other_starts(diag, best, progress)
+        return (f"the refit that would add {best.effect} did not converge, nor its fit from "
+                "the offline reduction: its likelihood ratio is only a bound")
     implausible = diag.implausible(best)
     if implausible:
         # The next confirmed effect whose estimates are plausible, if any (the diagnosis
@@ -343,26 +353,35 @@ def twins_apart(est: Estimator, fit: Fit, names: Sequence[str], alpha: float) ->
     return out
 
 
+def fresh_fit(test: FlightTest, spec: ModelSpec, settings: Settings, max_iter: int,
+              progress: bool = False) -> tuple[Estimator, Fit] | None:
+    """`spec` fitted to `test` from its offline reduction (`continuation.solve`, with its
+    own shape and start-time restarts), on `settings` without the nested fit's grid,
+    guesses, freed or held parameters and limits, with the iteration limit `max_iter`;
+    None where it does not converge."""
+    settings = dataclasses.replace(settings, nodes=None, guess={}, free=None, fixed={},
+                                   limits={}, max_iter=max_iter)
+    try:
+        est = Estimator(test, spec, settings)
+        return est, solve_with_continuation(est, progress)
+    except (SolverFailure, InputError):
+        return None
+
+
 def best_start(est: Estimator, fit: Fit, max_iter: int, progress: bool = False
                ) -> tuple[Estimator, Fit, str] | None:
     """The same model as `fit` (of `est`) from other starts, where one ends lower by more
     than IMPROVEMENT_CHI2: the fit with the start times whose windows misfit moved
     (`restarts.restart_start_times`), and a fit from the offline reduction
-    (`continuation.solve`, with its own shape and start-time restarts) with the
-    iteration limit `max_iter`.  The lowest, with which start it came from, or None
-    where `fit` stays lowest."""
+    (`fresh_fit`) with the iteration limit `max_iter`.  The lowest, with which start it
+    came from, or None where `fit` stays lowest."""
     tried: list[tuple[Estimator, Fit, str]] = []
     moved, restarts = restart_start_times(est, fit, progress)
     if restarts:
         tried.append((est, moved, "; ".join(r.text() for r in restarts)))
-    settings = dataclasses.replace(fit.settings, nodes=None, guess={}, free=None, fixed={},
-                                   limits={}, max_iter=max_iter)
-    try:
-        fresh_est = Estimator(fit.test, est.spec, settings)
-        tried.append((fresh_est, solve_with_continuation(fresh_est, progress),
-                      "the offline reduction"))
-    except (SolverFailure, InputError):
-        pass
+    fresh = fresh_fit(fit.test, est.spec, fit.settings, max_iter, progress)
+    if fresh is not None:
+        tried.append((*fresh, "the offline reduction"))
     best = min(tried, key=lambda t: t[1].chi_square, default=None)
     if best is None or best[1].chi_square >= fit.chi_square - IMPROVEMENT_CHI2:
         return None
@@ -371,41 +390,53 @@ def best_start(est: Estimator, fit: Fit, max_iter: int, progress: bool = False
 
 
 def from_other_starts(diag: Diagnosis, best: ScoreTest, progress: bool = False) -> None:
-    """Where the confirming refit of `best` (nested, from the diagnosed fit) looks like a
-    wrong basin, fit the same model from other starts (`best_start`) and keep the
-    lowest (in place: the refit, its likelihood ratio, estimates, note and `start`;
+    """Where the confirming refit of `best` (nested, from the diagnosed fit) did not
+    converge or looks like a wrong basin, fit the same model from other starts and keep
+    the lowest (in place: the refit, its likelihood ratio, estimates, note and `start`;
     the diagnosis's judgements of `best` are made again).  A wrong basin shows as a
     chi-square far above the noise (`far_from_noise`), an estimate outside its
     plausible range (`Diagnosis.implausible`), or identical canopies given different
-    constants (`twins_apart`).  Tried once per effect and diagnosis.
+    constants (`twins_apart`); the other starts are then `best_start`'s.  A refit that
+    did not converge is fitted from the offline reduction (`fresh_fit`), which
+    replaces it where it converges.  Tried once per effect and diagnosis.
 
     A fit of a model that lacks an effect bends its other parameters to make up for
     it, and the refit that adds the effect starts there.  On `drogue` flown with a
     2,000 lbf deployment load, the refit from the baseline fit (chi-square/dof 17.6)
     stopped at 8.99 with the load at 11,058 N (truth 8,896 N), and a load-cell offset
-    was then confirmed to take up the rest.  On a two-Drogue test flown with added
-    mass, the nested refit reported "Solved" at chi-square 7,056.8 on about 5,720
-    dof, with one disreef's start 0.3 s early and added-mass factors 1.26 and 0.98
-    for two identical canopies."""
-    assert best.refitted is not None and best.refit is not None and best.spec is not None
+    was then confirmed to take up the rest; with the observed inflation starts 0.3 s
+    off the truth too, the refit did not converge at all.  On a two-Drogue test
+    flown with added mass, the nested refit reported "Solved" at chi-square 7,056.8
+    on about 5,720 dof, with one disreef's start 0.3 s early and added-mass factors
+    1.26 and 0.98 for two identical canopies."""
+    assert best.refit is not None and best.spec is not None
     if best.start is not None:
         return
     best.start = ""
-    est, fit = best.refitted
-    suspect = far_from_noise(fit, diag.alpha) or diag.implausible(best) \
-        or twins_apart(est, fit, list(best.refit_estimate), diag.alpha)
-    if not suspect:
-        return
     # The diagnosed fit's own iteration limit: a fit from the reduction is a fit, not a
     # refit from next door (on the deployment load above it took more than 150).
-    found = best_start(est, fit, diag.fit.settings.max_iter, progress)
-    if found is None:
-        return
-    fresh_est, fresh, how = found
-    best.refit = dataclasses.replace(best.refit,
-                                     statistic=diag.fit.chi_square - fresh.chi_square)
-    best.refitted = (fresh_est, fresh)
-    best.refit_estimate = {n: fresh.parameters[n] for n in best.refit_estimate}
+    max_iter = diag.fit.settings.max_iter
+    if best.refit.lower_bound or best.refitted is None:
+        fresh = fresh_fit(diag.fit.test, best.spec, diag.fit.settings, max_iter, progress)
+        if fresh is None or (best.refitted is not None
+                             and fresh[1].chi_square > best.refitted[1].chi_square):
+            return
+        found = (*fresh, "the offline reduction, after the nested refit did not converge")
+    else:
+        est, fit = best.refitted
+        suspect = far_from_noise(fit, diag.alpha) or diag.implausible(best) \
+            or twins_apart(est, fit, list(best.refit_estimate), diag.alpha)
+        if not suspect:
+            return
+        found = best_start(est, fit, max_iter, progress)
+        if found is None:
+            return
+    fresh_est, fit, how = found
+    best.refit = dataclasses.replace(best.refit, statistic=diag.fit.chi_square - fit.chi_square,
+                                     lower_bound=False)
+    best.refitted = (fresh_est, fit)
+    best.refit_estimate = {n: fit.parameters[n] for n in
+                           best.refit_estimate or best.parameters}
     best.refit_note += f"; fitted from other starts too, kept: {how}"
     best.start = how
     diag.forget(best.effect)
@@ -446,7 +477,6 @@ def discover(fit: Fit, spec: ModelSpec, candidates: Mapping[str, EffectType] | N
                 # against the last model; either change is diagnosed again.
                 if _restarted_last(out, step, progress) or _drop_unneeded(out, alpha,
                                                                           progress):
-                    out.steps[-1].found_s += time.perf_counter() - clock
                     continue
                 out.stopped = found
                 out.state = ("consistent" if step.diagnosis.consistent_with_noise else
@@ -466,7 +496,9 @@ def _restarted_last(out: Discovery, step: DiscoveryStep, progress: bool) -> bool
     if step.searched or step.estimator is None or not far_from_noise(step.fit, out.alpha):
         return False
     step.searched = True
+    began = time.perf_counter()
     found = best_start(step.estimator, step.fit, step.fit.settings.max_iter, progress)
+    step.found_s += time.perf_counter() - began
     if found is None:
         return False
     step.estimator, step.fit, step.start = found
@@ -566,8 +598,8 @@ def _drop_stand_ins(out: Discovery, alpha: float, progress: bool) -> None:
 def _drop_unneeded(out: Discovery, alpha: float, progress: bool) -> bool:
     """Test every effect the chain added (stand-in or not) again against the last model,
     and drop the one whose keeping is least significant where it is not significant at
-    alpha / k over the k effects tested (a step of its own, `_without`).  Whether one
-    was dropped.
+    alpha / k over the k effects tested (a step of its own, `_without`); again on the
+    model that leaves, until every effect left earns its place.  Whether one was dropped.
 
     Each effect was admitted by its likelihood ratio against the model before it; the
     effects added after it may explain the same residual better.  On a two-Drogue test
@@ -577,24 +609,28 @@ def _drop_unneeded(out: Discovery, alpha: float, progress: bool) -> bool:
     quasi-likelihood test of a dispersion the model does not explain), so that a
     misfit left by something else does not keep an effect.  The air's motion, admitted
     by its evidence rather than a likelihood ratio, is not tested here."""
-    last = out.steps[-1]
-    names = [s.added for s in out.steps[1:] if s.added is not None and s.dropped is None
-             and s.added != "wind_process" and s.added in last.spec.effect_names
-             and s.added not in out.dropped]
-    if not names:
-        return False
-    phi = max(1.0, last.fit.chi_square / last.fit.dof) if last.fit.dof > 0 else 1.0
-    trials = [t for name in names
-              if (t := _without(last, name, alpha / len(names), progress, phi)) is not None]
-    if not trials:
-        return False
-    began = time.perf_counter()
-    step = min(trials, key=lambda t: t.fit.chi_square)  # the least needed
-    step.explained = explained_share(last.fit.chi_square, last.fit.dof, step.fit.chi_square)
-    step.admitted_by += f", tested again against the last model with {len(names)} added"
-    step.found_s = time.perf_counter() - began
-    out.steps.append(step)
-    return True
+    dropped = False
+    while True:
+        began = time.perf_counter()
+        last = out.steps[-1]
+        names = [s.added for s in out.steps[1:] if s.added is not None and s.dropped is None
+                 and s.added != "wind_process" and s.added in last.spec.effect_names
+                 and s.added not in out.dropped]
+        if not names:
+            return dropped
+        phi = max(1.0, last.fit.chi_square / last.fit.dof) if last.fit.dof > 0 else 1.0
+        trials = [t for name in names
+                  if (t := _without(last, name, alpha / len(names), progress, phi)) is not None]
+        if not trials:
+            return dropped
+        step = min(trials, key=lambda t: t.fit.chi_square)  # the least needed
+        step.explained = explained_share(last.fit.chi_square, last.fit.dof,
+                                         step.fit.chi_square)
+        step.admitted_by += (f", tested again against the last model with the "
+                             f"{len(names)} effect(s) added")
+        step.found_s = time.perf_counter() - began
+        out.steps.append(step)
+        dropped = True
 
 
 def _without(last: DiscoveryStep, name: str, alpha: float, progress: bool,

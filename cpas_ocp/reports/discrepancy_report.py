@@ -83,6 +83,8 @@ def write_diagnosis(diag: Diagnosis, cov: Covariance | None, out: str | Path,
                 "intensities": [dataclasses.asdict(p) for p in diag.air.points],
                 "two_ln_bayes_factor": diag.air.two_ln_b, "named": diag.air.decisive},
             "verdict": diag.verdict(),
+            "state": diag.state,
+            "noise_test": diag.noise.as_dict(),
         }
         (tmp / "diagnosis.json").write_text(json_text(result))
         figures = plot_sensor_residuals(fit, diag.windows, tmp, units)
