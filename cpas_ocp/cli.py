@@ -66,14 +66,15 @@ if TYPE_CHECKING:
 def main(argv: list[str] | None = None) -> int:
     """Run one command; every way it can end is an exit code and at most one line on stderr
     (the module's docstring lists them)."""
-    parser = _parser()
-    try:
-        args = parser.parse_args(argv)
-    except SystemExit as exc:  # --help (0), or a usage error already printed as one line (2)
-        return int(exc.code or 0)
+    # The handlers first: building the parser imports CasADi (seconds), and a signal in
+    # that time is an interrupt like any other, not a traceback or a silent death.
     previous = {sig: signal.getsignal(sig) for sig in interrupts.SIGNALS}
     interrupts.handle_signals()
     try:
+        try:
+            args = _parser().parse_args(argv)
+        except SystemExit as exc:  # --help (0), or a usage error already printed as one line
+            return int(exc.code or 0)
         if isinstance(getattr(args, "out", None), Path):
             check_output(args.out)  # before the work, not after it
         return int(args.run(args) or 0)
@@ -890,3 +891,7 @@ def _fit_and_covariance(est: Estimator, args: argparse.Namespace
     for problem in claim.problems():
         print(f"warning: {problem}", file=sys.stderr)
     return est, fit, cov, claim
+
+
+if __name__ == "__main__":  # python -m cpas_ocp.cli, as the cpas-ocp script
+    sys.exit(main())

@@ -11,12 +11,15 @@ used is an `InputError` on ``--scheduler``.
 
 from __future__ import annotations
 
+import os
 import signal
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
+from types import FrameType
 from typing import TypeVar
 
 from cpas_ocp.errors import InputError
+from cpas_ocp.estimation.compiled import abandon
 
 T = TypeVar("T")
 R = TypeVar("R")
@@ -59,7 +62,14 @@ def _worker_signals() -> None:
     the whole process group), and dies quietly on SIGTERM: it must not run the command's
     handlers, inherited through fork, which would print its traceback."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    signal.signal(signal.SIGTERM, _worker_stop)
+
+
+def _worker_stop(signum: int, frame: FrameType | None) -> None:
+    """End a local worker at once, leaving no compiler running (each runs in a process group
+    of its own, which the worker's death would not reach) and no compiler's folder."""
+    abandon()
+    os._exit(128 + signum)
 
 
 def _on_dask(fn: Callable[[T], R], items: Sequence[T],
