@@ -20,7 +20,13 @@ class InputError(ValueError):
         self.field = field
         # One line, whatever a library's message carried along (pandas ends some with \n).
         self.expectation = " ".join(expectation.split())
-        super().__init__(f"{file}: {field}: {self.expectation}")
+        super().__init__(f"{_printable(file)}: {_printable(field)}: {self.expectation}")
+
+
+def _printable(text: str) -> str:
+    """`text` with its line breaks and other control characters escaped (a file name or a
+    JSON key may hold them): one line that still says exactly what was named."""
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
 
 
 class NotAResult(RuntimeError):

@@ -6,23 +6,79 @@ inputs to `run_tasks`, which runs them in this process (one worker), on a
 `ProcessPoolExecutor` of local processes, or, given a scheduler address, on
 a Dask cluster through `distributed.Client.map` (the workers must have
 cpas-ocp installed and see the same file paths).  A scheduler that cannot be
-used is an `InputError` on ``--scheduler``.
+used is an `InputError` on ``--scheduler``; an address that is not one at all is
+refused before any work (`scheduler_address`), not by Dask's parser after it.
 """
 
 from __future__ import annotations
 
+import ipaddress
 import os
+import re
 import signal
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from types import FrameType
 from typing import TypeVar
+from urllib.parse import urlsplit
 
 from cpas_ocp.errors import InputError
 from cpas_ocp.estimation.compiled import abandon
 
 T = TypeVar("T")
 R = TypeVar("R")
+
+
+# The schemes of Dask's communication back ends; an address without one is tcp.
+SCHEMES = ("tcp", "tls", "inproc", "ucx", "ws", "wss")
+_HOST_LABEL = re.compile(r"(?!-)[A-Za-z0-9_-]{1,63}(?<!-)")
+
+
+def scheduler_address(text: str) -> str:
+    """`text` if it is a Dask scheduler address, ``SCHEME://HOST[:PORT]`` (``HOST[:PORT]``
+    meaning tcp; an IPv6 host in brackets; ``inproc://`` any name), else ValueError
+    saying what is expected and what is wrong: checked before the work, where Dask's
+    own parser fails only when the tasks are sent, with an internal error."""
+    expected = (f"a Dask scheduler address SCHEME://HOST[:PORT] (SCHEME one of "
+                f"{', '.join(SCHEMES)}); got {text!r}")
+    if not text or any(c.isspace() or not c.isprintable() for c in text):
+        raise ValueError(f"{expected}: empty, or with a space or a control character")
+    scheme, sep, rest = text.partition("://")
+    if not sep:
+        scheme, rest = "tcp", text
+    if scheme not in SCHEMES:
+        raise ValueError(f"{expected}: unknown scheme {scheme!r}")
+    if not rest:
+        raise ValueError(f"{expected}: no host")
+    if scheme == "inproc":
+        return text
+    try:
+        parts = urlsplit(f"//{rest}")
+        port = parts.port
+    except ValueError as exc:  # brackets unbalanced, a port not a number or beyond 65535
+        raise ValueError(f"{expected}: {exc}") from None
+    if parts.path or parts.query or parts.fragment or "@" in parts.netloc:
+        raise ValueError(f"{expected}: more than a host and a port")
+    if port == 0 or parts.netloc.endswith(":"):
+        raise ValueError(f"{expected}: a port from 1 to 65535")
+    host = parts.hostname or ""
+    if parts.netloc.startswith("["):
+        try:
+            ipaddress.IPv6Address(host)
+        except ValueError:
+            raise ValueError(f"{expected}: {host!r} in brackets is no IPv6 address") from None
+    elif not all(_HOST_LABEL.fullmatch(label) for label in host.split(".")) or (
+            host.rsplit(".", 1)[-1].isdigit() and not _is_ipv4(host)):
+        raise ValueError(f"{expected}: {host!r} is no host name or IPv4 address")
+    return text
+
+
+def _is_ipv4(host: str) -> bool:
+    try:
+        ipaddress.IPv4Address(host)
+    except ValueError:
+        return False
+    return True
 
 
 def run_tasks(fn: Callable[[T], R], items: Sequence[T], workers: int = 2,
