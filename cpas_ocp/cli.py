@@ -48,7 +48,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from cpas_ocp import interrupts
-from cpas_ocp.errors import InputError, NotAResult, SolverFailure
+from cpas_ocp.errors import InputError, NotAResult, PluginError, SolverFailure
 from cpas_ocp.io.output_folder import check_output
 
 if TYPE_CHECKING:
@@ -78,7 +78,7 @@ def main(argv: list[str] | None = None) -> int:
         if isinstance(getattr(args, "out", None), Path):
             check_output(args.out)  # before the work, not after it
         return int(args.run(args) or 0)
-    except InputError as exc:
+    except (InputError, PluginError) as exc:
         _say(f"error: {exc}")
         return 2
     except SolverFailure as exc:
