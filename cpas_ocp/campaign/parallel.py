@@ -31,7 +31,7 @@ R = TypeVar("R")
 
 # The schemes of Dask's communication back ends; an address without one is tcp.
 SCHEMES = ("tcp", "tls", "inproc", "ucx", "ws", "wss")
-_HOST_LABEL = re.compile(r"(?!-)[A-Za-z0-9_-]{1,63}(?<!-)")
+_HOST_LABEL = re.compile(r"(?!-)[\w-]{1,63}(?<!-)")  # letters of any script: IDN names
 
 
 def scheduler_address(text: str) -> str:
@@ -67,8 +67,7 @@ def scheduler_address(text: str) -> str:
             ipaddress.IPv6Address(host)
         except ValueError:
             raise ValueError(f"{expected}: {host!r} in brackets is no IPv6 address") from None
-    elif not all(_HOST_LABEL.fullmatch(label) for label in host.split(".")) or (
-            host.rsplit(".", 1)[-1].isdigit() and not _is_ipv4(host)):
+    elif not (_is_ipv4(host) or _is_host_name(host)):
         raise ValueError(f"{expected}: {host!r} is no host name or IPv4 address")
     return text
 
@@ -79,6 +78,14 @@ def _is_ipv4(host: str) -> bool:
     except ValueError:
         return False
     return True
+
+
+def _is_host_name(host: str) -> bool:
+    """Whether `host` is a DNS name: labels of letters (any script), digits, hyphens and
+    underscores, a final dot allowed, the last label not all digits (an IPv4 address
+    mistyped, 1.2.3.4.5, is no name)."""
+    labels = host.removesuffix(".").split(".")
+    return all(_HOST_LABEL.fullmatch(label) for label in labels) and not labels[-1].isdigit()
 
 
 def run_tasks(fn: Callable[[T], R], items: Sequence[T], workers: int = 2,
