@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -199,32 +200,51 @@ wait
 """
 
 
-@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads /proc")
-@pytest.mark.parametrize("sig, code", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
-def test_an_interrupt_while_compiling_leaves_no_compiler_and_no_folder(sig, code,
-                                                                      tmp_path) -> None:
-    """Interrupted while the model compiles (a fresh cache), the command kills each compiler
-    with the passes it started (gcc's cc1 and as; here a stand-in's `sleep`), and leaves no
-    temporary folder."""
+def _interrupted_while_compiling(command: list[str], sig: int, tmp_path: Path,
+                                 compilers: int = 1) -> None:
+    """Run the command line's `command` with a fresh compile cache and a stand-in compiler;
+    once `compilers` of them run, send `sig`: the command ends interrupted, none of the
+    compilers' processes survive, and no temporary folder is left."""
     (tmp_path / "bin").mkdir()
     (tmp_path / "bin" / "gcc").write_text(SLOW_COMPILER)
     (tmp_path / "bin" / "gcc").chmod(0o755)
     cache = tmp_path / "cache"
-    proc = subprocess.Popen([sys.executable, "-m", "cpas_ocp.cli", "demo", "--out",
-                             str(tmp_path / "demo")], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True,
+    proc = subprocess.Popen([sys.executable, "-m", "cpas_ocp.cli", *command],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             env={**os.environ, "CPAS_OCP_CACHE": str(cache),
                                  "CPAS_OCP_COMPILE": "1",
                                  "PATH": f"{tmp_path / 'bin'}{os.pathsep}{os.environ['PATH']}"})
     below: dict[int, str] = {}
-    while proc.poll() is None and "sleep" not in below.values():
+    while proc.poll() is None and list(below.values()).count("sleep") < compilers:
         time.sleep(0.02)
         below = _descendants(proc.pid)
     assert proc.poll() is None, "the command ended before it compiled"
     proc.send_signal(sig)
     _, err = proc.communicate(timeout=60)
-    _interrupted(err, code, proc.returncode)
+    _interrupted(err, sig + 128, proc.returncode)
     time.sleep(0.2)  # SIGKILL is delivered at once, but a process takes a moment to end
     assert not [name for pid, name in below.items() if _running(pid)]
     assert not list(cache.glob(".cpas-cg-*")) and not list(tmp_path.glob("**/.cpas-*"))
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads /proc")
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_an_interrupt_while_compiling_leaves_no_compiler_and_no_folder(sig, tmp_path) -> None:
+    """Interrupted while the model compiles (a fresh cache), the command kills each compiler
+    with the passes it started (gcc's cc1 and as; here a stand-in's `sleep`), and leaves no
+    temporary folder."""
+    _interrupted_while_compiling(["demo", "--out", str(tmp_path / "demo")], sig, tmp_path)
     assert not list((tmp_path / "demo").glob("*"))
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads /proc")
+def test_an_interrupted_campaign_leaves_no_compiler_of_its_workers(drogue_folder,
+                                                                   tmp_path) -> None:
+    """A campaign's local workers, ended by the command, kill the compilers they started
+    (in process groups of their own, which the workers' death would not reach)."""
+    for seed in (1, 2):
+        shutil.copytree(drogue_folder(seed), tmp_path / "tests" / f"drogue{seed}")
+    _interrupted_while_compiling(["campaign", str(tmp_path / "tests"), "--out",
+                                  str(tmp_path / "campaign"), "--workers", "2"],
+                                 signal.SIGINT, tmp_path, compilers=2)
+    assert not (tmp_path / "campaign").exists()
