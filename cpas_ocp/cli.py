@@ -48,7 +48,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from cpas_ocp import interrupts
-from cpas_ocp.errors import InputError, NotAResult, SolverFailure
+from cpas_ocp.errors import InputError, NotAResult, PluginError, SolverFailure
 from cpas_ocp.io.output_folder import check_output
 
 if TYPE_CHECKING:
@@ -66,25 +66,26 @@ if TYPE_CHECKING:
 def main(argv: list[str] | None = None) -> int:
     """Run one command; every way it can end is an exit code and at most one line on stderr
     (the module's docstring lists them)."""
-    parser = _parser()
-    try:
-        args = parser.parse_args(argv)
-    except SystemExit as exc:  # --help (0), or a usage error already printed as one line (2)
-        return int(exc.code or 0)
+    # The handlers first: building the parser imports CasADi (seconds), and a signal in
+    # that time is an interrupt like any other, not a traceback or a silent death.
     previous = {sig: signal.getsignal(sig) for sig in interrupts.SIGNALS}
     interrupts.handle_signals()
     try:
+        try:
+            args = _parser().parse_args(argv)
+        except SystemExit as exc:  # --help (0), or a usage error already printed as one line
+            return int(exc.code or 0)
         if isinstance(getattr(args, "out", None), Path):
             check_output(args.out)  # before the work, not after it
         return int(args.run(args) or 0)
-    except InputError as exc:
-        print(f"error: {exc}", file=sys.stderr)
+    except (InputError, PluginError) as exc:
+        _say(f"error: {exc}")
         return 2
     except SolverFailure as exc:
-        print(f"error: {exc}; no result written", file=sys.stderr)
+        _say(f"error: {exc}; no result written")
         return 3
     except NotAResult as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        _say(f"error: {exc}")
         return 4
     except interrupts.Interrupted as exc:
         print(f"interrupted ({exc}); nothing written", file=sys.stderr)
@@ -97,14 +98,21 @@ def main(argv: list[str] | None = None) -> int:
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 128 + signal.SIGPIPE
     except SystemExit as exc:  # a plug-in or library code ending the process mid-command
-        print(f"error: code run by the command called sys.exit({exc.code!r}) before it "
-              f"finished (a plug-in?)", file=sys.stderr)
+        _say(f"error: code run by the command called sys.exit({exc.code!r}) before it "
+             f"finished (a plug-in?)")
         return 1
     except Exception as exc:  # the one boundary for errors
         return _internal_error(exc)
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
+
+
+def _say(message: str) -> None:
+    """Print `message` on stderr as the one line the exit codes promise: a message that
+    spans lines (a library's, a solver's) keeps them all, joined by "; "."""
+    print("; ".join(line.strip() for line in message.splitlines() if line.strip()),
+          file=sys.stderr)
 
 
 def _internal_error(exc: Exception) -> int:
@@ -127,7 +135,7 @@ class _Parser(argparse.ArgumentParser):
     """argparse with its errors as one line (no usage block) and exit code 2."""
 
     def error(self, message: str) -> None:  # type: ignore[override]
-        self.exit(2, f"error: {self.prog}: {message}\n")
+        self.exit(2, "; ".join(f"error: {self.prog}: {message}".splitlines()) + "\n")
 
 
 def _ranged(kind: type, low: float, high: float = math.inf, low_open: bool = False,
@@ -325,8 +333,17 @@ def _plugins(args: argparse.Namespace) -> dict[str, EffectType]:
 
 def _parallel_options(s: argparse.ArgumentParser) -> None:
     s.add_argument("--workers", type=COUNT, default=2, help="local processes (default 2)")
-    s.add_argument("--scheduler", default=None, metavar="ADDRESS",
+    s.add_argument("--scheduler", type=_scheduler, default=None, metavar="ADDRESS",
                    help="run on this Dask scheduler (e.g. tcp://host:8786) instead")
+
+
+def _scheduler(text: str) -> str:
+    """An argparse type: a Dask scheduler address (`scheduler_address`)."""
+    from cpas_ocp.campaign.parallel import scheduler_address
+    try:
+        return scheduler_address(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def _where(args: argparse.Namespace) -> str:
@@ -386,10 +403,20 @@ def _solver_options(s: argparse.ArgumentParser) -> None:
                         "0.25,0.5,1,2,4): one fit each")
 
 
+# The multiples of the wind process's sigmas (m/s, about 1) --wind-intensity may try: six
+# decades about them, from still air to winds beyond any a parachute flies in, so that
+# no multiple reaches the solver as a sigma of 1e-300 or 1e300 m/s.
+WIND_FACTORS = (1e-3, 1e3)
+
+
 def _factors(text: str) -> tuple[float, ...]:
-    """An argparse type: comma-separated positive finite numbers."""
-    parse = _ranged(float, 0.0, low_open=True)
-    values = tuple(parse(part) for part in text.split(","))
+    """An argparse type: comma-separated distinct multiples within WIND_FACTORS."""
+    parse = _ranged(float, *WIND_FACTORS)
+    try:
+        values = tuple(parse(part) for part in text.split(","))
+    except argparse.ArgumentTypeError as exc:
+        raise argparse.ArgumentTypeError(f"multiples of the wind process's sigmas, each {exc}"
+                                         ) from None
     if len(set(values)) != len(values):
         raise argparse.ArgumentTypeError(f"distinct multiples; got {text!r}")
     return values
@@ -891,3 +918,7 @@ def _fit_and_covariance(est: Estimator, args: argparse.Namespace
     for problem in claim.problems():
         print(f"warning: {problem}", file=sys.stderr)
     return est, fit, cov, claim
+
+
+if __name__ == "__main__":  # python -m cpas_ocp.cli, as the cpas-ocp script
+    sys.exit(main())

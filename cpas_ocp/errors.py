@@ -2,7 +2,8 @@
 
 `InputError` is a user's mistake in a test folder or on the command line: it
 carries the file, the field and what was expected, and the CLI prints it as one
-line and exits with code 2.  `SolverFailure` is an estimation that did not
+line and exits with code 2; so is `PluginError`, a plug-in file whose own code
+failed.  `SolverFailure` is an estimation that did not
 converge: it carries Ipopt's status and iteration count, and is never shown as
 a result.  `NotAResult` is a converged fit that may not claim to be one.
 """
@@ -20,7 +21,25 @@ class InputError(ValueError):
         self.field = field
         # One line, whatever a library's message carried along (pandas ends some with \n).
         self.expectation = " ".join(expectation.split())
-        super().__init__(f"{file}: {field}: {self.expectation}")
+        super().__init__(f"{_printable(file)}: {_printable(field)}: {self.expectation}")
+
+
+def _printable(text: str) -> str:
+    """`text` with its line breaks and other control characters escaped (a file name or a
+    JSON key may hold them): one line that still says exactly what was named."""
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
+
+
+class PluginError(Exception):
+    """A plug-in file's own code failed: a hook raised, or returned NaN.  Bad input like an
+    `InputError` (the CLI prints it as one line and exits with 2), but no ValueError, so
+    that no code that catches those as a numerical failure takes it for one."""
+
+    def __init__(self, file: str, hook: str, problem: str) -> None:
+        self.file = file
+        self.hook = hook
+        self.problem = " ".join(problem.split())
+        super().__init__(f"{_printable(file)}: hook {hook} {self.problem}")
 
 
 class NotAResult(RuntimeError):

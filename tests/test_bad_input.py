@@ -139,6 +139,7 @@ def test_a_byte_order_mark_is_valid_input(drogue_folder, tmp_path):
 @pytest.mark.parametrize("option, value", [
     ("--grid-step", "0"), ("--grid-step", "-0.01"), ("--grid-step", "nan"),
     ("--max-iter", "0"), ("--seed", "-1"), ("--profile-points", "1"),
+    ("--wind-intensity", "1e-300"), ("--wind-intensity", "1e300"),
 ])
 def test_an_option_out_of_range_is_one_line_exit_2(option, value, tmp_path, capsys):
     command = ["demo", "--out", str(tmp_path / "d")]
@@ -170,6 +171,60 @@ def test_a_bad_out_path_is_refused_before_the_work(make, drogue_folder, tmp_path
     assert len(captured.err.strip().splitlines()) == 1 and str(out) in captured.err
     assert "solving" not in captured.out  # refused before the estimator was built
     assert not list(tmp_path.glob(".cpas-out-*"))
+
+
+@pytest.mark.skipif(not Path("/proc/self").is_dir(), reason="needs /proc")
+@pytest.mark.parametrize("out", ["/proc/x/out", "/proc/self/x/out"])
+def test_an_out_path_where_no_folder_can_be_made_is_refused(out, tmp_path, capsys):
+    """Permissions do not tell (root may "write" /proc): the folder is tried, and the
+    failure is the user's path, not an internal error."""
+    code = main(["simulate", "drogue", "--out", out, "--seed", "1"])
+    err = capsys.readouterr().err.strip()
+    assert code == 2
+    assert len(err.splitlines()) == 1 and out in err and "Traceback" not in err, err
+
+
+@pytest.mark.parametrize("address, why", [
+    ("tcp://host:99999", "Port out of range"), ("tcp://host:x", "integer"),
+    ("foo://host:1", "unknown scheme 'foo'"), ("tcp://[::1:8786", "IPv6"),
+    ("tcp://[zz]:1", "zz"), ("tcp://host:0", "port"), ("tcp://h:8786/x", "more than"),
+    ("", "empty"), ("tcp://a b:1", "space"), ("tcp://-x:1", "-x"),
+])
+def test_a_bad_scheduler_address_is_refused_before_the_work(address, why, tmp_path, capsys):
+    """Dask's own parser would fail only when the tasks are sent, as an internal error."""
+    code = main(["campaign", str(tmp_path / "nowhere"), "--out", str(tmp_path / "c"),
+                 "--scheduler", address])
+    err = capsys.readouterr().err.strip()
+    assert code == 2
+    assert len(err.splitlines()) == 1 and "--scheduler" in err and why in err, err
+    assert repr(address) in err and "nowhere" not in err  # refused before the folders
+
+
+@pytest.mark.parametrize("address", ["tcp://host:8786", "host:8786", "tcp://10.0.0.2",
+                                     "tls://[::1]:8786", "ws://sched.example.org:80",
+                                     "inproc://10.0.0.1/4242/1", "ucx://node_7:13337"])
+def test_a_scheduler_address_dask_reads_is_accepted(address) -> None:
+    from distributed.comm.addressing import parse_address
+
+    from cpas_ocp.cli import _scheduler
+
+    assert _scheduler(address) == address
+    assert parse_address(address)[0] in ("tcp", "tls", "ws", "inproc", "ucx")
+
+
+@pytest.mark.parametrize("name, key", [("model.json", r"bad\nkey"),
+                                       (r"two\nlines.json", "CdS[x]")])
+def test_a_line_break_in_a_name_stays_one_line(name, key, drogue_folder, tmp_path, capsys):
+    """A file name or a JSON key holding a line break is named escaped, on one line."""
+    model = tmp_path / name.replace(r"\n", "\n")
+    model.write_text(json.dumps({"effects": ["canopy_inflation"],
+                                 "fix": {key.replace(r"\n", "\n"): 1.0}}))
+    code = main(["reduce", str(drogue_folder(1)), "--model", str(model),
+                 "--out", str(tmp_path / "r")])
+    err = capsys.readouterr().err.strip()
+    assert code == 2
+    assert len(err.splitlines()) == 1 and name in err and key in err, err
+    assert not (tmp_path / "r").exists()
 
 
 def test_demo_does_not_delete_a_folder_it_did_not_write(tmp_path, capsys):

@@ -71,10 +71,11 @@ def test_compare_without_nesting_uses_the_criteria_only(problem_folder, tmp_path
     assert result["nesting"].startswith("neither model is nested")
 
 
-def test_a_failing_plugin_is_reported_among_the_candidates(problem_fit, tmp_path) -> None:
-    """A user's effect whose code raises is listed as not tested, with the error; the other
-    candidates are still tested."""
+def test_a_failing_plugin_candidate_is_the_plugins_error(problem_fit, tmp_path) -> None:
+    """A user's effect whose code raises is the user's mistake, named by its file and hook
+    (the command line's exit 2), not a candidate quietly left untested."""
     from cpas_ocp.discrepancy.score_test import score_test
+    from cpas_ocp.errors import PluginError
     from cpas_ocp.io.model_spec import baseline_spec
     from cpas_ocp.physics.effects.registry import load_plugin
     (tmp_path / "bad.py").write_text(
@@ -89,6 +90,7 @@ def test_a_failing_plugin_is_reported_among_the_candidates(problem_fit, tmp_path
         "    def forces(self, ctx):\n"
         "        raise RuntimeError('half-written physics')\n")
     fit, _, _ = problem_fit("fbcp", 1)
-    result = score_test(fit, baseline_spec(), load_plugin(tmp_path / "bad.py")["bad_effect"])
-    assert not result.tested
-    assert "RuntimeError: half-written physics" in result.note
+    with pytest.raises(PluginError) as raised:
+        score_test(fit, baseline_spec(), load_plugin(tmp_path / "bad.py")["bad_effect"])
+    assert str(raised.value) == (f"{tmp_path / 'bad.py'}: hook forces raised RuntimeError: "
+                                 "half-written physics")

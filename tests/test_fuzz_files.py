@@ -6,7 +6,11 @@ line with exit 2, naming the file, with nothing written.
   replaced;
 - a flight card (`import-altus LOG --card CARD`): a node of a rocket's card;
 - an Altus Metrum log (`import-altus LOG`): a cell replaced, rows dropped or
-  repeated, the header damaged, the last line cut.
+  repeated, the header damaged, the last line cut;
+- a `--scheduler` address (`campaign`), assembled from schemes, hosts and ports valid
+  and not, or any text: refused in one line naming the option, or one Dask reads.
+
+Plug-in files that fail are drawn in `test_plugin_faults.py`.
 
 `benchmarks/fuzz_inputs.py` runs the long profile.
 """
@@ -104,3 +108,33 @@ def test_a_corrupted_altus_log_is_valid_or_one_line_exit_2(data, altus_log, tmp_
     code = main(["import-altus", str(work / "log.csv"), "--card", str(work / "card.json"),
                  "--out", str(work / "test")])
     assert_contract(code, capsys.readouterr().err.strip(), "log.csv", work / "test")
+
+
+SCHEMES = st.sampled_from(["tcp://", "tls://", "ws://", "wss://", "ucx://", "inproc://", "",
+                           "foo://", "TCP://", "tcp:/", "://"])
+HOSTS = st.sampled_from(["host", "10.0.0.2", "[::1]", "sched.example.org", "node_7", "",
+                         "[::1", "::1]", "[zz]", "-x", "a b", "1.2.3.4.5", "h@h", "h/x",
+                         "\x00", "é"])
+PORTS = st.sampled_from(["", ":8786", ":1", ":65535", ":0", ":65536", ":99999", ":x", ":",
+                         ":-1", ":+1", ": 1", "/", "/x?y"])
+ADDRESSES = st.one_of(st.builds(lambda a, b, c: a + b + c, SCHEMES, HOSTS, PORTS),
+                      st.text(max_size=30))
+
+
+@SETTINGS
+@given(address=ADDRESSES)
+def test_a_scheduler_address_is_one_dask_reads_or_one_line_exit_2(address, tmp_path, capsys):
+    """Refused before any work, in one line naming --scheduler; or accepted, and then Dask's
+    own parser reads it (the command goes on, to refuse the missing tests folder)."""
+    from distributed.comm.addressing import parse_address, parse_host_port
+
+    code = main(["campaign", str(tmp_path / "nowhere"), "--out", str(tmp_path / "c"),
+                 "--scheduler", address])
+    err = capsys.readouterr().err.strip()
+    assert_contract(code, err, "", tmp_path / "c")
+    assert code == 2
+    if "--scheduler" not in err:
+        assert "nowhere" in err, err
+        scheme, location = parse_address(address)
+        if scheme != "inproc":
+            parse_host_port(location, 8786)

@@ -2,14 +2,15 @@
 
 from __future__ import annotations
 
+import os
+import shutil
 import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
-
-pytestmark = pytest.mark.slow
 
 # The command, with Ipopt's first iteration callback announcing itself and then pausing, so
 # that the signal surely arrives inside the solver whatever the machine's load.
@@ -29,6 +30,7 @@ sys.exit(main(sys.argv[1:]))
 """
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("sig, code", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
 def test_a_signal_mid_solve_leaves_nothing_and_says_interrupted(sig, code, tmp_path) -> None:
     """Sent inside Ipopt (where an exception would read as a solver failure), the signal
@@ -87,3 +89,162 @@ def test_a_signal_inside_a_deferred_region_waits_for_its_end() -> None:
         for s, handler in previous.items():
             signal.signal(s, handler)
 
+
+
+# The command line with the building of its parser announced and held up, so that the
+# signal surely arrives while the parser is built (it imports CasADi: seconds).
+EARLY = """
+import sys, time
+import cpas_ocp.cli as cli
+
+build = cli._parser
+def announced():
+    print("parsing", flush=True)
+    time.sleep(5.0)
+    return build()
+cli._parser = announced
+sys.exit(cli.main(sys.argv[1:]))
+"""
+
+
+def _interrupted(err: str, code: int, returncode: int) -> None:
+    """The process ended by the signal in order: its exit code, the one line, no traceback."""
+    assert returncode == code, err
+    assert err.strip().splitlines() == [
+        f"interrupted ({signal.Signals(code - 128).name}); nothing written"], err
+
+
+@pytest.mark.parametrize("sig, code", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+def test_a_signal_while_the_arguments_are_parsed_is_an_interrupt(sig, code, tmp_path) -> None:
+    """The handlers are installed before the parser is built: a signal in a command's first
+    seconds is no KeyboardInterrupt traceback (SIGINT) and no silent death (SIGTERM)."""
+    proc = subprocess.Popen([sys.executable, "-u", "-c", EARLY, "demo", "--out",
+                             str(tmp_path / "demo")], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    assert proc.stdout is not None
+    assert proc.stdout.readline().startswith("parsing")
+    proc.send_signal(sig)
+    _, err = proc.communicate(timeout=60)
+    _interrupted(err, code, proc.returncode)
+    assert not (tmp_path / "demo").exists()
+
+
+def _python_started(pid: int) -> bool:
+    """Whether the interpreter `pid` has installed its own SIGINT handler (its start-up is
+    done: a signal before it would kill the process outright, which no code can change)."""
+    try:
+        status = Path(f"/proc/{pid}/status").read_text()
+    except FileNotFoundError:
+        return False
+    caught = int(next(line for line in status.splitlines()
+                      if line.startswith("SigCgt:")).split()[1], 16)
+    return bool(caught >> (signal.SIGINT - 1) & 1)
+
+
+@pytest.mark.skipif(not Path("/proc/self/status").exists(), reason="reads /proc")
+def test_ctrl_c_in_the_first_moments_of_the_command_line_is_an_interrupt(tmp_path) -> None:
+    """`python -m cpas_ocp.cli` itself, Ctrl-C 0.2 s after the interpreter started."""
+    proc = subprocess.Popen([sys.executable, "-m", "cpas_ocp.cli", "demo", "--out",
+                             str(tmp_path / "demo")], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    while not _python_started(proc.pid) and proc.poll() is None:
+        time.sleep(0.01)
+    time.sleep(0.2)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    _interrupted(err, 130, proc.returncode)
+    assert not (tmp_path / "demo").exists()
+
+
+def _processes() -> dict[int, tuple[int, str, str]]:
+    """Every process: its parent, name and state (read from /proc)."""
+    out = {}
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            text = stat.read_text()
+        except OSError:  # ended meanwhile
+            continue
+        name = text[text.index("(") + 1:text.rindex(")")]
+        state, ppid = text[text.rindex(")") + 2:].split()[:2]
+        out[int(stat.parent.name)] = (int(ppid), name, state)
+    return out
+
+
+def _descendants(pid: int) -> dict[int, str]:
+    """The processes below `pid`, by id, with their names."""
+    table = _processes()
+    found: dict[int, str] = {}
+    todo = [pid]
+    while todo:
+        parent = todo.pop()
+        for child, (ppid, name, _) in table.items():
+            if ppid == parent and child not in found:
+                found[child] = name
+                todo.append(child)
+    return found
+
+
+def _running(pid: int) -> bool:
+    """Whether `pid` still runs (a zombie, awaiting its reaper, does not)."""
+    try:
+        text = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return False
+    return text[text.rindex(")") + 2] != "Z"
+
+
+# A C compiler whose pass (a `sleep`, as gcc's cc1) outlives a driver killed alone.
+SLOW_COMPILER = """#!/bin/sh
+sleep 60 &
+wait
+"""
+
+
+def _interrupted_while_compiling(command: list[str], sig: int, tmp_path: Path,
+                                 compilers: int = 1) -> None:
+    """Run the command line's `command` with a fresh compile cache and a stand-in compiler;
+    once `compilers` of them run, send `sig`: the command ends interrupted, none of the
+    compilers' processes survive, and no temporary folder is left."""
+    (tmp_path / "bin").mkdir()
+    (tmp_path / "bin" / "gcc").write_text(SLOW_COMPILER)
+    (tmp_path / "bin" / "gcc").chmod(0o755)
+    cache = tmp_path / "cache"
+    proc = subprocess.Popen([sys.executable, "-m", "cpas_ocp.cli", *command],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env={**os.environ, "CPAS_OCP_CACHE": str(cache),
+                                 "CPAS_OCP_COMPILE": "1",
+                                 "PATH": f"{tmp_path / 'bin'}{os.pathsep}{os.environ['PATH']}"})
+    below: dict[int, str] = {}
+    while proc.poll() is None and list(below.values()).count("sleep") < compilers:
+        time.sleep(0.02)
+        below = _descendants(proc.pid)
+    assert proc.poll() is None, "the command ended before it compiled"
+    proc.send_signal(sig)
+    _, err = proc.communicate(timeout=60)
+    _interrupted(err, sig + 128, proc.returncode)
+    time.sleep(0.2)  # SIGKILL is delivered at once, but a process takes a moment to end
+    assert not [name for pid, name in below.items() if _running(pid)]
+    assert not list(cache.glob(".cpas-cg-*")) and not list(tmp_path.glob("**/.cpas-*"))
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads /proc")
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_an_interrupt_while_compiling_leaves_no_compiler_and_no_folder(sig, tmp_path) -> None:
+    """Interrupted while the model compiles (a fresh cache), the command kills each compiler
+    with the passes it started (gcc's cc1 and as; here a stand-in's `sleep`), and leaves no
+    temporary folder."""
+    _interrupted_while_compiling(["demo", "--out", str(tmp_path / "demo")], sig, tmp_path)
+    assert not list((tmp_path / "demo").glob("*"))
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads /proc")
+def test_an_interrupted_campaign_leaves_no_compiler_of_its_workers(drogue_folder,
+                                                                   tmp_path) -> None:
+    """A campaign's local workers, ended by the command, kill the compilers they started
+    (in process groups of their own, which the workers' death would not reach)."""
+    for seed in (1, 2):
+        shutil.copytree(drogue_folder(seed), tmp_path / "tests" / f"drogue{seed}")
+    _interrupted_while_compiling(["campaign", str(tmp_path / "tests"), "--out",
+                                  str(tmp_path / "campaign"), "--workers", "2"],
+                                 signal.SIGINT, tmp_path, compilers=2)
+    assert not (tmp_path / "campaign").exists()

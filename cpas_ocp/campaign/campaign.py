@@ -29,7 +29,7 @@ import numpy as np
 import pandas as pd
 
 from cpas_ocp.campaign.parallel import run_tasks
-from cpas_ocp.errors import InputError, SolverFailure
+from cpas_ocp.errors import InputError, PluginError, SolverFailure
 from cpas_ocp.io.flight_test import MANIFEST, Parachute
 from cpas_ocp.physics.parameters import param_name, split_name
 
@@ -96,7 +96,7 @@ def reconstruct_folder(folder: str) -> TestOutcome:
         if not check_drag_areas(claim, fit, cov).is_result:
             return TestOutcome(folder, name, "claim", "; ".join(claim.problems()),
                                wall_s=time.perf_counter() - t0)
-    except InputError as exc:
+    except (InputError, PluginError) as exc:
         return TestOutcome(folder, name, "input", str(exc), wall_s=time.perf_counter() - t0)
     except SolverFailure as exc:
         return TestOutcome(folder, name, "solver", str(exc), wall_s=time.perf_counter() - t0)

@@ -6,20 +6,86 @@ inputs to `run_tasks`, which runs them in this process (one worker), on a
 `ProcessPoolExecutor` of local processes, or, given a scheduler address, on
 a Dask cluster through `distributed.Client.map` (the workers must have
 cpas-ocp installed and see the same file paths).  A scheduler that cannot be
-used is an `InputError` on ``--scheduler``.
+used is an `InputError` on ``--scheduler``; an address that is not one at all is
+refused before any work (`scheduler_address`), not by Dask's parser after it.
 """
 
 from __future__ import annotations
 
+import ipaddress
+import os
+import re
 import signal
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
+from types import FrameType
 from typing import TypeVar
+from urllib.parse import urlsplit
 
 from cpas_ocp.errors import InputError
+from cpas_ocp.estimation.compiled import abandon
 
 T = TypeVar("T")
 R = TypeVar("R")
+
+
+# The schemes of Dask's communication back ends; an address without one is tcp.
+SCHEMES = ("tcp", "tls", "inproc", "ucx", "ws", "wss")
+_HOST_LABEL = re.compile(r"(?!-)[\w-]{1,63}(?<!-)")  # letters of any script: IDN names
+
+
+def scheduler_address(text: str) -> str:
+    """`text` if it is a Dask scheduler address, ``SCHEME://HOST[:PORT]`` (``HOST[:PORT]``
+    meaning tcp; an IPv6 host in brackets; ``inproc://`` any name), else ValueError
+    saying what is expected and what is wrong: checked before the work, where Dask's
+    own parser fails only when the tasks are sent, with an internal error."""
+    expected = (f"a Dask scheduler address SCHEME://HOST[:PORT] (SCHEME one of "
+                f"{', '.join(SCHEMES)}); got {text!r}")
+    if not text or any(c.isspace() or not c.isprintable() for c in text):
+        raise ValueError(f"{expected}: empty, or with a space or a control character")
+    scheme, sep, rest = text.partition("://")
+    if not sep:
+        scheme, rest = "tcp", text
+    if scheme not in SCHEMES:
+        raise ValueError(f"{expected}: unknown scheme {scheme!r}")
+    if not rest:
+        raise ValueError(f"{expected}: no host")
+    if scheme == "inproc":
+        return text
+    try:
+        parts = urlsplit(f"//{rest}")
+        port = parts.port
+    except ValueError as exc:  # brackets unbalanced, a port not a number or beyond 65535
+        raise ValueError(f"{expected}: {exc}") from None
+    if parts.path or parts.query or parts.fragment or "@" in parts.netloc:
+        raise ValueError(f"{expected}: more than a host and a port")
+    if port == 0 or parts.netloc.endswith(":"):
+        raise ValueError(f"{expected}: a port from 1 to 65535")
+    host = parts.hostname or ""
+    if parts.netloc.startswith("["):
+        try:
+            ipaddress.IPv6Address(host)
+        except ValueError:
+            raise ValueError(f"{expected}: {host!r} in brackets is no IPv6 address") from None
+    elif not (_is_ipv4(host) or _is_host_name(host)):
+        raise ValueError(f"{expected}: {host!r} is no host name or IPv4 address")
+    return text
+
+
+def _is_ipv4(host: str) -> bool:
+    try:
+        ipaddress.IPv4Address(host)
+    except ValueError:
+        return False
+    return True
+
+
+def _is_host_name(host: str) -> bool:
+    """Whether `host` is a DNS name: labels of letters (any script), digits, hyphens and
+    underscores, a final dot allowed, the last label not all digits (an IPv4 address
+    mistyped, 1.2.3.4.5, is no name)."""
+    labels = host.removesuffix(".").split(".")
+    return all(_HOST_LABEL.fullmatch(label) for label in labels) and not labels[-1].isdigit()
 
 
 def run_tasks(fn: Callable[[T], R], items: Sequence[T], workers: int = 2,
@@ -59,7 +125,14 @@ def _worker_signals() -> None:
     the whole process group), and dies quietly on SIGTERM: it must not run the command's
     handlers, inherited through fork, which would print its traceback."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    signal.signal(signal.SIGTERM, _worker_stop)
+
+
+def _worker_stop(signum: int, frame: FrameType | None) -> None:
+    """End a local worker at once, leaving no compiler running (each runs in a process group
+    of its own, which the worker's death would not reach) and no compiler's folder."""
+    abandon()
+    os._exit(128 + signum)
 
 
 def _on_dask(fn: Callable[[T], R], items: Sequence[T],

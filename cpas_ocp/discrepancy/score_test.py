@@ -60,7 +60,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from cpas_ocp.errors import InputError, SolverFailure
+from cpas_ocp.errors import InputError, PluginError, SolverFailure
 from cpas_ocp.estimation.estimator import POLISH_CONSTRAINT_TOL, STOP_CONSTRAINT_TOL, Estimator, Fit
 from cpas_ocp.estimation.uncertainty import NonFiniteCurvature
 from cpas_ocp.inference.hypothesis_tests import chi_bar_square_sf, cone_statistic
@@ -224,9 +224,6 @@ def score_test(fit: Fit, spec: ModelSpec, entry: EffectType,
         extended = _extended_spec(fit, spec, effect)
     except InputError as exc:
         result.note = f"does not apply to this test: {exc.expectation}"
-        return result
-    except Exception as exc:  # a user's plug-in may fail in its own code: report, go on
-        result.note = f"could not be added to the model: {type(exc).__name__}: {exc}"
         return result
     tested = tuple(null)
     result.parameters, result.null = tested, dict(null)
@@ -526,7 +523,8 @@ def confirmed_ranking(tests: list[ScoreTest]) -> list[ScoreTest]:
 
 def _extended_spec(fit: Fit, spec: ModelSpec, effect: Effect) -> ModelSpec:
     """`spec` with `effect` added where the composition accepts it (replacing the effect it
-    `replaces`); InputError when no position composes."""
+    `replaces`); when no position composes, the first PluginError (the plug-in's code failed
+    where its place was right), else the first InputError."""
     effects = list(spec.effects)
     names = [e.name for e in effects]
     if effect.replaces in names:
@@ -538,17 +536,17 @@ def _extended_spec(fit: Fit, spec: ModelSpec, effect: Effect) -> ModelSpec:
                          f"one riser model; the fit uses {used}")
     else:
         trials = [[*effects[:k], effect, *effects[k:]] for k in range(len(effects), -1, -1)]
-    error: InputError | None = None
+    errors: list[InputError | PluginError] = []
     for trial in trials:
         candidate = dataclasses.replace(spec, effects=tuple(trial))
         try:
             candidate.model(fit.test)
-        except InputError as exc:
-            error = error or exc
+        except (InputError, PluginError) as exc:  # a plug-in's hook may fail at one place only
+            errors.append(exc)
             continue
         return candidate
-    assert error is not None
-    raise error
+    # A plug-in's own failure where it composes says more than where it does not.
+    raise next((e for e in errors if isinstance(e, PluginError)), errors[0])
 
 
 def _reproduces(chi2: float, violation: float, fit: Fit) -> bool:

@@ -21,13 +21,19 @@ from __future__ import annotations
 import hashlib
 import os
 import shutil
+import signal
 import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager, suppress
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import casadi as ca
+
+from cpas_ocp import interrupts
 
 FLAGS = ("-shared", "-fPIC")
 # gcc's time at -O1 grows faster than the source: a 4 MB Jacobian (a GPS model
@@ -80,7 +86,7 @@ def compile_functions(functions: list[ca.Function]) -> list[ca.Function]:
 def _compile(functions: list[ca.Function], cc: str) -> list[ca.Function]:
     folder = cache_folder()
     folder.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(prefix=".cpas-cg-", dir=folder) as tmp:
+    with tempfile.TemporaryDirectory(prefix=".cpas-cg-", dir=folder) as tmp, _live(Path(tmp)):
         sources = [_generate(fn, Path(tmp) / str(i)) for i, fn in enumerate(functions)]
         libraries = [folder / f"{fn.name()}-{_digest(src)}.so"
                      for fn, src in zip(functions, sources, strict=True)]
@@ -95,23 +101,29 @@ def _compile(functions: list[ca.Function], cc: str) -> list[ca.Function]:
         # compilers started all at once and 0.32 GB this way, in the same 14 s on 2 cores;
         # richer models' sources are larger and more.  Wait for every job before judging any,
         # so none is still writing into the temporary folder when a failure removes it.
-        # Interrupted (Ctrl-C, SIGTERM, any error), the compilers die with their parent.
+        # Interrupted (Ctrl-C, SIGTERM, any error), every compiler is killed and waited for
+        # before the temporary folder goes: each runs in a process group of its own (the
+        # driver with its cc1 and as), killed whole, since killing the driver alone leaves
+        # its cc1 running.
         try:
             for src, lib in missing:
                 while sum(proc.poll() is None for proc, _, _ in jobs) >= _cores():
                     time.sleep(0.05)
                 partial = src.parent / lib.name
-                with open(src.parent / "stderr", "wb") as err:
+                # A signal waits until the compiler is on the list of those to kill (one
+                # raised inside Popen would leave it running, unlisted).
+                with open(src.parent / "stderr", "wb") as err, interrupts.deferred():
                     jobs.append((subprocess.Popen([cc, optimisation(src), *FLAGS, "-o",
                                                    str(partial), str(src), "-lm"],
-                                                  stdout=subprocess.DEVNULL, stderr=err),
+                                                  stdout=subprocess.DEVNULL, stderr=err,
+                                                  start_new_session=True),
                                  partial, lib))
+                    _LIVE.compilers.append(jobs[-1][0])
             for proc, _, _ in jobs:
                 proc.wait()
         except BaseException:
             for proc, _, _ in jobs:
-                proc.kill()
-                proc.wait()
+                _kill_group(proc)
             raise
         for proc, partial, lib in jobs:
             if proc.returncode != 0:
@@ -119,6 +131,45 @@ def _compile(functions: list[ca.Function], cc: str) -> list[ca.Function]:
                 raise RuntimeError(f"compiling {lib.name} failed: {err[-500:]}")
             os.replace(partial, lib)  # atomic: a library in the cache is always complete
     return [ca.external(fn.name(), str(lib)) for fn, lib in zip(functions, libraries, strict=True)]
+
+
+@dataclass
+class _Live:
+    """The compilers running and the temporary folders they write in, for `abandon`."""
+
+    compilers: list[subprocess.Popen] = field(default_factory=list)
+    folders: list[Path] = field(default_factory=list)
+
+
+_LIVE = _Live()
+
+
+@contextmanager
+def _live(folder: Path) -> Iterator[None]:
+    """Register `folder` and the compilers started in it while the block runs."""
+    _LIVE.folders.append(folder)
+    try:
+        yield
+    finally:
+        _LIVE.folders.remove(folder)
+        _LIVE.compilers.clear()
+
+
+def abandon() -> None:
+    """Kill every running compiler and remove the temporary folders: for a process that
+    must end at once, without unwinding (a local worker of a campaign told to stop)."""
+    for proc in _LIVE.compilers:
+        _kill_group(proc)
+    for folder in _LIVE.folders:
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+def _kill_group(proc: subprocess.Popen) -> None:
+    """Kill the process group `proc` leads (a compiler driver and the passes it started),
+    and wait for the driver; the group's other members, orphaned, are reaped by init."""
+    with suppress(ProcessLookupError):  # the whole group has already ended
+        os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait()
 
 
 def _cores() -> int:

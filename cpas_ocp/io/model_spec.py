@@ -181,7 +181,12 @@ def spec_from_block(block: dict[str, Any] | None, file: str, base_dir: Path,
             raise InputError(file, f"model.plugins[{i}]", f"a plug-in inside {base_dir} "
                              f"(plug-ins are code run with your rights); {rel!r} lies outside "
                              "it: give --allow-external-plugins to run it")
-        for name, entry in load_plugin(path).items():
+        try:
+            entries = load_plugin(path)
+        except InputError as exc:  # said against the model that names the plug-in too
+            raise InputError(exc.file, exc.field, f"{exc.expectation} (named by {file}: "
+                             f"model.plugins[{i}])") from None
+        for name, entry in entries.items():
             if name in registry:
                 raise InputError(file, f"model.plugins[{i}]",
                                  f"effects with new names; {name!r} is already "

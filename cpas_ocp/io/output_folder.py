@@ -52,8 +52,17 @@ TMP_PREFIX = ".cpas-out-"
 def check_output(out: Path) -> None:
     """InputError unless `out` can become an output folder: not a file or a symbolic link
     (a link's target would be replaced, or a dangling one written through), and under
-    a folder this user may write in (created as needed).  Run before the work, so a
-    mistyped `--out` fails in a second rather than after the solve."""
+    a folder this user may create folders in (tried: permissions alone do not tell, in
+    /proc or on a read-only file system).  Run before the work, so a mistyped `--out`
+    fails in a second rather than after the solve."""
+    try:
+        _check_output(out)
+    except OSError as exc:  # a name too long, a folder that may not be read, ...
+        raise InputError(str(out), "(folder)", f"a folder path this user may create; "
+                         f"{exc.strerror or exc}") from None
+
+
+def _check_output(out: Path) -> None:
     if out.is_symlink():
         raise InputError(str(out), "(folder)", "a folder path, not a symbolic link (give the "
                          "link's target, or a new path)")
@@ -67,6 +76,11 @@ def check_output(out: Path) -> None:
     if not os.access(ancestor, os.W_OK | os.X_OK):
         raise InputError(str(out), "(folder)", f"a place this user may write; {ancestor} "
                          "is not writable")
+    try:
+        os.rmdir(tempfile.mkdtemp(prefix=f"{TMP_PREFIX}{os.getpid()}-", dir=ancestor))
+    except OSError as exc:
+        raise InputError(str(out), "(folder)", f"a place this user may create folders in; "
+                         f"{ancestor}: {exc.strerror or exc}") from None
 
 
 def sweep_orphans(folder: Path) -> None:

@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from cpas_ocp.errors import InputError
+from cpas_ocp.errors import InputError, PluginError
 from cpas_ocp.physics.effects.added_mass import AddedMass
 from cpas_ocp.physics.effects.axial_accelerometer import AxialAccelerometer
 from cpas_ocp.physics.effects.base import Effect
@@ -33,6 +33,7 @@ from cpas_ocp.physics.effects.forebody_drag import ForebodyDrag
 from cpas_ocp.physics.effects.loadcell_friction import LoadCellFriction
 from cpas_ocp.physics.effects.loadcell_scale import LoadCellScale
 from cpas_ocp.physics.effects.pilot_deployment import PilotDeployment
+from cpas_ocp.physics.effects.plugin_guard import HOOKS, guard_hooks, plugin_failure
 from cpas_ocp.physics.effects.rigid_riser import RigidRiser
 from cpas_ocp.physics.effects.sensor_bias import SensorBias
 from cpas_ocp.physics.effects.sensor_lag import SensorLag
@@ -97,6 +98,11 @@ class EffectType:
             return self.cls(**kwargs)
         except (TypeError, ValueError, AttributeError, KeyError) as exc:
             raise InputError(file, field_path, f"valid options of {self.name!r}: {exc}") from None
+        except BaseException as exc:  # a plug-in's constructor failing in its own code
+            if self.source == "cpas_ocp" or not plugin_failure(exc):
+                raise
+            raise PluginError(self.source, f"{self.cls.__name__}.__init__",
+                              f"raised {type(exc).__name__}: {exc}") from None
 
 
 def _builtin() -> dict[str, EffectType]:
@@ -161,8 +167,10 @@ def load_plugin(path: Path) -> dict[str, EffectType]:
     sys.modules[module_name] = module
     try:
         spec.loader.exec_module(module)
-    except (Exception, SystemExit) as exc:  # any failure inside the user's file is an input error
+    except BaseException as exc:  # any failure inside the user's file is an input error
         sys.modules.pop(module_name, None)
+        if not plugin_failure(exc):  # a real signal
+            raise
         raise InputError(str(path), "(python)",
                          f"an importable file; importing it raised {type(exc).__name__}: {exc}"
                          ) from None
@@ -174,6 +182,7 @@ def load_plugin(path: Path) -> dict[str, EffectType]:
             if name == "effect":
                 raise InputError(str(path), obj.__name__, "an Effect subclass with its own `name`")
             _check_hooks(path, obj)
+            guard_hooks(obj, path)
             found[name] = EffectType(name, obj, source=str(path))
     if not found:
         raise InputError(str(path), "(python)", "at least one Effect subclass")
@@ -188,10 +197,7 @@ def load_plugins(paths: Sequence[str | Path]) -> dict[str, EffectType]:
     return out
 
 
-# The hooks of `Effect` a model calls, and those of them through which an effect changes
-# a prediction or chi-square.
-HOOKS = ("parameters", "states", "captures", "event_timings", "state_guess", "forces",
-         "observations", "constraints", "penalties", "process_priors", "null_values")
+# The hooks through which an effect changes a prediction or chi-square.
 ACTING_HOOKS = ("forces", "observations", "constraints", "penalties")
 
 
