@@ -99,12 +99,23 @@ def bound_flag(fit: Fit, cov: Covariance | None, name: str) -> str:
 
 
 def parameter_flag(fit: Fit, cov: Covariance | None, name: str) -> str:
-    """What is wrong with a free parameter's estimate (`bound_flag`, or undetermined by the
-    covariance), or ''."""
+    """What is wrong with a free parameter's estimate (`bound_flag`, undetermined by the
+    covariance, or outside its effect's plausible range), or ''."""
     flag = bound_flag(fit, cov, name)
     if not flag and cov is not None and name in cov.undetermined:
         return "undetermined"
-    return flag
+    return flag or implausible_flag(fit, name)
+
+
+def implausible_flag(fit: Fit, name: str) -> str:
+    """"implausible (outside 0 to 0.5)" where the estimate lies outside the range its effect
+    declares physically plausible (`Effect.plausible`: a sensor lag is positive), or ''.
+    Bounds in SI."""
+    for effect in fit.model.effects:
+        low_high = effect.plausible(fit.test).get(name)
+        if low_high is not None and not low_high[0] <= fit.parameters[name] <= low_high[1]:
+            return f"implausible (outside {low_high[0]:.6g} to {low_high[1]:.6g})"
+    return ""
 
 
 def parameter_rows(fit: Fit, cov: Covariance | None, units: DisplayUnits

@@ -1,4 +1,4 @@
-"""A verdict of "consistent with the noise" is a chi-square test passed, not the absence of a
+"""Verdicts: "consistent with the noise" is a chi-square test passed, not the absence of a
 significant candidate.
 
 `drogue` is flown (seed 3) and its sensors' sigma are then stated 7 % smaller
@@ -109,3 +109,19 @@ def test_result_json_is_strict() -> None:
                       "d": dataclasses.asdict(_window(1.0, 1))})
     value = json.loads(text, parse_constant=refuse)
     assert value["a"] is None and value["b"] == [None, 3] and value["c"] == [1.5]
+
+
+def test_an_estimate_outside_its_plausible_range_is_named(drogue_fit) -> None:
+    """A GPS "lag" of -0.06 s (the receiver reporting before the event) is printed with
+    the range it leaves, beside its value."""
+    from types import SimpleNamespace
+
+    from cpas_ocp.physics.effects import SensorLag
+    from cpas_ocp.reports.report_data import implausible_flag
+
+    fit, _, _ = drogue_fit(1)
+    lagged = SimpleNamespace(model=SimpleNamespace(effects=[SensorLag.gps()]), test=fit.test,
+                             parameters={"lag[gps]": -0.06})
+    assert implausible_flag(lagged, "lag[gps]") == "implausible (outside 0 to 0.5)"
+    lagged.parameters["lag[gps]"] = 0.1
+    assert implausible_flag(lagged, "lag[gps]") == ""
