@@ -14,7 +14,8 @@ for (a tension-dependent load-cell gain; a wind profile in altitude), find it
 significant as written, add it, and end with residuals consistent with the
 noise: chi-square within 4 standard deviations, sqrt(2 dof), of its dof.  The
 library effects that fit part of a signal on the way are reported as
-partial, and the ones the model no longer needs are dropped.  (The periodic
+partial, and the ones the model no longer needs are dropped: the chain ends
+with no effect the truth lacks.  (The periodic
 case, canopy breathing, is `tests/test_breathing_plugin.py`.)
 """
 
@@ -53,10 +54,15 @@ def _discover(folder: Path, plugin: str, truth: dict[str, float], first: bool):
     return discover(fit, baseline_spec())
 
 
-def _ends_at_the_noise(found) -> None:
+def _ends_at_the_noise(found, proposed: str) -> None:
+    """Consistent with the noise, with no effect kept that the truth lacks: the baseline and
+    the plug-in written for the hidden physics, nothing else."""
     last = found.steps[-1].fit
     assert found.stopped == "the residuals are consistent with the noise", found.text()
+    assert found.state == "consistent"
     assert abs(last.chi_square - last.dof) < 4.0 * (2.0 * last.dof) ** 0.5
+    kept = set(found.steps[-1].spec.effect_names) - set(baseline_spec().effect_names)
+    assert kept == {proposed}, found.text()
 
 
 @pytest.fixture(scope="module")
@@ -79,7 +85,7 @@ def test_a_tension_dependent_loss_is_written_as_a_load_cell_gain(tension_loss) -
     # The reading loses more the higher the load: the gain falls with the tension.
     for name in ("tension_gain[fbcp1]", "tension_gain[fbcp2]"):
         assert found.steps[-1].fit.parameters[name] < 0.0, name
-    _ends_at_the_noise(found)
+    _ends_at_the_noise(found, "tension_gain")
 
 
 def test_a_shear_layer_is_written_as_a_wind_profile(wind_shear) -> None:
@@ -90,7 +96,7 @@ def test_a_shear_layer_is_written_as_a_wind_profile(wind_shear) -> None:
     assert "wind_profile" in final.spec.effect_names
     # The east wind grows with altitude (S > 0): the profile's east shear is positive.
     assert final.fit.parameters["wind_shear_east"] > 0.0
-    _ends_at_the_noise(found)
+    _ends_at_the_noise(found, "wind_profile")
     # A library effect added before the profile as a partial step, and no longer needed
     # after it, is dropped by a step of its own whose likelihood ratio is not significant.
     for step in found.steps:

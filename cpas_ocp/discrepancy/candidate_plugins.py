@@ -17,9 +17,11 @@ that can be written down without knowing more:
   varies with the tension, reading = T (1 + k_P T / T_ref), k_P the change of
   gain at the phase's peak tension T_ref (null 0);
 * **a residual that follows altitude** (a GPS or an altimeter): a horizontal
-  wind that changes linearly with height on top of the atmosphere's,
-  u(h) = u_0 + u_1 (h - h_0) / H over the phase's altitude span H from its
-  start h_0, east and north (null 0).
+  wind that changes with height on top of the atmosphere's, a cubic Legendre
+  series over the phase's altitude span (offset, shear, curvature and an
+  S-shaped layer term), east and north (null 0).  A straight line in
+  altitude leaves most of a shear layer's S for other effects: on `fbcp`
+  flown through one, a GPS lag stayed in the final model to take it up.
 
 Each proposal is Python source: a plug-in file with its physics in its
 docstring and its constants at the top, for the user to read, edit and pass
@@ -160,11 +162,12 @@ def _wind_profile(structure: list[Finding], fit: Fit) -> Proposal | None:
         return None
     f, c = hit
     h = fit.quantities()["altitude"]
-    h0, span = float(h[0]), max(float(np.max(h) - np.min(h)), 1.0)
+    top, bottom = float(np.max(h)), float(np.min(h))
     reason = (f"{f.sensor} {f.channel} in {f.window} correlates with altitude "
               f"(r = {c.r:+.2f}, p {c.p_value:.2g})")
     return Proposal("wind_profile", reason, _WIND_PROFILE.substitute(
-        h0=f"{h0:.1f}", span=f"{span:.1f}", reason=_wrap(reason)))
+        middle=f"{0.5 * (top + bottom):.1f}", half_span=f"{max(0.5 * (top - bottom), 1.0):.1f}",
+        reason=_wrap(reason)))
 
 
 def _round_up(value: float) -> float:
@@ -302,35 +305,48 @@ Proposed from the residual's signature:
 $reason
 
 On top of the atmosphere's wind, the air moves at
-u(h) = offset + shear (h - H0_M) / SPAN_M  (m/s, east and north),
-``wind_offset_east``, ``wind_offset_north`` the change at the phase's start
-altitude H0_M and ``wind_shear_east``, ``wind_shear_north`` the change across
-its altitude span SPAN_M; all vanish at the null.  Edit the profile (layers,
+u(h) = offset + shear P1(s) + curvature P2(s) + layer P3(s)  (m/s, east and
+north), s = (h - H_MID_M) / HALF_SPAN_M running from -1 at the phase's lowest
+altitude to +1 at its highest, P1..P3 the Legendre polynomials (s,
+(3 s^2 - 1) / 2, (5 s^3 - 3 s) / 2: orthogonal over the span, so each
+coefficient is what the others leave).  ``wind_offset_*`` is the mean change
+across the span, ``wind_shear_*`` half the straight-line change from its bottom
+to its top, ``wind_curvature_*`` a bend, ``wind_layer_*`` an S-shaped change
+such as a shear layer inside the span; all vanish at the null.  A wind that
+changes through a layer (tanh-like) is not a straight line, and a straight
+line leaves the rest for other effects to take up.  Edit the profile (layers,
 a power law) to fit what you know; list the effect first, before any drag.
 """
 ''' + _HEADER + '''
-H0_M = $h0  # the phase's start altitude (m)
-SPAN_M = $span  # the phase's altitude span (m)
+H_MID_M = $middle  # the middle of the phase's altitude span (m)
+HALF_SPAN_M = $half_span  # half the phase's altitude span (m)
 LIMIT_MS = 30.0  # bound on each coefficient (m/s)
+TERMS = ("offset", "shear", "curvature", "layer")  # Legendre P0..P3
+
+
+def legendre(s):
+    """P0..P3 at s."""
+    return (1.0, s, 0.5 * (3.0 * s**2 - 1.0), 0.5 * (5.0 * s**3 - 3.0 * s))
 
 
 @dataclass(frozen=True)
 class WindProfile(Effect):
-    """Horizontal wind offset + shear (h - H0_M) / SPAN_M, east and north (m/s)."""
+    """Horizontal wind, a cubic Legendre series in altitude, east and north (m/s)."""
 
     name: str = "wind_profile"
 
     def parameters(self, test):
         return [Parameter(f"wind_{kind}_{axis}", "m/s", 0.0, -LIMIT_MS, LIMIT_MS, scale=1.0,
                           description=f"{axis} wind {kind} against the atmosphere's")
-                for kind in ("offset", "shear") for axis in ("east", "north")]
+                for kind in TERMS for axis in ("east", "north")]
 
     def null_values(self, test):
         return {p.name: 0.0 for p in self.parameters(test)}
 
     def forces(self, ctx):
-        height = (ctx.x["position"][2] - H0_M) / SPAN_M
-        u = [ctx.p[f"wind_offset_{axis}"] + ctx.p[f"wind_shear_{axis}"] * height
+        s = (ctx.x["position"][2] - H_MID_M) / HALF_SPAN_M
+        basis = legendre(s)
+        u = [sum(ctx.p[f"wind_{kind}_{axis}"] * b for kind, b in zip(TERMS, basis))
              for axis in ("east", "north")]
         ctx.add_air_velocity(ca.vertcat(u[0], u[1], 0.0), self.name)
 ''')

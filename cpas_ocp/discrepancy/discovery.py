@@ -585,8 +585,10 @@ def _drop_stand_ins(out: Discovery, alpha: float, progress: bool) -> None:
         names = [s.added for s in out.steps[1:newest] if s.stand_in and s.added is not None
                  and s.added in last.spec.effect_names and s.added not in out.dropped]
         for name in reversed(names):
+            began = time.perf_counter()
             step = _without(last, name, alpha, progress)
             if step is not None:
+                step.found_s = time.perf_counter() - began
                 step.explained = explained_share(last.fit.chi_square, last.fit.dof,
                                                  step.fit.chi_square)
                 out.steps.append(step)
