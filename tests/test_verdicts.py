@@ -94,7 +94,8 @@ def test_the_verdict_needs_the_chi_square_test_passed() -> None:
     bad = Diagnosis(None, [], [], [], [], _noise=failing)  # type: ignore[arg-type]
     assert good.state == "consistent" and "consistent with the sensor noise" in good.verdict()
     assert bad.state == "misfit"
-    assert bad.verdict().startswith("no effect tested explains the residual; a misfit")
+    assert bad.verdict().startswith("no effect in the library explains the residual, a "
+                                    "misfit: chi-square 6626.7 on 5723")
     assert "consistent" not in bad.verdict()
 
 

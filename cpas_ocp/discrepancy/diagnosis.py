@@ -139,7 +139,7 @@ class Diagnosis:
     def misfit_text(self) -> str:
         """What remains where nothing is found but the residuals are not noise: the noise
         test, the signature, and the next move to try."""
-        lines = [f"a misfit nothing tested explains: {self.noise.text()}"]
+        lines = [f"a misfit: {self.noise.text()}"]
         if self.structure:
             lines.append("the residual's signature:\n" + signature_text(self.structure))
         lines.append("next: " + next_move(self.noise, self.statistics, bool(self.structure)))
@@ -276,7 +276,7 @@ class Diagnosis:
                     "refits did not converge, so nothing is confirmed and nothing ruled out "
                     "(see the refits above)" + signature)
         if not self.consistent_with_noise:
-            return ("no effect tested explains the residual; " + self.misfit_text())
+            return ("no effect in the library explains the residual, " + self.misfit_text())
         return ("the residuals are consistent with the sensor noise: "
                 f"{self.noise.text()}; no effect is significant at the family-wise level "
                 f"{self.alpha:g}")
