@@ -422,3 +422,25 @@ def test_still_air_leaves_the_air_motion_out_of_the_default(flight: Flight,
 
     assert "wind_process" not in effects("still") and "wind_process" in effects("air")
     assert set(effects("air")) - set(effects("still")) == {"wind_process"}
+
+
+def test_a_log_sampled_at_4_khz_keeps_its_events_sigmas(tmp_path: Path) -> None:
+    """A 4 kHz logger: each detected event's sigma is its sample interval, 0.25 ms, which the
+    manifest states (rounded to the millisecond it read 0, which no test folder may hold, and
+    the import blamed the card); the event times keep the sample's resolution."""
+    rate = 4000.0
+    coarse = fly(rate_hz=500.0)
+    t = np.arange(coarse.t[0], coarse.t[-1], 1.0 / rate)
+    fast = Flight(t, np.interp(t, coarse.t, coarse.h), np.interp(t, coarse.t, coarse.v),
+                  np.interp(t, coarse.t, coarse.f), coarse.events)
+    p, a = sensor_readings(fast, 8)
+    pd.DataFrame({"t": np.round(t, 6), "p": np.round(p, 1), "acc": np.round(a, 3)}).to_csv(
+        tmp_path / "log.csv", index=False)
+    code, report, _ = _import(tmp_path, tmp_path / "log.csv", AXIAL_MAP, CARD)
+    assert code == 0 and report is not None
+    test = load_test(tmp_path / "test")
+    charges = {e.parachute: e for e in test.events if e.name == "mortar_fire"}
+    for name in ("drogue", "main"):
+        assert charges[name].sigma == pytest.approx(1.0 / rate, rel=1e-3), name
+        assert charges[name].time == pytest.approx(
+            report["flight_events"][name]["time_s"], abs=1e-6), name

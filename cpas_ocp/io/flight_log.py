@@ -115,6 +115,7 @@ from cpas_ocp.physics.units import FACTORS, G0
 
 TOUCHDOWN_MARGIN_S = 0.5  # phase ends this long before the detected touchdown (s)
 EVENT_SIGMA_S = 0.1  # timing sigma of a flight-state change (one descent sample, s)
+MIN_EVENT_SIGMA_S = 1e-6  # least event sigma a manifest states (its times' resolution, s)
 EJECTION_EXCLUDE_S = 0.3  # altimeter samples left out after an ejection charge (s)
 MIN_ACCEL_SIGMA = 0.1  # floor of the accelerometer noise sigma (m/s^2)
 MIN_BARO_SIGMA_M = 0.3  # floor of the altimeter noise sigma (the pressure resolution, m)
@@ -1048,13 +1049,9 @@ def import_flight(log: FlightRecord | AltusLog, card: FlightCard, out: str | Pat
         "vehicle": card.vehicle,
         "parachutes": [{k: v for k, v in c.items() if k != "deployment"}
                        for c in parachutes],
-        "events": [{"name": "mortar_fire", "parachute": name,
-                    "time": {"value": round(t, 3), "unit": "s"},
-                    "sigma": {"value": round(deploy_sigma[name], 3), "unit": "s"}}
+        "events": [event_entry("mortar_fire", name, t, deploy_sigma[name])
                    for name, t in deploy.items()]
-                  + [{"name": "full_open", "parachute": name,
-                      "time": {"value": round(t, 3), "unit": "s"},
-                      "sigma": {"value": round(sigma, 3), "unit": "s"}}
+                  + [event_entry("full_open", name, t, sigma)
                      for name, (t, sigma) in full_open.items()],
         "sensors": sensors,
         "atmosphere": {"model": "site",
@@ -1069,7 +1066,10 @@ def import_flight(log: FlightRecord | AltusLog, card: FlightCard, out: str | Pat
                                if not c.get("open_at_start")],
                               held_openings(deploy, events), deploy_sigma, still_air),
     }
-    validate_manifest(manifest, card.source)
+    try:
+        validate_manifest(manifest, card.source)
+    except InputError as exc:
+        raise blamed(exc, card.source, src, MANIFEST) from None
     summary = ImportSummary(
         record.recorder, (t_begin, t_end),
         {**deploy, **{f"{name} full open": t for name, (t, _) in full_open.items()},
@@ -1086,6 +1086,25 @@ def import_flight(log: FlightRecord | AltusLog, card: FlightCard, out: str | Pat
 
 # Manifest fields the import copies from the card; the others it derives from the log.
 CARD_FIELDS = ("name", "label", "vehicle", "parachutes", "model")
+
+
+def blamed(exc: InputError, card_source: str, log_source: str, written: str) -> InputError:
+    """What the test folder's loading refused in the file `written` of an import, named
+    against where it came from: the card (the manifest's vehicle, canopies and model) or
+    the log (the phase, events, sensors, atmosphere)."""
+    if written == MANIFEST and exc.field.startswith(CARD_FIELDS):
+        return InputError(card_source, exc.field, f"{exc.expectation} (in the manifest the "
+                          "card makes)")
+    return InputError(log_source, f"(imported as {written}: {exc.field})", exc.expectation)
+
+
+def event_entry(name: str, parachute: str, t: float, sigma: float) -> dict[str, Any]:
+    """A manifest event of `parachute` at `t` (s) with its timing `sigma` (s): the time to
+    the microsecond and the sigma to four significant digits, never below `MIN_EVENT_SIGMA_S`
+    (a detected event's sigma is a sample interval, a quarter of a millisecond at 4 kHz,
+    which rounding to the millisecond made 0)."""
+    return {"name": name, "parachute": parachute, "time": {"value": round(t, 6), "unit": "s"},
+            "sigma": {"value": max(MIN_EVENT_SIGMA_S, float(f"{sigma:.4g}")), "unit": "s"}}
 
 
 def _write_folder(out: Path, manifest: dict[str, Any], files: dict[str, pd.DataFrame],
@@ -1108,11 +1127,7 @@ def _write_folder(out: Path, manifest: dict[str, Any], files: dict[str, pd.DataF
             written = Path(exc.file)
             if written.parent != tmp:
                 raise
-            if written.name == MANIFEST and exc.field.startswith(CARD_FIELDS):
-                raise InputError(card_source, exc.field, f"{exc.expectation} (in the "
-                                 f"manifest the card makes)") from None
-            raise InputError(log_source, f"(imported as {written.name}: {exc.field})",
-                             exc.expectation) from None
+            raise blamed(exc, card_source, log_source, written.name) from None
         if out.exists():
             out.rmdir()
         tmp.rename(out)
