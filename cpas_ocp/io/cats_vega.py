@@ -106,7 +106,7 @@ def read_cats_log(path: str | Path, axis: str = "auto") -> FlightRecord:
     states: dict[str, float] = {}
     if fsm is not None:
         for t, code in fsm.dropna().sort_values("ts").itertuples(index=False):
-            if int(code) in STATES:
+            if code == int(code) and int(code) in STATES:  # other values are no state
                 states.setdefault(STATES[int(code)], float(t) * scale)
     fixes = pd.DataFrame(columns=["time", "latitude", "longitude"])
     dropped = {"repeated_time_stamps": repeated}

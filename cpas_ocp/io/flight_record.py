@@ -31,6 +31,7 @@ import numpy as np
 import pandas as pd
 
 from cpas_ocp.errors import InputError
+from cpas_ocp.io.flight_test import MAX_MAGNITUDE
 from cpas_ocp.physics.atmosphere import StandardAtmosphere, pressure_altitude
 from cpas_ocp.physics.units import G0
 
@@ -186,15 +187,20 @@ def read_table(path: Path, what: str, sep: str | None = None, skip_rows: int = 0
 
 def numeric(table: pd.DataFrame, path: Path, column: str, field_name: str,
             header_line: int = 1) -> np.ndarray:
-    """Column `column` of `table` as numbers (blank: NaN); InputError naming the line of
-    the first entry that is neither (the header row is line `header_line` of the file)."""
+    """Column `column` of `table` as numbers (blank or ``nan``: NaN, a reading missing);
+    InputError naming the line of the first entry that is neither, or that is infinite or
+    beyond `MAX_MAGNITUDE` (no sensor reads 1e308 of anything: a damaged cell), the header
+    row being line `header_line` of the file."""
     text = table[column].astype("string").str.strip()
-    values = pd.to_numeric(text, errors="coerce")
+    values = pd.to_numeric(text, errors="coerce").astype(float)
     bad = values.isna() & text.notna() & (text != "") & (text.str.lower() != "nan")
-    if bad.any():
-        row = int(np.flatnonzero(bad.to_numpy())[0])
-        raise InputError(str(path), f"line {row + header_line + 1}, {column}",
-                         f"a number ({field_name}); got {text.iloc[row]!r}")
+    wild = values.notna() & ~(values.abs() <= MAX_MAGNITUDE)
+    for rows, what in ((bad, "a number"), (wild, f"a finite number of magnitude at most "
+                                                 f"{MAX_MAGNITUDE:g}")):
+        if rows.any():
+            row = int(np.flatnonzero(rows.to_numpy())[0])
+            raise InputError(str(path), f"line {row + header_line + 1}, {column}",
+                             f"{what} ({field_name}); got {text.iloc[row]!r}")
     return values.to_numpy(float)
 
 
