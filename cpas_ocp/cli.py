@@ -683,8 +683,8 @@ def _flight(args: argparse.Namespace) -> int:
                          "--log FILE)")
     for name in logs:
         if not (data / name).exists():
-            raise InputError(str(data / name), "(file)", f"the flight log of card {card.name!r} "
-                             "(give the folder holding it with --data)")
+            raise InputError(card.source, "data.logs", f"flight logs that exist; {data / name} "
+                             "does not (give the folder holding it with --data)")
     # The command line's format or map, else the card's, else an Altus Metrum export.
     log_format, columns = args.format, args.columns
     if log_format is None and columns is None:

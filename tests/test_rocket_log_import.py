@@ -656,3 +656,18 @@ def test_prometheus_events_are_found_with_the_states_hidden(log_name: str) -> No
     assert abs(main_.time - record.states["main"]) <= 3.0 * main_.sigma + 0.1
     assert abs(events["drogue"].time - record.states["drogue"]) <= DROGUE_WINDOW_S
     assert record.states["main"] < events["landed"].time < record.states["landed"]
+
+
+def test_flight_with_a_card_whose_log_does_not_exist_is_one_line(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """`cpas-ocp flight CARD` where the card's log is not in its data folder: exit 2, one
+    line naming the card file and the log's path, nothing written."""
+    card = {**CARD, "data": {"folder": "logs", "logs": ["flight.csv"], "columns": COLUMN_MAP}}
+    (tmp_path / "logs").mkdir()
+    (tmp_path / "card.json").write_text(json.dumps(card))
+    code = main(["flight", str(tmp_path / "card.json"), "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1, err
+    assert str(tmp_path / "card.json") in err[0], err
+    assert str(tmp_path / "logs" / "flight.csv") in err[0], err
+    assert not (tmp_path / "out").exists()

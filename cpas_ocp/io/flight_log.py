@@ -85,6 +85,7 @@ from scipy.signal import savgol_filter
 from cpas_ocp.errors import InputError
 from cpas_ocp.io.altus_metrum import AltusLog
 from cpas_ocp.io.flight_events import (
+    CLUSTER_GAP_S,
     DROGUE_WINDOW_S,
     FlightEvent,
     detect_events,
@@ -100,6 +101,13 @@ from cpas_ocp.io.flight_test import (
     read_json,
     validate_block,
     validate_manifest,
+)
+from cpas_ocp.io.plausibility import (
+    MAX_DESCENT_M_S,
+    MAX_SPEED_M_S,
+    check_pad_air,
+    check_speed,
+    check_steady_accelerometer,
 )
 from cpas_ocp.io.problems import problem_names
 from cpas_ocp.physics.atmosphere import (
@@ -767,14 +775,19 @@ def card_events(card: FlightCard, baro: pd.DataFrame, pad_altitude: float,
     crosses below a height above the pad after apogee (a main fired by an altimeter at
     its set height), the crossing interpolated between the barometer's samples; each with
     the card's sigma.  InputError naming the card's field where the descent never comes
-    down to that height."""
+    down to that height, or the time lies outside the log."""
     out: dict[str, FlightEvent] = {}
     for name, spec in card.events.items():
         field_name = f"events.{name}"
         sigma = _si(spec["sigma"], "time", card.source, f"{field_name}.sigma")
         if "time" in spec:
-            out[name] = FlightEvent(_si(spec["time"], "time", card.source,
-                                        f"{field_name}.time"), sigma, "the card")
+            t_event = _si(spec["time"], "time", card.source, f"{field_name}.time")
+            first, last = float(baro["time"].iloc[0]), float(baro["time"].iloc[-1])
+            if not first <= t_event <= last:
+                raise InputError(card.source, f"{field_name}.time", f"a time the log covers "
+                                 f"(its altimeter reads from {first:.2f} to {last:.2f} s, on "
+                                 f"the log's own clock); got {t_event:.2f} s")
+            out[name] = FlightEvent(t_event, sigma, "the card")
             continue
         height = _si(spec["altitude"], "length", card.source, f"{field_name}.altitude")
         t, h = baro["time"].to_numpy(), baro["altitude"].to_numpy() - pad_altitude
@@ -817,6 +830,29 @@ def flight_events(record: FlightRecord) -> tuple[dict[str, FlightEvent], list[st
     return events, notes
 
 
+def check_charges_deploy(events: dict[str, FlightEvent], deploy: dict[str, float],
+                         card: FlightCard, src: str, logged_states: bool) -> None:
+    """InputError naming the card's canopies where the log `src` shows an ejection charge
+    (`flight_events.detect_events`: the drogue's and the main's, found in the data, not a
+    logged state, which a computer logs whether or not a canopy is rigged to it) that
+    deploys none of them: no canopy's deployment time (s, `deploy`) lies within
+    `CLUSTER_GAP_S` or three of the charge's sigmas of it.  The card has too few canopies
+    (or the log is another flight's): the phase would hold an opening no model term makes."""
+    if logged_states:
+        return
+    for name in ("drogue", "main"):
+        charge = events.get(name)
+        if charge is None or charge.source.startswith("apogee"):
+            continue
+        if all(abs(t - charge.time) > max(CLUSTER_GAP_S, 3.0 * charge.sigma)
+               for t in deploy.values()):
+            deployed = ", ".join(f"{n} at {t:.2f} s" for n, t in deploy.items())
+            raise InputError(card.source, "parachutes", f"a canopy for each ejection charge "
+                             f"the log shows; {src} shows one at {charge.time:.2f} s "
+                             f"({charge.source}) that deploys none of the card's "
+                             f"{len(deploy)} ({deployed})")
+
+
 def import_flight(log: FlightRecord | AltusLog, card: FlightCard, out: str | Path,
                   still_air: bool = False) -> ImportSummary:
     """Write the test folder of `log` under `card` to `out` (see the module docstring);
@@ -829,10 +865,18 @@ def import_flight(log: FlightRecord | AltusLog, card: FlightCard, out: str | Pat
     if len(baro) < 20:
         raise InputError(src, "pressure", "a barometer (pressure or altitude) read in at "
                          f"least 20 samples; the log has {len(baro)}")
+    check_speed(record, baro["time"].to_numpy(), baro["altitude"].to_numpy(), MAX_SPEED_M_S,
+                "no rocket is faster in the lower atmosphere")
     events, notes = flight_events(record)
     p0, pad_note = pad_pressure(baro, events, card)
     pad_altitude = float(pressure_altitude(p0))
     notes.append(pad_note)
+    site_spec = card.site
+    elevation = _si(site_spec.get("elevation"), "length", card.source, "site.elevation")
+    t0, t0_note = pad_temperature(site_spec, p0, elevation, card.source)
+    check_pad_air(record, p0, t0, "card" if "temperature" in site_spec else
+                  "density" if "surface_density" in site_spec else "standard", elevation,
+                  card.source, "pressure" in site_spec)
     events.update(card_events(card, baro, pad_altitude, events))
     deploy: dict[str, float] = {}
     deploy_sigma: dict[str, float] = {}
@@ -854,6 +898,7 @@ def import_flight(log: FlightRecord | AltusLog, card: FlightCard, out: str | Pat
                              f"{state!r} deploys an earlier one too")
         deploy[chute["name"]] = events[state].time
         deploy_sigma[chute["name"]] = events[state].sigma
+    check_charges_deploy(events, deploy, card, src, bool(record.states))
     t_begin = min(deploy.values())
     descent = baro[baro["time"] > t_begin]
     if len(descent) < MIN_DESCENT_SAMPLES or \
@@ -894,9 +939,8 @@ def import_flight(log: FlightRecord | AltusLog, card: FlightCard, out: str | Pat
                                baro_phase["altitude"].to_numpy()[dead_baro], "m"))
         baro_phase = baro_phase[~dead_baro]
 
-    site_spec = card.site
-    elevation = _si(site_spec.get("elevation"), "length", card.source, "site.elevation")
-    t0, t0_note = pad_temperature(site_spec, p0, elevation, card.source)
+    check_speed(record, baro_phase["time"].to_numpy(), baro_phase["altitude"].to_numpy(),
+                MAX_DESCENT_M_S, "no canopy descends faster")
     notes.append(t0_note)
     lapse_spec = site_spec.get("lapse_rate", {"value": 1e3 * ISA_LAPSE_K_M, "unit": "K/km"})
     fixes = record.gps_fixes()
@@ -959,6 +1003,7 @@ def import_flight(log: FlightRecord | AltusLog, card: FlightCard, out: str | Pat
                                accel["acceleration"].to_numpy()[dead_accel & accel_in],
                                "m/s^2"))
     accel = accel[accel_in & ~dead_accel]
+    check_steady_accelerometer(record, accel["acceleration"].to_numpy())
     full_open = {name: peak for name, t in deploy.items() if t > t_begin
                  and (peak := opening_peak(accel, t)) is not None}
     # The accelerometer loses the same charge windows as the altimeter (the charge's jolt

@@ -17,6 +17,7 @@ The record holds, on one time base (s):
   `enu_about` places the fixes east/north/up about the pad;
 * ``states``: the first time of each flight state the computer logged
   (boost, coast, drogue, main, landed), empty where it logged none;
+* ``channels``: which column (and unit) each series came from, named in errors;
 * ``recorder``: what the log says made it; ``dropped``: what the reader left
   out and why (rows counted per reason); ``notes``: anything else to report.
 """
@@ -24,6 +25,7 @@ The record holds, on one time base (s):
 from __future__ import annotations
 
 import csv
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -44,6 +46,38 @@ BOOST_RUN = 3  # ... for this many samples in a row
 
 
 @dataclass(frozen=True)
+class Channel:
+    """Where one series of a record came from, for the errors that name it: the log's
+    column(s) (``"pressure column 'p'"``), the unit it was read in, the units of its kind
+    the log might have meant instead (name: SI factor) and the offset (SI) subtracted after
+    scaling (one g from an accelerometer that reads +1 g at rest)."""
+
+    column: str
+    unit: str
+    units: dict[str, float]
+    offset: float = 0.0
+    altitude: bool = False  # an altimeter's altitude column, not a pressure column
+
+    def reread(self, value: float, unit: str) -> float:
+        """`value` (SI, as the record holds it) as it reads had the column been in `unit`."""
+        return (value + self.offset) * self.units[unit] / self.units[self.unit] - self.offset
+
+    def hint(self, plausible: Callable[[str], bool]) -> str:
+        """``"is the unit hPa, not Pa?"`` for the first other unit (of a different factor)
+        for which `plausible(unit)`; a plea to check the column and its unit where none."""
+        for unit, factor in self.units.items():
+            if factor != self.units[self.unit] and plausible(unit):
+                return f"is the unit {unit}, not {self.unit}?"
+        return "is it the right column, in the unit declared?"
+
+
+# What a record's series are named in errors where its reader says nothing more.
+DEFAULT_CHANNELS = {"time": Channel("time", "s", {"s": 1.0}),
+                    "pressure": Channel("pressure", "Pa", {"Pa": 1.0}),
+                    "acceleration": Channel("acceleration", "m/s^2", {"m/s^2": 1.0})}
+
+
+@dataclass(frozen=True)
 class FlightRecord:
     """One cleaned flight log; see the module docstring for the columns and units."""
 
@@ -54,6 +88,12 @@ class FlightRecord:
     states: dict[str, float] = field(default_factory=dict)
     dropped: dict[str, int] = field(default_factory=dict)
     notes: tuple[str, ...] = ()
+    # Where the time, pressure (or altitude) and acceleration came from (`Channel`).
+    channels: dict[str, Channel] = field(default_factory=dict)
+
+    def channel(self, name: str) -> Channel:
+        """The `Channel` of series `name` (time, pressure, acceleration)."""
+        return self.channels.get(name, DEFAULT_CHANNELS[name])
 
     @property
     def has_gps_altitude(self) -> bool:
