@@ -594,7 +594,8 @@ def _dispersions(args: argparse.Namespace) -> int:
     if not models:
         raise InputError(str(args.campaign), "(table)",
                          "a canopy type and stage with enough tests to disperse; "
-                         + "; ".join(skipped))
+                         + ("; ".join(skipped) or "the table has no canopy's "
+                            "CdS, Ck, n_p, n, expopen or t_k"))
     out = write_dispersions(models, skipped, args.cases, args.seed, args.out, table, stages)
     for model in models:
         print(model.text())
