@@ -106,6 +106,10 @@ def dispersion_models(table: pd.DataFrame, min_tests: int = MIN_TESTS
             skipped.append(f"{kind} {stage}: {len(points)} canopies, fewer than {min_tests}")
             continue
         varying = [c for c in points.columns if np.ptp(points[c].to_numpy()) > 0.0]
+        if not varying:
+            skipped.append(f"{kind} {stage}: no parameter varies over its {len(points)} "
+                           "canopies")
+            continue
         dispersions = {c: fit_dispersion(c, points[c].to_numpy()) for c in varying}
         hull_names = next((h for h in HULL_PARAMETERS if set(h) <= set(varying)), ())
         if not hull_names:
@@ -174,6 +178,34 @@ def check_numbers(table: pd.DataFrame, path: Path, column: str, what: str,
     table[column] = values
 
 
+def check_names(table: pd.DataFrame, path: Path, column: str, what: str,
+                allowed: tuple[str, ...] = ()) -> None:
+    """Column `column` of a campaign table read from `path` as text in every row (one of
+    `allowed` where given); InputError naming the file, the row and the column of the
+    first blank (or unknown) cell, `what` saying what the column holds."""
+    text = table[column].astype("string").str.strip()
+    bad = text.isna() | (text == "")
+    if allowed:
+        bad |= ~text.isin(allowed)
+    if bad.any():
+        row = int(np.flatnonzero(bad.to_numpy(bool))[0])
+        expected = f"one of {', '.join(allowed)}" if allowed else "a name"
+        raise InputError(str(path), f"{_where(path, row)}, {column}",
+                         f"{expected} ({what}); got {str(table[column].iloc[row])!r}")
+    table[column] = text.astype(str)
+
+
+def check_unique(table: pd.DataFrame, path: Path, key: list[str], what: str) -> None:
+    """InputError naming the row of a campaign table read from `path` that repeats an
+    earlier row's `key` columns (`what` says what a row is one of)."""
+    repeated = table.duplicated(subset=key, keep="first").to_numpy(bool)
+    if repeated.any():
+        row = int(np.flatnonzero(repeated)[0])
+        raise InputError(str(path), f"{_where(path, row)}, {'/'.join(key)}",
+                         f"one row per {what}; this row repeats an earlier one's "
+                         f"({', '.join(str(table[k].iloc[row]) for k in key)})")
+
+
 def read_stage_table(campaign: str | Path) -> pd.DataFrame | None:
     """The campaign's stages.csv (`campaign.STAGE_COLUMNS`) in its folder, or beside its
     parameter table; None where there is none (campaigns written before it existed)."""
@@ -187,6 +219,13 @@ def read_stage_table(campaign: str | Path) -> pd.DataFrame | None:
     missing = [c for c in STAGE_COLUMNS if c not in stages.columns]
     if missing:
         raise InputError(str(path), ", ".join(missing), "the columns of a campaign's stages")
+    for column, what in (("test", "the test's name"), ("parachute", "the canopy's name"),
+                         ("type", "the canopy's type"), ("stage", "the stage's name")):
+        check_names(stages, path, column, what)
+    check_names(stages, path, "inflation", "the canopy's inflation law",
+                ("infinite_mass", "finite_mass"))
+    check_names(stages, path, "fill_length", "the fill length's form",
+                ("diameter", "growth_scaled"))
     check_numbers(stages, path, "stage_index", "the stage's order in its canopy, from 0",
                   integer=True)
     check_numbers(stages, path, "diameter", "the canopy's D_o in m", positive=True)
@@ -194,11 +233,11 @@ def read_stage_table(campaign: str | Path) -> pd.DataFrame | None:
                   "where none", missing=True, positive=True)
     check_numbers(stages, path, "v_start", "the stage's start airspeed in m/s, blank where "
                   "none", missing=True, positive=True)
+    check_unique(stages, path, ["test", "parachute", "stage_index"], "test, canopy and stage")
     if (stages["stage_index"] < 0).any():
         row = int(np.flatnonzero((stages["stage_index"] < 0).to_numpy())[0])
         raise InputError(str(path), f"{_where(path, row)}, stage_index",
                          "the stage's order in its canopy, from 0")
-    stages["stage"] = stages["stage"].astype(str)
     return stages
 
 
@@ -218,6 +257,11 @@ def read_parameter_table(path: str | Path) -> pd.DataFrame:
     missing = [c for c in COLUMNS if c not in table.columns]
     if missing:
         raise InputError(str(path), ", ".join(missing), "the columns of a campaign's table")
+    for column, what in (("test", "the test's name"), ("parameter", "the parameter's base "
+                                                                    "name"),
+                         ("name", "the parameter's full name")):
+        check_names(table, path, column, what)
+    check_unique(table, path, ["test", "name"], "test and parameter")
     positive = table["parameter"].isin(DISPERSED) | table["unit"].isin(POSITIVE_UNITS)
     check_numbers(table, path, "value", "the reconstructed value; a drag area, mass or "
                   f"{'/'.join(DISPERSED)} above zero", positive=positive)

@@ -231,8 +231,12 @@ def load_card(name_or_path: str) -> FlightCard:
 
 
 def _si(q: dict[str, Any], dim: str, source: str, field: str) -> float:
+    """The quantity `q` ({value, unit}) of dimension `dim` in SI; InputError naming `field`
+    of `source` where it is no such quantity."""
     unit = q.get("unit") if isinstance(q, dict) else None
-    if unit not in FACTORS[dim] or not isinstance(q.get("value"), int | float):
+    value = q.get("value") if isinstance(q, dict) else None
+    if not isinstance(unit, str) or unit not in FACTORS[dim] \
+            or not isinstance(value, int | float) or isinstance(value, bool):
         raise InputError(source, field, f"{{value, unit}} with a {dim} unit "
                          f"({', '.join(sorted(FACTORS[dim]))})")
     return float(q["value"]) * FACTORS[dim][unit]

@@ -1,0 +1,212 @@
+"""Property-based: the rocketry inputs and the campaign's tables, corrupted, are valid input
+or one line with exit 2 naming the file, with nothing written; where one is accepted, what
+was written holds physics a flight has.
+
+- a column map (`import LOG --columns MAP`): a node of a map that uses every block (time
+  in ms, pressure in hPa, three accelerometer axes, GNSS) deleted or replaced;
+- a CATS Configurator export (`import EXPORT --format cats`): one of its CSVs with a cell
+  replaced, rows dropped or repeated, the header damaged or the last line cut;
+- a rocket's flight card (`import LOG --card CARD`, the log read through the card's
+  inline column map): a node of the card deleted or replaced;
+- a flight card for `cpas-ocp flight`: a node of a card whose data block names the log
+  beside it; the reconstruction is replaced by a stand-in that ends the command with exit
+  4 once the import is done (the fits are `test_rocket_log_import`'s business; here every
+  way the command's inputs can be wrong is);
+- a campaign's tables (`dispersions CAMPAIGN`): parameters.csv or stages.csv corrupted as
+  a log is.  Where one is accepted, every drag area and dispersed parameter it held was a
+  finite number above zero.
+
+An import accepted must have written a folder that loads, whose pad air is a launch
+pad's (30-110 kPa, 180-340 K).  `benchmarks/fuzz_inputs.py` runs the long profile of the
+other files' tests.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from hypothesis import event, given
+from hypothesis import strategies as st
+
+from cpas_ocp.campaign.campaign import STAGE_COLUMNS
+from cpas_ocp.campaign.dispersion_study import DISPERSED
+from cpas_ocp.cli import main
+from cpas_ocp.errors import NotAResult
+from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.io.plausibility import PAD_PRESSURE_PA, PAD_TEMPERATURE_K
+
+from .corruption import assert_contract, corrupted_document, corrupted_lines
+from .test_dispersion_study import _table
+from .test_fuzz_files import SETTINGS, _case
+from .test_rocket_log_import import CARD, COLUMN_MAP, Flight, fly, write_cats, write_mapped
+
+RATE_HZ = 50.0  # the logs' sample rate: events resolved, a few thousand rows to rewrite
+NOMINAL = {"CdS[drogue,stage1]": {"value": 0.467, "unit": "m^2", "source": "card"},
+           "CdS[main,stage2]": {"value": 5.78, "unit": "m^2", "source": "card"}}
+# A card that reads its log through its own column map and names it, for `import` and
+# `flight` alike.
+FULL_CARD = {**CARD, "data": {"folder": "", "logs": ["log.csv"], "columns": COLUMN_MAP},
+             "nominal": NOMINAL}
+CATS_FILES = ("imu.csv", "baro.csv", "flightStates.csv", "gnssInfo.csv")
+
+
+@pytest.fixture(scope="module")
+def flight() -> Flight:
+    return fly(rate_hz=RATE_HZ)
+
+
+@pytest.fixture(scope="module")
+def logs(flight: Flight, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A column-mapped log (log.csv), a CATS export (export/) and a campaign folder
+    (campaign/: parameters.csv and stages.csv of the synthetic 25-test table)."""
+    root = tmp_path_factory.mktemp("fuzz_logs")
+    write_mapped(flight, root / "log.csv", seed=21)
+    write_cats(flight, root / "export", seed=22)
+    (root / "campaign").mkdir()
+    table = _table()
+    table.to_csv(root / "campaign" / "parameters.csv", index=False)
+    kinds = table[["test", "parachute", "type"]].drop_duplicates()
+    pd.DataFrame([{"test": r.test, "parachute": r.parachute, "type": r.type,
+                   "stage": "stage1", "stage_index": 0,
+                   "inflation": "infinite_mass" if r.type == "drogue" else "finite_mass",
+                   "fill_length": "diameter", "diameter": {"drogue": 7.0}.get(r.type, 3.0),
+                   "line_length": np.nan, "v_start": 130.0} for r in kinds.itertuples()],
+                 columns=STAGE_COLUMNS).to_csv(root / "campaign" / "stages.csv", index=False)
+    return root
+
+
+@pytest.fixture
+def no_reconstruction(monkeypatch: pytest.MonkeyPatch) -> None:
+    """`flight` ends with exit 4 where its first log's reconstruction would begin."""
+    def stand_in(*_args: object) -> None:
+        raise NotAResult("reconstruction left out by the test")
+    monkeypatch.setattr("cpas_ocp.cli._flight_log", stand_in)
+
+
+def _write(path: Path, obj: object) -> str:
+    path.write_text(json.dumps(obj))
+    return str(path)
+
+
+def assert_imported(code: int, out: Path) -> None:
+    """An import that exited 0 wrote a folder that loads, with a launch pad's air."""
+    if code != 0:
+        return
+    test = load_test(out)
+    atmosphere = json.loads((out / "manifest.json").read_text())["atmosphere"]
+    assert PAD_PRESSURE_PA[0] <= atmosphere["pressure"]["value"] <= PAD_PRESSURE_PA[1]
+    assert PAD_TEMPERATURE_K[0] <= atmosphere["temperature"]["value"] <= PAD_TEMPERATURE_K[1]
+    assert test.t_end > test.t_start
+
+
+def test_the_uncorrupted_inputs_are_valid(logs: Path, tmp_path: Path, no_reconstruction,
+                                          capsys: pytest.CaptureFixture[str]) -> None:
+    """Every base input is valid, so that every exit 2 below comes from a corruption."""
+    card = _write(tmp_path / "card.json", FULL_CARD)
+    assert main(["import", str(logs / "log.csv"), "--columns",
+                 _write(tmp_path / "map.json", COLUMN_MAP), "--card", card,
+                 "--out", str(tmp_path / "mapped")]) == 0
+    assert main(["import", str(logs / "export"), "--format", "cats", "--card", card,
+                 "--out", str(tmp_path / "cats")]) == 0
+    assert main(["import", str(logs / "log.csv"), "--card", card,
+                 "--out", str(tmp_path / "carded")]) == 0
+    for out in ("mapped", "cats", "carded"):
+        assert_imported(0, tmp_path / out)
+    shutil.copy(logs / "log.csv", tmp_path / "log.csv")
+    assert main(["flight", card, "--out", str(tmp_path / "flight")]) == 4
+    assert "left out by the test" in capsys.readouterr().err
+    assert load_test(tmp_path / "flight" / "log" / "test").name == CARD["name"]
+    assert main(["dispersions", str(logs / "campaign"), "--out", str(tmp_path / "disp"),
+                 "--cases", "100", "--seed", "1"]) == 0
+
+
+@SETTINGS
+@given(data=st.data())
+def test_a_corrupted_column_map_is_valid_or_one_line_exit_2(data, logs, tmp_path, capsys):
+    document = corrupted_document(data, COLUMN_MAP)
+    work = _case(tmp_path, json.dumps(document, sort_keys=True))
+    code = main(["import", str(logs / "log.csv"), "--columns",
+                 _write(work / "map.json", document), "--card",
+                 _write(work / "card.json", CARD), "--out", str(work / "test")])
+    event(f"exit {code}")
+    # A map naming the wrong column or unit is named in the map, or in the log's column
+    # whose readings no flight makes.
+    assert_contract(code, capsys.readouterr().err.strip(), ("map.json", "log.csv"),
+                    work / "test")
+    assert_imported(code, work / "test")
+
+
+@SETTINGS
+@given(data=st.data())
+def test_a_corrupted_cats_export_is_valid_or_one_line_exit_2(data, logs, tmp_path, capsys):
+    name = data.draw(st.sampled_from(CATS_FILES), label="file")
+    lines = corrupted_lines(data, (logs / "export" / name).read_text().splitlines())
+    work = _case(tmp_path, (name, *lines))
+    shutil.copytree(logs / "export", work / "export")
+    (work / "export" / name).write_text("\n".join(lines) + "\n")
+    code = main(["import", str(work / "export"), "--format", "cats", "--card",
+                 _write(work / "card.json", CARD), "--out", str(work / "test")])
+    event(f"exit {code}")
+    # Rows dropped may take a flight state the card deploys at: then the card's field is
+    # named, with the states the log has.
+    assert_contract(code, capsys.readouterr().err.strip(), (str(work / "export"), "card.json"),
+                    work / "test")
+    assert_imported(code, work / "test")
+
+
+@SETTINGS
+@given(data=st.data())
+def test_a_corrupted_rocket_card_is_valid_or_one_line_exit_2(data, logs, tmp_path, capsys):
+    document = corrupted_document(data, FULL_CARD)
+    work = _case(tmp_path, json.dumps(document, sort_keys=True))
+    code = main(["import", str(logs / "log.csv"), "--card", _write(work / "card.json", document),
+                 "--out", str(work / "test")])
+    event(f"exit {code}")
+    # A unit the card's inline map gets wrong is named at the log's column it misreads.
+    assert_contract(code, capsys.readouterr().err.strip(), ("card.json", "log.csv"),
+                    work / "test")
+    assert_imported(code, work / "test")
+
+
+@SETTINGS
+@given(data=st.data())
+def test_a_corrupted_flight_card_is_valid_or_one_line_exit_2(data, logs, tmp_path,
+                                                             no_reconstruction, capsys):
+    document = corrupted_document(data, FULL_CARD)
+    work = _case(tmp_path, json.dumps(document, sort_keys=True))
+    shutil.copy(logs / "log.csv", work / "log.csv")
+    code = main(["flight", _write(work / "card.json", document), "--out", str(work / "out")])
+    event(f"exit {code}")
+    err = capsys.readouterr().err.strip()
+    if code == 4:  # imported; the stand-in ended it where the fits begin
+        assert "left out by the test" in err, err
+        assert_imported(0, work / "out" / "log" / "test")
+        return
+    assert_contract(code, err, ("card.json", "log.csv"), work / "out")
+
+
+@pytest.mark.slow  # each table accepted draws its figures: about 3 s
+@SETTINGS
+@given(data=st.data())
+def test_a_corrupted_campaign_table_is_valid_or_one_line_exit_2(data, logs, tmp_path, capsys):
+    name = data.draw(st.sampled_from(["parameters.csv", "stages.csv"]), label="file")
+    lines = corrupted_lines(data, (logs / "campaign" / name).read_text().splitlines())
+    work = _case(tmp_path, (name, *lines))
+    shutil.copytree(logs / "campaign", work / "campaign")
+    (work / "campaign" / name).write_text("\n".join(lines) + "\n")
+    code = main(["dispersions", str(work / "campaign"), "--out", str(work / "out"),
+                 "--cases", "100", "--seed", "1"])
+    event(f"exit {code}")
+    assert_contract(code, capsys.readouterr().err.strip(), str(work / "campaign"),
+                    work / "out")
+    if code == 0:  # every dispersed value it read was a positive number
+        table = pd.read_csv(work / "campaign" / "parameters.csv", keep_default_na=False,
+                            na_values=[""])
+        values = pd.to_numeric(table.loc[table["parameter"].isin(DISPERSED), "value"],
+                               errors="coerce")
+        assert (np.isfinite(values) & (values > 0.0)).all()
