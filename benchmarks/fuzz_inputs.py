@@ -1,7 +1,9 @@
 """Long profile of the property-based input tests: many corrupted manifests, series, model
-files, flight cards and Altus Metrum logs.
+files, flight cards, Altus Metrum logs, column maps, CATS exports, flight cards for
+`flight` and campaign tables.
 
-Runs `tests/test_fuzz_manifest.py` and `tests/test_fuzz_files.py` with `--examples`
+Runs `tests/test_fuzz_manifest.py`, `tests/test_fuzz_files.py` and
+`tests/test_fuzz_logs.py` (its slow campaign-table test too) with `--examples`
 examples of each kind
 (default 2,000) drawn from `--seed` (the suite runs 30 fixed ones).  Every example must be
 valid input or a one-line exit 2 with nothing written; a failure prints
@@ -33,10 +35,12 @@ def main() -> int:
     done = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
                            f"--hypothesis-seed={args.seed}",
                            str(ROOT / "tests" / "test_fuzz_manifest.py"),
-                           str(ROOT / "tests" / "test_fuzz_files.py")], env=env, cwd=ROOT)
+                           str(ROOT / "tests" / "test_fuzz_files.py"),
+                           str(ROOT / "tests" / "test_fuzz_logs.py")], env=env, cwd=ROOT)
     verdict = "contract held" if done.returncode == 0 else "FAILED"
-    print(f"{args.examples} each of corrupted manifests, series, model files, flight cards "
-          f"and Altus Metrum logs (seed {args.seed}) in "
+    print(f"{args.examples} each of corrupted manifests, series, model files, flight cards, "
+          f"Altus Metrum logs, column maps, CATS exports and campaign tables (seed "
+          f"{args.seed}) in "
           f"{time.perf_counter() - t0:.1f} s: {verdict}")
     return done.returncode
 

@@ -33,7 +33,6 @@ import pytest
 from hypothesis import event, given
 from hypothesis import strategies as st
 
-from cpas_ocp.campaign.campaign import STAGE_COLUMNS
 from cpas_ocp.campaign.dispersion_study import DISPERSED
 from cpas_ocp.cli import main
 from cpas_ocp.errors import NotAResult
@@ -42,6 +41,7 @@ from cpas_ocp.io.plausibility import PAD_PRESSURE_PA, PAD_TEMPERATURE_K
 
 from .corruption import assert_contract, corrupted_document, corrupted_lines
 from .test_dispersion_study import _table
+from .test_drag_area_envelope import stage_table
 from .test_fuzz_files import SETTINGS, _case
 from .test_rocket_log_import import CARD, COLUMN_MAP, Flight, fly, write_cats, write_mapped
 
@@ -70,13 +70,7 @@ def logs(flight: Flight, tmp_path_factory: pytest.TempPathFactory) -> Path:
     (root / "campaign").mkdir()
     table = _table()
     table.to_csv(root / "campaign" / "parameters.csv", index=False)
-    kinds = table[["test", "parachute", "type"]].drop_duplicates()
-    pd.DataFrame([{"test": r.test, "parachute": r.parachute, "type": r.type,
-                   "stage": "stage1", "stage_index": 0,
-                   "inflation": "infinite_mass" if r.type == "drogue" else "finite_mass",
-                   "fill_length": "diameter", "diameter": {"drogue": 7.0}.get(r.type, 3.0),
-                   "line_length": np.nan, "v_start": 130.0} for r in kinds.itertuples()],
-                 columns=STAGE_COLUMNS).to_csv(root / "campaign" / "stages.csv", index=False)
+    stage_table(table).to_csv(root / "campaign" / "stages.csv", index=False)
     return root
 
 
@@ -102,6 +96,15 @@ def assert_imported(code: int, out: Path) -> None:
     assert PAD_PRESSURE_PA[0] <= atmosphere["pressure"]["value"] <= PAD_PRESSURE_PA[1]
     assert PAD_TEMPERATURE_K[0] <= atmosphere["temperature"]["value"] <= PAD_TEMPERATURE_K[1]
     assert test.t_end > test.t_start
+
+
+def imported_or_refused(code: int, capsys: pytest.CaptureFixture[str],
+                        named: tuple[str, ...], out: Path) -> None:
+    """An import's exit: refused in one line naming one of `named` with nothing at `out`
+    (`assert_contract`), or a folder written that holds a flight (`assert_imported`)."""
+    event(f"exit {code}")
+    assert_contract(code, capsys.readouterr().err.strip(), named, out)
+    assert_imported(code, out)
 
 
 def test_the_uncorrupted_inputs_are_valid(logs: Path, tmp_path: Path, no_reconstruction,
@@ -133,12 +136,9 @@ def test_a_corrupted_column_map_is_valid_or_one_line_exit_2(data, logs, tmp_path
     code = main(["import", str(logs / "log.csv"), "--columns",
                  _write(work / "map.json", document), "--card",
                  _write(work / "card.json", CARD), "--out", str(work / "test")])
-    event(f"exit {code}")
     # A map naming the wrong column or unit is named in the map, or in the log's column
     # whose readings no flight makes.
-    assert_contract(code, capsys.readouterr().err.strip(), ("map.json", "log.csv"),
-                    work / "test")
-    assert_imported(code, work / "test")
+    imported_or_refused(code, capsys, ("map.json", "log.csv"), work / "test")
 
 
 @SETTINGS
@@ -151,12 +151,9 @@ def test_a_corrupted_cats_export_is_valid_or_one_line_exit_2(data, logs, tmp_pat
     (work / "export" / name).write_text("\n".join(lines) + "\n")
     code = main(["import", str(work / "export"), "--format", "cats", "--card",
                  _write(work / "card.json", CARD), "--out", str(work / "test")])
-    event(f"exit {code}")
     # Rows dropped may take a flight state the card deploys at: then the card's field is
     # named, with the states the log has.
-    assert_contract(code, capsys.readouterr().err.strip(), (str(work / "export"), "card.json"),
-                    work / "test")
-    assert_imported(code, work / "test")
+    imported_or_refused(code, capsys, (str(work / "export"), "card.json"), work / "test")
 
 
 @SETTINGS
@@ -166,11 +163,8 @@ def test_a_corrupted_rocket_card_is_valid_or_one_line_exit_2(data, logs, tmp_pat
     work = _case(tmp_path, json.dumps(document, sort_keys=True))
     code = main(["import", str(logs / "log.csv"), "--card", _write(work / "card.json", document),
                  "--out", str(work / "test")])
-    event(f"exit {code}")
     # A unit the card's inline map gets wrong is named at the log's column it misreads.
-    assert_contract(code, capsys.readouterr().err.strip(), ("card.json", "log.csv"),
-                    work / "test")
-    assert_imported(code, work / "test")
+    imported_or_refused(code, capsys, ("card.json", "log.csv"), work / "test")
 
 
 @SETTINGS

@@ -1108,7 +1108,7 @@ def import_flight(log: FlightRecord | AltusLog, card: FlightCard, out: str | Pat
                        "pressure": {"value": round(p0, 2), "unit": "Pa"},
                        "temperature": {"value": round(t0, 3), "unit": "K"},
                        "lapse_rate": {"value": round(1e3 * lapse, 4), "unit": "K/km"}},
-        "phase": {"start": {"value": t_begin, "unit": "s"},
+        "phase": {"start": {"value": instant(t_begin), "unit": "s"},
                   "end": {"value": round(t_end, 3), "unit": "s"}},
         "model": rocket_model(card.model, [s["kind"] for s in sensors],
                               [(c["name"], c["stages"][0]) for c in parachutes
@@ -1147,12 +1147,18 @@ def blamed(exc: InputError, card_source: str, log_source: str, written: str) -> 
     return InputError(log_source, f"(imported as {written}: {exc.field})", exc.expectation)
 
 
+def instant(t: float) -> float:
+    """A time (s) as the manifest states it, to the microsecond: the phase's start and the
+    first deployment, rounded alike, stay equal."""
+    return round(t, 6)
+
+
 def event_entry(name: str, parachute: str, t: float, sigma: float) -> dict[str, Any]:
     """A manifest event of `parachute` at `t` (s) with its timing `sigma` (s): the time to
     the microsecond and the sigma to four significant digits, never below `MIN_EVENT_SIGMA_S`
     (a detected event's sigma is a sample interval, a quarter of a millisecond at 4 kHz,
     which rounding to the millisecond made 0)."""
-    return {"name": name, "parachute": parachute, "time": {"value": round(t, 6), "unit": "s"},
+    return {"name": name, "parachute": parachute, "time": {"value": instant(t), "unit": "s"},
             "sigma": {"value": max(MIN_EVENT_SIGMA_S, float(f"{sigma:.4g}")), "unit": "s"}}
 
 
