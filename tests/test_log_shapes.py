@@ -466,6 +466,9 @@ def _mistaken(flight: Flight, seed: int) -> dict[str, tuple[pd.DataFrame, dict, 
         "acceleration in m/s^2 declared g": (
             with_gravity, {**AXIAL_MAP, "acceleration": {"column": "acc", "unit": "g"}},
             "acceleration column 'acc'", "is the unit m/s^2, not g?"),
+        "an accelerometer axis with its sign reversed": (
+            table, {**AXIAL_MAP, "acceleration": {**AXIAL_MAP["acceleration"], "sign": -1}},
+            "acceleration column 'acc'", "is its sign reversed"),
         "the pressure's column named as the acceleration's": (
             table, {**AXIAL_MAP, "acceleration": {"column": "p", "unit": "m/s^2"}},
             "acceleration column 'p'", "right column"),
@@ -474,11 +477,12 @@ def _mistaken(flight: Flight, seed: int) -> dict[str, tuple[pd.DataFrame, dict, 
 
 @pytest.mark.parametrize("case", ["altitude in ft declared m", "pressure in hPa declared Pa",
                                   "time in s declared ms", "acceleration in m/s^2 declared g",
+                                  "an accelerometer axis with its sign reversed",
                                   "the pressure's column named as the acceleration's"])
 def test_a_unit_mistake_is_named(case: str, flight: Flight, tmp_path: Path,
                                  capsys: pytest.CaptureFixture[str]) -> None:
     """Readings no flight makes (a pad at 3 K or 204 K, a descent at 30 km/s, 8.8 g under a
-    canopy) are one line naming the log's column and asking about the unit that would make
+    canopy, a boost read at -4 g) are one line naming the log's column and asking about the unit that would make
     them physical, exit 2, no folder; the same log in the right unit imports (the first
     test of this module)."""
     table, column_map, column, question = _mistaken(flight, 9)[case]

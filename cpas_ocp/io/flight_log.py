@@ -105,6 +105,7 @@ from cpas_ocp.io.flight_test import (
 from cpas_ocp.io.plausibility import (
     MAX_DESCENT_M_S,
     MAX_SPEED_M_S,
+    check_boost,
     check_pad_air,
     check_speed,
     check_steady_accelerometer,
@@ -871,6 +872,7 @@ def import_flight(log: FlightRecord | AltusLog, card: FlightCard, out: str | Pat
                          f"least 20 samples; the log has {len(baro)}")
     check_speed(record, baro["time"].to_numpy(), baro["altitude"].to_numpy(), MAX_SPEED_M_S,
                 "no rocket is faster in the lower atmosphere")
+    check_boost(record, samples)
     events, notes = flight_events(record)
     p0, pad_note = pad_pressure(baro, events, card)
     pad_altitude = float(pressure_altitude(p0))

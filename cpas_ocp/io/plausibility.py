@@ -14,6 +14,11 @@ than imported into a folder whose fit would mean nothing.
   altitude within `MAX_PAD_OFFSET_M` of the card's site elevation (weather moves it by a
   few hundred metres).  A pressure in hPa declared Pa gives 1013 Pa and 3 K; an altitude in
   ft declared m gives the pad 3.3 times as high, 57 kPa and 204 K at a 1400 m site;
+* the boost: where the altimeter climbs faster than `BOOST_CLIMB_M_S` (50 m/s, which
+  only thrust gives), the axial accelerometer reads the thrust in the `BOOST_WINDOW_S`
+  before, above `MIN_BOOST_G` (1 g subtracted: a thrust twice the weight, below any safe
+  launch's).  An axis whose sign is reversed, whose reading turned over shows a boost,
+  is named;
 * the accelerometer under the canopies: the drag carries the weight, so the specific
   force along the body is about one g (less as the body swings or hangs sideways), and
   the median axial reading (1 g subtracted) lies within `MAX_STEADY_G` of zero.  A reading
@@ -30,6 +35,7 @@ import numpy as np
 import pandas as pd
 
 from cpas_ocp.errors import InputError
+from cpas_ocp.io.flight_events import BOOST_G, BOOST_RUN
 from cpas_ocp.io.flight_record import FlightRecord, pressure_of_altitude
 from cpas_ocp.physics.atmosphere import pressure_altitude
 from cpas_ocp.physics.units import G0
@@ -42,24 +48,36 @@ PAD_PRESSURE_PA = (30e3, 110e3)  # air pressure on any launch pad (Pa)
 PAD_TEMPERATURE_K = (180.0, 340.0)  # air temperature on any launch pad (K)
 MAX_PAD_OFFSET_M = 2000.0  # the pad's pressure altitude off the site's elevation (m)
 MAX_STEADY_G = 3.0  # median axial reading under the canopies, off zero (g)
+BOOST_CLIMB_M_S = 50.0  # a climb this fast is a boost's (m/s): no canopy climbs ...
+BOOST_WINDOW_S = 10.0  # ... whose thrust the accelerometer reads in this long before (s) ...
+MIN_BOOST_G = 1.0  # ... above this (g, 1 g subtracted: a thrust twice the weight)
 
 
-def peak_speed(t: np.ndarray, h: np.ndarray) -> tuple[float, float]:
-    """The largest rate of change (m/s) of the altitude `h` (m) at times `t` (s, increasing),
-    and its time: the change of the running median over `SPEED_WINDOW_S` (at least
-    `MEDIAN_SAMPLES` samples, at most an eighth of the log) across as many samples, so that
-    a pulse of a few samples (an ejection charge's gas at the static port) does not count."""
+def climb_rates(t: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The rate of climb (m/s, negative in a descent) of the altitude `h` (m) at times `t` (s,
+    increasing), robust to short pulses, and the times it applies from: the change of the
+    running median over `SPEED_WINDOW_S` (at least `MEDIAN_SAMPLES` samples, at most an
+    eighth of the log) across as many samples, so that a pulse of a few samples (an
+    ejection charge's gas at the static port) does not count.  Empty for under 2 samples."""
     if t.size < 2:
-        return 0.0, float(t[0]) if t.size else 0.0
+        return np.empty(0), np.empty(0)
     interval = float(np.median(np.diff(t)))
     n = max(MEDIAN_SAMPLES, round(SPEED_WINDOW_S / interval) if interval > 0 else 0)
     # An eighth of the log at most: a log whose time unit is off by 1000 spans milliseconds.
     n = min(n, max(MEDIAN_SAMPLES, t.size // 8)) // 2 * 2 + 1
     n = min(n, t.size - 1)
     smooth = pd.Series(h).rolling(n, center=True, min_periods=1).median().to_numpy()
-    rate = np.abs(smooth[n:] - smooth[:-n]) / (t[n:] - t[:-n])
-    k = int(np.argmax(rate))
-    return float(rate[k]), float(t[k])
+    return (smooth[n:] - smooth[:-n]) / (t[n:] - t[:-n]), t[:-n]
+
+
+def peak_speed(t: np.ndarray, h: np.ndarray) -> tuple[float, float]:
+    """The largest rate of change (m/s) of the altitude `h` (m) at times `t` (s), either way
+    (`climb_rates`), and its time."""
+    rate, at = climb_rates(t, h)
+    if rate.size == 0:
+        return 0.0, float(t[0]) if t.size else 0.0
+    k = int(np.argmax(np.abs(rate)))
+    return float(abs(rate[k])), float(at[k])
 
 
 def check_speed(record: FlightRecord, t: np.ndarray, h: np.ndarray, ceiling: float,
@@ -150,3 +168,38 @@ def check_steady_accelerometer(record: FlightRecord, a: np.ndarray) -> None:
                      f"a median axial reading within {MAX_STEADY_G:g} g of zero under the "
                      f"canopies (1 g subtracted: their drag carries the weight); it reads "
                      f"{median / G0:.4g} g there: {hint}")
+
+
+def check_boost(record: FlightRecord, samples: pd.DataFrame) -> None:
+    """InputError naming the log's acceleration column where the altimeter shows a boost (a
+    climb faster than `BOOST_CLIMB_M_S`, which only thrust gives) and the axial
+    accelerometer, reading over the `BOOST_WINDOW_S` before the fastest climb, reads the
+    thrust with its sign reversed: never above `MIN_BOOST_G` (1 g subtracted: a
+    thrust-to-weight ratio of 2, below any safe launch's), but, turned over (``sign`` -1,
+    an axis ``"-y"``), a boost as `flight_events` detects one (above `BOOST_G` for
+    `BOOST_RUN` samples).  An accelerometer that reads no boost
+    either way (a lateral axis, or one that did not log the boost) is left to the other
+    checks.  `samples` are the record's."""
+    baro = samples[["time", "altitude"]].dropna()
+    rate, at = climb_rates(baro["time"].to_numpy(float), baro["altitude"].to_numpy(float))
+    if rate.size == 0 or float(rate.max()) < BOOST_CLIMB_M_S:
+        return
+    t_climb = float(at[int(np.argmax(rate))])
+    accel = samples[["time", "acceleration"]].dropna()
+    boost = accel[(accel["time"] >= t_climb - BOOST_WINDOW_S) & (accel["time"] <= t_climb)]
+    a = boost["acceleration"].to_numpy(float)
+    if a.size < MEDIAN_SAMPLES or float(a.max()) > MIN_BOOST_G * G0:
+        return
+    channel = record.channel("acceleration")
+    # Turned over: the specific force reversed, for a reading whose offset (one g) the
+    # reader subtracted; a logger's own subtraction turns over with its axis.
+    flipped = pd.Series(-(a + channel.offset) - channel.offset)
+    if not float(flipped.rolling(BOOST_RUN).min().max()) > BOOST_G * G0:
+        return  # no boost either way: an accelerometer that did not read it, not a sign
+    raise InputError(str(record.path), channel.column,
+                     f"an axial reading that shows the boost the altimeter shows (a climb "
+                     f"at {float(rate.max()):.0f} m/s near {t_climb:.2f} s): above "
+                     f"{MIN_BOOST_G:g} g (1 g subtracted) in the {BOOST_WINDOW_S:g} s before; "
+                     f"it reads {float(a.min()) / G0:.3g} to {float(a.max()) / G0:.3g} g "
+                     f"there: is its sign reversed (a 'sign' of -1, or the axis with "
+                     f"'-')?")
