@@ -14,7 +14,12 @@ was written holds physics a flight has.
   way the command's inputs can be wrong is);
 - a campaign's tables (`dispersions CAMPAIGN`): parameters.csv or stages.csv corrupted as
   a log is.  Where one is accepted, every drag area and dispersed parameter it held was a
-  finite number above zero.
+  finite number above zero;
+- the cases `montecarlo` flies (cases_<type>_<stage>.parquet, written by `dispersions`):
+  the table corrupted as a log is and written back as Parquet (or, where the text no
+  longer parses, as the damaged file itself); the fit is replaced by a stand-in that ends
+  the command with exit 4 once the cases are read and matched to the test's model.
+  Where they are accepted, every case was finite and positive.
 
 An import accepted must have written a folder that loads, whose pad air is a launch
 pad's (30-110 kPa, 180-340 K).  `benchmarks/fuzz_inputs.py` runs the long profile of the
@@ -23,6 +28,7 @@ other files' tests.
 
 from __future__ import annotations
 
+import io
 import json
 import shutil
 from pathlib import Path
@@ -32,7 +38,9 @@ import pandas as pd
 import pytest
 from hypothesis import event, given
 from hypothesis import strategies as st
+from pyarrow import ArrowException
 
+from cpas_ocp.campaign.campaign import COLUMNS
 from cpas_ocp.campaign.dispersion_study import DISPERSED
 from cpas_ocp.cli import main
 from cpas_ocp.errors import NotAResult
@@ -80,6 +88,36 @@ def no_reconstruction(monkeypatch: pytest.MonkeyPatch) -> None:
     def stand_in(*_args: object) -> None:
         raise NotAResult("reconstruction left out by the test")
     monkeypatch.setattr("cpas_ocp.cli._flight_log", stand_in)
+
+
+@pytest.fixture(scope="module")
+def dispersed(problem_folder, tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    """The fbcp seed-1 test folder and a dispersions folder drawn from 12 tests scattered
+    5 % about its truth (as `test_monte_carlo_cli` draws them)."""
+    folder = problem_folder("fbcp", 1)
+    truth = json.loads((folder / "truth.json").read_text())["parameters"]
+    root = tmp_path_factory.mktemp("dispersed")
+    rng = np.random.default_rng(5)
+    rows = [{"test": f"t{k}", "parameter": b, "name": f"{b}[fbcp1,stage1]",
+             "parachute": "fbcp1", "type": "fbcp", "stage": "stage1", "forebody": "capsule",
+             "cluster_size": 2, "line_length": np.nan,
+             "value": truth[f"{b}[fbcp1,stage1]"] * (1 + 0.05 * rng.standard_normal()),
+             "std": 0.01, "unit": "1"} for k in range(12) for b in ("CdS", "Ck", "n_p",
+                                                                   "expopen", "t_k")]
+    (root / "campaign").mkdir()
+    pd.DataFrame(rows, columns=COLUMNS).to_csv(root / "campaign" / "parameters.csv",
+                                               index=False)
+    assert main(["dispersions", str(root / "campaign"), "--out", str(root / "cases"),
+                 "--cases", "20", "--seed", "5"]) == 0
+    return folder, root / "cases"
+
+
+@pytest.fixture
+def no_fit(monkeypatch: pytest.MonkeyPatch) -> None:
+    """`montecarlo` ends with exit 4 where its fit would begin."""
+    def stand_in(*_args: object, **_kwargs: object) -> None:
+        raise NotAResult("fit left out by the test")
+    monkeypatch.setattr("cpas_ocp.inference.continuation.solve_checked", stand_in)
 
 
 def _write(path: Path, obj: object) -> str:
@@ -204,3 +242,32 @@ def test_a_corrupted_campaign_table_is_valid_or_one_line_exit_2(data, logs, tmp_
         values = pd.to_numeric(table.loc[table["parameter"].isin(DISPERSED), "value"],
                                errors="coerce")
         assert (np.isfinite(values) & (values > 0.0)).all()
+
+
+@pytest.mark.slow  # each case file accepted builds the test's NLP: about 20 s in all
+@SETTINGS
+@given(data=st.data())
+def test_corrupted_monte_carlo_cases_are_valid_or_one_line_exit_2(data, dispersed, tmp_path,
+                                                                  no_fit, capsys):
+    folder, cases = dispersed
+    name = "cases_fbcp_stage1.parquet"
+    lines = corrupted_lines(data, pd.read_parquet(cases / name).to_csv(index=False)
+                            .splitlines())
+    work = _case(tmp_path, tuple(lines))
+    shutil.copytree(cases, work / "cases")
+    text = "\n".join(lines) + "\n"
+    try:
+        pd.read_csv(io.StringIO(text)).to_parquet(work / "cases" / name)
+    except (ValueError, TypeError, ArrowException):  # no table: the damaged file itself
+        (work / "cases" / name).write_text(text)
+    code = main(["montecarlo", str(folder), "--cases", str(work / "cases"), "--out",
+                 str(work / "out")])
+    event(f"exit {code}")
+    err = capsys.readouterr().err.strip()
+    if code == 4:  # read and matched; the stand-in ended it where the fit begins
+        assert "fit left out by the test" in err, err
+        values = pd.read_parquet(work / "cases" / name).to_numpy(float)
+        assert np.isfinite(values).all() and (values > 0.0).all()
+        assert not (work / "out").exists()
+        return
+    assert_contract(code, err, name, work / "out")

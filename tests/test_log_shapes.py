@@ -482,9 +482,9 @@ def _mistaken(flight: Flight, seed: int) -> dict[str, tuple[pd.DataFrame, dict, 
 def test_a_unit_mistake_is_named(case: str, flight: Flight, tmp_path: Path,
                                  capsys: pytest.CaptureFixture[str]) -> None:
     """Readings no flight makes (a pad at 3 K or 204 K, a descent at 30 km/s, 8.8 g under a
-    canopy, a boost read at -4 g) are one line naming the log's column and asking about the unit that would make
-    them physical, exit 2, no folder; the same log in the right unit imports (the first
-    test of this module)."""
+    canopy, a boost read at -4 g) are one line naming the log's column and asking about the
+    unit (or sign) that would make them physical, exit 2, no folder; the same log in the
+    right unit imports (the first test of this module)."""
     table, column_map, column, question = _mistaken(flight, 9)[case]
     table.to_csv(tmp_path / "log.csv", index=False)
     code, _, err = _import(tmp_path, tmp_path / "log.csv", column_map, CARD, capsys)
