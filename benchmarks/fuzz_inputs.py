@@ -1,8 +1,10 @@
 """Long profile of the property-based input tests: many corrupted manifests, series, model
-files, flight cards and Altus Metrum logs, scheduler addresses, and plug-ins that fail.
+files, flight cards, Altus Metrum logs, column maps, CATS exports, flight cards for
+`flight`, campaign tables, scheduler addresses, and plug-ins that fail.
 
-Runs `tests/test_fuzz_manifest.py`, `tests/test_fuzz_files.py` and
-`tests/test_plugin_faults.py` with `--examples` examples of each kind
+Runs `tests/test_fuzz_manifest.py`, `tests/test_fuzz_files.py`,
+`tests/test_plugin_faults.py` and `tests/test_fuzz_logs.py` (its slow
+campaign-table test too) with `--examples` examples of each kind
 (default 2,000) drawn from `--seed` (the suite runs 30 fixed ones).  Every example must be
 valid input or a one-line exit 2 with nothing written; a failure prints
 Hypothesis's smallest falsifying example.  Prints the count and the wall time.
@@ -34,10 +36,12 @@ def main() -> int:
                            f"--hypothesis-seed={args.seed}",
                            str(ROOT / "tests" / "test_fuzz_manifest.py"),
                            str(ROOT / "tests" / "test_fuzz_files.py"),
-                           str(ROOT / "tests" / "test_plugin_faults.py")], env=env, cwd=ROOT)
+                           str(ROOT / "tests" / "test_plugin_faults.py"),
+                           str(ROOT / "tests" / "test_fuzz_logs.py")], env=env, cwd=ROOT)
     verdict = "contract held" if done.returncode == 0 else "FAILED"
     print(f"{args.examples} each of corrupted manifests, series, model files, flight cards, "
-          f"Altus Metrum logs, scheduler addresses and failing plug-ins (seed {args.seed}) in "
+          f"Altus Metrum logs, column maps, CATS exports, campaign tables, scheduler "
+          f"addresses and failing plug-ins (seed {args.seed}) in "
           f"{time.perf_counter() - t0:.1f} s: {verdict}")
     return done.returncode
 

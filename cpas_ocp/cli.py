@@ -39,6 +39,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import shutil
 import signal
 import sys
 import time
@@ -56,6 +57,7 @@ if TYPE_CHECKING:
     from cpas_ocp.estimation.uncertainty import Covariance
     from cpas_ocp.inference.result_claim import Claim
     from cpas_ocp.io.flight_log import FlightCard
+    from cpas_ocp.io.flight_record import FlightRecord
     from cpas_ocp.io.flight_test import FlightTest
     from cpas_ocp.io.model_spec import ModelSpec
     from cpas_ocp.io.recorder_clocks import RecorderEstimates
@@ -622,7 +624,8 @@ def _dispersions(args: argparse.Namespace) -> int:
     if not models:
         raise InputError(str(args.campaign), "(table)",
                          "a canopy type and stage with enough tests to disperse; "
-                         + "; ".join(skipped))
+                         + ("; ".join(skipped) or "the table has no canopy's "
+                            "CdS, Ck, n_p, n, expopen or t_k"))
     out = write_dispersions(models, skipped, args.cases, args.seed, args.out, table, stages)
     for model in models:
         print(model.text())
@@ -686,9 +689,9 @@ def _import(args: argparse.Namespace) -> int:
     log_format, columns = args.format, args.columns
     if log_format is None and columns is None:  # the card says how its logs are read
         if card.data_format is None and card.data_columns is None:
-            raise InputError("(command line)", "--format/--columns", "one of the two (a "
-                             "built-in format, or a column map), or a card whose data block "
-                             "gives its logs' format or columns")
+            raise InputError(card.source, "data.format/data.columns", "one of the two, "
+                             "saying how the card's logs are read (a built-in format, or a "
+                             "column map), or --format/--columns on the command line")
         log_format = card.data_format
         columns = card.data_columns if not isinstance(card.data_columns, str) \
             else _beside(card) / card.data_columns
@@ -711,8 +714,8 @@ def _flight(args: argparse.Namespace) -> int:
                          "--log FILE)")
     for name in logs:
         if not (data / name).exists():
-            raise InputError(str(data / name), "(file)", f"the flight log of card {card.name!r} "
-                             "(give the folder holding it with --data)")
+            raise InputError(card.source, "data.logs", f"flight logs that exist; {data / name} "
+                             "does not (give the folder holding it with --data)")
     # The command line's format or map, else the card's, else an Altus Metrum export.
     log_format, columns = args.format, args.columns
     if log_format is None and columns is None:
@@ -721,7 +724,17 @@ def _flight(args: argparse.Namespace) -> int:
             else card.data_columns
         if log_format is None and columns is None:
             log_format = "altus"
-    recorders = [_flight_log(args, card, data / name, log_format, columns) for name in logs]
+    new_out = not args.out.exists() or not any(args.out.iterdir())
+    try:
+        # Every log is imported before any is reconstructed: a log the import refuses is
+        # said in a second, not after the fits of the others.
+        records = [_flight_import(card, data / name, log_format, columns, args.out)
+                   for name in logs]
+        recorders = [_flight_log(args, card, log, record) for log, record in records]
+    except InputError:
+        if new_out:  # a refused input leaves no half-written output
+            shutil.rmtree(args.out, ignore_errors=True)
+        raise
     if len(recorders) > 1:
         from cpas_ocp.io.recorder_clocks import recorders_text
         text = recorders_text(recorders)
@@ -743,24 +756,34 @@ def _beside(card: FlightCard) -> Path:
     return Path(card.source).parent if _is_file(card) else Path()
 
 
-def _flight_log(args: argparse.Namespace, card: FlightCard, log: Path, log_format: str | None,
-                columns: Path | dict[str, Any] | None) -> RecorderEstimates:
-    """Import, reconstruct, diagnose and compare one log of the `flight` command (a function
-    of its own so that one log's fits and refits are freed before the next log's): its
-    drag areas and start times, for the recorders' comparison."""
+def _flight_import(card: FlightCard, log: Path, log_format: str | None,
+                   columns: Path | dict[str, Any] | None, out: Path
+                   ) -> tuple[Path, FlightRecord]:
+    """Read one log of the `flight` command and import it into out/<log stem>/test (the
+    import's summary printed): the log and its record."""
+    from cpas_ocp.io.flight_log import import_flight
+    from cpas_ocp.io.log_formats import read_flight_log
+    print(f"== {log.name}: import", flush=True)
+    record = read_flight_log(log, log_format, columns, f"{card.source}: data.columns")
+    summary = import_flight(record, card, out / log.stem / "test")
+    print(summary.text())
+    return log, record
+
+
+def _flight_log(args: argparse.Namespace, card: FlightCard, log: Path, record: FlightRecord
+                ) -> RecorderEstimates:
+    """Reconstruct, diagnose and compare one log of the `flight` command, imported by
+    `_flight_import` (a function of its own so that one log's fits and refits are freed
+    before the next log's): its drag areas and start times, for the recorders'
+    comparison."""
     from cpas_ocp.discrepancy.diagnosis import diagnose
     from cpas_ocp.inference.process_intensity import without_wind
-    from cpas_ocp.io.flight_log import import_flight
     from cpas_ocp.io.flight_test import load_test
-    from cpas_ocp.io.log_formats import read_flight_log
     from cpas_ocp.io.recorder_clocks import RecorderEstimates
     from cpas_ocp.reports.discrepancy_report import write_diagnosis
     from cpas_ocp.reports.flight_report import air_motion_text, flight_text, held_opening_profiles
     folder = args.out / log.stem
-    print(f"== {log.name}: import", flush=True)
-    record = read_flight_log(log, log_format, columns, f"{card.source}: data.columns")
-    summary = import_flight(record, card, folder / "test")
-    print(summary.text())
+    print(f"== {log.name}: reconstruct", flush=True)
     test = load_test(folder / "test")
     est, fit, cov, out = _run_reconstruction(test, args, _spec(test, args), folder / "report")
     still = without_wind(est.spec, test)
@@ -809,8 +832,6 @@ def _flight_still_air(test: FlightTest, args: argparse.Namespace, spec: ModelSpe
 
 
 def _demo(args: argparse.Namespace) -> int:
-    import shutil
-
     from cpas_ocp.estimation.simulate import simulate_problem
     from cpas_ocp.io.problems import load_problem
     test_dir = args.out / "test"

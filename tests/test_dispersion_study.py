@@ -93,3 +93,76 @@ def test_missing_table_is_one_line_exit_2(tmp_path, capsys) -> None:
     assert main(["dispersions", str(tmp_path), "--out", str(tmp_path / "o"), "--seed", "1"]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "parameters.parquet" in err
+
+
+def _collinear(table: pd.DataFrame) -> pd.DataFrame:
+    """The drogues' n_p and expopen moved onto a line through their Ck: no 3-D hull."""
+    table = table.copy()
+    for test, ck in table[table.parameter == "Ck"].set_index("test")["value"].items():
+        if not str(test).startswith("d"):
+            continue
+        rows = table.test == test
+        table.loc[rows & (table.parameter == "n_p"), "value"] = 6.0 + 10.0 * (ck - 1.15)
+        table.loc[rows & (table.parameter == "expopen"), "value"] = 1.3 + 2.0 * (ck - 1.15)
+    return table
+
+
+def _cell(table: pd.DataFrame, row: int, column: str, value: object) -> pd.DataFrame:
+    table = table.astype({column: object})
+    table.loc[row, column] = value
+    return table
+
+
+# A damaged campaign table: what its CSV holds, and what the one line names.
+BAD_TABLES = {
+    "a negative drag area": (lambda t: _cell(t, 0, "value", -21.0), "line 2, value"),
+    "a negative fill constant": (lambda t: _cell(t, 3, "value", -6.0), "line 5, value"),
+    "a text cell": (lambda t: _cell(t, 3, "value", "x"), "line 5, value"),
+    "an infinite value": (lambda t: _cell(t, 3, "value", np.inf), "line 5, value"),
+    "a blank value": (lambda t: _cell(t, 3, "value", np.nan), "line 5, value"),
+    "a cluster of no canopies": (lambda t: _cell(t, 4, "cluster_size", 0), "line 6, "
+                                 "cluster_size"),
+    "a negative line length": (lambda t: _cell(t, 4, "line_length", -3.0), "line 6, "
+                               "line_length"),
+    "no unit column": (lambda t: t.drop(columns="unit"), "unit"),
+}
+
+
+@pytest.mark.parametrize("case", list(BAD_TABLES))
+def test_a_damaged_campaign_table_is_one_line(case, tmp_path, capsys) -> None:
+    """Drag areas, fill constants and the other dispersed parameters are positive; a cell
+    that is no number, or a column that is missing, is one line naming the file, its line
+    and column, exit 2, nothing written (a negative drag area was dispersed, a text cell
+    ended in a TypeError)."""
+    damage, named = BAD_TABLES[case]
+    damage(_table()).to_csv(tmp_path / "parameters.csv", index=False)
+    code = main(["dispersions", str(tmp_path), "--out", str(tmp_path / "o"), "--cases", "100",
+                 "--seed", "1"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1, err
+    assert "parameters.csv" in err[0] and named in err[0], err
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_negative_diameter_in_the_stages_table_is_one_line(tmp_path, capsys) -> None:
+    _table().to_csv(tmp_path / "parameters.csv", index=False)
+    pd.DataFrame([{"test": "d0", "parachute": "drogue1", "type": "drogue", "stage": "stage1",
+                   "stage_index": 0, "inflation": "infinite_mass", "fill_length": "diameter",
+                   "diameter": -5.0, "line_length": np.nan, "v_start": 80.0}]).to_csv(
+        tmp_path / "stages.csv", index=False)
+    code = main(["dispersions", str(tmp_path), "--out", str(tmp_path / "o"), "--cases", "100",
+                 "--seed", "1"])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and "stages.csv: line 2, diameter" in err, err
+    assert not (tmp_path / "o").exists()
+
+
+def test_collinear_shape_parameters_leave_the_caps_to_bound_the_draws(tmp_path, capsys) -> None:
+    """Tests whose (Ck, n_p, expopen) lie on a line have no hull with a volume: the drogue is
+    dispersed within its caps, and the summary says why there is no hull (it ended in an
+    internal error)."""
+    _collinear(_table()).to_csv(tmp_path / "parameters.csv", index=False)
+    assert main(["dispersions", str(tmp_path), "--out", str(tmp_path / "o"), "--cases", "100",
+                 "--seed", "1"]) == 0
+    assert "collinear" in capsys.readouterr().out
+    assert (tmp_path / "o" / "cases_drogue_stage1.parquet").is_file()

@@ -89,6 +89,19 @@ def test_campaign_tables_give_the_fitted_curve(problem_folder) -> None:
                        chute, "stage1", t_i, fit.t[-1])
 
 
+def stage_table(table: pd.DataFrame) -> pd.DataFrame:
+    """The stages table of the synthetic campaign `table`: drogues (D_o 7 m, infinite mass)
+    and the other canopies (D_o 3 m, finite mass), one stage each, V_i 130 m/s."""
+    kinds = table[["test", "parachute", "type"]].drop_duplicates()
+    return pd.DataFrame([{"test": r.test, "parachute": r.parachute, "type": r.type,
+                          "stage": "stage1", "stage_index": 0,
+                          "inflation": "infinite_mass" if r.type == "drogue" else "finite_mass",
+                          "fill_length": "diameter",
+                          "diameter": {"drogue": 7.0}.get(r.type, 3.0),
+                          "line_length": np.nan, "v_start": 130.0}
+                         for r in kinds.itertuples()], columns=STAGE_COLUMNS)
+
+
 @pytest.fixture(scope="module")
 def campaign(tmp_path_factory):
     """The 25-test synthetic table of test_dispersion_study and its stages: drogues
@@ -96,13 +109,7 @@ def campaign(tmp_path_factory):
     root = tmp_path_factory.mktemp("envelope")
     table = _table()
     table.to_parquet(root / "parameters.parquet", index=False)
-    kinds = table[["test", "parachute", "type"]].drop_duplicates()
-    pd.DataFrame([{"test": r.test, "parachute": r.parachute, "type": r.type,
-                   "stage": "stage1", "stage_index": 0,
-                   "inflation": "infinite_mass" if r.type == "drogue" else "finite_mass",
-                   "fill_length": "diameter", "diameter": {"drogue": 7.0}.get(r.type, 3.0),
-                   "line_length": np.nan, "v_start": 130.0} for r in kinds.itertuples()],
-                 columns=STAGE_COLUMNS).to_csv(root / "stages.csv", index=False)
+    stage_table(table).to_csv(root / "stages.csv", index=False)
     assert main(["dispersions", str(root), "--out", str(root / "out"), "--cases", "4000",
                  "--seed", str(SEED)]) == 0
     return root

@@ -422,3 +422,108 @@ def test_still_air_leaves_the_air_motion_out_of_the_default(flight: Flight,
 
     assert "wind_process" not in effects("still") and "wind_process" in effects("air")
     assert set(effects("air")) - set(effects("still")) == {"wind_process"}
+
+
+def test_a_log_sampled_at_4_khz_keeps_its_events_sigmas(tmp_path: Path) -> None:
+    """A 4 kHz logger: each detected event's sigma is its sample interval, 0.25 ms, which the
+    manifest states (rounded to the millisecond it read 0, which no test folder may hold, and
+    the import blamed the card); the event times keep the sample's resolution."""
+    rate = 4000.0
+    coarse = fly(rate_hz=500.0)
+    t = np.arange(coarse.t[0], coarse.t[-1], 1.0 / rate)
+    fast = Flight(t, np.interp(t, coarse.t, coarse.h), np.interp(t, coarse.t, coarse.v),
+                  np.interp(t, coarse.t, coarse.f), coarse.events)
+    p, a = sensor_readings(fast, 8)
+    pd.DataFrame({"t": np.round(t, 6), "p": np.round(p, 1), "acc": np.round(a, 3)}).to_csv(
+        tmp_path / "log.csv", index=False)
+    code, report, _ = _import(tmp_path, tmp_path / "log.csv", AXIAL_MAP, CARD)
+    assert code == 0 and report is not None
+    test = load_test(tmp_path / "test")
+    charges = {e.parachute: e for e in test.events if e.name == "mortar_fire"}
+    for name in ("drogue", "main"):
+        assert charges[name].sigma == pytest.approx(1.0 / rate, rel=1e-3), name
+        assert charges[name].time == pytest.approx(
+            report["flight_events"][name]["time_s"], abs=1e-6), name
+
+
+def _mistaken(flight: Flight, seed: int) -> dict[str, tuple[pd.DataFrame, dict, str, str]]:
+    """Logs of the flight read through a map that mistakes a unit or a column: (table, map,
+    the column the one line names, the question it asks)."""
+    table = _table(flight, seed)
+    feet = pd.DataFrame({"t": table["t"], "alt": np.round(
+        np.asarray(pressure_altitude(table["p"].to_numpy()), float) / FT, 1)})
+    with_gravity = table.assign(acc=np.round((table["acc"] + G0) / 1.0, 3))
+    return {
+        "altitude in ft declared m": (
+            feet, {"time": AXIAL_MAP["time"], "altitude": {"column": "alt", "unit": "m"}},
+            "altitude column 'alt'", "is the unit ft, not m?"),
+        "pressure in hPa declared Pa": (
+            table.assign(p=np.round(table["p"] / 100.0, 3)), AXIAL_MAP,
+            "pressure column 'p'", "is the unit hPa, not Pa?"),
+        "time in s declared ms": (
+            table, {**AXIAL_MAP, "time": {"column": "t", "unit": "ms"}},
+            "time column 't'", "is the unit s, not ms?"),
+        "acceleration in m/s^2 declared g": (
+            with_gravity, {**AXIAL_MAP, "acceleration": {"column": "acc", "unit": "g"}},
+            "acceleration column 'acc'", "is the unit m/s^2, not g?"),
+        "an accelerometer axis with its sign reversed": (
+            table, {**AXIAL_MAP, "acceleration": {**AXIAL_MAP["acceleration"], "sign": -1}},
+            "acceleration column 'acc'", "is its sign reversed"),
+        "the pressure's column named as the acceleration's": (
+            table, {**AXIAL_MAP, "acceleration": {"column": "p", "unit": "m/s^2"}},
+            "acceleration column 'p'", "right column"),
+    }
+
+
+@pytest.mark.parametrize("case", ["altitude in ft declared m", "pressure in hPa declared Pa",
+                                  "time in s declared ms", "acceleration in m/s^2 declared g",
+                                  "an accelerometer axis with its sign reversed",
+                                  "the pressure's column named as the acceleration's"])
+def test_a_unit_mistake_is_named(case: str, flight: Flight, tmp_path: Path,
+                                 capsys: pytest.CaptureFixture[str]) -> None:
+    """Readings no flight makes (a pad at 3 K or 204 K, a descent at 30 km/s, 8.8 g under a
+    canopy, a boost read at -4 g) are one line naming the log's column and asking about the
+    unit (or sign) that would make them physical, exit 2, no folder; the same log in the
+    right unit imports (the first test of this module)."""
+    table, column_map, column, question = _mistaken(flight, 9)[case]
+    table.to_csv(tmp_path / "log.csv", index=False)
+    code, _, err = _import(tmp_path, tmp_path / "log.csv", column_map, CARD, capsys)
+    lines = err.strip().splitlines()
+    assert code == 2 and len(lines) == 1, err
+    assert "log.csv" in lines[0] and column in lines[0] and question in lines[0], lines[0]
+    assert not (tmp_path / "test").exists()
+
+
+def test_the_card_pressure_of_another_unit_is_the_cards_mistake(
+        flight: Flight, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A card whose site.pressure is in hPa but says Pa (863 Pa, 3 K with its surface
+    density) names the card's field, not the log."""
+    _table(flight, 10).to_csv(tmp_path / "log.csv", index=False)
+    card = {**CARD, "site": {**CARD["site"], "pressure": {"value": 863, "unit": "Pa"}}}
+    code, _, err = _import(tmp_path, tmp_path / "log.csv", AXIAL_MAP, card, capsys)
+    assert code == 2 and "card.json: site.pressure" in err, err
+
+
+def test_a_card_with_fewer_canopies_than_charges_is_one_line(
+        flight: Flight, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The log shows two ejection charges; a card with the drogue only would fit the main's
+    opening with no canopy to make it: one line naming the card's parachutes and the
+    charge's time."""
+    _table(flight, 11).to_csv(tmp_path / "log.csv", index=False)
+    card = {**CARD, "parachutes": CARD["parachutes"][:1]}
+    code, _, err = _import(tmp_path, tmp_path / "log.csv", AXIAL_MAP, card, capsys)
+    lines = err.strip().splitlines()
+    assert code == 2 and len(lines) == 1, err
+    assert "card.json: parachutes" in lines[0] and "ejection charge" in lines[0]
+    assert f"{sample_time(flight, flight.events['main']):.2f} s" in lines[0]
+
+
+def test_a_card_event_after_the_log_ends_is_the_cards(
+        flight: Flight, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A card's main at 5000 s on a log of 80 s: the card's field is named (the manifest's
+    check named the log as if it had written the time)."""
+    _without_main_charge(flight, 12).to_csv(tmp_path / "log.csv", index=False)
+    card = {**CARD, "events": {"main": {"time": {"value": 5000, "unit": "s"},
+                                        "sigma": {"value": 0.5, "unit": "s"}}}}
+    code, _, err = _import(tmp_path, tmp_path / "log.csv", AXIAL_MAP, card, capsys)
+    assert code == 2 and "card.json: events.main.time" in err, err

@@ -124,6 +124,15 @@ BAD_BLOCKS = {
     "prior in a wrong unit": ({"priors": {"CdS[fbcp1,stage1]": {"value": 2.0, "sigma": 0.1,
                                                                 "unit": "lbf"}}},
                               "model.priors.CdS[fbcp1,stage1].unit"),
+    # A dimensionless factor fixed in a unit of acceleration: "g" also spells a load factor.
+    "dimensionless factor in m/s^2": (
+        {"effects": FULL,
+         "fix": {"added_mass_factor[fbcp1]": {"value": 1, "unit": "m/s^2"}}},
+        "model.fix.added_mass_factor[fbcp1].unit"),
+    "dimensionless factor in g": (
+        {"effects": FULL,
+         "fix": {"added_mass_factor[fbcp1]": {"value": 1, "unit": "g"}}},
+        "model.fix.added_mass_factor[fbcp1].unit"),
 }
 
 

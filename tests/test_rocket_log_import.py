@@ -12,6 +12,7 @@ folder; a log ending before touchdown ends the phase at its end.
 from __future__ import annotations
 
 import json
+import shutil
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -578,6 +579,62 @@ def test_cats_export_without_its_imu_file_is_one_line(flight: Flight, tmp_path: 
     assert code == 2 and len(err) == 1 and "imu.csv" in err[0]
 
 
+@pytest.fixture(scope="module")
+def cats_export(flight: Flight, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    folder = tmp_path_factory.mktemp("cats") / "export"
+    write_cats(flight, folder, seed=9)
+    return folder
+
+
+# A damaged cell of a CATS export: (file, line, column, text) and what the one line names.
+DAMAGED_CATS = {
+    "an overflowing pressure": ("baro.csv", 3000, "P", "1e308", "line 3000, P"),
+    "an infinite pressure": ("baro.csv", 3000, "P", "inf", "line 3000, P"),
+    "an infinite flight state": ("flightStates.csv", 4, "state", "inf", "line 4, state"),
+    "an overflowing acceleration": ("imu.csv", 3000, "Ax", "-1e308", "line 3000, Ax"),
+    "a time stamp that is text": ("imu.csv", 3000, "ts", "x", "line 3000, ts"),
+    "an infinite time stamp": ("baro.csv", 3000, "ts", "inf", "line 3000, ts"),
+}
+
+
+@pytest.mark.parametrize("case", list(DAMAGED_CATS))
+def test_a_damaged_cats_cell_is_one_line(case: str, cats_export: Path, tmp_path: Path,
+                                         capsys: pytest.CaptureFixture[str]) -> None:
+    """A cell no sensor can read (1e308, inf, text) is one line naming the file, its line
+    and column, exit 2, no folder: never an overflow inside the reader (a state of inf)."""
+    file, line, column, text, named = DAMAGED_CATS[case]
+    shutil.copytree(cats_export, tmp_path / "export")
+    lines = (tmp_path / "export" / file).read_text().splitlines()
+    cells = lines[line - 1].split(",")
+    cells[lines[0].split(",").index(column)] = text
+    lines[line - 1] = ",".join(cells)
+    (tmp_path / "export" / file).write_text("\n".join(lines) + "\n")
+    code = main(["import", str(tmp_path / "export"), "--format", "cats", "--card",
+                 str(_card(tmp_path)), "--out", str(tmp_path / "test")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1, err
+    assert file in err[0] and named in err[0], err
+    assert not (tmp_path / "test").exists()
+
+
+def test_a_cats_export_read_as_data_despite_glitches(cats_export: Path, tmp_path: Path) -> None:
+    """Time stamps out of order, a negative one, a blank reading and a state code that is
+    no state are data a real export may hold: read, not refused."""
+    shutil.copytree(cats_export, tmp_path / "export")
+    imu = (tmp_path / "export" / "imu.csv").read_text().splitlines()
+    imu[3000:3100] = imu[3000:3100][::-1]
+    imu[10] = "-7.5" + imu[10][imu[10].index(","):]
+    (tmp_path / "export" / "imu.csv").write_text("\n".join(imu) + "\n")
+    baro = (tmp_path / "export" / "baro.csv").read_text().splitlines()
+    baro[2000] = baro[2000].rsplit(",", 1)[0] + ",nan"
+    (tmp_path / "export" / "baro.csv").write_text("\n".join(baro) + "\n")
+    states = (tmp_path / "export" / "flightStates.csv").read_text().splitlines()
+    states.insert(2, "1.5,4.5")
+    (tmp_path / "export" / "flightStates.csv").write_text("\n".join(states) + "\n")
+    _import(["import", str(tmp_path / "export"), "--format", "cats", "--card",
+             str(_card(tmp_path))], tmp_path / "test")
+
+
 PROMETHEUS = Path(__file__).resolve().parents[2] / "shared" / "data" / "prometheus-2022"
 
 
@@ -599,3 +656,18 @@ def test_prometheus_events_are_found_with_the_states_hidden(log_name: str) -> No
     assert abs(main_.time - record.states["main"]) <= 3.0 * main_.sigma + 0.1
     assert abs(events["drogue"].time - record.states["drogue"]) <= DROGUE_WINDOW_S
     assert record.states["main"] < events["landed"].time < record.states["landed"]
+
+
+def test_flight_with_a_card_whose_log_does_not_exist_is_one_line(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """`cpas-ocp flight CARD` where the card's log is not in its data folder: exit 2, one
+    line naming the card file and the log's path, nothing written."""
+    card = {**CARD, "data": {"folder": "logs", "logs": ["flight.csv"], "columns": COLUMN_MAP}}
+    (tmp_path / "logs").mkdir()
+    (tmp_path / "card.json").write_text(json.dumps(card))
+    code = main(["flight", str(tmp_path / "card.json"), "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1, err
+    assert str(tmp_path / "card.json") in err[0], err
+    assert str(tmp_path / "logs" / "flight.csv") in err[0], err
+    assert not (tmp_path / "out").exists()

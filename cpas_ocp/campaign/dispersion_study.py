@@ -35,9 +35,11 @@ from cpas_ocp.campaign.distributions import Dispersion, fit_dispersion, generato
 from cpas_ocp.campaign.hulls import (
     ENGINEERING_FACTOR,
     PILOT_ENGINEERING_FACTOR,
+    DegenerateHull,
     Hull,
     sample_in_hull,
 )
+from cpas_ocp.errors import InputError
 
 DISPERSED = ("CdS", "Ck", "n_p", "n", "expopen", "t_k")
 HULL_PARAMETERS = (("Ck", "n_p", "expopen"), ("n", "expopen"))
@@ -61,6 +63,7 @@ class DispersionModel:
     hull_names: tuple[str, ...]
     hull: Hull | None
     test_points: pd.DataFrame
+    note: str = ""  # why a hull was not drawn where one was asked for
 
     @property
     def label(self) -> str:
@@ -86,7 +89,7 @@ class DispersionModel:
             lines.append(f"  hull of ({', '.join(self.hull_names)}) grown by "
                          f"{100 * self.hull.growth:.0f} %, {len(self.hull.vertices)} vertices")
         else:
-            lines.append("  no hull: the caps alone bound the draws")
+            lines.append(f"  {self.note or 'no hull'}: the caps alone bound the draws")
         return "\n".join(lines)
 
 
@@ -103,18 +106,25 @@ def dispersion_models(table: pd.DataFrame, min_tests: int = MIN_TESTS
             skipped.append(f"{kind} {stage}: {len(points)} canopies, fewer than {min_tests}")
             continue
         varying = [c for c in points.columns if np.ptp(points[c].to_numpy()) > 0.0]
+        if not varying:
+            skipped.append(f"{kind} {stage}: no parameter varies over its {len(points)} "
+                           "canopies")
+            continue
         dispersions = {c: fit_dispersion(c, points[c].to_numpy()) for c in varying}
         hull_names = next((h for h in HULL_PARAMETERS if set(h) <= set(varying)), ())
         if not hull_names:
             shape = [c for c in ("n", "n_p", "Ck", "expopen") if c in varying]
             hull_names = tuple(shape) if len(shape) >= 2 else ()
-        hull = None
+        hull, note = None, ""
         if hull_names and len(points) > len(hull_names):
             factor = PILOT_ENGINEERING_FACTOR if kind == "pilot" else ENGINEERING_FACTOR
-            hull = Hull.from_points(points[list(hull_names)].to_numpy(),
-                                    list(hull_names)).grow(factor)
+            try:
+                hull = Hull.from_points(points[list(hull_names)].to_numpy(),
+                                        list(hull_names)).grow(factor)
+            except DegenerateHull as exc:  # the tests' points lie on a line or a plane
+                note = f"no hull of ({', '.join(hull_names)}): {exc}"
         models.append(DispersionModel(str(kind), str(stage), len(points), dispersions,
-                                      tuple(hull_names) if hull else (), hull, points))
+                                      tuple(hull_names) if hull else (), hull, points, note))
     return models, skipped
 
 
@@ -131,6 +141,71 @@ def _read_table(path: Path, what: str) -> pd.DataFrame:
                          f"{str(exc).splitlines()[0][:200]})") from None
 
 
+# Parameters whose every value is positive (a drag area, an over-inflation factor, a fill
+# constant, an opening exponent, a time to full open): the dispersed ones; and the units
+# of the quantities no sign can flip (areas, masses).
+POSITIVE_UNITS = ("m^2", "ft^2", "kg", "lb", "lbm", "slug")
+
+
+def _where(path: Path, row: int) -> str:
+    """A table row as its reader finds it: a CSV's line (the header is line 1), a Parquet
+    table's row."""
+    return f"line {row + 2}" if path.suffix != ".parquet" else f"row {row + 1}"
+
+
+def check_numbers(table: pd.DataFrame, path: Path, column: str, what: str,
+                  missing: bool = False, positive: pd.Series | bool = False,
+                  integer: bool = False) -> None:
+    """Column `column` of a campaign table read from `path` as finite numbers in place (NaN
+    only where `missing` allows a blank), above zero in the rows `positive` marks (a drag
+    area, a mass, a diameter: a negative one is no quantity, and a Monte Carlo case drawn
+    about it flies nothing), whole numbers where `integer`; InputError naming the file,
+    the row and the column where one is not, `what` saying what the column holds."""
+    values = pd.to_numeric(table[column], errors="coerce").astype(float)
+    blank = table[column].isna()
+    bad = (values.isna() & ~(blank & missing)) | np.isinf(values)
+    if integer:
+        bad |= values.notna() & (values != np.round(values))
+    sign = positive if isinstance(positive, pd.Series) else pd.Series(positive, table.index)
+    low = sign.to_numpy(bool) & (values <= 0.0).to_numpy(bool)
+    for rows, expected in ((bad.to_numpy(bool), f"a finite {'whole ' if integer else ''}"
+                            f"number{' or a blank' if missing else ''} ({what})"),
+                           (low, f"a number above zero ({what})")):
+        if rows.any():
+            row = int(np.flatnonzero(rows)[0])
+            raise InputError(str(path), f"{_where(path, row)}, {column}",
+                             f"{expected}; got {str(table[column].iloc[row])!r}")
+    table[column] = values
+
+
+def check_names(table: pd.DataFrame, path: Path, column: str, what: str,
+                allowed: tuple[str, ...] = ()) -> None:
+    """Column `column` of a campaign table read from `path` as text in every row (one of
+    `allowed` where given); InputError naming the file, the row and the column of the
+    first blank (or unknown) cell, `what` saying what the column holds."""
+    text = table[column].astype("string").str.strip()
+    bad = text.isna() | (text == "")
+    if allowed:
+        bad |= ~text.isin(allowed)
+    if bad.any():
+        row = int(np.flatnonzero(bad.to_numpy(bool))[0])
+        expected = f"one of {', '.join(allowed)}" if allowed else "a name"
+        raise InputError(str(path), f"{_where(path, row)}, {column}",
+                         f"{expected} ({what}); got {str(table[column].iloc[row])!r}")
+    table[column] = text.astype(str)
+
+
+def check_unique(table: pd.DataFrame, path: Path, key: list[str], what: str) -> None:
+    """InputError naming the row of a campaign table read from `path` that repeats an
+    earlier row's `key` columns (`what` says what a row is one of)."""
+    repeated = table.duplicated(subset=key, keep="first").to_numpy(bool)
+    if repeated.any():
+        row = int(np.flatnonzero(repeated)[0])
+        raise InputError(str(path), f"{_where(path, row)}, {'/'.join(key)}",
+                         f"one row per {what}; this row repeats an earlier one's "
+                         f"({', '.join(str(table[k].iloc[row]) for k in key)})")
+
+
 def read_stage_table(campaign: str | Path) -> pd.DataFrame | None:
     """The campaign's stages.csv (`campaign.STAGE_COLUMNS`) in its folder, or beside its
     parameter table; None where there is none (campaigns written before it existed)."""
@@ -144,7 +219,25 @@ def read_stage_table(campaign: str | Path) -> pd.DataFrame | None:
     missing = [c for c in STAGE_COLUMNS if c not in stages.columns]
     if missing:
         raise InputError(str(path), ", ".join(missing), "the columns of a campaign's stages")
-    stages["stage"] = stages["stage"].astype(str)
+    for column, what in (("test", "the test's name"), ("parachute", "the canopy's name"),
+                         ("type", "the canopy's type"), ("stage", "the stage's name")):
+        check_names(stages, path, column, what)
+    check_names(stages, path, "inflation", "the canopy's inflation law",
+                ("infinite_mass", "finite_mass"))
+    check_names(stages, path, "fill_length", "the fill length's form",
+                ("diameter", "growth_scaled"))
+    check_numbers(stages, path, "stage_index", "the stage's order in its canopy, from 0",
+                  integer=True)
+    check_numbers(stages, path, "diameter", "the canopy's D_o in m", positive=True)
+    check_numbers(stages, path, "line_length", "the suspension lines' length in m, blank "
+                  "where none", missing=True, positive=True)
+    check_numbers(stages, path, "v_start", "the stage's start airspeed in m/s, blank where "
+                  "none", missing=True, positive=True)
+    check_unique(stages, path, ["test", "parachute", "stage_index"], "test, canopy and stage")
+    if (stages["stage_index"] < 0).any():
+        row = int(np.flatnonzero((stages["stage_index"] < 0).to_numpy())[0])
+        raise InputError(str(path), f"{_where(path, row)}, stage_index",
+                         "the stage's order in its canopy, from 0")
     return stages
 
 
@@ -164,6 +257,24 @@ def read_parameter_table(path: str | Path) -> pd.DataFrame:
     missing = [c for c in COLUMNS if c not in table.columns]
     if missing:
         raise InputError(str(path), ", ".join(missing), "the columns of a campaign's table")
+    for column, what in (("test", "the test's name"), ("parameter", "the parameter's base "
+                                                                    "name"),
+                         ("name", "the parameter's full name")):
+        check_names(table, path, column, what)
+    check_unique(table, path, ["test", "name"], "test and parameter")
+    positive = table["parameter"].isin(DISPERSED) | table["unit"].isin(POSITIVE_UNITS)
+    check_numbers(table, path, "value", "the reconstructed value; a drag area, mass or "
+                  f"{'/'.join(DISPERSED)} above zero", positive=positive)
+    check_numbers(table, path, "std", "its standard deviation, blank where undetermined",
+                  missing=True)
+    if (table["std"] < 0).any():
+        row = int(np.flatnonzero((table["std"] < 0).to_numpy())[0])
+        raise InputError(str(path), f"{_where(path, row)}, std", "a standard deviation, "
+                         f"0 or more; got {table['std'].iloc[row]:g}")
+    check_numbers(table, path, "cluster_size", "the canopies in the cluster", integer=True,
+                  positive=True)
+    check_numbers(table, path, "line_length", "the suspension lines' length in m, blank "
+                  "where none", missing=True, positive=True)
     table["stage"] = table["stage"].fillna("").astype(str)
     table["parachute"] = table["parachute"].fillna("").astype(str)
     return table

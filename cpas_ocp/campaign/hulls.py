@@ -57,6 +57,11 @@ RANK_TOL = 1e-9                  # smallest singular value / largest, below it p
 CHUNK = 65_536                   # points per block in the containment test
 
 
+class DegenerateHull(ValueError):
+    """Test points that span fewer dimensions than their parameters (collinear, coplanar,
+    or a parameter constant over the tests): they have no hull with a volume."""
+
+
 def check_points(points: np.ndarray | Sequence[Sequence[float]],
                  names: Sequence[str] | None = None) -> tuple[np.ndarray, tuple[str, ...]]:
     """The test points as an (m, d) float array and their parameter names.
@@ -86,14 +91,14 @@ def check_points(points: np.ndarray | Sequence[Sequence[float]],
     spread = np.ptp(x, axis=0)
     if np.any(spread <= 0.0):
         flat = [labels[i] for i in np.flatnonzero(spread <= 0.0)]
-        raise ValueError(f"parameter(s) {', '.join(flat)} have the same value on every test: "
+        raise DegenerateHull(f"parameter(s) {', '.join(flat)} have the same value on every test: "
                          f"the points span fewer than {d} dimensions")
     z = (x - x.mean(axis=0)) / spread
     singular = np.linalg.svd(z, compute_uv=False)
     rank = int(np.sum(singular > RANK_TOL * singular[0]))
     if rank < d:
         shape = {1: "collinear", 2: "coplanar"}.get(rank, f"in a {rank}-D subspace")
-        raise ValueError(f"the {m} points are {shape} (they span {rank} of {d} dimensions): "
+        raise DegenerateHull(f"the {m} points are {shape} (they span {rank} of {d} dimensions): "
                          "their convex hull has no area/volume")
     return x, labels
 
@@ -130,7 +135,8 @@ class Hull:
         try:
             hull = ConvexHull(z)
         except QhullError as exc:  # the rank check above should have caught it
-            raise ValueError(f"the points have no {x.shape[1]}-D convex hull: {exc}") from exc
+            raise DegenerateHull(f"the points have no {x.shape[1]}-D convex hull: {exc}"
+                                 ) from exc
         # Qhull triangulates facets, so coplanar simplices repeat an equation.
         equations = np.unique(np.round(hull.equations, 12), axis=0)
         return cls(names=labels, vertices=x[hull.vertices], center=center, scale=scale,

@@ -37,7 +37,7 @@ from cpas_ocp.errors import InputError
 from cpas_ocp.estimation.estimator import Estimator, Fit
 from cpas_ocp.estimation.uncertainty import Covariance
 from cpas_ocp.inference.hypothesis_tests import chi_bar_square_sf
-from cpas_ocp.physics.units import FACTORS
+from cpas_ocp.physics.units import conversion
 
 _EXPR = re.compile(r"^\s*(?P<name>[A-Za-z_][A-Za-z0-9_]*(\[[A-Za-z0-9_,]+\])?)\s*"
                    r"(?P<op>==|<=|>=)\s*(?P<value>[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?)"
@@ -148,11 +148,11 @@ def _to_si(value: float, unit: str | None, si: str, source: str, name: str) -> f
     """`value` in `unit` converted to `si` (same dimension); no unit means SI already."""
     if unit is None or unit == si:
         return value
-    dims = [d for d, table in FACTORS.items() if unit in table and si in table]
-    if not dims:
+    factor = conversion(unit, si)
+    if factor is None:
         raise InputError(source, f"{name} unit", f"a unit of the same dimension as {si}; "
                                                  f"got {unit!r}")
-    return value * FACTORS[dims[0]][unit] / FACTORS[dims[0]][si]
+    return value * factor
 
 
 @dataclass

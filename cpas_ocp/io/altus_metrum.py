@@ -40,7 +40,7 @@ import numpy as np
 import pandas as pd
 
 from cpas_ocp.errors import InputError
-from cpas_ocp.io.flight_record import MIN_SATELLITES, FlightRecord, new_fixes
+from cpas_ocp.io.flight_record import MIN_SATELLITES, Channel, FlightRecord, new_fixes
 from cpas_ocp.io.flight_test import MAX_MAGNITUDE
 
 REQUIRED = ("time", "state_name", "pressure", "altitude", "acceleration")
@@ -53,6 +53,10 @@ SENSOR_COLUMNS = ("pressure", "acceleration", "altitude", "height", "speed", "te
                   "accel_x", "accel_y", "accel_z", "gyro_roll", "gyro_pitch", "gyro_yaw",
                   "mag_x", "mag_y", "mag_z", "tilt")
 GPS_COLUMNS = ("latitude", "longitude", "gps_altitude", "nsat")
+# The columns the record's series come from, in the units AltOS writes.
+CHANNELS = {"time": Channel("column 'time'", "s", {"s": 1.0}),
+            "pressure": Channel("column 'pressure'", "Pa", {"Pa": 1.0}),
+            "acceleration": Channel("column 'acceleration'", "m/s^2", {"m/s^2": 1.0})}
 # AltOS writes 2^31 - 1 for a quantity the receiver did not report (e.g. hdop).
 MISSING_SENTINEL = 2147483647.0
 # AltOS names an export <product>-serial-<serial>-flight-<flight>.csv.
@@ -131,7 +135,7 @@ class AltusLog:
                             {"repeated_time_stamps": self.duplicate_times,
                              "repeated_sensor_rows": int(self._repeats().sum()),
                              "gps_fixes_with_too_few_satellites": few,
-                             "gps_repeats_between_fixes": repeats})
+                             "gps_repeats_between_fixes": repeats}, channels=CHANNELS)
 
 
 def _header(path: Path) -> list[str]:

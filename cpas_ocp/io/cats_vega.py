@@ -36,6 +36,7 @@ import pandas as pd
 from cpas_ocp.errors import InputError
 from cpas_ocp.io.flight_record import (
     MIN_SATELLITES,
+    Channel,
     FlightRecord,
     axial_from_axes,
     new_fixes,
@@ -45,6 +46,7 @@ from cpas_ocp.io.flight_record import (
     samples_frame,
     time_ordered,
 )
+from cpas_ocp.physics.units import G0
 
 STATES = {3: "boost", 4: "coast", 5: "drogue", 6: "main", 7: "landed"}
 EMPTY = "No data recorded"
@@ -106,7 +108,7 @@ def read_cats_log(path: str | Path, axis: str = "auto") -> FlightRecord:
     states: dict[str, float] = {}
     if fsm is not None:
         for t, code in fsm.dropna().sort_values("ts").itertuples(index=False):
-            if int(code) in STATES:
+            if code == int(code) and int(code) in STATES:  # other values are no state
                 states.setdefault(STATES[int(code)], float(t) * scale)
     fixes = pd.DataFrame(columns=["time", "latitude", "longitude"])
     dropped = {"repeated_time_stamps": repeated}
@@ -116,5 +118,10 @@ def read_cats_log(path: str | Path, axis: str = "auto") -> FlightRecord:
                           "longitude": gnss["longitude"]})[ok]
         fixes, repeats = new_fixes(g)
         dropped["gnss_rows_without_a_new_fix"] = repeats + int((~ok).sum())
+    channels = {"time": Channel("time stamps 'ts'", "ms" if scale < 1.0 else "s",
+                                {"s": 1.0, "ms": 1e-3}),
+                "pressure": Channel("baro.csv column 'P'", "Pa", {"Pa": 1.0}),
+                "acceleration": Channel("imu.csv columns 'Ax/Ay/Az'", "m/s^2",
+                                        {"m/s^2": 1.0}, G0)}
     return FlightRecord(folder, "CATS flight computer", samples, fixes, states, dropped,
-                        (f"axial accelerometer axis: {used}",))
+                        (f"axial accelerometer axis: {used}",), channels)

@@ -43,6 +43,7 @@ import pandas as pd
 from cpas_ocp.errors import InputError
 from cpas_ocp.io.flight_record import (
     MIN_SATELLITES,
+    Channel,
     FlightRecord,
     axial_from_axes,
     new_fixes,
@@ -207,7 +208,27 @@ def read_mapped_log(path: str | Path, column_map: dict[str, Any], map_source: st
                 states.setdefault(state, float(t))
     notes = () if axis_used is None else (f"axial accelerometer axis: {axis_used}",)
     return FlightRecord(path, column_map.get("recorder", "flight computer"), samples, gnss,
-                        states, dropped, notes)
+                        states, dropped, notes, mapped_channels(column_map))
+
+
+def mapped_channels(column_map: dict[str, Any]) -> dict[str, Channel]:
+    """The record's channels (`flight_record.Channel`) as the map declares them: each
+    series' column and unit, and the other units of its kind."""
+    time = column_map["time"]
+    baro = "pressure" if "pressure" in column_map else "altitude"
+    spec = column_map[baro]
+    out = {"time": Channel(f"time column {time['column']!r}", time["unit"], FACTORS["time"]),
+           "pressure": Channel(f"{baro} column {spec['column']!r}", spec["unit"],
+                               PRESSURE_UNITS if baro == "pressure" else FACTORS["length"],
+                               altitude=baro == "altitude")}
+    accel = column_map.get("acceleration")
+    if accel is not None:
+        columns = accel.get("column") or "/".join(accel["axes"].values())
+        included = "axes" in accel or accel.get("gravity", "included") == "included"
+        out["acceleration"] = Channel(
+            f"acceleration column{'s' if 'axes' in accel else ''} {columns!r}", accel["unit"],
+            FACTORS["acceleration"], G0 if included else 0.0)
+    return out
 
 
 def _acceleration(src: _Source, spec: dict[str, Any], sources: _Sources, map_source: str

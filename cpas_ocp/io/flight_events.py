@@ -138,6 +138,9 @@ def detect_events(samples: pd.DataFrame) -> tuple[dict[str, FlightEvent], list[s
     start = events["coast"].time if "coast" in events else tb[0]
     smooth = _running_median(tb, h, SMOOTH_S)
     up = tb >= start
+    if not up.any():  # the altimeter stopped before the accelerometer's burnout
+        notes.append("no altimeter samples after burnout: apogee and touchdown not detected")
+        return events, notes
     k_top = int(np.flatnonzero(up)[np.argmax(smooth[up])])
     noise = max(second_difference_sigma(h), 0.05)
     near_top = tb[up][np.abs(smooth[up] - smooth[k_top]) <= 2.0 * noise]

@@ -85,6 +85,7 @@ from scipy.signal import savgol_filter
 from cpas_ocp.errors import InputError
 from cpas_ocp.io.altus_metrum import AltusLog
 from cpas_ocp.io.flight_events import (
+    CLUSTER_GAP_S,
     DROGUE_WINDOW_S,
     FlightEvent,
     detect_events,
@@ -101,6 +102,14 @@ from cpas_ocp.io.flight_test import (
     validate_block,
     validate_manifest,
 )
+from cpas_ocp.io.plausibility import (
+    MAX_DESCENT_M_S,
+    MAX_SPEED_M_S,
+    check_boost,
+    check_pad_air,
+    check_speed,
+    check_steady_accelerometer,
+)
 from cpas_ocp.io.problems import problem_names
 from cpas_ocp.physics.atmosphere import (
     ISA_LAPSE_K_M,
@@ -115,6 +124,7 @@ from cpas_ocp.physics.units import FACTORS, G0
 
 TOUCHDOWN_MARGIN_S = 0.5  # phase ends this long before the detected touchdown (s)
 EVENT_SIGMA_S = 0.1  # timing sigma of a flight-state change (one descent sample, s)
+MIN_EVENT_SIGMA_S = 1e-6  # least event sigma a manifest states (its times' resolution, s)
 EJECTION_EXCLUDE_S = 0.3  # altimeter samples left out after an ejection charge (s)
 MIN_ACCEL_SIGMA = 0.1  # floor of the accelerometer noise sigma (m/s^2)
 MIN_BARO_SIGMA_M = 0.3  # floor of the altimeter noise sigma (the pressure resolution, m)
@@ -222,8 +232,12 @@ def load_card(name_or_path: str) -> FlightCard:
 
 
 def _si(q: dict[str, Any], dim: str, source: str, field: str) -> float:
+    """The quantity `q` ({value, unit}) of dimension `dim` in SI; InputError naming `field`
+    of `source` where it is no such quantity."""
     unit = q.get("unit") if isinstance(q, dict) else None
-    if unit not in FACTORS[dim] or not isinstance(q.get("value"), int | float):
+    value = q.get("value") if isinstance(q, dict) else None
+    if not isinstance(unit, str) or unit not in FACTORS[dim] \
+            or not isinstance(value, int | float) or isinstance(value, bool):
         raise InputError(source, field, f"{{value, unit}} with a {dim} unit "
                          f"({', '.join(sorted(FACTORS[dim]))})")
     return float(q["value"]) * FACTORS[dim][unit]
@@ -766,14 +780,19 @@ def card_events(card: FlightCard, baro: pd.DataFrame, pad_altitude: float,
     crosses below a height above the pad after apogee (a main fired by an altimeter at
     its set height), the crossing interpolated between the barometer's samples; each with
     the card's sigma.  InputError naming the card's field where the descent never comes
-    down to that height."""
+    down to that height, or the time lies outside the log."""
     out: dict[str, FlightEvent] = {}
     for name, spec in card.events.items():
         field_name = f"events.{name}"
         sigma = _si(spec["sigma"], "time", card.source, f"{field_name}.sigma")
         if "time" in spec:
-            out[name] = FlightEvent(_si(spec["time"], "time", card.source,
-                                        f"{field_name}.time"), sigma, "the card")
+            t_event = _si(spec["time"], "time", card.source, f"{field_name}.time")
+            first, last = float(baro["time"].iloc[0]), float(baro["time"].iloc[-1])
+            if not first <= t_event <= last:
+                raise InputError(card.source, f"{field_name}.time", f"a time the log covers "
+                                 f"(its altimeter reads from {first:.2f} to {last:.2f} s, on "
+                                 f"the log's own clock); got {t_event:.2f} s")
+            out[name] = FlightEvent(t_event, sigma, "the card")
             continue
         height = _si(spec["altitude"], "length", card.source, f"{field_name}.altitude")
         t, h = baro["time"].to_numpy(), baro["altitude"].to_numpy() - pad_altitude
@@ -816,6 +835,29 @@ def flight_events(record: FlightRecord) -> tuple[dict[str, FlightEvent], list[st
     return events, notes
 
 
+def check_charges_deploy(events: dict[str, FlightEvent], deploy: dict[str, float],
+                         card: FlightCard, src: str, logged_states: bool) -> None:
+    """InputError naming the card's canopies where the log `src` shows an ejection charge
+    (`flight_events.detect_events`: the drogue's and the main's, found in the data, not a
+    logged state, which a computer logs whether or not a canopy is rigged to it) that
+    deploys none of them: no canopy's deployment time (s, `deploy`) lies within
+    `CLUSTER_GAP_S` or three of the charge's sigmas of it.  The card has too few canopies
+    (or the log is another flight's): the phase would hold an opening no model term makes."""
+    if logged_states:
+        return
+    for name in ("drogue", "main"):
+        charge = events.get(name)
+        if charge is None or charge.source.startswith("apogee"):
+            continue
+        if all(abs(t - charge.time) > max(CLUSTER_GAP_S, 3.0 * charge.sigma)
+               for t in deploy.values()):
+            deployed = ", ".join(f"{n} at {t:.2f} s" for n, t in deploy.items())
+            raise InputError(card.source, "parachutes", f"a canopy for each ejection charge "
+                             f"the log shows; {src} shows one at {charge.time:.2f} s "
+                             f"({charge.source}) that deploys none of the card's "
+                             f"{len(deploy)} ({deployed})")
+
+
 def import_flight(log: FlightRecord | AltusLog, card: FlightCard, out: str | Path,
                   still_air: bool = False) -> ImportSummary:
     """Write the test folder of `log` under `card` to `out` (see the module docstring);
@@ -828,10 +870,19 @@ def import_flight(log: FlightRecord | AltusLog, card: FlightCard, out: str | Pat
     if len(baro) < 20:
         raise InputError(src, "pressure", "a barometer (pressure or altitude) read in at "
                          f"least 20 samples; the log has {len(baro)}")
+    check_speed(record, baro["time"].to_numpy(), baro["altitude"].to_numpy(), MAX_SPEED_M_S,
+                "no rocket is faster in the lower atmosphere")
+    check_boost(record, samples)
     events, notes = flight_events(record)
     p0, pad_note = pad_pressure(baro, events, card)
     pad_altitude = float(pressure_altitude(p0))
     notes.append(pad_note)
+    site_spec = card.site
+    elevation = _si(site_spec.get("elevation"), "length", card.source, "site.elevation")
+    t0, t0_note = pad_temperature(site_spec, p0, elevation, card.source)
+    check_pad_air(record, p0, t0, "card" if "temperature" in site_spec else
+                  "density" if "surface_density" in site_spec else "standard", elevation,
+                  card.source, "pressure" in site_spec)
     events.update(card_events(card, baro, pad_altitude, events))
     deploy: dict[str, float] = {}
     deploy_sigma: dict[str, float] = {}
@@ -853,6 +904,7 @@ def import_flight(log: FlightRecord | AltusLog, card: FlightCard, out: str | Pat
                              f"{state!r} deploys an earlier one too")
         deploy[chute["name"]] = events[state].time
         deploy_sigma[chute["name"]] = events[state].sigma
+    check_charges_deploy(events, deploy, card, src, bool(record.states))
     t_begin = min(deploy.values())
     descent = baro[baro["time"] > t_begin]
     if len(descent) < MIN_DESCENT_SAMPLES or \
@@ -893,9 +945,8 @@ def import_flight(log: FlightRecord | AltusLog, card: FlightCard, out: str | Pat
                                baro_phase["altitude"].to_numpy()[dead_baro], "m"))
         baro_phase = baro_phase[~dead_baro]
 
-    site_spec = card.site
-    elevation = _si(site_spec.get("elevation"), "length", card.source, "site.elevation")
-    t0, t0_note = pad_temperature(site_spec, p0, elevation, card.source)
+    check_speed(record, baro_phase["time"].to_numpy(), baro_phase["altitude"].to_numpy(),
+                MAX_DESCENT_M_S, "no canopy descends faster")
     notes.append(t0_note)
     lapse_spec = site_spec.get("lapse_rate", {"value": 1e3 * ISA_LAPSE_K_M, "unit": "K/km"})
     fixes = record.gps_fixes()
@@ -958,6 +1009,7 @@ def import_flight(log: FlightRecord | AltusLog, card: FlightCard, out: str | Pat
                                accel["acceleration"].to_numpy()[dead_accel & accel_in],
                                "m/s^2"))
     accel = accel[accel_in & ~dead_accel]
+    check_steady_accelerometer(record, accel["acceleration"].to_numpy())
     full_open = {name: peak for name, t in deploy.items() if t > t_begin
                  and (peak := opening_peak(accel, t)) is not None}
     # The accelerometer loses the same charge windows as the altimeter (the charge's jolt
@@ -1048,13 +1100,9 @@ def import_flight(log: FlightRecord | AltusLog, card: FlightCard, out: str | Pat
         "vehicle": card.vehicle,
         "parachutes": [{k: v for k, v in c.items() if k != "deployment"}
                        for c in parachutes],
-        "events": [{"name": "mortar_fire", "parachute": name,
-                    "time": {"value": round(t, 3), "unit": "s"},
-                    "sigma": {"value": round(deploy_sigma[name], 3), "unit": "s"}}
+        "events": [event_entry("mortar_fire", name, t, deploy_sigma[name])
                    for name, t in deploy.items()]
-                  + [{"name": "full_open", "parachute": name,
-                      "time": {"value": round(t, 3), "unit": "s"},
-                      "sigma": {"value": round(sigma, 3), "unit": "s"}}
+                  + [event_entry("full_open", name, t, sigma)
                      for name, (t, sigma) in full_open.items()],
         "sensors": sensors,
         "atmosphere": {"model": "site",
@@ -1062,14 +1110,17 @@ def import_flight(log: FlightRecord | AltusLog, card: FlightCard, out: str | Pat
                        "pressure": {"value": round(p0, 2), "unit": "Pa"},
                        "temperature": {"value": round(t0, 3), "unit": "K"},
                        "lapse_rate": {"value": round(1e3 * lapse, 4), "unit": "K/km"}},
-        "phase": {"start": {"value": t_begin, "unit": "s"},
+        "phase": {"start": {"value": instant(t_begin), "unit": "s"},
                   "end": {"value": round(t_end, 3), "unit": "s"}},
         "model": rocket_model(card.model, [s["kind"] for s in sensors],
                               [(c["name"], c["stages"][0]) for c in parachutes
                                if not c.get("open_at_start")],
                               held_openings(deploy, events), deploy_sigma, still_air),
     }
-    validate_manifest(manifest, card.source)
+    try:
+        validate_manifest(manifest, card.source)
+    except InputError as exc:
+        raise blamed(exc, card.source, src, MANIFEST) from None
     summary = ImportSummary(
         record.recorder, (t_begin, t_end),
         {**deploy, **{f"{name} full open": t for name, (t, _) in full_open.items()},
@@ -1086,6 +1137,31 @@ def import_flight(log: FlightRecord | AltusLog, card: FlightCard, out: str | Pat
 
 # Manifest fields the import copies from the card; the others it derives from the log.
 CARD_FIELDS = ("name", "label", "vehicle", "parachutes", "model")
+
+
+def blamed(exc: InputError, card_source: str, log_source: str, written: str) -> InputError:
+    """What the test folder's loading refused in the file `written` of an import, named
+    against where it came from: the card (the manifest's vehicle, canopies and model) or
+    the log (the phase, events, sensors, atmosphere)."""
+    if written == MANIFEST and exc.field.startswith(CARD_FIELDS):
+        return InputError(card_source, exc.field, f"{exc.expectation} (in the manifest the "
+                          "card makes)")
+    return InputError(log_source, f"(imported as {written}: {exc.field})", exc.expectation)
+
+
+def instant(t: float) -> float:
+    """A time (s) as the manifest states it, to the microsecond: the phase's start and the
+    first deployment, rounded alike, stay equal."""
+    return round(t, 6)
+
+
+def event_entry(name: str, parachute: str, t: float, sigma: float) -> dict[str, Any]:
+    """A manifest event of `parachute` at `t` (s) with its timing `sigma` (s): the time to
+    the microsecond and the sigma to four significant digits, never below `MIN_EVENT_SIGMA_S`
+    (a detected event's sigma is a sample interval, a quarter of a millisecond at 4 kHz,
+    which rounding to the millisecond made 0)."""
+    return {"name": name, "parachute": parachute, "time": {"value": instant(t), "unit": "s"},
+            "sigma": {"value": max(MIN_EVENT_SIGMA_S, float(f"{sigma:.4g}")), "unit": "s"}}
 
 
 def _write_folder(out: Path, manifest: dict[str, Any], files: dict[str, pd.DataFrame],
@@ -1108,11 +1184,7 @@ def _write_folder(out: Path, manifest: dict[str, Any], files: dict[str, pd.DataF
             written = Path(exc.file)
             if written.parent != tmp:
                 raise
-            if written.name == MANIFEST and exc.field.startswith(CARD_FIELDS):
-                raise InputError(card_source, exc.field, f"{exc.expectation} (in the "
-                                 f"manifest the card makes)") from None
-            raise InputError(log_source, f"(imported as {written.name}: {exc.field})",
-                             exc.expectation) from None
+            raise blamed(exc, card_source, log_source, written.name) from None
         if out.exists():
             out.rmdir()
         tmp.rename(out)

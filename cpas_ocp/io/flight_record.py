@@ -17,6 +17,7 @@ The record holds, on one time base (s):
   `enu_about` places the fixes east/north/up about the pad;
 * ``states``: the first time of each flight state the computer logged
   (boost, coast, drogue, main, landed), empty where it logged none;
+* ``channels``: which column (and unit) each series came from, named in errors;
 * ``recorder``: what the log says made it; ``dropped``: what the reader left
   out and why (rows counted per reason); ``notes``: anything else to report.
 """
@@ -24,6 +25,7 @@ The record holds, on one time base (s):
 from __future__ import annotations
 
 import csv
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -31,6 +33,7 @@ import numpy as np
 import pandas as pd
 
 from cpas_ocp.errors import InputError
+from cpas_ocp.io.flight_test import MAX_MAGNITUDE
 from cpas_ocp.physics.atmosphere import StandardAtmosphere, pressure_altitude
 from cpas_ocp.physics.units import G0
 
@@ -40,6 +43,38 @@ MIN_SATELLITES = 4  # a GNSS fix needs four satellites for a position with an al
 EARTH_RADIUS_M = 6371008.8  # mean Earth radius (m): east/north over a few km to < 0.5 %
 BOOST_AXIS_G = 2.0  # an axis counts as boosting where it reads this many g above rest
 BOOST_RUN = 3  # ... for this many samples in a row
+
+
+@dataclass(frozen=True)
+class Channel:
+    """Where one series of a record came from, for the errors that name it: the log's
+    column(s) (``"pressure column 'p'"``), the unit it was read in, the units of its kind
+    the log might have meant instead (name: SI factor) and the offset (SI) subtracted after
+    scaling (one g from an accelerometer that reads +1 g at rest)."""
+
+    column: str
+    unit: str
+    units: dict[str, float]
+    offset: float = 0.0
+    altitude: bool = False  # an altimeter's altitude column, not a pressure column
+
+    def reread(self, value: float, unit: str) -> float:
+        """`value` (SI, as the record holds it) as it reads had the column been in `unit`."""
+        return (value + self.offset) * self.units[unit] / self.units[self.unit] - self.offset
+
+    def hint(self, plausible: Callable[[str], bool]) -> str:
+        """``"is the unit hPa, not Pa?"`` for the first other unit (of a different factor)
+        for which `plausible(unit)`; a plea to check the column and its unit where none."""
+        for unit, factor in self.units.items():
+            if factor != self.units[self.unit] and plausible(unit):
+                return f"is the unit {unit}, not {self.unit}?"
+        return "is it the right column, in the unit declared?"
+
+
+# What a record's series are named in errors where its reader says nothing more.
+DEFAULT_CHANNELS = {"time": Channel("time", "s", {"s": 1.0}),
+                    "pressure": Channel("pressure", "Pa", {"Pa": 1.0}),
+                    "acceleration": Channel("acceleration", "m/s^2", {"m/s^2": 1.0})}
 
 
 @dataclass(frozen=True)
@@ -53,6 +88,12 @@ class FlightRecord:
     states: dict[str, float] = field(default_factory=dict)
     dropped: dict[str, int] = field(default_factory=dict)
     notes: tuple[str, ...] = ()
+    # Where the time, pressure (or altitude) and acceleration came from (`Channel`).
+    channels: dict[str, Channel] = field(default_factory=dict)
+
+    def channel(self, name: str) -> Channel:
+        """The `Channel` of series `name` (time, pressure, acceleration)."""
+        return self.channels.get(name, DEFAULT_CHANNELS[name])
 
     @property
     def has_gps_altitude(self) -> bool:
@@ -186,15 +227,20 @@ def read_table(path: Path, what: str, sep: str | None = None, skip_rows: int = 0
 
 def numeric(table: pd.DataFrame, path: Path, column: str, field_name: str,
             header_line: int = 1) -> np.ndarray:
-    """Column `column` of `table` as numbers (blank: NaN); InputError naming the line of
-    the first entry that is neither (the header row is line `header_line` of the file)."""
+    """Column `column` of `table` as numbers (blank or ``nan``: NaN, a reading missing);
+    InputError naming the line of the first entry that is neither, or that is infinite or
+    beyond `MAX_MAGNITUDE` (no sensor reads 1e308 of anything: a damaged cell), the header
+    row being line `header_line` of the file."""
     text = table[column].astype("string").str.strip()
-    values = pd.to_numeric(text, errors="coerce")
+    values = pd.to_numeric(text, errors="coerce").astype(float)
     bad = values.isna() & text.notna() & (text != "") & (text.str.lower() != "nan")
-    if bad.any():
-        row = int(np.flatnonzero(bad.to_numpy())[0])
-        raise InputError(str(path), f"line {row + header_line + 1}, {column}",
-                         f"a number ({field_name}); got {text.iloc[row]!r}")
+    wild = values.notna() & ~(values.abs() <= MAX_MAGNITUDE)
+    for rows, what in ((bad, "a number"), (wild, f"a finite number of magnitude at most "
+                                                 f"{MAX_MAGNITUDE:g}")):
+        if rows.any():
+            row = int(np.flatnonzero(rows.to_numpy())[0])
+            raise InputError(str(path), f"line {row + header_line + 1}, {column}",
+                             f"{what} ({field_name}); got {text.iloc[row]!r}")
     return values.to_numpy(float)
 
 

@@ -49,7 +49,7 @@ from cpas_ocp.physics.effects.registry import (
     load_plugin,
 )
 from cpas_ocp.physics.model import Model
-from cpas_ocp.physics.units import FACTORS
+from cpas_ocp.physics.units import conversion
 
 RISER_MODELS = ("rigid_riser", "elastic_riser", "pilot_deployment")
 
@@ -144,12 +144,14 @@ class ModelSpec:
 
 
 def _conversion(unit: str, si_unit: str, file: str, field_path: str) -> float:
-    if unit == si_unit:
-        return 1.0
-    for table in FACTORS.values():
-        if unit in table and si_unit in table:
-            return table[unit] / table[si_unit]
-    raise InputError(file, field_path, f"a unit convertible to {si_unit!r}; got {unit!r}")
+    """The factor from `unit` to the parameter's `si_unit` (`units.conversion`: the same
+    dimension); InputError naming `field_path` of `file` where the dimensions differ (a
+    dimensionless factor fixed in m/s^2 or g)."""
+    factor = conversion(unit, si_unit)
+    if factor is None:
+        raise InputError(file, field_path, f"a unit of the parameter's dimension, convertible "
+                         f"to {si_unit!r}; got {unit!r}")
+    return factor
 
 
 def baseline_spec() -> ModelSpec:

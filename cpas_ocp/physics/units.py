@@ -49,6 +49,22 @@ def factor(unit: str, dimension: str) -> float:
     return FACTORS[dimension][unit]
 
 
+def conversion(unit: str, si_unit: str) -> float | None:
+    """The factor that turns a value in `unit` into one in `si_unit`, where both spell one
+    dimension; None where they do not.  A dimensionless quantity (SI unit "1": a factor, a
+    fill constant) takes only the dimensionless spellings: "g" also names a load factor, but
+    a factor "fixed at 1 g" states an acceleration (9.81 m/s^2), a unit mistake, not 1.  A
+    load factor (SI unit "g") takes "1" as well."""
+    if unit == si_unit:
+        return 1.0
+    for dim, table in FACTORS.items():
+        if dim == "load_factor" and si_unit in FACTORS["dimensionless"]:
+            continue
+        if unit in table and si_unit in table:
+            return table[unit] / table[si_unit]
+    return None
+
+
 def dimension_of(unit: str, allowed: tuple[str, ...]) -> str | None:
     """The first of `allowed` dimensions that knows `unit`, or None."""
     for dim in allowed:
