@@ -111,6 +111,7 @@ from cpas_ocp.io.plausibility import (
     check_steady_accelerometer,
 )
 from cpas_ocp.io.problems import problem_names
+from cpas_ocp.io.strict_json import json_text
 from cpas_ocp.physics.atmosphere import (
     ISA_LAPSE_K_M,
     R_AIR,
@@ -1177,7 +1178,7 @@ def _write_folder(out: Path, manifest: dict[str, Any], files: dict[str, pd.DataF
         for name, frame in files.items():
             frame.to_csv(tmp / name, index=False)
         (tmp / MANIFEST).write_text(json.dumps(manifest, indent=2) + "\n")
-        (tmp / "import.json").write_text(json.dumps(summary.to_dict(), indent=2) + "\n")
+        (tmp / "import.json").write_text(json_text(summary.to_dict()))
         try:
             load_test(tmp)
         except InputError as exc:
