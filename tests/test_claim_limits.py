@@ -191,7 +191,8 @@ def test_a_value_on_or_within_one_sigma_of_a_bound_is_flagged() -> None:
     prm = {"expopen[main,s2]": Parameter(names[0], "1", 1.0, 0.3, 6.0),
            "n[main,s2]": Parameter(names[1], "1", 8.0, 0.3, 60.0),
            "t_k[main,s2]": Parameter(names[2], "s", 0.3, 0.01, 3.0, physical_lower=True)}
-    fit = SimpleNamespace(model=SimpleNamespace(parameter=prm.__getitem__), free=names,
+    fit = SimpleNamespace(model=SimpleNamespace(parameter=prm.__getitem__, effects=()),
+                          free=names,
                           parameters={names[0]: 5.9993, names[1]: 9.9, names[2]: 0.01},
                           guess={}, test=None)
     cov = Covariance(names, np.diag([84.0, 2.3, 0.0]) ** 2, [names[2]], 1.0)
