@@ -510,6 +510,10 @@ def _chain(out: Discovery, candidates: Mapping[str, EffectType] | None, max_step
                 return out
             found.found_s = time.perf_counter() - clock
             if not _extend(out, step, found, max_steps):
+                # At the step limit too, every effect added earns its place or goes; a
+                # model that changes is diagnosed again (and adds nothing: the limit).
+                if _drop_unneeded(out, alpha, progress):
+                    continue
                 out.state = "stopped early"
                 return out
             _drop_stand_ins(out, alpha, progress)
