@@ -526,7 +526,7 @@ def _diagnosis_options(s: argparse.ArgumentParser) -> None:
 
 
 def _discover(args: argparse.Namespace) -> int:
-    from cpas_ocp.discrepancy.discovery import DiscoveryStep, discover
+    from cpas_ocp.discrepancy.discovery import DiscoveryStep, InterruptedDiscovery, discover
     from cpas_ocp.io.flight_test import load_test
     from cpas_ocp.reports.discrepancy_report import write_discovery
     test = load_test(args.test_dir)
@@ -542,8 +542,18 @@ def _discover(args: argparse.Namespace) -> int:
               flush=True)
 
     print("diagnosing, step by step ...", flush=True)
-    found = discover(fit, est.spec, plugins, args.max_steps, args.alpha, args.confirm,
-                     progress=not args.verbose, on_step=said, estimator=est)
+    try:
+        found = discover(fit, est.spec, plugins, args.max_steps, args.alpha, args.confirm,
+                         progress=not args.verbose, on_step=said, estimator=est)
+    except InterruptedDiscovery as exc:
+        # The steps finished are kept: their chain, JSON and model files, written with
+        # further signals held off (no figures, so it takes well under a second or two).
+        with interrupts.deferred():
+            out = write_discovery(exc.partial, args.out, plugins, _units(test, args),
+                                  figures=False)
+        _say(f"interrupted ({exc}); the {len(exc.partial.steps)} finished step(s) written "
+             f"to {out} (discovery.md, discovery.json, step_K.json)")
+        return exc.exit_code
     # The chain is read from its start: a first fit the data press against guessed bounds
     # is said so in the report, not only on the terminal (a misfit is what the chain is
     # for, and its table shows it).

@@ -77,6 +77,7 @@ from cpas_ocp.inference.model_comparison import Criteria, LikelihoodRatio, one_s
 from cpas_ocp.inference.noise_test import NoiseTest, noise_test
 from cpas_ocp.inference.phase_windows import phase_windows
 from cpas_ocp.inference.restarts import IMPROVEMENT_CHI2, restart_start_times
+from cpas_ocp.interrupts import Interrupted
 from cpas_ocp.io.flight_test import FlightTest
 from cpas_ocp.io.model_spec import ModelSpec
 from cpas_ocp.physics.effects.registry import EffectType, load_plugin
@@ -261,6 +262,15 @@ class Discovery:
         if last is not None:
             lines += ["", "last diagnosis: " + last.verdict()]
         return "\n".join(lines)
+
+
+class InterruptedDiscovery(Interrupted):
+    """A signal that stopped `discover`, with the chain of the steps it had finished
+    (`partial`: each step's fit, the diagnoses made; its state "stopped early")."""
+
+    def __init__(self, signum: int, partial: Discovery) -> None:
+        super().__init__(signum)
+        self.partial = partial
 
 
 def next_step(diag: Diagnosis, progress: bool = False) -> DiscoveryStep | str:
@@ -450,8 +460,24 @@ def discover(fit: Fit, spec: ModelSpec, candidates: Mapping[str, EffectType] | N
     """The chain from `fit` (of `spec`, by `estimator` where given): see the module
     docstring.  `candidates` are the plug-in effects tested beside the library's;
     `on_step` is called with each step once it is diagnosed (progress for a caller
-    that prints)."""
+    that prints).  A signal (`interrupts.Interrupted`) raises `InterruptedDiscovery`
+    with the steps finished so far, for the caller to keep."""
     out = Discovery([DiscoveryStep(None, spec, fit, estimator=estimator)], alpha=alpha)
+    try:
+        return _chain(out, candidates, max_steps, alpha, confirm_top, progress, on_step)
+    except Interrupted as exc:
+        # Every step in the chain is a finished fit; what was under way is lost.
+        out.state = "stopped early"
+        diagnosed = sum(s.diagnosis is not None for s in out.steps)
+        out.stopped = (f"interrupted ({exc}) after {len(out.steps)} fit(s), {diagnosed} of "
+                       "them diagnosed; the work under way was lost")
+        raise InterruptedDiscovery(exc.signum, out) from None
+
+
+def _chain(out: Discovery, candidates: Mapping[str, EffectType] | None, max_steps: int,
+           alpha: float, confirm_top: int, progress: bool,
+           on_step: Callable[[DiscoveryStep], None] | None) -> Discovery:
+    """`discover`'s loop on the chain `out`, which it extends in place."""
     clock = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="cpas-ocp-proposed-") as folder:
         while True:
@@ -484,6 +510,10 @@ def discover(fit: Fit, spec: ModelSpec, candidates: Mapping[str, EffectType] | N
                 return out
             found.found_s = time.perf_counter() - clock
             if not _extend(out, step, found, max_steps):
+                # At the step limit too, every effect added earns its place or goes; a
+                # model that changes is diagnosed again (and adds nothing: the limit).
+                if _drop_unneeded(out, alpha, progress):
+                    continue
                 out.state = "stopped early"
                 return out
             _drop_stand_ins(out, alpha, progress)

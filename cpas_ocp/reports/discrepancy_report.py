@@ -238,17 +238,19 @@ def _markdown(frame: pd.DataFrame) -> str:
 
 def write_discovery(discovery: Discovery, out: str | Path,
                     plugins: dict[str, EffectType] | None = None,
-                    units: DisplayUnits | None = None) -> Path:
+                    units: DisplayUnits | None = None, figures: bool = True) -> Path:
     """Write the discovery folder atomically: discovery.md (the chain with each step's
     time, how it ended, the last model's parameters with sigma, each step's
     normalised RMS per channel, the figure, the last diagnosis with the last model's
     residual figures), discovery.html (the same, interactive), discovery.json (strict
     JSON), and each step's model as a model file (`step_K.json`, reusable with
-    `reconstruct --model`)."""
+    `reconstruct --model`).  Without `figures` (a chain cut short by a signal, written
+    in the second or two a signal allows), no figures, no HTML page and no sigma: the
+    chain, its JSON and its model files."""
     out = Path(out)
     steps = discovery.steps
     final = steps[-1].fit
-    cov = final_covariance(discovery)
+    cov = final_covariance(discovery) if figures else None
     units = units or display_units(final.test)
     with atomic_folder(out, "discovery.json") as tmp:
         labels = [s.label for s in steps]
@@ -266,8 +268,10 @@ def write_discovery(discovery: Discovery, out: str | Path,
         for trial in discovery.proposals:
             (tmp / "proposed" / trial.proposal.file_name).write_text(trial.proposal.source)
         worst = [s.worst_window for s in steps]
-        plot_discovery(labels, [s.fit.chi_square / s.fit.dof for s in steps],
-                       [w[1] if w else float("nan") for w in worst], tmp / "discovery.png")
+        if figures:
+            plot_discovery(labels, [s.fit.chi_square / s.fit.dof for s in steps],
+                           [w[1] if w else float("nan") for w in worst],
+                           tmp / "discovery.png")
         rms = pd.DataFrame([s.channel_rms for s in steps], index=labels).T
         rms.columns = [f"{k}: {label}" for k, label in enumerate(labels)]
         result = {
@@ -308,12 +312,13 @@ def write_discovery(discovery: Discovery, out: str | Path,
         }
         (tmp / "discovery.json").write_text(json_text(result))
         last = steps[-1].diagnosis
-        figures = [] if last is None else plot_sensor_residuals(last.fit, last.windows, tmp)
+        drawn = [] if last is None or not figures else \
+            plot_sensor_residuals(last.fit, last.windows, tmp)
         final_table = parameter_table(final, cov, units)
         (tmp / "discovery.md").write_text(
             f"# Discovery on {steps[0].fit.test.name}\n\n```\n{discovery.text()}\n```\n\n"
-            "![the error falling step by step](discovery.png)\n\n"
-            f"## The last model's parameters\n\n```\n{final_table}\n```\n\n"
+            + ("![the error falling step by step](discovery.png)\n\n" if figures else "")
+            + f"## The last model's parameters\n\n```\n{final_table}\n```\n\n"
             "## Normalised RMS per sensor channel after each step\n\n"
             + _markdown(rms.reset_index(names="channel")) + "\n\n"
             + "Each step's model is `step_K.json` here (a model file: `cpas-ocp reconstruct "
@@ -322,7 +327,9 @@ def write_discovery(discovery: Discovery, out: str | Path,
                "tested as written: read them, edit them, pass them to `--plugin`.\n"
                if discovery.proposals else "")
             + ("" if last is None else f"\n## The last diagnosis\n\n```\n{last.text()}\n```\n\n")
-            + "".join(f"![{p.stem}]({p.name})\n\n" for p in figures))
+            + "".join(f"![{p.stem}]({p.name})\n\n" for p in drawn))
+        if not figures:
+            return out
         page = begin_page(final, f"Discovery on {final.test.name}", units)
         page.heading("Ending")
         page.preformatted(discovery.ending())
