@@ -527,7 +527,8 @@ def _restarted_last(out: Discovery, step: DiscoveryStep, progress: bool) -> bool
         return False
     step.searched = True
     began = time.perf_counter()
-    found = best_start(step.estimator, step.fit, step.fit.settings.max_iter, progress)
+    # The first fit's iteration limit: a step's refit carries the confirming refit's.
+    found = best_start(step.estimator, step.fit, out.steps[0].fit.settings.max_iter, progress)
     step.found_s += time.perf_counter() - began
     if found is None:
         return False
