@@ -286,8 +286,7 @@ def next_step(diag: Diagnosis, progress: bool = False) -> DiscoveryStep | str:
                 else "nothing left is confirmed: the last diagnosis says what remains")
     if best.refit is not None and best.spec is not None:
         from_other_starts(diag, best, progress)
-    if best.refit is None or best.refit.lower_bound or best.refitted is None \
-            or best.spec is None:
+    if _unconverged(best):
         return (f"the refit that would add {best.effect} did not converge, nor its fit from "
                 "the offline reduction: its likelihood ratio is only a bound")
     implausible = diag.implausible(best)
@@ -305,6 +304,23 @@ def next_step(diag: Diagnosis, progress: bool = False) -> DiscoveryStep | str:
         return (f"{best.effect} fits part of the residual only with an implausible estimate "
                 f"({'; '.join(implausible)}): a stand-in, not added")
     return _step_of(diag, best, best.refit.text())
+
+
+def _unconverged(best: ScoreTest) -> bool:
+    """Whether no refit adding `best`'s effect converged: its likelihood ratio is at most a
+    bound, and the chain cannot take the step."""
+    return best.refit is None or best.refit.lower_bound or best.refitted is None \
+        or best.spec is None
+
+
+def _ending_state(diag: Diagnosis) -> str:
+    """The state of a chain that stops at the diagnosis `diag` with no step to take:
+    "consistent" (`Diagnosis.consistent_with_noise`), "stopped early" where the effect it
+    confirms could not be added (no refit converged), else "misfit"."""
+    if diag.consistent_with_noise:
+        return "consistent"
+    best = diag.explanation
+    return "stopped early" if best is not None and _unconverged(best) else "misfit"
 
 
 def _step_of(diag: Diagnosis, best: ScoreTest, admitted_by: str) -> DiscoveryStep:
@@ -505,8 +521,7 @@ def _chain(out: Discovery, candidates: Mapping[str, EffectType] | None, max_step
                                                                           progress):
                     continue
                 out.stopped = found
-                out.state = ("consistent" if step.diagnosis.consistent_with_noise else
-                             "stopped early" if "did not converge" in found else "misfit")
+                out.state = _ending_state(step.diagnosis)
                 return out
             found.found_s = time.perf_counter() - clock
             if not _extend(out, step, found, max_steps):
