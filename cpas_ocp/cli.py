@@ -222,9 +222,13 @@ def _parser() -> argparse.ArgumentParser:
     s = sub.add_parser("discover", help="diagnose, add the confirmed effect, refit, and "
                                         "again, until the residuals are noise or nothing "
                                         "left is significant")
-    _diagnosis_options(s)
+    _diagnosis_options(s, resumable=True)
     s.add_argument("--max-steps", type=_ranged(int, 1), default=4, metavar="K",
                    help="add at most K effects (default 4)")
+    s.add_argument("--resume", type=Path, default=None, metavar="DIR",
+                   help="go on from the finished steps of a discovery folder (one that was "
+                        "interrupted or killed), with the test folder and options it was "
+                        "started with; it is written again in place")
     _units_option(s)
     s.set_defaults(run=_discover)
 
@@ -509,11 +513,12 @@ def _diagnose(args: argparse.Namespace) -> int:
     return 0
 
 
-def _diagnosis_options(s: argparse.ArgumentParser) -> None:
+def _diagnosis_options(s: argparse.ArgumentParser, resumable: bool = False) -> None:
     """The test folder, output folder, plug-ins, confirmation, level, model and solver
-    options of a command that diagnoses (`diagnose`, `discover`)."""
-    s.add_argument("test_dir", type=Path)
-    s.add_argument("--out", required=True, type=Path)
+    options of a command that diagnoses (`diagnose`, `discover`; with `resumable`, the
+    test and output folders may come from --resume instead)."""
+    s.add_argument("test_dir", type=Path, nargs="?" if resumable else None)
+    s.add_argument("--out", required=not resumable, type=Path)
     _plugin_option(s, "also test the effects this Python file defines (repeatable)")
     s.add_argument("--confirm", type=_ranged(int, 0), default=3, metavar="N",
                    help="refit the N leading significant effects to confirm them, and more "
@@ -526,14 +531,46 @@ def _diagnosis_options(s: argparse.ArgumentParser) -> None:
 
 
 def _discover(args: argparse.Namespace) -> int:
-    from cpas_ocp.discrepancy.discovery import DiscoveryStep, InterruptedDiscovery, discover
+    from cpas_ocp.discrepancy.discovery import (
+        Discovery,
+        DiscoveryStep,
+        InterruptedDiscovery,
+        discover,
+    )
+    from cpas_ocp.discrepancy.discovery_checkpoint import (
+        checkpoint_context,
+        read_checkpoint,
+        write_checkpoint,
+    )
     from cpas_ocp.io.flight_test import load_test
     from cpas_ocp.reports.discrepancy_report import write_discovery
+    if args.resume is not None:
+        _resumed_options(args, checkpoint_context(args.resume))
+        check_output(args.out)
+    elif args.test_dir is None or args.out is None:
+        raise InputError("(command line)", "test_dir, --out",
+                         "a test folder and --out DIR, or --resume DIR")
     test = load_test(args.test_dir)
     plugins = _plugins(args)
-    est = _estimator(test, args, _spec(test, args, plugins))
-    print(f"solving: {est.size_text()} ...", flush=True)
-    est, fit, _, claim = _fit_and_covariance(est, args)
+    units = _units(test, args)
+    context = {"test_dir": str(args.test_dir.resolve()),
+               "plugin": [str(Path(f).resolve()) for f in args.plugin],
+               "max_steps": args.max_steps, "alpha": args.alpha, "confirm": args.confirm,
+               "units": args.units}
+    if args.resume is not None:
+        print(f"reading the finished steps in {args.resume} ...", flush=True)
+        chain = read_checkpoint(args.resume, test, plugins)
+        first, est, fit, claim = chain.steps[0], None, chain.steps[0].fit, None
+        spec = first.spec
+        print(f"  {len(chain.steps)} step(s) read; going on from step {len(chain.steps) - 1}",
+              flush=True)
+    else:
+        chain = None
+        est = _estimator(test, args, _spec(test, args, plugins))
+        print(f"solving: {est.size_text()} ...", flush=True)
+        est, fit, _, claim = _fit_and_covariance(est, args)
+        spec = est.spec
+    whole = [0]  # steps in the chain the folder last held whole
 
     def said(step: DiscoveryStep) -> None:
         print(f"step {step.label}: chi-square {step.fit.chi_square:.1f} "
@@ -541,30 +578,62 @@ def _discover(args: argparse.Namespace) -> int:
               f"{step.diagnosis.verdict().splitlines()[0] if step.diagnosis else ''}",
               flush=True)
 
-    print("diagnosing, step by step ...", flush=True)
-    try:
-        found = discover(fit, est.spec, plugins, args.max_steps, args.alpha, args.confirm,
-                         progress=not args.verbose, on_step=said, estimator=est)
-    except InterruptedDiscovery as exc:
-        # The steps finished are kept: their chain, JSON and model files, written with
-        # further signals held off (no figures, so it takes well under a second or two).
+    def kept(chain: Discovery, figures: bool = False) -> Path:
+        # The folder, written whole with signals held off: the report so far and what
+        # `--resume` needs (`discovery_checkpoint`).
         with interrupts.deferred():
-            out = write_discovery(exc.partial, args.out, plugins, _units(test, args),
-                                  figures=False)
-        _say(f"interrupted ({exc}); the {len(exc.partial.steps)} finished step(s) written "
-             f"to {out} (discovery.md, discovery.json, step_K.json)")
+            return write_discovery(chain, args.out, {**plugins, **chain.plugins}, units,
+                                   figures=figures,
+                                   extra=lambda tmp: write_checkpoint(chain, tmp, context))
+
+    def checkpoint(chain: Discovery) -> None:
+        kept(chain)
+        whole[0] = len(chain.steps)
+
+    print("diagnosing, step by step ...", flush=True)
+    new_folder = not args.out.exists() or not any(args.out.iterdir())
+    try:
+        found = discover(fit, spec, plugins, args.max_steps, args.alpha, args.confirm,
+                         progress=not args.verbose, on_step=said, estimator=est,
+                         on_whole=checkpoint, resume=chain)
+    except (InputError, PluginError):
+        # A user's mistake (a plug-in that fails) leaves nothing half-written; any other
+        # ending keeps the steps finished.
+        if new_folder:
+            shutil.rmtree(args.out, ignore_errors=True)
+        raise
+    except InterruptedDiscovery as exc:
+        # The steps finished are kept: the chain as it last was whole (a step under way
+        # may have been appended since), marked as stopped; `--resume` goes on from it.
+        partial = exc.partial
+        partial.steps = partial.steps[:max(whole[0], 1)]
+        partial.stopped += f"; `cpas-ocp discover --resume {args.out}` goes on from here"
+        out = kept(partial)
+        _say(f"interrupted ({exc}); the {len(partial.steps)} finished step(s) written "
+             f"to {out} (discovery.md, discovery.json, step_K.json); go on with "
+             f"cpas-ocp discover --resume {out}")
         return exc.exit_code
     # The chain is read from its start: a first fit the data press against guessed bounds
     # is said so in the report, not only on the terminal (a misfit is what the chain is
     # for, and its table shows it).
-    if not claim.is_result:
+    if claim is not None and not claim.is_result:
         found.notes.append(f"the first fit is not a result: {claim.problems()[0]}")
-    out = write_discovery(found, args.out, plugins, _units(test, args))
+    out = kept(found, figures=True)
     print()
     print(found.text())
     print(f"\ndiscovery written to {out} (discovery.md, discovery.html, discovery.json, "
           "discovery.png, step_K.json)")
     return 0
+
+
+def _resumed_options(args: argparse.Namespace, context: dict) -> None:
+    """The test folder and options of the discovery being resumed (`--resume`), into
+    `args`; its output folder is the one resumed."""
+    args.out = args.resume
+    args.test_dir = Path(context["test_dir"])
+    args.plugin = [Path(f) for f in context["plugin"]]
+    for name in ("max_steps", "alpha", "confirm", "units"):
+        setattr(args, name, context[name])
 
 
 def _compare(args: argparse.Namespace) -> int:

@@ -115,6 +115,10 @@ class DiscoveryStep:
     # starts) and diagnosing it.
     found_s: float = 0.0
     diagnosed_s: float = 0.0
+    # The verdict and worst window of a diagnosis made before the chain was read back from
+    # its folder (`discovery_checkpoint`), where the diagnosis itself is not kept.
+    recorded_verdict: str | None = None
+    recorded_worst: tuple[str, float] | None = None
 
     @property
     def label(self) -> str:
@@ -148,9 +152,16 @@ class DiscoveryStep:
         return lines
 
     @property
+    def verdict(self) -> str | None:
+        """The verdict of the step's diagnosis (None where none was made)."""
+        return self.recorded_verdict if self.diagnosis is None else self.diagnosis.verdict()
+
+    @property
     def worst_window(self) -> tuple[str, float] | None:
         """The diagnosed window with the largest chi-square excess and its normalised RMS."""
-        w = None if self.diagnosis is None else worst_window(self.diagnosis.statistics)
+        if self.diagnosis is None:
+            return self.recorded_worst
+        w = worst_window(self.diagnosis.statistics)
         return None if w is None else (f"{w.sensor}.{w.channel} {w.window}", w.normalized_rms)
 
 
@@ -197,7 +208,7 @@ class Discovery:
     plugins: dict[str, EffectType] = field(default_factory=dict)
     # How the chain ended: "consistent" (the last fit passes the noise test), "misfit"
     # (nothing left is confirmed and the residuals are not noise) or "stopped early"
-    # (the step limit, or a refit that did not converge).
+    # (the step limit, or a refit that did not converge); "in progress" while it runs.
     state: str = ""
     alpha: float = ALPHA
 
@@ -224,6 +235,8 @@ class Discovery:
             head = "consistent with the noise"
         elif self.state == "misfit":
             head = "a misfit nothing tested explains"
+        elif self.state == "in progress":
+            head = "in progress (the chain goes on)"
         else:
             head = "stopped early"
         return (f"{head}: {noise.text()}; {self.stopped} ({len(self.steps) - 1} step(s), "
@@ -472,15 +485,24 @@ def discover(fit: Fit, spec: ModelSpec, candidates: Mapping[str, EffectType] | N
              max_steps: int = MAX_STEPS, alpha: float = ALPHA, confirm_top: int = CONFIRM_TOP,
              progress: bool = False,
              on_step: Callable[[DiscoveryStep], None] | None = None,
-             estimator: Estimator | None = None) -> Discovery:
+             estimator: Estimator | None = None,
+             on_whole: Callable[[Discovery], None] | None = None,
+             resume: Discovery | None = None) -> Discovery:
     """The chain from `fit` (of `spec`, by `estimator` where given): see the module
     docstring.  `candidates` are the plug-in effects tested beside the library's;
     `on_step` is called with each step once it is diagnosed (progress for a caller
-    that prints).  A signal (`interrupts.Interrupted`) raises `InterruptedDiscovery`
-    with the steps finished so far, for the caller to keep."""
-    out = Discovery([DiscoveryStep(None, spec, fit, estimator=estimator)], alpha=alpha)
+    that prints), `on_whole` with the chain wherever it is whole (a step appended and
+    the stand-ins it frees dropped, or a step diagnosed: for a caller that keeps it on
+    disk, `discovery_checkpoint`).  `resume`: a chain read back from disk, to go on
+    from its last step (`fit` and `spec` are then its first).  A signal
+    (`interrupts.Interrupted`) raises `InterruptedDiscovery` with the steps finished
+    so far, for the caller to keep."""
+    out = resume if resume is not None else Discovery(
+        [DiscoveryStep(None, spec, fit, estimator=estimator)], alpha=alpha)
+    out.state, out.stopped = "in progress", ""
     try:
-        return _chain(out, candidates, max_steps, alpha, confirm_top, progress, on_step)
+        return _chain(out, candidates, max_steps, alpha, confirm_top, progress, on_step,
+                      on_whole)
     except Interrupted as exc:
         # Every step in the chain is a finished fit; what was under way is lost.
         out.state = "stopped early"
@@ -492,13 +514,16 @@ def discover(fit: Fit, spec: ModelSpec, candidates: Mapping[str, EffectType] | N
 
 def _chain(out: Discovery, candidates: Mapping[str, EffectType] | None, max_steps: int,
            alpha: float, confirm_top: int, progress: bool,
-           on_step: Callable[[DiscoveryStep], None] | None) -> Discovery:
+           on_step: Callable[[DiscoveryStep], None] | None,
+           on_whole: Callable[[Discovery], None] | None = None) -> Discovery:
     """`discover`'s loop on the chain `out`, which it extends in place."""
     clock = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="cpas-ocp-proposed-") as folder:
         while True:
             step = out.steps[-1]
             if step.diagnosis is None or step.diagnosis.fit is not step.fit:
+                if on_whole is not None:
+                    on_whole(out)
                 began = time.perf_counter()
                 step.diagnosis = diagnose(step.fit, step.spec, candidates, confirm_top, alpha,
                                           progress, frozenset(out.dropped))
@@ -506,6 +531,8 @@ def _chain(out: Discovery, candidates: Mapping[str, EffectType] | None, max_step
                 clock = time.perf_counter()
                 if on_step is not None:
                     on_step(step)
+                if on_whole is not None:
+                    on_whole(out)
             found = next_step(step.diagnosis, progress)
             if isinstance(found, str) and _unexplained(step.diagnosis) \
                     and out.added < max_steps:

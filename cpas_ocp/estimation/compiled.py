@@ -2,7 +2,7 @@
 
 CasADi evaluates SX functions in its virtual machine.  The same function
 emitted as C and compiled by the system C compiler at -O1 (-O0 for very
-large sources, see `LARGE_SOURCE_BYTES`) runs about four times faster on the
+large sources, and none above `VM_SOURCE_BYTES`) runs about four times faster on the
 RK4-step Jacobians that dominate a reconstruction (and -O2 costs twice the
 compile time for 10 % more).  The C source is hashed and
 the shared library is kept under that hash in the cache folder
@@ -36,21 +36,22 @@ import casadi as ca
 from cpas_ocp import interrupts
 
 FLAGS = ("-shared", "-fPIC")
-# gcc's time at -O1 grows faster than the source: a 4 MB Jacobian (a GPS model
-# integrated back over its lag) took 400 s.  Sources above this size are built
-# at -O0, still about twice as fast as the virtual machine, but three times slower
-# than -O1: the RK4-step Jacobians of `drogue_full` (1.6 MB of C; 20 s at -O1 against
-# 7 s at -O0) and `main3_full` (2.4 MB; 35 s against 10 s) run 3.3 and 2.7 times
-# faster at -O1, and so do the diagnosis's candidates with added mass, load-cell
-# friction or a GPS lag (1.3-2.1 MB).  Compiled once per model structure, the -O1
-# build pays for itself within a few iterations.
+# gcc's time and memory grow faster than the source, because CasADi emits each function
+# as one body: a 4 MB Jacobian (a GPS model integrated back over its lag) took 400 s at
+# -O1, and its 5.5 MB successor (`chained_jacobians.ModelPieces`: the lagged GPS output's
+# Jacobian) 38 s and 8.0 GB at -O0 (`benchmarks/compile_cost.py`).  Sources above
+# LARGE_SOURCE_BYTES are built at -O0, still about twice as fast as the virtual machine
+# but three times slower than -O1; sources above VM_SOURCE_BYTES are not compiled at all
+# and run in the virtual machine, which costs that one piece a factor of two or three
+# and no minutes or gigabytes of compiling.  The pieces of the library's models are
+# below 1.1 MB (the RK4 step's Jacobian of `drogue` with added mass) except that one.
 LARGE_SOURCE_BYTES = 3_000_000
+VM_SOURCE_BYTES = 4_000_000
 
 
 def optimisation(source: Path) -> str:
     """-O1 for ordinary sources, -O0 for very large ones."""
     return "-O0" if source.stat().st_size > LARGE_SOURCE_BYTES else "-O1"
-
 
 def cache_folder() -> Path:
     """Where compiled libraries are kept."""
@@ -89,9 +90,10 @@ def _compile(functions: list[ca.Function], cc: str) -> list[ca.Function]:
     with tempfile.TemporaryDirectory(prefix=".cpas-cg-", dir=folder) as tmp, _live(Path(tmp)):
         sources = [_generate(fn, Path(tmp) / str(i)) for i, fn in enumerate(functions)]
         libraries = [folder / f"{fn.name()}-{_digest(src)}.so"
+                     if src.stat().st_size <= VM_SOURCE_BYTES else None
                      for fn, src in zip(functions, sources, strict=True)]
         missing = [(src, lib) for src, lib in zip(sources, libraries, strict=True)
-                   if not lib.exists()]
+                   if lib is not None and not lib.exists()]
         if missing and sys.stderr.isatty():
             sys.stderr.write(f"  compiling {len(missing)} model functions to native code "
                              f"(once per model structure; cache {folder}) ...\n")
@@ -130,7 +132,8 @@ def _compile(functions: list[ca.Function], cc: str) -> list[ca.Function]:
                 err = (partial.parent / "stderr").read_bytes().decode(errors="replace")
                 raise RuntimeError(f"compiling {lib.name} failed: {err[-500:]}")
             os.replace(partial, lib)  # atomic: a library in the cache is always complete
-    return [ca.external(fn.name(), str(lib)) for fn, lib in zip(functions, libraries, strict=True)]
+    return [fn if lib is None else ca.external(fn.name(), str(lib))
+            for fn, lib in zip(functions, libraries, strict=True)]
 
 
 @dataclass

@@ -16,6 +16,7 @@ import casadi as ca
 import numpy as np
 
 from cpas_ocp.estimation.action_windows import ActionWindows
+from cpas_ocp.estimation.chained_jacobians import ModelPieces
 from cpas_ocp.estimation.compiled import compile_functions
 from cpas_ocp.estimation.fit import (
     EVENTS,
@@ -97,6 +98,7 @@ class _Block:
     nodes: list[np.ndarray]
     times: np.ndarray
     data: list[np.ndarray]
+    chain: tuple[str, int] = ("", 0)  # ("gap", RK4 steps) or (observation piece, kind)
 
 
 @dataclass
@@ -293,6 +295,11 @@ class NlpTranscription:
         step after the node before the sample)."""
         y = nlp.syms
         counts = substeps_of(self.t)
+        _, _, _, _, xscale, cscale = self._ctx
+        pieces = ModelPieces(self.model, [self.model.parameter_names.index(f) for f in self.free],
+                             self.pscale, cscale, xscale)
+        if counts.max() > 1:  # long intervals: samples inside them need the dynamics
+            pieces.need_rhs()
         blocks, gap_rows = [], []
         # One gap function per number of sub-steps; the gaps' rows stay node-major.
         for m in np.unique(counts):
@@ -302,21 +309,23 @@ class NlpTranscription:
             gap = ca.Function("gap" if m == 1 else f"gap_{m}",
                               [y["x"], y["x1"], y["t"], y["dt"], y["p"], y["c"]],
                               [(y["x1"] - xe) / nlp.xscale])
-            blocks.append(_Block(gap, [ks, ks + 1], self.t[ks], [np.diff(self.t)[ks]]))
+            blocks.append(_Block(gap, [ks, ks + 1], self.t[ks], [np.diff(self.t)[ks]],
+                                 ("gap", int(m) * self.settings.substeps)))
             gap_rows.append((ks[:, None] * self.model.nx
                              + np.arange(self.model.nx)[None, :]).ravel())
         n_gap_blocks = len(blocks)
-        sensor_blocks, destinations, offsets = self._sensor_blocks(self._step, n, h)
+        sensor_blocks, destinations, offsets = self._sensor_blocks(self._step, n, h, pieces)
         blocks += sensor_blocks
         # Each block's values (the line search's trial points) and its values with the
-        # Jacobian (accepted points) run as native code; the functions themselves stay
-        # in CasADi's VM as well, for the differentiable graph (`_obj`, `_g`).
-        local = [self._local_jacobian(b.fn, len(b.nodes)) for b in blocks]
-        native = [b.fn for b in blocks] + local
+        # Jacobian (accepted points) are chains of the model's few pieces, which run as
+        # native code (`chained_jacobians`); the block functions themselves stay in
+        # CasADi's VM, for the differentiable graph (`_obj`, `_g`).
         if self.settings.compile:
-            native = compile_functions(native)
-        mapped = [self._mapped_block(b, value_fn, jac_fn) for b, value_fn, jac_fn
-                  in zip(blocks, native[:len(blocks)], native[len(blocks):], strict=True)]
+            pieces.adopt(compile_functions(list(pieces.functions.values())))
+        chains = [pieces.gap(b.chain[1]) if b.chain[0] == "gap"
+                  else pieces.residual(*b.chain) for b in blocks]
+        mapped = [self._mapped_block(b, value_fn, jac_fn) for b, (value_fn, jac_fn)
+                  in zip(blocks, chains, strict=True)]
         nlp.residuals = _gathered(mapped[n_gap_blocks:], destinations, offsets)
         nlp.g = (mapped[:1] if n_gap_blocks == 1 else
                  _gathered(mapped[:n_gap_blocks], gap_rows, [0, self.model.nx * n]))
@@ -536,7 +545,7 @@ class NlpTranscription:
                                     [ca.triu(hessian)], ["x", "p", "lam_f", "lam_g"],
                                     ["hess_gamma_x_x"])}
 
-    def _sensor_blocks(self, step: ca.Function, n: int, h: float
+    def _sensor_blocks(self, step: ca.Function, n: int, h: float, pieces: ModelPieces
                        ) -> tuple[list[_Block], list[np.ndarray], list[int]]:
         """The per-sample residual functions of every sensor the model observes, and where
         each block's rows go; records `self._samples`, one entry per sensor.
@@ -551,7 +560,7 @@ class NlpTranscription:
         are instance-major (every channel of one sample, then the next sample);
         `destinations[b]` gives, per row of block b, its row in the sensors' part of
         the residual vector, where sensor j's rows are offsets[j]..offsets[j+1]-1,
-        instance-major, in the order of `self._samples`.
+        instance-major, in the order of `self._samples`; each set of times adds a piece.
         """
         m = self.model
         xs, ts, dts = ca.SX.sym("x", m.nx), ca.SX.sym("t"), ca.SX.sym("dt")
@@ -585,10 +594,11 @@ class NlpTranscription:
             dt = tsamp - self.t[k]
             between = np.abs(dt) >= 1e-7
             kinds = (~between, between & ~long[k], between & long[k])
+            names = [self._samples[i][0] for i in members]
+            observe = pieces.add_observation(names)
             for kind, samples in enumerate(np.flatnonzero(c) for c in kinds):
                 if samples.size == 0:
                     continue
-                names = [self._samples[i][0] for i in members]
                 meas = np.vstack([self._samples[i][3][:, samples] for i in members])
                 sig = np.vstack([self._samples[i][4][:, samples] for i in members])
                 ym, sg = ca.SX.sym("ym", meas.shape[0]), ca.SX.sym("sg", meas.shape[0])
@@ -607,7 +617,8 @@ class NlpTranscription:
                 y_at = ca.vertcat(*[m.outputs[name](x_at, t_at, ps, cs) for name in names])
                 fn = ca.Function(f"residual_{len(blocks)}",
                                  [*states, ts, *sym_extra, ym, sg, ps, cs], [(ym - y_at) / sg])
-                blocks.append(_Block(fn, nodes, self.t[k[samples]], [*extra, meas, sig]))
+                blocks.append(_Block(fn, nodes, self.t[k[samples]], [*extra, meas, sig], (
+                    observe, kind)))
                 # Row (sample j, channel c) of sensor i lies at offsets[i] + j n_i + c.
                 destinations.append(np.concatenate([
                     offsets[i] + samples[:, None] * len(self._samples[i][1])

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -238,7 +239,8 @@ def _markdown(frame: pd.DataFrame) -> str:
 
 def write_discovery(discovery: Discovery, out: str | Path,
                     plugins: dict[str, EffectType] | None = None,
-                    units: DisplayUnits | None = None, figures: bool = True) -> Path:
+                    units: DisplayUnits | None = None, figures: bool = True,
+                    extra: Callable[[Path], None] | None = None) -> Path:
     """Write the discovery folder atomically: discovery.md (the chain with each step's
     time, how it ended, the last model's parameters with sigma, each step's
     normalised RMS per channel, the figure, the last diagnosis with the last model's
@@ -246,7 +248,8 @@ def write_discovery(discovery: Discovery, out: str | Path,
     JSON), and each step's model as a model file (`step_K.json`, reusable with
     `reconstruct --model`).  Without `figures` (a chain cut short by a signal, written
     in the second or two a signal allows), no figures, no HTML page and no sigma: the
-    chain, its JSON and its model files."""
+    chain, its JSON and its model files.  `extra` writes more files into the folder
+    before it takes its place (`discovery_checkpoint.write_checkpoint`)."""
     out = Path(out)
     steps = discovery.steps
     final = steps[-1].fit
@@ -290,7 +293,7 @@ def write_discovery(discovery: Discovery, out: str | Path,
                        "seconds_to_find": s.found_s, "seconds_to_diagnose": s.diagnosed_s,
                        "worst_window": None if w is None else {"where": w[0],
                                                                "normalized_rms": w[1]},
-                       "verdict": None if s.diagnosis is None else s.diagnosis.verdict()}
+                       "verdict": s.verdict}
                       for k, (s, w) in enumerate(zip(steps, worst, strict=True))],
             "proposals": [{"step": t.step, "effect": t.proposal.name,
                            "file": f"proposed/{t.proposal.file_name}",
@@ -328,6 +331,8 @@ def write_discovery(discovery: Discovery, out: str | Path,
                if discovery.proposals else "")
             + ("" if last is None else f"\n## The last diagnosis\n\n```\n{last.text()}\n```\n\n")
             + "".join(f"![{p.stem}]({p.name})\n\n" for p in drawn))
+        if extra is not None:
+            extra(tmp)
         if not figures:
             return out
         page = begin_page(final, f"Discovery on {final.test.name}", units)
