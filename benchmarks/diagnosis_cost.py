@@ -6,8 +6,10 @@ baseline model lacks, fitted with the baseline model from the offline
 reduction, and diagnosed.  Printed: the baseline fit's iterations and time,
 then per candidate effect its score test (wall time, whether its null point
 needed a solve and whether that converged) and per confirming refit its
-iterations, status and time; the verdict; the total wall time and the peak
-resident memory of the process.
+iterations, status and time; the verdict; the total wall time, the peak
+resident memory of the process and of its largest compiler, and the native
+builds the diagnosis started (model structures with a library to compile;
+`CPAS_OCP_CACHE` pointing at an empty folder shows a first run's).
 
     python benchmarks/diagnosis_cost.py [--hidden added_mass elastic_riser ...] [--seed N]
                                         [--null-point score|solve]
@@ -31,6 +33,7 @@ from pathlib import Path
 
 from cpas_ocp.discrepancy import diagnosis as diagnosis_module
 from cpas_ocp.discrepancy import score_test as score_module
+from cpas_ocp.estimation.compiled import COUNTS
 from cpas_ocp.estimation.estimator import Estimator, Fit
 from cpas_ocp.estimation.simulate import simulate_problem
 from cpas_ocp.inference.continuation import solve as solve_with_continuation
@@ -101,6 +104,7 @@ def run(case: str, seed: int, root: Path, null_point: str = "score") -> None:
         original_confirm, case,
         lambda a, out: f"refit {a[1].effect:18s} {a[1].refit_note}")
     diagnosis_module.confirm = score_module.confirm
+    builds_before, libraries_before = COUNTS["builds"], COUNTS["libraries"]
     try:
         t0 = time.perf_counter()
         diag = diagnosis_module.diagnose(fit, spec)
@@ -109,9 +113,12 @@ def run(case: str, seed: int, root: Path, null_point: str = "score") -> None:
         score_module.score_test, score_module.confirm = original_test, original_confirm
         diagnosis_module.confirm = original_confirm
     peak_gb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6
+    compiler_gb = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1e6
     print(f"[{case}] verdict: {diag.verdict()}")
     print(f"[{case}] diagnosis {t_diag:.1f} s, fit + diagnosis {t_fit + t_diag:.1f} s, "
-          f"peak memory of the process so far {peak_gb:.2f} GB", flush=True)
+          f"peak memory of the process so far {peak_gb:.2f} GB (largest compiler "
+          f"{compiler_gb:.2f} GB); native builds {COUNTS['builds'] - builds_before} "
+          f"({COUNTS['libraries'] - libraries_before} libraries compiled)", flush=True)
 
 
 def main() -> None:

@@ -573,8 +573,8 @@ def _discover(args: argparse.Namespace) -> int:
     whole = [0]  # steps in the chain the folder last held whole
 
     def said(step: DiscoveryStep) -> None:
-        print(f"step {step.label}: chi-square {step.fit.chi_square:.1f} "
-              f"(chi2/dof {step.fit.chi_square / step.fit.dof:.3f}); "
+        print(f"step {step.label} ({step.found_s + step.diagnosed_s:.0f} s): chi-square "
+              f"{step.fit.chi_square:.1f} (chi2/dof {step.fit.chi_square / step.fit.dof:.3f}); "
               f"{step.diagnosis.verdict().splitlines()[0] if step.diagnosis else ''}",
               flush=True)
 

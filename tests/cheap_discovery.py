@@ -1,11 +1,11 @@
-"""A discovery chain that costs one fit and a diagnosis without refits per step.
+"""A discovery chain that costs one fit and a diagnosis of one score test per step.
 
-`cheap(patch)` (pytest's monkeypatch in process) or `python
-tests/cheap_discovery.py ARGS` (the command line in a process of its own, for a
-signal) makes `discover` diagnose without confirming refits and take, in place
-of the effect a refit would confirm, the step's own fit again under the name
-"gps_lag": a chain of `--max-steps` steps whose every fit is a real one, so what
-is written, read back and resumed is real.
+`cheap(patch)` (pytest's monkeypatch in process) or `python -m
+tests.cheap_discovery ARGS` (the command line in a process of its own, for a
+signal) makes `discover` diagnose with one score test and no confirming refits,
+and take, in place of the effect a refit would confirm, the step's own fit again
+under the name "gps_lag": a chain of `--max-steps` steps whose every fit is a
+real one, so what is written, read back and resumed is real.
 """
 
 from __future__ import annotations
@@ -14,15 +14,18 @@ import sys
 from typing import Any
 
 from cpas_ocp.discrepancy import discovery
+from cpas_ocp.discrepancy.score_test import candidate_effects
 
 REAL_DIAGNOSE = discovery.diagnose
 _SPECS: list[Any] = []  # the spec of each fit diagnosed
 
 
-def _diagnose(fit: Any, spec: Any, candidates: Any, confirm_top: int, *args: Any,
-              **kwargs: Any) -> Any:
+def _diagnose(fit: Any, spec: Any, candidates: Any, confirm_top: int, alpha: float,
+              progress: bool, exclude: frozenset[str]) -> Any:
+    """The diagnosis with one score test (an IMU bias) and no refits."""
     _SPECS.append(spec)
-    return REAL_DIAGNOSE(fit, spec, candidates, 0, *args, **kwargs)  # no refits
+    others = frozenset(candidate_effects(candidates)) - {"imu_bias"}
+    return REAL_DIAGNOSE(fit, spec, candidates, 0, alpha, progress, exclude | others)
 
 
 def _next_step(diag: Any, progress: bool = False) -> discovery.DiscoveryStep:

@@ -1,5 +1,5 @@
 """Compiled per-instance values and Jacobians give exactly what CasADi's virtual machine
-gives."""
+gives, whether waited for or switched to once compiled in the background."""
 
 from __future__ import annotations
 
@@ -18,14 +18,16 @@ pytestmark = [pytest.mark.slow,
 def test_compiled_and_interpreted_estimators_agree(drogue_folder, tmp_path,
                                                    monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("CPAS_OCP_CACHE", str(tmp_path / "cache"))
+    monkeypatch.setenv("CPAS_OCP_COMPILE", "wait")
     test = load_test(drogue_folder(1))
     vm = Estimator(test, settings=Settings(compile=False))
     native = Estimator(test, settings=Settings(compile=True))
     libraries = sorted(p.name.split("-")[0] for p in (tmp_path / "cache").glob("*.so"))
-    # Per block (the shooting gaps, each sensor): its values and its values with Jacobian.
-    assert libraries and {f"{name}_jac" for name in libraries
-                          if not name.endswith("_jac")} == {n for n in libraries
-                                                             if n.endswith("_jac")}
+    # Per piece of the model (the RK4 step, each sensor group's outputs): its values and
+    # its values with Jacobians.
+    assert "rk4_step" in libraries and {f"{name}_d" for name in libraries
+                                        if not name.endswith("_d")} == {
+        n for n in libraries if n.endswith("_d")}
 
     z = vm.initial_point()
     z = z * (1.0 + 1e-3 * np.random.default_rng(7).standard_normal(z.size))  # off the guess
@@ -55,3 +57,26 @@ def test_compiled_and_interpreted_estimators_agree(drogue_folder, tmp_path,
     stamps = {p: p.stat().st_mtime_ns for p in (tmp_path / "cache").glob("*.so")}
     Estimator(test, settings=Settings(compile=True))
     assert {p: p.stat().st_mtime_ns for p in (tmp_path / "cache").glob("*.so")} == stamps
+
+
+def test_a_model_runs_in_the_vm_until_its_native_code_is_ready(drogue_folder, tmp_path,
+                                                                monkeypatch) -> None:
+    """With an empty cache, the estimator evaluates in the VM while its pieces compile in
+    the background, then switches to them: the same values and Jacobians either way."""
+    monkeypatch.setenv("CPAS_OCP_CACHE", str(tmp_path / "cache"))
+    monkeypatch.setenv("CPAS_OCP_COMPILE", "1")
+    test = load_test(drogue_folder(1))
+    vm = Estimator(test, settings=Settings(compile=False))
+    est = Estimator(test, settings=Settings(compile=True))
+    z = vm.initial_point()
+    points, reference = est._points, vm._points
+    np.testing.assert_array_equal(points.residual_value(z), reference.residual_value(z))
+    assert est._native is not None and points.switched_at is None  # still compiling
+    est._native[0].wait()
+    z2 = z * (1.0 + 1e-3 * np.random.default_rng(7).standard_normal(z.size))
+    for name in ("residual_jacobian", "constraints"):
+        a, b = getattr(points, name)(z2), getattr(reference, name)(z2)
+        for x, y in zip(a, b, strict=True):
+            x, y = (v.toarray() if hasattr(v, "toarray") else v for v in (x, y))
+            np.testing.assert_allclose(x, y, rtol=1e-12, atol=1e-12 * np.max(np.abs(y)))
+    assert points.switched_at == 1  # after the one evaluation made in the VM

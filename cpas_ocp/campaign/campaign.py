@@ -17,7 +17,6 @@ airspeed V_i), which `cpas-ocp dispersions` uses for its drag-area envelopes.
 
 from __future__ import annotations
 
-import sys
 import time
 import traceback
 from collections.abc import Sequence
@@ -32,6 +31,7 @@ from cpas_ocp.campaign.parallel import run_tasks
 from cpas_ocp.errors import InputError, PluginError, SolverFailure
 from cpas_ocp.io.flight_test import MANIFEST, Parachute
 from cpas_ocp.physics.parameters import param_name, split_name
+from cpas_ocp.progress import progress_line
 
 COLUMNS = ["test", "parameter", "name", "parachute", "type", "stage", "forebody",
            "cluster_size", "line_length", "value", "std", "unit"]
@@ -146,15 +146,10 @@ def run_campaign(folders: Sequence[str | Path], workers: int = 2, scheduler: str
     `folders`.  With `progress`, a line on stderr counts finished and failed tests."""
     paths = [str(Path(f)) for f in folders]
     outcomes: dict[str, TestOutcome] = {}
-    for _, outcome in run_tasks(reconstruct_folder, paths, workers, scheduler):
-        outcomes[outcome.folder] = outcome
-        if progress and sys.stderr.isatty():
-            failed = sum(not o.ok for o in outcomes.values())
-            sys.stderr.write(f"\r  {len(outcomes)}/{len(paths)} tests reconstructed, "
-                             f"{failed} failed   ")
-            sys.stderr.flush()
-    if progress and sys.stderr.isatty():
-        sys.stderr.write("\n")
+    with progress_line("tests reconstructed", len(paths), progress) as advance:
+        for _, outcome in run_tasks(reconstruct_folder, paths, workers, scheduler):
+            outcomes[outcome.folder] = outcome
+            advance(f"{sum(not o.ok for o in outcomes.values())} failed")
     return [outcomes[p] for p in paths]
 
 

@@ -23,7 +23,6 @@ numbers.  A case's result does not depend on the chunk it is flown in.
 from __future__ import annotations
 
 import functools
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -44,6 +43,7 @@ from cpas_ocp.io.flight_test import MANIFEST, FlightTest, load_test
 from cpas_ocp.physics.model import Model
 from cpas_ocp.physics.parameters import param_name
 from cpas_ocp.physics.units import LBF
+from cpas_ocp.progress import progress_line
 
 MAX_CHUNK = 1000  # cases per task: about 4 s of flight for a Drogue stage
 QUANTILES = (0.0, 0.01, 0.1, 0.5, 0.9, 0.99, 0.999, 1.0)
@@ -226,22 +226,17 @@ def run_monte_carlo(fit: Fit, stages: list[StageCases], workers: int = 2,
             owner.append(k)
             first += size
     results: list[PeakLoads | None] = [None] * len(chunks)
-    total, flown = sum(len(s.cases) for s in stages), 0
-    for done, (i, loads) in enumerate(run_tasks(fly_chunk, chunks, workers, scheduler), 1):
-        expected = nominals[owner[i]].tension[0]
-        if not np.isclose(loads.tension[0], expected, rtol=1e-9, atol=0.0):
-            raise InputError(folder, "(model)", f"the same model in every worker; a worker "
-                             f"flies the fitted values to {loads.tension[0]:.6g} N against "
-                             f"{expected:.6g} N here (another cpas-ocp version or another "
-                             "copy of the test folder on the workers?)")
-        results[i] = loads
-        flown += len(chunks[i].cases) - 1
-        if progress and sys.stderr.isatty():
-            sys.stderr.write(f"\r  {flown:,}/{total:,} cases flown ({done}/{len(chunks)} "
-                             "chunks)   ")
-            sys.stderr.flush()
-    if progress and sys.stderr.isatty():
-        sys.stderr.write("\n")
+    total = sum(len(c.cases) - 1 for c in chunks)
+    with progress_line("cases flown", total, progress) as advance:
+        for done, (i, loads) in enumerate(run_tasks(fly_chunk, chunks, workers, scheduler), 1):
+            expected = nominals[owner[i]].tension[0]
+            if not np.isclose(loads.tension[0], expected, rtol=1e-9, atol=0.0):
+                raise InputError(folder, "(model)", f"the same model in every worker; a "
+                                 f"worker flies the fitted values to {loads.tension[0]:.6g} N "
+                                 f"against {expected:.6g} N here (another cpas-ocp version "
+                                 "or another copy of the test folder on the workers?)")
+            results[i] = loads
+            advance(f"{done}/{len(chunks)} chunks", done=len(chunks[i].cases) - 1)
     out = []
     for k, s in enumerate(stages):
         parts = [r for r, o in zip(results, owner, strict=True) if o == k and r is not None]

@@ -19,7 +19,6 @@ fit's captured value, the same for every case (t_i is not dispersed).
 
 from __future__ import annotations
 
-import sys
 from dataclasses import dataclass
 
 import casadi as ca
@@ -30,6 +29,7 @@ from cpas_ocp.estimation.estimator import Fit
 from cpas_ocp.estimation.simulate import rk4_step
 from cpas_ocp.physics.model import Model
 from cpas_ocp.physics.parameters import param_name
+from cpas_ocp.progress import progress_line
 
 # RK4 step (s): on the Drogue's disreef stage the peak load at 4 ms is 0.03 % below the
 # 1 ms value (50,477 against 50,490 N), far inside any dispersion.
@@ -140,15 +140,12 @@ def fly_stage(model: Model, start: StageStart, cases: pd.DataFrame,
     peak_g = np.full(n, -np.inf)
     steps = max(1, int(np.ceil((t1 - t_i) / step)))
     h = (t1 - t_i) / steps
-    for j in range(steps + 1):
-        t = t_i + j * h
-        X_next, tension, factor = flight(X, t, h, p, c)
-        np.maximum(peak_t, np.asarray(tension).ravel(), out=peak_t)
-        np.maximum(peak_g, np.asarray(factor).ravel(), out=peak_g)
-        X = np.asarray(X_next)
-        if progress and sys.stderr.isatty() and j % 50 == 0:
-            sys.stderr.write(f"\r  {parachute} {stage}: {t - t_i:5.2f} of {t1 - t_i:.2f} s")
-            sys.stderr.flush()
-    if progress and sys.stderr.isatty():
-        sys.stderr.write("\n")
+    with progress_line(f"{parachute} {stage}: steps flown", steps + 1, progress) as advance:
+        for j in range(steps + 1):
+            t = t_i + j * h
+            X_next, tension, factor = flight(X, t, h, p, c)
+            np.maximum(peak_t, np.asarray(tension).ravel(), out=peak_t)
+            np.maximum(peak_g, np.asarray(factor).ravel(), out=peak_g)
+            X = np.asarray(X_next)
+            advance(f"t = {t - t_i:.2f} of {t1 - t_i:.2f} s")
     return PeakLoads(parachute, stage, float(t_i), t1, peak_t, peak_g)

@@ -53,7 +53,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import sys
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
@@ -69,6 +68,7 @@ from cpas_ocp.io.model_spec import RISER_MODELS, ModelSpec
 from cpas_ocp.physics.effects.base import Effect
 from cpas_ocp.physics.effects.registry import BUILTIN, EffectType
 from cpas_ocp.process_memory import release_freed_memory
+from cpas_ocp.progress import progress_line
 
 if TYPE_CHECKING:
     from cpas_ocp.physics.model import Model
@@ -179,14 +179,12 @@ def score_tests(fit: Fit, spec: ModelSpec,
     entries = {n: e for n, e in candidate_effects(candidates).items()
                if n not in spec.effect_names and n not in exclude}
     out = []
-    for i, (name, entry) in enumerate(entries.items()):
-        if progress and sys.stderr.isatty():
-            sys.stderr.write(f"\r  score test {i + 1}/{len(entries)}: {name:24s}")
-            sys.stderr.flush()
-        out.append(score_test(fit, spec, entry))
-        release_freed_memory()
-    if progress and sys.stderr.isatty():
-        sys.stderr.write("\n")
+    with progress_line("score tests", len(entries), progress) as advance:
+        for name, entry in entries.items():
+            advance(name, done=0)
+            out.append(score_test(fit, spec, entry))
+            release_freed_memory()
+            advance()
     return rank(out)
 
 

@@ -34,6 +34,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+from cpas_ocp import interrupts
 from cpas_ocp.estimation.fit import (
     EVENTS,
     MAX_LATTICE_STEP_S,
@@ -85,9 +86,15 @@ class Estimator(NlpTranscription, Solving, Linearising):
         """`effects`: an effect list, a `ModelSpec`, or None for the model the manifest declares.
 
         `settings.free` and `settings.fixed` override the spec's choice.
+
+        Built with signals deferred (`interrupts.deferred`): CasADi's wrappers clear
+        a Python exception raised inside them while they match argument types, so an
+        `Interrupted` raised there by a signal's handler would be lost and the
+        command would run on; deferred, it is raised once the build is done.
         """
-        super().__init__(test, effects, settings)
-        self._setup_solver()
+        with interrupts.deferred():
+            super().__init__(test, effects, settings)
+            self._setup_solver()
 
 
 def reconstruct(test: FlightTest, effects: Sequence[Effect] | ModelSpec | None = None,

@@ -99,12 +99,31 @@ class PointEvaluations:
     """
 
     def __init__(self, residual_value: ca.Function, residual_jacobian: ca.Function,
-                 constraint_value: ca.Function, constraints: ca.Function) -> None:
+                 constraint_value: ca.Function, constraints: ca.Function,
+                 switch: Callable[[], Sequence[ca.Function] | None] | None = None) -> None:
+        """`switch`, where given, is asked before each new evaluation for the same four
+        functions in faster form (native code compiled meanwhile); once it gives them,
+        they replace these (on the same patterns) and it is not asked again."""
         self._buffers = {name: FunctionBuffer(fn) for name, fn in (
             ("r", residual_value), ("rJ", residual_jacobian),
             ("g", constraint_value), ("gA", constraints))}
         self._kept: dict[str, list[tuple[bytes, list]]] = {name: [] for name in self._buffers}
         self.evaluations = dict.fromkeys(self._buffers, 0)  # model evaluations made, per kind
+        self._switch = switch
+        self.switched_at: int | None = None  # the evaluations made before the switch
+
+    def _maybe_switch(self) -> None:
+        if self._switch is None:
+            return
+        functions = self._switch()
+        if functions is None:
+            return
+        self._switch = None
+        for name, fn in zip(self._buffers, functions, strict=True):
+            old = self._buffers[name].fn
+            assert all(fn.sparsity_out(i) == old.sparsity_out(i) for i in range(fn.n_out()))
+            self._buffers[name] = FunctionBuffer(fn)
+        self.switched_at = sum(self.evaluations.values())
 
     def _lookup(self, name: str, key: bytes) -> list | None:
         for k, value in self._kept[name]:
@@ -116,6 +135,7 @@ class PointEvaluations:
         key = np.ascontiguousarray(z, dtype=float).tobytes()
         found = self._lookup(name, key)
         if found is None:
+            self._maybe_switch()
             buffer = self._buffers[name]
             found = [buffer.shaped(i, v) for i, v in enumerate(buffer.nonzeros(z))]
             self.evaluations[name] += 1

@@ -17,7 +17,7 @@ import numpy as np
 
 from cpas_ocp.estimation.action_windows import ActionWindows
 from cpas_ocp.estimation.chained_jacobians import ModelPieces
-from cpas_ocp.estimation.compiled import compile_functions
+from cpas_ocp.estimation.compiled import in_background, native_build
 from cpas_ocp.estimation.fit import (
     EVENTS,
     PRIORS,
@@ -318,19 +318,58 @@ class NlpTranscription:
         blocks += sensor_blocks
         # Each block's values (the line search's trial points) and its values with the
         # Jacobian (accepted points) are chains of the model's few pieces, which run as
-        # native code (`chained_jacobians`); the block functions themselves stay in
-        # CasADi's VM, for the differentiable graph (`_obj`, `_g`).
+        # native code once compiled (`chained_jacobians`; until then, and without a
+        # compiler, in CasADi's VM: `_switch_to_native`); the block functions themselves
+        # stay in the VM, for the differentiable graph (`_obj`, `_g`).
+        build = None
         if self.settings.compile:
-            pieces.adopt(compile_functions(list(pieces.functions.values())))
+            build = native_build(list(pieces.functions.values()))
+            if build is not None and not in_background():
+                pieces.adopt(build.wait())
+                build = None
+            elif build is not None and (native := build.ready()) is not None:
+                pieces.adopt(native)
+                build = None
+        layout = (blocks, n_gap_blocks, destinations, offsets, gap_rows, n)
+        self._native = (build, pieces, layout, nlp) if build is not None else None
+        nlp.residuals, nlp.g = self._block_pieces(pieces, *layout)
+        nlp.lbg = [np.zeros(self.model.nx * n)]
+        nlp.ubg = [np.zeros(self.model.nx * n)]
+
+    def _block_pieces(self, pieces: ModelPieces, blocks: list[_Block], n_gap_blocks: int,
+                      destinations: list[np.ndarray], offsets: list[int],
+                      gap_rows: list[np.ndarray], n: int) -> tuple[list[_Piece], list[_Piece]]:
+        """The sensors' residual pieces and the continuity gaps' constraint pieces, every
+        block's values and Jacobian chained from `pieces`."""
         chains = [pieces.gap(b.chain[1]) if b.chain[0] == "gap"
                   else pieces.residual(*b.chain) for b in blocks]
         mapped = [self._mapped_block(b, value_fn, jac_fn) for b, (value_fn, jac_fn)
                   in zip(blocks, chains, strict=True)]
-        nlp.residuals = _gathered(mapped[n_gap_blocks:], destinations, offsets)
-        nlp.g = (mapped[:1] if n_gap_blocks == 1 else
-                 _gathered(mapped[:n_gap_blocks], gap_rows, [0, self.model.nx * n]))
-        nlp.lbg = [np.zeros(self.model.nx * n)]
-        nlp.ubg = [np.zeros(self.model.nx * n)]
+        residuals = _gathered(mapped[n_gap_blocks:], destinations, offsets)
+        gaps = (mapped[:1] if n_gap_blocks == 1 else
+                _gathered(mapped[:n_gap_blocks], gap_rows, [0, self.model.nx * n]))
+        return residuals, gaps
+
+    def _switch_to_native(self) -> tuple[ca.Function, ...] | None:
+        """Once the model's pieces compiled in the background are ready: the point functions
+        (`_point_functions`) rebuilt on them, for `PointEvaluations.switch`; None before."""
+        if self._native is None:
+            return None
+        build, pieces, layout, nlp = self._native
+        native = build.ready()
+        if native is None:
+            if build.failed:
+                self._native = None
+            return None
+        self._native = None
+        pieces.adopt(native)
+        residuals, gaps = self._block_pieces(pieces, *layout)
+        nlp.residuals[:len(residuals)] = residuals
+        nlp.g[:len(gaps)] = gaps
+        functions = self._point_functions(nlp)
+        (self._residual_value, self._residual_jacobian, self._constraint_value,
+         self._constraints) = functions
+        return functions
 
     def _captures(self, nlp: _Nlp, h: float) -> None:
         """Captured quantities at free event times: cubic B-spline weights of node values,
@@ -440,14 +479,10 @@ class NlpTranscription:
         jac = _stack(pieces, "jacobian")
         self._g = _stack(g, "symbolic")
         constraint_jac = _stack(g, "jacobian")
-        self._residual_value = ca.Function("residual_value", [z_all], [_stack(pieces, "value")])
-        self._residual_jacobian = ca.Function("residual_jacobian", [z_all],
-                                              [_stack(pieces, "with_jacobian"), jac])
-        self._constraint_value = ca.Function("constraint_value", [z_all], [_stack(g, "value")])
-        self._constraints = ca.Function("constraints", [z_all],
-                                        [_stack(g, "with_jacobian"), constraint_jac])
-        self._points = PointEvaluations(self._residual_value, self._residual_jacobian,
-                                        self._constraint_value, self._constraints)
+        functions = self._point_functions(nlp)
+        (self._residual_value, self._residual_jacobian, self._constraint_value,
+         self._constraints) = functions
+        self._points = PointEvaluations(*functions, switch=self._switch_to_native)
         # The exact curvature of the few capture and effect constraints (a capture at a
         # free time bends in that time; without it a Pilot's bag-strip constraint made the
         # steps cycle); the curvature of the continuity constraints is neglected.
@@ -474,6 +509,18 @@ class NlpTranscription:
         self._nz = (nlp.X.numel(), nlp.P.numel(), nlp.C.numel())
         self._xscale = nlp.xscale
         self._cscale = nlp.cscale
+
+    @staticmethod
+    def _point_functions(nlp: _Nlp) -> tuple[ca.Function, ...]:
+        """The residuals r(z), r with its Jacobian, the constraints g(z), g with its
+        Jacobian: the functions `PointEvaluations` evaluates."""
+        z, pieces, g = nlp.z, nlp.residuals, nlp.g
+        return (ca.Function("residual_value", [z], [_stack(pieces, "value")]),
+                ca.Function("residual_jacobian", [z], [_stack(pieces, "with_jacobian"),
+                                                       _stack(pieces, "jacobian")]),
+                ca.Function("constraint_value", [z], [_stack(g, "value")]),
+                ca.Function("constraints", [z], [_stack(g, "with_jacobian"),
+                                                 _stack(g, "jacobian")]))
 
     def _variable_bounds(self, nlp: _Nlp) -> None:
         """Bounds of the scaled decision variables: the free parameters' own, captured

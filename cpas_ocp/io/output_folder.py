@@ -9,6 +9,7 @@ same folder removes those whose process is gone.
 
 from __future__ import annotations
 
+import ctypes
 import os
 import shutil
 import tempfile
@@ -21,7 +22,8 @@ from cpas_ocp.errors import InputError
 
 @contextmanager
 def atomic_folder(out: str | Path, marker: str | tuple[str, ...]) -> Iterator[Path]:
-    """Yield a temporary folder beside `out`; on success it replaces `out` in one rename.
+    """Yield a temporary folder beside `out`; on success it takes `out`'s place in one step
+    (`_exchange`).
 
     `out` must be new, empty, or an earlier output of the same kind (it holds
     `marker`, or one of several), so a mistyped path never deletes a user's
@@ -39,11 +41,26 @@ def atomic_folder(out: str | Path, marker: str | tuple[str, ...]) -> Iterator[Pa
     tmp = Path(tempfile.mkdtemp(prefix=f"{TMP_PREFIX}{os.getpid()}-", dir=out.parent))
     try:
         yield tmp
-        if out.exists():
+        if not out.exists():
+            tmp.rename(out)
+        elif not _exchange(tmp, out):
             shutil.rmtree(out)
-        tmp.rename(out)
+            tmp.rename(out)
     finally:
-        shutil.rmtree(tmp, ignore_errors=True)
+        shutil.rmtree(tmp, ignore_errors=True)  # after an exchange, the earlier output
+
+
+def _exchange(a: Path, b: Path) -> bool:
+    """Swap two folders in one step (Linux's renameat2 with RENAME_EXCHANGE), so that a
+    process killed at any moment leaves one of them whole under `b`'s name; False where
+    the system cannot (the caller then removes `b` and renames `a`)."""
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        renameat2 = libc.renameat2
+    except (OSError, AttributeError):
+        return False
+    at_cwd, exchange = -100, 2  # AT_FDCWD, RENAME_EXCHANGE
+    return renameat2(at_cwd, os.fsencode(a), at_cwd, os.fsencode(b), exchange) == 0
 
 
 TMP_PREFIX = ".cpas-out-"
