@@ -40,12 +40,14 @@ class Interrupted(BaseException):
 class _Signals:
     depth: int = 0  # nested `deferred` regions entered
     pending: int | None = None  # the signal that arrived inside one
+    received: int | None = None  # the last signal this process was asked to stop by
 
 
 _state = _Signals()
 
 
 def _handler(signum: int, frame: FrameType | None) -> None:
+    _state.received = signum
     if _state.depth:
         _state.pending = signum
         return
@@ -56,6 +58,12 @@ def handle_signals() -> None:
     """Turn SIGINT and SIGTERM into `Interrupted` (call from the main thread)."""
     for sig in SIGNALS:
         signal.signal(sig, _handler)
+
+
+def received() -> bool:
+    """Whether the process has been asked to stop by a signal (its work is to be dropped,
+    not finished in the background)."""
+    return _state.received is not None
 
 
 def pending() -> bool:

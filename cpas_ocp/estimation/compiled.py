@@ -46,7 +46,8 @@ FLAGS = ("-shared", "-fPIC")
 # and no minutes or gigabytes of compiling.  The pieces of the library's models are
 # below 1.1 MB (the RK4 step's Jacobian of `drogue` with added mass) except that one.
 LARGE_SOURCE_BYTES = 3_000_000
-# Builds that had a library to compile, and compilers started, in this process (benchmarks).
+# Builds that queued a library no build had queued before, and compilers started, in this
+# process (benchmarks).
 COUNTS = {"builds": 0, "libraries": 0}
 VM_SOURCE_BYTES = 4_000_000
 
@@ -122,40 +123,49 @@ class _Job:
 class NativeBuild:
     """The native versions of some functions, compiled by background processes.
 
-    The C sources are generated at once; a library already in the cache is
-    used as it is, the others are queued for the compilers (`_advance`: one
-    per core, and one core left to the caller while it works).  `ready()`
-    returns the native functions once every library is there, and None until
-    then, so the caller runs the functions in CasADi's VM meanwhile and
-    switches when they are ready: a first run is never slower than the VM by
-    more than the sources' generation.  `wait()` blocks until they are.  A
-    compiler that fails leaves the VM functions in use (warned once).
-    Libraries above `VM_SOURCE_BYTES` of source are not compiled.
+    The C sources are generated at once (each in a folder of its own in the
+    cache); a library already in the cache is used as it is, the others are
+    queued for the compilers (`_Queue.advance`: one per core, and one core
+    left to the caller while it works).  `ready()` returns the native
+    functions once every library is there, and None until then, so the caller
+    runs the functions in CasADi's VM meanwhile and switches when they are
+    ready.  `wait()` blocks until they are.  A compiler that fails leaves the
+    VM functions in use (warned once).  Libraries above `VM_SOURCE_BYTES` of
+    source are not compiled.
     """
 
     def __init__(self, functions: list[ca.Function], cc: str) -> None:
         self.functions = list(functions)
         self._native: list[ca.Function] | None = None
         self.failed = False
-        folder = cache_folder()
-        folder.mkdir(parents=True, exist_ok=True)
-        self._folder = Path(tempfile.mkdtemp(prefix=".cpas-cg-", dir=folder))
-        _LIVE.folders.append(self._folder)
-        try:
-            sources = [_generate(fn, self._folder / str(i)) for i, fn in enumerate(functions)]
-        except BaseException:
-            self._remove_folder()
-            raise
-        self.libraries = [folder / f"{fn.name()}-{_digest(src)}.so"
-                          if src.stat().st_size <= VM_SOURCE_BYTES else None
-                          for fn, src in zip(functions, sources, strict=True)]
-        self._jobs = [_QUEUE.job(src, lib, cc) for src, lib in zip(sources, self.libraries,
-                                                                  strict=True)
-                      if lib is not None and not lib.exists()]
-        COUNTS["builds"] += bool(self._jobs)
+        cache = cache_folder()
+        cache.mkdir(parents=True, exist_ok=True)
+        _sweep_stale(cache)
+        self.libraries: list[Path | None] = []
+        self._jobs: list[_Job] = []
+        fresh = False  # whether this build queued a library no other build had
+        for fn in functions:
+            folder = Path(tempfile.mkdtemp(prefix=".cpas-cg-", dir=cache))
+            _LIVE.folders.append(folder)
+            try:
+                src = _generate(fn, folder)
+            except BaseException:
+                _remove(folder)
+                raise
+            lib = (cache / f"{fn.name()}-{_digest(src)}.so"
+                   if src.stat().st_size <= VM_SOURCE_BYTES else None)
+            self.libraries.append(lib)
+            job = None if lib is None or lib.exists() else _QUEUE.job(src, lib, cc)
+            if job is None or job.source != src:  # cached, not compiled, or under way
+                _remove(folder)
+            if job is not None:
+                self._jobs.append(job)
+                fresh = fresh or job.source == src
+        COUNTS["builds"] += fresh
         if self._jobs and sys.stderr.isatty():
             sys.stderr.write(f"  compiling {len(self._jobs)} model functions to native code "
-                             f"(once per model structure; cache {folder}) ...\n")
+                             f"in the background (once per model structure; cache "
+                             f"{cache}) ...\n")
         _QUEUE.advance()
 
     @property
@@ -172,7 +182,6 @@ class NativeBuild:
         if self.pending:
             return None
         errors = [job.error for job in self._jobs if job.error is not None]
-        self._remove_folder()
         if errors:
             self.failed = True
             _warn(RuntimeError(errors[0]))
@@ -188,19 +197,15 @@ class NativeBuild:
             while (native := self.ready()) is None and not self.failed:
                 time.sleep(0.05)
         except BaseException:
-            self.cancel()
+            _QUEUE.cancel(self._jobs)
             raise
         return native if native is not None else list(self.functions)
 
-    def cancel(self) -> None:
-        """Kill this build's compilers and remove its folder."""
-        _QUEUE.cancel(self._jobs)
-        self._remove_folder()
 
-    def _remove_folder(self) -> None:
-        shutil.rmtree(self._folder, ignore_errors=True)
-        if self._folder in _LIVE.folders:
-            _LIVE.folders.remove(self._folder)
+# A compiler's command: the library is compiled beside its source, moved into the cache in
+# one rename (a library in the cache is always complete) and the source's folder removed,
+# by the job itself, so that one still running when the process ends finishes on its own.
+_JOB = 'cc=$1; shift; "$cc" "$@" && mv -f "$PARTIAL" "$LIBRARY" && rm -rf "$FOLDER"'
 
 
 class _Queue:
@@ -227,32 +232,34 @@ class _Queue:
         for job in [j for j in self.running if j.process.poll() is not None]:
             self.running.remove(job)
             _LIVE.compilers.remove(job.process)
-            if job.process.returncode == 0:
-                os.replace(job.partial, job.library)  # atomic: a library is always complete
-            else:
-                err = (job.partial.parent / "stderr").read_bytes().decode(errors="replace")
+            if job.process.returncode != 0:
+                err = (job.source.parent / "stderr").read_bytes().decode(errors="replace")
                 job.error = f"compiling {job.library.name} failed: {err[-500:]}"
+            _remove(job.source.parent)
         limit = max(_cores() - 1, 1) if in_background() else _cores()
         while self.waiting and len(self.running) < limit:
             job, cc = self.waiting.pop()  # the newest first: the model in use now
             if job.done:
+                _remove(job.source.parent)
                 continue
             # A signal waits until the compiler is on the list of those to kill (one
             # raised inside Popen would leave it running, unlisted).  Each runs in a
-            # process group of its own (the driver with its cc1 and as), killed whole,
-            # since killing the driver alone leaves its cc1 running.
+            # process group of its own (the shell with the driver, its cc1 and as),
+            # killed whole, since killing the driver alone leaves its cc1 running.
+            env = {**os.environ, "PARTIAL": str(job.partial), "LIBRARY": str(job.library),
+                   "FOLDER": str(job.source.parent)}
             with open(job.source.parent / "stderr", "wb") as err, interrupts.deferred():
                 job.process = subprocess.Popen(
-                    [cc, optimisation(job.source), *FLAGS, "-o", str(job.partial),
-                     str(job.source), "-lm"], stdout=subprocess.DEVNULL, stderr=err,
-                    start_new_session=True, preexec_fn=_lowest_priority if in_background()
-                    else None)
+                    ["sh", "-c", _JOB, "sh", cc, optimisation(job.source), *FLAGS, "-o",
+                     str(job.partial), str(job.source), "-lm"], env=env,
+                    stdout=subprocess.DEVNULL, stderr=err, start_new_session=True,
+                    preexec_fn=_lowest_priority if in_background() else None)
                 self.running.append(job)
                 _LIVE.compilers.append(job.process)
                 COUNTS["libraries"] += 1
 
     def cancel(self, jobs: list[_Job]) -> None:
-        """Kill and forget `jobs`."""
+        """Kill and forget `jobs`, and remove their folders."""
         for job in jobs:
             self.waiting = [(j, cc) for j, cc in self.waiting if j is not job]
             if job in self.running:
@@ -261,9 +268,31 @@ class _Queue:
                 _kill_group(job.process)
             if not job.library.exists():
                 job.error = "cancelled"
+            _remove(job.source.parent)
 
 
 _QUEUE = _Queue()
+
+
+# A compiler's folder this old belongs to a process killed outright (SIGKILL): no compile
+# takes an hour (the longest measured, 400 s).
+STALE_FOLDER_S = 3600.0
+
+
+def _sweep_stale(cache: Path) -> None:
+    """Remove the compilers' folders in `cache` older than STALE_FOLDER_S."""
+    now = time.time()
+    for folder in cache.glob(".cpas-cg-*"):
+        with suppress(OSError):
+            if now - folder.stat().st_mtime > STALE_FOLDER_S:
+                shutil.rmtree(folder, ignore_errors=True)
+
+
+def _remove(folder: Path) -> None:
+    """Remove a compiler's folder and forget it."""
+    shutil.rmtree(folder, ignore_errors=True)
+    if folder in _LIVE.folders:
+        _LIVE.folders.remove(folder)
 
 
 def _lowest_priority() -> None:
@@ -286,7 +315,7 @@ _LIVE = _Live()
 def abandon() -> None:
     """Kill every running compiler and remove the temporary folders: for a process that
     must end at once, without unwinding (a local worker of a campaign told to stop), and
-    at the end of every process (a library not finished by then is not needed by it)."""
+    at the end of a process a signal stopped."""
     for proc in _LIVE.compilers:
         _kill_group(proc)
     _LIVE.compilers.clear()
@@ -297,13 +326,25 @@ def abandon() -> None:
     _LIVE.folders.clear()
 
 
+def _at_exit() -> None:
+    """At the end of the process: stopped by a signal, drop every compile (`abandon`);
+    else drop those not started and leave the running ones to finish (at the lowest
+    priority, in seconds), so the next run finds their libraries."""
+    if interrupts.received():
+        abandon()
+        return
+    for job, _ in _QUEUE.waiting:
+        _remove(job.source.parent)
+    _QUEUE.waiting.clear()
+
+
 def _forget_the_parents() -> None:
     """In a forked child: the compilers and folders are the parent's, not its own."""
     global _QUEUE, _LIVE
     _QUEUE, _LIVE = _Queue(), _Live()
 
 
-atexit.register(abandon)
+atexit.register(_at_exit)
 os.register_at_fork(after_in_child=_forget_the_parents)
 
 
@@ -324,7 +365,7 @@ def _cores() -> int:
 
 
 def _generate(fn: ca.Function, folder: Path) -> Path:
-    folder.mkdir()
+    """The C source of `fn`, written into the existing `folder`."""
     name = f"{fn.name()}.c"
     gen = ca.CodeGenerator(name, {"with_header": False})
     gen.add(fn)
