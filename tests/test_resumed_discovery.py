@@ -26,7 +26,6 @@ from cpas_ocp.io.flight_test import load_test
 
 from .cheap_discovery import cheap
 
-pytestmark = pytest.mark.slow
 HERE = Path(__file__).resolve().parent
 
 
@@ -46,6 +45,7 @@ def _chain(out: Path) -> tuple[list, list, str]:
             result["ending"]["state"])
 
 
+@pytest.mark.slow
 def test_a_killed_discovery_resumes_as_if_never_stopped(drogue_folder, tmp_path, monkeypatch,
                                                        capsys) -> None:
     folder = drogue_folder(1)
@@ -79,3 +79,22 @@ def test_a_killed_discovery_resumes_as_if_never_stopped(drogue_folder, tmp_path,
     assert resumed[0] == uninterrupted[0] == [None, "gps_lag", "gps_lag", "gps_lag"]
     assert resumed[1] == pytest.approx(uninterrupted[1], rel=1e-9)
     assert resumed[2] == uninterrupted[2] == "stopped early"
+
+
+@pytest.mark.parametrize("setup", ["missing", "not a discovery", "no test folder"])
+def test_a_folder_that_cannot_be_resumed_is_one_line_exit_2(setup, tmp_path, capsys) -> None:
+    """`--resume` of a folder that holds no discovery to go on from, or of none, or
+    `discover` with neither a test folder nor `--resume`: exit 2, one line naming what is
+    wrong, nothing written."""
+    folder = tmp_path / "d"
+    if setup == "not a discovery":
+        folder.mkdir()
+        (folder / "notes.txt").write_text("mine")
+    args = ["discover", "--out", str(folder)] if setup == "no test folder" else \
+        ["discover", "--resume", str(folder)]
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: "), err
+    assert ("--resume DIR" in err[0]) if setup == "no test folder" else (RESUME_FILE in err[0])
+    assert sorted(p.name for p in tmp_path.rglob("*")) == (
+        ["d", "notes.txt"] if setup == "not a discovery" else [])

@@ -229,10 +229,12 @@ class _Queue:
     def advance(self) -> None:
         """Collect the compilers that ended and start waiting ones: one per core, but one
         core left to the process while it has work (`in_background`)."""
-        for job in [j for j in self.running if j.process.poll() is not None]:
+        for job, process in [(j, j.process) for j in self.running]:
+            if process is None or process.poll() is None:
+                continue
             self.running.remove(job)
-            _LIVE.compilers.remove(job.process)
-            if job.process.returncode != 0:
+            _LIVE.compilers.remove(process)
+            if process.returncode != 0:
                 err = (job.source.parent / "stderr").read_bytes().decode(errors="replace")
                 job.error = f"compiling {job.library.name} failed: {err[-500:]}"
             _remove(job.source.parent)
@@ -262,7 +264,7 @@ class _Queue:
         """Kill and forget `jobs`, and remove their folders."""
         for job in jobs:
             self.waiting = [(j, cc) for j, cc in self.waiting if j is not job]
-            if job in self.running:
+            if job in self.running and job.process is not None:
                 self.running.remove(job)
                 _LIVE.compilers.remove(job.process)
                 _kill_group(job.process)
