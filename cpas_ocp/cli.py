@@ -570,7 +570,7 @@ def _discover(args: argparse.Namespace) -> int:
         print(f"solving: {est.size_text()} ...", flush=True)
         est, fit, _, claim = _fit_and_covariance(est, args)
         spec = est.spec
-    whole = [0]  # steps in the chain the folder last held whole
+    whole = [len(chain.steps) if chain is not None else 0]  # steps the folder last held whole
 
     def said(step: DiscoveryStep) -> None:
         print(f"step {step.label} ({step.found_s + step.diagnosed_s:.0f} s): chi-square "

@@ -1,19 +1,19 @@
-"""Native code for the estimator's per-instance Jacobians, compiled once per model and cached.
+"""Native code for the model's pieces (`chained_jacobians`), compiled once per machine.
 
 CasADi evaluates SX functions in its virtual machine.  The same function
 emitted as C and compiled by the system C compiler at -O1 (-O0 for very
-large sources, and none above `VM_SOURCE_BYTES`) runs about four times faster on the
-RK4-step Jacobians that dominate a reconstruction (and -O2 costs twice the
-compile time for 10 % more).  The C source is hashed and
-the shared library is kept under that hash in the cache folder
-(``$CPAS_OCP_CACHE``, else ``~/.cache/cpas-ocp``), so a model structure is
-compiled once per machine: every test folder with the same vehicle,
-parachutes, sensors and atmosphere reuses it.
+large sources, and none above `VM_SOURCE_BYTES`) runs about four times
+faster on an RK4 step's Jacobian (and -O2 costs twice the compile time for
+10 % more).  The C source is hashed and the shared library kept under that
+hash in the cache folder (``$CPAS_OCP_CACHE``, else ``~/.cache/cpas-ocp``),
+so a piece is compiled once per machine: every test folder with the same
+vehicle, parachutes, sensors and atmosphere reuses it.
 
-Compiled functions carry no derivatives; the estimator supplies every
-derivative Ipopt needs (objective gradient, constraint Jacobian, Hessian)
-from separately compiled Jacobian functions.  Without a C compiler, or with
-``CPAS_OCP_COMPILE=0``, the SX functions are used unchanged.
+A model met for the first time runs in the VM while its pieces compile in
+the background (`NativeBuild`); the estimator switches to them once they
+are all there.  ``CPAS_OCP_COMPILE=wait`` compiles first, as before;
+``CPAS_OCP_COMPILE=0``, or no C compiler, keeps the VM.  Compiled functions
+carry no derivatives: each piece comes with a separately compiled Jacobian.
 """
 
 from __future__ import annotations
@@ -73,19 +73,6 @@ def in_background() -> bool:
     """Whether a model met for the first time runs in the VM while its native code compiles
     (the default), rather than waiting for it (``CPAS_OCP_COMPILE=wait``)."""
     return os.environ.get("CPAS_OCP_COMPILE", "1") != "wait"
-
-
-def compile_functions(functions: list[ca.Function]) -> list[ca.Function]:
-    """Native versions of `functions` (same names, inputs and outputs), compiled as needed
-    and waited for.
-
-    Missing libraries are compiled in parallel, one compiler per core at a
-    time.  Falls back to the functions themselves when no compiler is
-    available, or (with a warning on stderr) when the cache cannot be written
-    or the compiler fails.
-    """
-    build = native_build(functions)
-    return list(functions) if build is None else build.wait()
 
 
 def native_build(functions: list[ca.Function]) -> NativeBuild | None:
