@@ -17,13 +17,19 @@ Here the model is expanded once per *kind of piece* instead:
 * `rhs` / `rhs_d`: the dynamics and their Jacobians the same way (for samples
   inside a long interval, predicted by Hermite interpolation);
 * `observe_i` / `observe_i_d`: the outputs of sensor group i at a state and
-  their Jacobians.
+  their Jacobians; where an output reads the state at another time (a sensor's
+  lag, `ModelContext.at_time_offset`), that state and time are inputs of their
+  own, and `offset_k` / `offset_k_d` give the offset dt(p) with its Jacobians.
 
 Each block's function is then an MX chain of calls to these pieces, with the
 chain rule written out (A_m ... A_1 for an interval of m sub-steps, the
 parameters' sensitivities accumulated as D <- A D + B), evaluated in CasADi's
-VM over native pieces.  Only the pieces are compiled, and their size does not
-grow with the sub-steps; the chains cost a few matrix products per instance.
+VM over native pieces.  An offset state is chained the same way, through
+the step piece from the state at the sample, its step h = dt(p) / steps
+carrying dt's sensitivities (the step piece also gives dx+/dh and dx+/dt).
+Only the pieces are compiled, and their size does not grow with the
+sub-steps or a lag's steps; the chains cost a few matrix products per
+instance.  The lagged GPS output's Jacobian, expanded, was 5.5 MB of C.
 """
 
 from __future__ import annotations
@@ -51,36 +57,47 @@ class ModelPieces:
     cscale: float
     xscale: np.ndarray
     functions: dict[str, ca.Function] = field(default_factory=dict)
+    # Per observation piece, the offsets (indices into `model.offsets`) its outputs read.
+    offsets_of: dict[str, list[int]] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         m = self.model
-        self._x, self._t, self._h = ca.SX.sym("x", m.nx), ca.SX.sym("t"), ca.SX.sym("h")
-        self._p = ca.SX.sym("p", len(m.parameters))
-        self._c = ca.SX.sym("c", len(m.captures))
-        self._add("rk4_step", [self._x, self._t, self._h, self._p, self._c],
-                  rk4(m.rhs, self._x, self._t, self._h, self._p, self._c))
+        self._x, self._t, self._p, self._c = m.symbols
+        h = ca.SX.sym("h")
+        self._add("rk4_step", [self._x, self._t, h, self._p, self._c],
+                  rk4(m.rhs, self._x, self._t, h, self._p, self._c), [self._x, h, self._t])
 
-    def _add(self, name: str, args: list[ca.SX], expr: ca.SX) -> None:
-        """Piece `name` (value) and `name_d` (value and Jacobians in x, free p, c)."""
-        x, p, c = args[0], args[-2], args[-1]
+    def _add(self, name: str, args: list[ca.SX], expr: ca.SX, wrt: Sequence[ca.SX]) -> None:
+        """Piece `name` (value) and `name_d`: the value, its Jacobians in the free
+        parameters (scaled) and the captures (scaled), then in each of `wrt`."""
+        p, c = args[-2], args[-1]
         jp = ca.jacobian(expr, p)[:, self.free_cols] @ ca.diag(ca.DM(self.pscale)) \
             if self.free_cols else ca.SX(expr.numel(), 0)
         self.functions[name] = ca.Function(name, args, [expr])
         self.functions[f"{name}_d"] = ca.Function(
-            f"{name}_d", args, [expr, ca.jacobian(expr, x), jp, ca.jacobian(expr, c) * self.cscale])
+            f"{name}_d", args, [expr, jp, ca.jacobian(expr, c) * self.cscale,
+                                *(ca.jacobian(expr, w) for w in wrt)])
 
     def need_rhs(self) -> None:
         """Add the dynamics' pieces (for samples inside long intervals)."""
         if "rhs" not in self.functions:
             self._add("rhs", [self._x, self._t, self._p, self._c],
-                      self.model.rhs(self._x, self._t, self._p, self._c))
+                      self.model.rhs(self._x, self._t, self._p, self._c), [self._x])
 
     def add_observation(self, names: Sequence[str]) -> str:
-        """Add the pieces of the outputs of sensors `names` (stacked); their name."""
+        """Add the pieces of the outputs of sensors `names` (stacked), and of the offsets
+        they read; the observation piece's name."""
         key = f"observe_{sum(n.startswith('observe_') for n in self.functions) // 2}"
         m = self.model
-        y = ca.vertcat(*[m.outputs[name](self._x, self._t, self._p, self._c) for name in names])
-        self._add(key, [self._x, self._t, self._p, self._c], y)
+        y = ca.vertcat(*[m.output_expressions[name] for name in names])
+        used = [k for k, o in enumerate(m.offsets)
+                if ca.depends_on(y, ca.vertcat(o.x, o.t))]
+        self.offsets_of[key] = used
+        for k in used:
+            if f"offset_{k}" not in self.functions:
+                self._add(f"offset_{k}", [self._p, self._c], m.offsets[k].dt, [])
+        at = [v for k in used for v in (m.offsets[k].x, m.offsets[k].t)]
+        self._add(key, [self._x, self._t, *at, self._p, self._c], y, [self._x, *at])
         return key
 
     def adopt(self, functions: Sequence[ca.Function]) -> None:
@@ -89,46 +106,53 @@ class ModelPieces:
 
     # -- the chains --------------------------------------------------------------------
 
-    def _states(self, n_states: int) -> tuple[list[ca.MX], ca.DM]:
-        nx = self.model.nx
-        return [ca.MX.sym(f"x{i}", nx) for i in range(n_states)], ca.diag(ca.DM(self.xscale))
-
     def _pc(self) -> tuple[ca.MX, ca.MX]:
         m = self.model
         return ca.MX.sym("p", len(m.parameters)), ca.MX.sym("c", len(m.captures))
 
+    def _zeros(self, rows: int, n_states: int) -> list[ca.MX]:
+        """Zero sensitivities of `rows` quantities to n_states states, p and c."""
+        nx, nfree, ncap = self.model.nx, len(self.free_cols), len(self.model.captures)
+        return [*(ca.MX(rows, nx) for _ in range(n_states)), ca.MX(rows, nfree),
+                ca.MX(rows, ncap)]
+
     def _stepped(self, x: ca.MX, t: ca.MX, length: ca.MX, steps: int, p: ca.MX, c: ca.MX,
-                 jacobian: bool) -> tuple[ca.MX, list[ca.MX]]:
-        """The state `steps` RK4 steps of length/steps after x at t, and (with `jacobian`)
-        its sensitivities to the scaled x, the scaled free parameters and c."""
+                 sens: list[ca.MX] | None, dlength: list[ca.MX] | None = None
+                 ) -> tuple[ca.MX, list[ca.MX]]:
+        """The state `steps` RK4 steps of length/steps after x at t, and (given `sens`, x's
+        sensitivities to each state argument (scaled), the scaled free parameters and c)
+        its own; `dlength`: those of `length` (None: it is data)."""
         h = length / steps
-        if not jacobian:
+        if sens is None:
             for j in range(steps):
                 x = self.functions["rk4_step"](x, t + j * h, h, p, c)
             return x, []
-        _, xs = self._states(0)
-        dx = dp = dc = None
         for j in range(steps):
-            x, a, b, cc = self.functions["rk4_step_d"](x, t + j * h, h, p, c)
-            if dx is None:
-                dx, dp, dc = a @ xs, b, cc
-            else:
-                dx, dp, dc = a @ dx, a @ dp + b, a @ dc + cc
-        return x, [dx, dp, dc]
+            x, b, cc, a, ah, at = self.functions["rk4_step_d"](x, t + j * h, h, p, c)
+            new = [a @ d for d in sens]
+            new[-2], new[-1] = new[-2] + b, new[-1] + cc
+            if dlength is not None:  # the step's length and time move with the parameters
+                new = [d + (ah + j * at) @ (dl / steps) for d, dl in zip(new, dlength,
+                                                                         strict=True)]
+            sens = new
+        return x, sens
 
     def gap(self, steps: int) -> tuple[ca.Function, ca.Function]:
         """The continuity gap (x1 - x(t + dt)) / xscale of an interval of `steps` RK4 steps,
         as (values, values and Jacobian) with the inputs (x, x1, t, dt, p, c) and the
         Jacobian's columns (x, x1 scaled, free parameters scaled, c scaled), column-major."""
-        (x, x1), _ = self._states(2)
+        nx = self.model.nx
+        x, x1 = ca.MX.sym("x0", nx), ca.MX.sym("x1", nx)
         t, dt = ca.MX.sym("t"), ca.MX.sym("dt")
         p, c = self._pc()
         inv = ca.diag(ca.DM(1.0 / self.xscale))
         args = [x, x1, t, dt, p, c]
-        xe, _ = self._stepped(x, t, dt, steps, p, c, jacobian=False)
+        xe, _ = self._stepped(x, t, dt, steps, p, c, None)
         value = ca.Function(f"gap_{steps}_chain", args, [(x1 - xe) / self.xscale])
-        xe, (dx, dp, dc) = self._stepped(x, t, dt, steps, p, c, jacobian=True)
-        jac = ca.horzcat(-inv @ dx, ca.DM.eye(self.model.nx), -inv @ dp, -inv @ dc)
+        start = self._zeros(nx, 1)
+        start[0] = ca.MX(ca.diag(ca.DM(self.xscale)))
+        xe, (dx, dp, dc) = self._stepped(x, t, dt, steps, p, c, start)
+        jac = ca.horzcat(-inv @ dx, ca.DM.eye(nx), -inv @ dp, -inv @ dc)
         both = ca.Function(f"gap_{steps}_chain_jac", args, [(x1 - xe) / self.xscale, ca.vec(jac)])
         return value, both
 
@@ -137,56 +161,77 @@ class ModelPieces:
         Jacobian), with `transcription._sensor_blocks`' inputs for a sample `kind`: 0 at a
         node (x, t, ym, sg, p, c), 1 one partial step after it (x, t, dt, ym, sg, p, c), 2
         inside a long interval by Hermite interpolation (x, x1, t, dt, H, ym, sg, p, c)."""
-        n_out = self.functions[observe].numel_out(0)
+        nx, n_out = self.model.nx, self.functions[observe].numel_out(0)
         ym, sg = ca.MX.sym("ym", n_out), ca.MX.sym("sg", n_out)
         p, c = self._pc()
         t, dt, length = ca.MX.sym("t"), ca.MX.sym("dt"), ca.MX.sym("H")
-        states, _ = self._states(2 if kind == 2 else 1)
-        if kind == 0:
-            extra, t_at = [], t
-        elif kind == 1:
-            extra, t_at = [dt], t + dt
-        else:
-            extra, t_at = [dt, length], t + dt
+        states = [ca.MX.sym(f"x{i}", nx) for i in range(2 if kind == 2 else 1)]
+        extra, t_at = ([], t) if kind == 0 else ([dt], t + dt) if kind == 1 else \
+            ([dt, length], t + dt)
         args = [*states, t, *extra, ym, sg, p, c]
         fns = []
         for jacobian in (False, True):
             x_at, sens = self._sample_state(kind, states, t, dt, length, p, c, jacobian)
+            at, at_sens = self._offset_states(observe, x_at, t_at, p, c,
+                                              sens if jacobian else None)
             if not jacobian:
-                y = self.functions[observe](x_at, t_at, p, c)
+                y = self.functions[observe](x_at, t_at, *at, p, c)
                 fns.append(ca.Function(f"{observe}_{kind}_chain", args, [(ym - y) / sg]))
                 continue
-            y, yx, yp, yc = self.functions[f"{observe}_d"](x_at, t_at, p, c)
-            *dstates, dp, dc = sens
-            weight = -ca.diag(1.0 / sg)
-            jac = weight @ ca.horzcat(*(yx @ d for d in dstates), yx @ dp + yp, yx @ dc + yc)
+            y, yp, yc, yx, *y_at = self.functions[f"{observe}_d"](x_at, t_at, *at, p, c)
+            jac = [yx @ d for d in sens]
+            jac[-2], jac[-1] = jac[-2] + yp, jac[-1] + yc
+            for y_o, d_o in zip(y_at, at_sens, strict=True):
+                jac = [j + y_o @ d for j, d in zip(jac, d_o, strict=True)]
+            jac = -ca.diag(1.0 / sg) @ ca.horzcat(*jac)
             fns.append(ca.Function(f"{observe}_{kind}_chain_jac", args,
                                    [(ym - y) / sg, ca.vec(jac)]))
         return fns[0], fns[1]
+
+    def _offset_states(self, observe: str, x_at: ca.MX, t_at: ca.MX, p: ca.MX, c: ca.MX,
+                       sens: list[ca.MX] | None) -> tuple[list[ca.MX], list[list[ca.MX]]]:
+        """The offset states and times the outputs of `observe` read, as its piece takes
+        them, and (given the sample state's `sens`) their sensitivities, in the same order."""
+        at, at_sens = [], []
+        for k in self.offsets_of[observe]:
+            steps = self.model.offsets[k].steps
+            if sens is None:
+                length = self.functions[f"offset_{k}"](p, c)
+                x_o, _ = self._stepped(x_at, t_at, length, steps, p, c, None)
+                at += [x_o, t_at + length]
+                continue
+            length, lp, lc = self.functions[f"offset_{k}_d"](p, c)
+            dlength = [*self._zeros(1, len(sens) - 2)[:-2], lp, lc]
+            x_o, sens_o = self._stepped(x_at, t_at, length, steps, p, c, sens, dlength)
+            at += [x_o, t_at + length]
+            at_sens += [sens_o, dlength]
+        return at, at_sens
 
     def _sample_state(self, kind: int, states: list[ca.MX], t: ca.MX, dt: ca.MX,
                       length: ca.MX, p: ca.MX, c: ca.MX, jacobian: bool
                       ) -> tuple[ca.MX, list[ca.MX]]:
         """The state at a sample of `kind` and (with `jacobian`) its sensitivities to each
         state argument (scaled), the scaled free parameters and c."""
-        nx, nfree, ncap = self.model.nx, len(self.free_cols), len(self.model.captures)
-        _, xs = self._states(0)
+        nx = self.model.nx
+        xs = ca.MX(ca.diag(ca.DM(self.xscale)))
+        start = self._zeros(nx, len(states))
+        start[0] = xs
         if kind == 0:
-            return states[0], ([xs, ca.MX(nx, nfree), ca.MX(nx, ncap)] if jacobian else [])
+            return states[0], (start if jacobian else [])
         if kind == 1:
-            return self._stepped(states[0], t, dt, 1, p, c, jacobian)
+            return self._stepped(states[0], t, dt, 1, p, c, start if jacobian else None)
         x_a, x_b = states
         if not jacobian:
             f_a = self.functions["rhs"](x_a, t, p, c)
             f_b = self.functions["rhs"](x_b, t + length, p, c)
             return hermite_state(x_a, x_b, f_a, f_b, length, dt), []
-        f_a, fx_a, fp_a, fc_a = self.functions["rhs_d"](x_a, t, p, c)
-        f_b, fx_b, fp_b, fc_b = self.functions["rhs_d"](x_b, t + length, p, c)
-        zero_x = ca.MX(nx, nx)
+        f_a, fp_a, fc_a, fx_a = self.functions["rhs_d"](x_a, t, p, c)
+        f_b, fp_b, fc_b, fx_b = self.functions["rhs_d"](x_b, t + length, p, c)
+        zero = self._zeros(nx, 2)
         # The interpolant is linear in (x_a, f_a, x_b, f_b): each sensitivity is the
         # interpolant of theirs.
-        sens = [hermite_state(xs, zero_x, fx_a @ xs, zero_x, length, dt),
-                hermite_state(zero_x, xs, zero_x, fx_b @ xs, length, dt),
-                hermite_state(ca.MX(nx, nfree), ca.MX(nx, nfree), fp_a, fp_b, length, dt),
-                hermite_state(ca.MX(nx, ncap), ca.MX(nx, ncap), fc_a, fc_b, length, dt)]
+        sens = [hermite_state(xs, zero[0], fx_a @ xs, zero[0], length, dt),
+                hermite_state(zero[1], xs, zero[1], fx_b @ xs, length, dt),
+                hermite_state(zero[2], zero[2], fp_a, fp_b, length, dt),
+                hermite_state(zero[3], zero[3], fc_a, fc_b, length, dt)]
         return hermite_state(x_a, x_b, f_a, f_b, length, dt), sens

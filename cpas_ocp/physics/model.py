@@ -57,6 +57,7 @@ class ModelContext:
     state_names: tuple[str, ...] = ()
     # Canopies that are bodies of their own (elastic risers); the others ride on the vehicle.
     separate_bodies: set[str] = field(default_factory=set)
+    offsets: list[TimeOffset] = field(default_factory=list)  # `at_time_offset`'s
 
     def separate_body(self, chute: str, effect: str) -> None:
         """Make canopy `chute` a body of its own (on behalf of riser model `effect`).
@@ -122,17 +123,53 @@ class ModelContext:
         derivative is known.  A sensor that reports with a time lag tau sees
         ``at_time_offset(y, -tau, n)``; the step dt/steps should stay well
         below the time scale of the dynamics (inflation: about 0.1 s).
+
+        The expression returned holds the offset state and time as symbols of
+        their own (`TimeOffset`); `Model` puts the RK4 steps in for them in
+        every function it gives (`expand_offsets`), and the estimator's pieces
+        chain them through one compiled step instead (`chained_jacobians`).
         """
         if self.state_vector is None:
             raise RuntimeError("at_time_offset is available in the observations pass only")
         xdot = ca.vertcat(*(self.xdot[n] for n in self.state_names))
         p = ca.vertcat(ca.SX(0, 1), *self.p.values())
         c = ca.vertcat(ca.SX(0, 1), *self.c.values())
-        f = ca.Function("dynamics", [self.state_vector, self.t, p, c], [xdot])
-        x, t, h = self.state_vector, self.t, dt / steps
-        for _ in range(steps):
-            x, t = rk4(f, x, t, h, p, c), t + h
-        return ca.substitute(expr, ca.vertcat(self.state_vector, self.t), ca.vertcat(x, t))
+        k = len(self.offsets)
+        offset = TimeOffset(ca.SX.sym(f"x_offset{k}", self.state_vector.numel()),
+                            ca.SX.sym(f"t_offset{k}"), ca.SX(dt), steps,
+                            ca.Function("dynamics", [self.state_vector, self.t, p, c], [xdot]))
+        self.offsets.append(offset)
+        return ca.substitute(expr, ca.vertcat(self.state_vector, self.t),
+                             ca.vertcat(offset.x, offset.t))
+
+    def expand_offsets(self, expr: ca.SX) -> ca.SX:
+        """`expr` with every offset state and time (`at_time_offset`) replaced by its RK4
+        steps from the state at t: a function of (x, t, p, c) alone."""
+        if not self.offsets:
+            return expr
+        p = ca.vertcat(ca.SX(0, 1), *self.p.values())
+        c = ca.vertcat(ca.SX(0, 1), *self.c.values())
+        symbols, values = [], []
+        for o in self.offsets:
+            x, t, h = self.state_vector, self.t, o.dt / o.steps
+            for _ in range(o.steps):
+                x, t = rk4(o.dynamics, x, t, h, p, c), t + h
+            symbols += [o.x, o.t]
+            values += [x, t]
+        return ca.substitute(expr, ca.vertcat(*symbols), ca.vertcat(*values))
+
+
+@dataclass
+class TimeOffset:
+    """A state `x` and time `t` standing for those `dt` (s, an expression of the
+    parameters) after the state and time of the model, `steps` RK4 steps of `dynamics`
+    away (`ModelContext.at_time_offset`)."""
+
+    x: ca.SX
+    t: ca.SX
+    dt: ca.SX
+    steps: int
+    dynamics: ca.Function
 
 
 class Model:
@@ -187,7 +224,7 @@ class Model:
             e.observations(ctx)
         for timing, _ in self.timings:
             if timing.crossing is not None:
-                gap = ctx.q[timing.crossing]
+                gap = ctx.expand_offsets(ctx.q[timing.crossing])
                 xdot = ca.vertcat(*(ctx.xdot[n] for n in ctx.state_names))
                 ctx.q[_rate_name(timing.crossing)] = (ca.jtimes(gap, x, xdot)
                                                       + ca.jacobian(gap, t))
@@ -196,7 +233,8 @@ class Model:
                                               for c_ in e.constraints(ctx)]
         # (effect, channel, times, residuals in sigma) of every effect's pseudo-observations.
         self.penalties: list[tuple[str, str, np.ndarray, ca.SX]] = [
-            (e.name, channel, np.asarray(times, dtype=float), expr) for e in self.effects
+            (e.name, channel, np.asarray(times, dtype=float), ctx.expand_offsets(expr))
+            for e in self.effects
             for channel, (times, expr) in e.penalties(ctx).items()]
         missing = [s.name for s in self.states if s.name not in ctx.xdot]
         if missing:
@@ -206,16 +244,23 @@ class Model:
         self.rhs = ca.Function("rhs", args, [ca.vertcat(*(ctx.xdot[s.name] for s in self.states))],
                                ["x", "t", "p", "c"], ["xdot"])
         self.sensor_channels = {name: tuple(ch) for name, ch in ctx.y.items()}
+        # Each sensor's outputs as the effects wrote them: of (x, t, p, c) and the offset
+        # states and times (`at_time_offset`), for the estimator's pieces; every function
+        # below has the offsets' RK4 steps put in (`expand_offsets`).
+        self.symbols = (x, t, p, c)
+        self.offsets = tuple(ctx.offsets)
+        self.output_expressions = {name: ca.vertcat(*ch.values()) for name, ch in ctx.y.items()}
         self.outputs = {
-            name: ca.Function(f"y{i}", args, [ca.vertcat(*ch.values())],
-                              ["x", "t", "p", "c"], ["y"])
-            for i, (name, ch) in enumerate(ctx.y.items())
+            name: ca.Function(f"y{i}", args, [ctx.expand_offsets(y)], ["x", "t", "p", "c"],
+                              ["y"])
+            for i, (name, y) in enumerate(self.output_expressions.items())
         }
         self.quantity_names = tuple(n for n, v in ctx.q.items()
                                     if isinstance(v, ca.SX) and v.numel() == 1)
-        self.quantities = ca.Function(
-            "quantities", args, [ca.vertcat(*(ctx.q[n] for n in self.quantity_names))])
-        self._capture_fns = {cap.name: ca.Function(f"capture{i}", args, [ctx.q[cap.quantity]])
+        self.quantities = ca.Function("quantities", args, [ctx.expand_offsets(
+            ca.vertcat(*(ctx.q[n] for n in self.quantity_names)))])
+        self._capture_fns = {cap.name: ca.Function(f"capture{i}", args,
+                                                   [ctx.expand_offsets(ctx.q[cap.quantity])])
                              for i, cap in enumerate(self.captures)}
         predicted = [_predicted_time(timing, event, ctx) for timing, event in self.timings]
         self.event_times = ca.Function("event_times", [p, c], [ca.vertcat(ca.SX(0, 1),
