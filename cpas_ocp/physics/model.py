@@ -58,6 +58,8 @@ class ModelContext:
     # Canopies that are bodies of their own (elastic risers); the others ride on the vehicle.
     separate_bodies: set[str] = field(default_factory=set)
     offsets: list[TimeOffset] = field(default_factory=list)  # `at_time_offset`'s
+    # The offsets' symbols and their RK4 steps, once formed (`expand_offsets`).
+    _expansion: tuple[ca.SX, ca.SX] | None = field(default=None, repr=False)
 
     def separate_body(self, chute: str, effect: str) -> None:
         """Make canopy `chute` a body of its own (on behalf of riser model `effect`).
@@ -132,13 +134,16 @@ class ModelContext:
         if self.state_vector is None:
             raise RuntimeError("at_time_offset is available in the observations pass only")
         xdot = ca.vertcat(*(self.xdot[n] for n in self.state_names))
-        p = ca.vertcat(ca.SX(0, 1), *self.p.values())
-        c = ca.vertcat(ca.SX(0, 1), *self.c.values())
+        # An offset inside `expr` (a lag on an output that already reads another time) is
+        # put in first, so that it moves with the state it is taken from.
+        expr = self.expand_offsets(expr)
         k = len(self.offsets)
         offset = TimeOffset(ca.SX.sym(f"x_offset{k}", self.state_vector.numel()),
                             ca.SX.sym(f"t_offset{k}"), ca.SX(dt), steps,
-                            ca.Function("dynamics", [self.state_vector, self.t, p, c], [xdot]))
+                            ca.Function("dynamics", [self.state_vector, self.t,
+                                                     *self._parameters()], [xdot]))
         self.offsets.append(offset)
+        self._expansion = None
         return ca.substitute(expr, ca.vertcat(self.state_vector, self.t),
                              ca.vertcat(offset.x, offset.t))
 
@@ -147,16 +152,22 @@ class ModelContext:
         steps from the state at t: a function of (x, t, p, c) alone."""
         if not self.offsets:
             return expr
-        p = ca.vertcat(ca.SX(0, 1), *self.p.values())
-        c = ca.vertcat(ca.SX(0, 1), *self.c.values())
-        symbols, values = [], []
-        for o in self.offsets:
-            x, t, h = self.state_vector, self.t, o.dt / o.steps
-            for _ in range(o.steps):
-                x, t = rk4(o.dynamics, x, t, h, p, c), t + h
-            symbols += [o.x, o.t]
-            values += [x, t]
-        return ca.substitute(expr, ca.vertcat(*symbols), ca.vertcat(*values))
+        if self._expansion is None:  # the steps, formed once for every expression
+            p, c = self._parameters()
+            symbols, values = [], []
+            for o in self.offsets:
+                x, t, h = self.state_vector, self.t, o.dt / o.steps
+                for _ in range(o.steps):
+                    x, t = rk4(o.dynamics, x, t, h, p, c), t + h
+                symbols += [o.x, o.t]
+                values += [x, t]
+            self._expansion = (ca.vertcat(*symbols), ca.vertcat(*values))
+        return ca.substitute(expr, *self._expansion)
+
+    def _parameters(self) -> tuple[ca.SX, ca.SX]:
+        """The parameter and captured-value vectors, as the dynamics take them."""
+        return (ca.vertcat(ca.SX(0, 1), *self.p.values()),
+                ca.vertcat(ca.SX(0, 1), *self.c.values()))
 
 
 @dataclass
