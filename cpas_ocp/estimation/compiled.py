@@ -28,7 +28,7 @@ import sys
 import tempfile
 import time
 from contextlib import suppress
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import casadi as ca
@@ -43,18 +43,20 @@ FLAGS = ("-shared", "-fPIC")
 # LARGE_SOURCE_BYTES are built at -O0, still about twice as fast as the virtual machine
 # but three times slower than -O1; sources above VM_SOURCE_BYTES are not compiled at all
 # and run in the virtual machine, which costs that one piece a factor of two or three
-# and no minutes or gigabytes of compiling.  The pieces of the library's models are
-# below 1.1 MB (the RK4 step's Jacobian of `drogue` with added mass) except that one.
+# and no minutes or gigabytes of compiling.  That output's states at t - tau are now
+# chained through the step piece, and the largest piece of the library's models is the
+# RK4 step's Jacobian of `drogue` with added mass, 1.3 MB.
 LARGE_SOURCE_BYTES = 3_000_000
+VM_SOURCE_BYTES = 4_000_000
 # Builds that queued a library no build had queued before, and compilers started, in this
 # process (benchmarks).
 COUNTS = {"builds": 0, "libraries": 0}
-VM_SOURCE_BYTES = 4_000_000
 
 
 def optimisation(source: Path) -> str:
     """-O1 for ordinary sources, -O0 for very large ones."""
     return "-O0" if source.stat().st_size > LARGE_SOURCE_BYTES else "-O1"
+
 
 def cache_folder() -> Path:
     """Where compiled libraries are kept."""
@@ -133,7 +135,7 @@ class NativeBuild:
         fresh = False  # whether this build queued a library no other build had
         for fn in functions:
             folder = Path(tempfile.mkdtemp(prefix=".cpas-cg-", dir=cache))
-            _LIVE.folders.append(folder)
+            _FOLDERS.append(folder)
             try:
                 src = _generate(fn, folder)
             except BaseException:
@@ -220,7 +222,6 @@ class _Queue:
             if process is None or process.poll() is None:
                 continue
             self.running.remove(job)
-            _LIVE.compilers.remove(process)
             if process.returncode != 0:
                 err = (job.source.parent / "stderr").read_bytes().decode(errors="replace")
                 job.error = f"compiling {job.library.name} failed: {err[-500:]}"
@@ -244,7 +245,6 @@ class _Queue:
                     stdout=subprocess.DEVNULL, stderr=err, start_new_session=True,
                     preexec_fn=_lowest_priority if in_background() else None)
                 self.running.append(job)
-                _LIVE.compilers.append(job.process)
                 COUNTS["libraries"] += 1
 
     def cancel(self, jobs: list[_Job]) -> None:
@@ -253,7 +253,6 @@ class _Queue:
             self.waiting = [(j, cc) for j, cc in self.waiting if j is not job]
             if job in self.running and job.process is not None:
                 self.running.remove(job)
-                _LIVE.compilers.remove(job.process)
                 _kill_group(job.process)
             if not job.library.exists():
                 job.error = "cancelled"
@@ -280,8 +279,8 @@ def _sweep_stale(cache: Path) -> None:
 def _remove(folder: Path) -> None:
     """Remove a compiler's folder and forget it."""
     shutil.rmtree(folder, ignore_errors=True)
-    if folder in _LIVE.folders:
-        _LIVE.folders.remove(folder)
+    if folder in _FOLDERS:
+        _FOLDERS.remove(folder)
 
 
 def _lowest_priority() -> None:
@@ -290,29 +289,23 @@ def _lowest_priority() -> None:
     os.nice(19)
 
 
-@dataclass
-class _Live:
-    """The compilers running and the temporary folders they write in, for `abandon`."""
-
-    compilers: list[subprocess.Popen] = field(default_factory=list)
-    folders: list[Path] = field(default_factory=list)
-
-
-_LIVE = _Live()
+# The compilers' temporary folders of this process (sources, partial libraries), for
+# `abandon`; the compilers themselves are `_QUEUE.running`'s.
+_FOLDERS: list[Path] = []
 
 
 def abandon() -> None:
     """Kill every running compiler and remove the temporary folders: for a process that
     must end at once, without unwinding (a local worker of a campaign told to stop), and
     at the end of a process a signal stopped."""
-    for proc in _LIVE.compilers:
-        _kill_group(proc)
-    _LIVE.compilers.clear()
+    for job in _QUEUE.running:
+        if job.process is not None:
+            _kill_group(job.process)
     _QUEUE.waiting.clear()
     _QUEUE.running.clear()
-    for folder in _LIVE.folders:
+    for folder in _FOLDERS:
         shutil.rmtree(folder, ignore_errors=True)
-    _LIVE.folders.clear()
+    _FOLDERS.clear()
 
 
 def _at_exit() -> None:
@@ -329,8 +322,9 @@ def _at_exit() -> None:
 
 def _forget_the_parents() -> None:
     """In a forked child: the compilers and folders are the parent's, not its own."""
-    global _QUEUE, _LIVE
-    _QUEUE, _LIVE = _Queue(), _Live()
+    global _QUEUE
+    _QUEUE = _Queue()
+    _FOLDERS.clear()
 
 
 atexit.register(_at_exit)
