@@ -560,8 +560,7 @@ def _discover(args: argparse.Namespace) -> int:
     if args.resume is not None:
         print(f"reading the finished steps in {args.resume} ...", flush=True)
         chain = read_checkpoint(args.resume, test, plugins)
-        first, est, fit, claim = chain.steps[0], None, chain.steps[0].fit, None
-        spec = first.spec
+        est, fit, spec = None, chain.steps[0].fit, chain.steps[0].spec
         print(f"  {len(chain.steps)} step(s) read; going on from step {len(chain.steps) - 1}",
               flush=True)
     else:
@@ -570,6 +569,12 @@ def _discover(args: argparse.Namespace) -> int:
         print(f"solving: {est.size_text()} ...", flush=True)
         est, fit, _, claim = _fit_and_covariance(est, args)
         spec = est.spec
+        # The chain is read from its start: a first fit the data press against guessed
+        # bounds is said so in the report, not only on the terminal (a misfit is what the
+        # chain is for, and its table shows it); kept with the steps, so a resumed run says
+        # it too.
+        if not claim.is_result:
+            context["first_fit"] = f"the first fit is not a result: {claim.problems()[0]}"
     whole = [len(chain.steps) if chain is not None else 0]  # steps the folder last held whole
 
     def said(step: DiscoveryStep) -> None:
@@ -581,6 +586,8 @@ def _discover(args: argparse.Namespace) -> int:
     def kept(chain: Discovery, figures: bool = False) -> Path:
         # The folder, written whole with signals held off: the report so far and what
         # `--resume` needs (`discovery_checkpoint`).
+        if context.get("first_fit") and context["first_fit"] not in chain.notes:
+            chain.notes.append(context["first_fit"])
         with interrupts.deferred():
             return write_discovery(chain, args.out, {**plugins, **chain.plugins}, units,
                                    figures=figures,
@@ -613,11 +620,6 @@ def _discover(args: argparse.Namespace) -> int:
              f"to {out} (discovery.md, discovery.json, step_K.json); go on with "
              f"cpas-ocp discover --resume {out}")
         return exc.exit_code
-    # The chain is read from its start: a first fit the data press against guessed bounds
-    # is said so in the report, not only on the terminal (a misfit is what the chain is
-    # for, and its table shows it).
-    if claim is not None and not claim.is_result:
-        found.notes.append(f"the first fit is not a result: {claim.problems()[0]}")
     out = kept(found, figures=True)
     print()
     print(found.text())

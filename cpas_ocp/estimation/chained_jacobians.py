@@ -116,6 +116,13 @@ class ModelPieces:
         return [*(ca.MX(rows, nx) for _ in range(n_states)), ca.MX(rows, nfree),
                 ca.MX(rows, ncap)]
 
+    def _at_node(self, n_states: int) -> list[ca.MX]:
+        """The sensitivities of the first node state argument itself: the state scales to
+        itself, zero to the other state arguments, the parameters and c."""
+        sens = self._zeros(self.model.nx, n_states)
+        sens[0] = ca.MX(ca.diag(ca.DM(self.xscale)))
+        return sens
+
     def _stepped(self, x: ca.MX, t: ca.MX, length: ca.MX, steps: int, p: ca.MX, c: ca.MX,
                  sens: list[ca.MX] | None, dlength: list[ca.MX] | None = None
                  ) -> tuple[ca.MX, list[ca.MX]]:
@@ -149,9 +156,7 @@ class ModelPieces:
         args = [x, x1, t, dt, p, c]
         xe, _ = self._stepped(x, t, dt, steps, p, c, None)
         value = ca.Function(f"gap_{steps}_chain", args, [(x1 - xe) / self.xscale])
-        start = self._zeros(nx, 1)
-        start[0] = ca.MX(ca.diag(ca.DM(self.xscale)))
-        xe, (dx, dp, dc) = self._stepped(x, t, dt, steps, p, c, start)
+        xe, (dx, dp, dc) = self._stepped(x, t, dt, steps, p, c, self._at_node(1))
         jac = ca.horzcat(-inv @ dx, ca.DM.eye(nx), -inv @ dp, -inv @ dc)
         both = ca.Function(f"gap_{steps}_chain_jac", args, [(x1 - xe) / self.xscale, ca.vec(jac)])
         return value, both
@@ -212,10 +217,8 @@ class ModelPieces:
                       ) -> tuple[ca.MX, list[ca.MX]]:
         """The state at a sample of `kind` and (with `jacobian`) its sensitivities to each
         state argument (scaled), the scaled free parameters and c."""
-        nx = self.model.nx
-        xs = ca.MX(ca.diag(ca.DM(self.xscale)))
-        start = self._zeros(nx, len(states))
-        start[0] = xs
+        start = self._at_node(len(states))
+        xs = start[0]
         if kind == 0:
             return states[0], (start if jacobian else [])
         if kind == 1:
@@ -227,7 +230,7 @@ class ModelPieces:
             return hermite_state(x_a, x_b, f_a, f_b, length, dt), []
         f_a, fp_a, fc_a, fx_a = self.functions["rhs_d"](x_a, t, p, c)
         f_b, fp_b, fc_b, fx_b = self.functions["rhs_d"](x_b, t + length, p, c)
-        zero = self._zeros(nx, 2)
+        zero = self._zeros(self.model.nx, 2)
         # The interpolant is linear in (x_a, f_a, x_b, f_b): each sensitivity is the
         # interpolant of theirs.
         sens = [hermite_state(xs, zero[0], fx_a @ xs, zero[0], length, dt),
