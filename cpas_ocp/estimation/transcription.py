@@ -39,6 +39,7 @@ from cpas_ocp.estimation.shooting_grid import (
     substeps_of,
 )
 from cpas_ocp.estimation.simulate import rk4_step, simulate
+from cpas_ocp.estimation.sparse_rows import stacked_rows
 from cpas_ocp.io.flight_test import FlightTest
 from cpas_ocp.io.model_spec import ModelSpec, spec_from_effects, spec_of_test, unfitted_sensors
 from cpas_ocp.physics.effects import Effect
@@ -127,6 +128,11 @@ def _stack(pieces: Sequence[_Piece], field_name: str) -> ca.MX:
     return ca.vertcat(*[getattr(p, field_name) for p in pieces])
 
 
+def _stacked_jacobian(pieces: Sequence[_Piece]) -> ca.MX:
+    """The Jacobians of every piece, stacked (`sparse_rows.stacked_rows`)."""
+    return stacked_rows([p.jacobian for p in pieces])
+
+
 def _gathered(pieces: Sequence[_Piece], destinations: Sequence[np.ndarray],
               offsets: Sequence[int]) -> list[_Piece]:
     """Row i of `pieces[b]` moved to row `destinations[b][i]` of the stacked result (the
@@ -135,12 +141,13 @@ def _gathered(pieces: Sequence[_Piece], destinations: Sequence[np.ndarray],
     if not pieces:
         return []
     order = np.argsort(np.concatenate(destinations))  # stacked row of each result row
-    stacked = [_stack(pieces, f) for f in ("symbolic", "value", "with_jacobian", "jacobian")]
+    stacked = [_stack(pieces, f) for f in ("symbolic", "value", "with_jacobian")]
     times = _stack_times(pieces)
     out = []
     for a, b in itertools.pairwise(offsets):
         rows = order[a:b].tolist()
-        out.append(_Piece(*(x[rows] for x in stacked[:3]), stacked[3][rows, :],
+        out.append(_Piece(*(x[rows] for x in stacked[:3]),
+                          stacked_rows([p.jacobian for p in pieces], order[a:b]),
                           times[order[a:b]]))
     return out
 
@@ -517,10 +524,10 @@ class NlpTranscription:
         z, pieces, g = nlp.z, nlp.residuals, nlp.g
         return (ca.Function("residual_value", [z], [_stack(pieces, "value")]),
                 ca.Function("residual_jacobian", [z], [_stack(pieces, "with_jacobian"),
-                                                       _stack(pieces, "jacobian")]),
+                                                       _stacked_jacobian(pieces)]),
                 ca.Function("constraint_value", [z], [_stack(g, "value")]),
                 ca.Function("constraints", [z], [_stack(g, "with_jacobian"),
-                                                 _stack(g, "jacobian")]))
+                                                 _stacked_jacobian(g)]))
 
     def _variable_bounds(self, nlp: _Nlp) -> None:
         """Bounds of the scaled decision variables: the free parameters' own, captured
