@@ -4,7 +4,8 @@ vertcat and row indexing of the sparse matrices (`estimation/sparse_rows.py`).
 The `drogue` test (simulated once, seed 4 unless `--seed`) is transcribed
 twice in one process, with `sparse_rows.ONE_GATHER` off (the earlier path)
 and on, each with native pieces (`CPAS_OCP_COMPILE=wait`, compiled once into a
-temporary cache) and in CasADi's VM.  Printed per path: the time of one
+temporary cache before any timing) and in CasADi's VM.  Printed per path: the
+estimator's build time, the time of one
 evaluation of the residuals with their Jacobian (rJ) and of the constraints
 with theirs (gA), the median of `--repeats`, and the wall time and chi-square
 of a fit from the offline reduction; then the ratios earlier / one gather.
@@ -32,11 +33,12 @@ from cpas_ocp.io.problems import load_problem
 
 
 def measure(folder: Path, repeats: int) -> dict[str, float]:
-    """Per-evaluation times (ms) of rJ and gA at the starting point, and one fit's time (s)
-    and chi-square."""
+    """The estimator's build time (s), per-evaluation times (ms) of rJ and gA at the starting
+    point, and one fit's time (s) and chi-square."""
+    t0 = time.perf_counter()
     est = Estimator(load_test(folder), baseline_spec())
+    out = {"build": time.perf_counter() - t0}
     z = est.initial_point()
-    out = {}
     for name in ("rJ", "gA"):
         buffer = est._points._buffers[name]
         buffer.nonzeros(z)
@@ -63,21 +65,24 @@ def main() -> None:
         simulate_problem(load_problem("drogue"), folder, args.seed)
         os.environ["CPAS_OCP_CACHE"] = str(Path(tmp) / "cache")
         results = {}
+        os.environ["CPAS_OCP_COMPILE"] = "wait"
+        Estimator(load_test(folder), baseline_spec())  # the pieces compiled, untimed
         for mode in ("wait", "0"):
             os.environ["CPAS_OCP_COMPILE"] = mode
             for one_gather in (False, True):
                 sparse_rows.ONE_GATHER = one_gather
                 results[mode, one_gather] = measure(folder, args.repeats)
     print(f"drogue seed {args.seed}: one evaluation (median of {args.repeats}) and one fit")
-    print(f"{'code':8} {'stacking':12} {'rJ (ms)':>8} {'gA (ms)':>8} {'fit (s)':>8} "
-          f"{'chi2':>10}")
+    print(f"{'code':8} {'stacking':12} {'build (s)':>9} {'rJ (ms)':>8} {'gA (ms)':>8} "
+          f"{'fit (s)':>8} {'chi2':>10}")
     for (mode, one_gather), r in results.items():
         print(f"{'native' if mode == 'wait' else 'VM':8} "
-              f"{'one gather' if one_gather else 'vertcat':12} {r['rJ']:8.1f} {r['gA']:8.1f} "
+              f"{'one gather' if one_gather else 'vertcat':12} {r['build']:9.2f} "
+              f"{r['rJ']:8.1f} {r['gA']:8.1f} "
               f"{r['fit']:8.2f} {r['chi2']:10.3f}")
     for mode in ("wait", "0"):
         old, new = results[mode, False], results[mode, True]
-        ratios = "  ".join(f"{k} {old[k] / new[k]:.2f}" for k in ("rJ", "gA", "fit"))
+        ratios = "  ".join(f"{k} {old[k] / new[k]:.2f}" for k in ("build", "rJ", "gA", "fit"))
         same = np.isclose(old["chi2"], new["chi2"], rtol=1e-6)
         print(f"{'native' if mode == 'wait' else 'VM'}: vertcat / one gather: {ratios}; "
               f"same chi-square: {same}")

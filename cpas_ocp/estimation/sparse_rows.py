@@ -11,6 +11,7 @@ the blocks' nonzeros into it.
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Sequence
 
 import casadi as ca
@@ -29,32 +30,52 @@ def nonzeros(mat: ca.MX) -> ca.MX:
 def stacked_rows(mats: Sequence[ca.MX], rows: np.ndarray | None = None) -> ca.MX:
     """`vertcat(*mats)[rows, :]` (every row where `rows` is None), on the exact pattern of
     the stacked matrices, as one gather of their nonzeros."""
+    first = sum(mat.size1() for mat in mats)
+    chosen = np.arange(first) if rows is None else np.asarray(rows, dtype=np.int64)
+    return row_ranges(mats, chosen, [0, chosen.size])[0]
+
+
+def row_ranges(mats: Sequence[ca.MX], rows: np.ndarray, bounds: Sequence[int]
+               ) -> list[ca.MX]:
+    """`[vertcat(*mats)[rows[a:b], :] for a, b in pairwise(bounds)]`, each on the exact
+    pattern of the stacked matrices, all through one gather of their nonzeros."""
     if not mats:
-        return ca.MX(0, 1)
+        return [ca.MX(b - a, 0) for a, b in itertools.pairwise(bounds)]
     if not ONE_GATHER:
-        stacked_mx = ca.vertcat(*mats)
-        return stacked_mx if rows is None else stacked_mx[np.asarray(rows).tolist(), :]
+        stacked = ca.vertcat(*mats)
+        return [stacked[np.asarray(rows[a:b]).tolist(), :]
+                for a, b in itertools.pairwise(bounds)]
     ncol = mats[0].size2()
     row_parts, col_parts, values = [], [], []
     first = 0
     for mat in mats:
         if mat.size2() != ncol:
             raise ValueError(f"stacking {mat.size2()} columns under {ncol}")
-        sp = mat.sparsity()
         if mat.nnz():
+            sp = mat.sparsity()
             row_parts.append(np.asarray(sp.row(), dtype=np.int64) + first)
             col_parts.append(np.asarray(sp.get_col(), dtype=np.int64))
             values.append(nonzeros(mat))
         first += mat.size1()
-    stacked = np.arange(first) if rows is None else np.asarray(rows, dtype=np.int64)
-    position = np.full(first, -1, dtype=np.int64)  # result row of each stacked row
-    position[stacked] = np.arange(stacked.size)
-    if not values:
-        return ca.MX(stacked.size, ncol)
-    row = position[np.concatenate(row_parts)]
-    col = np.concatenate(col_parts)
-    kept = np.flatnonzero(row >= 0)
-    order = kept[np.lexsort((row[kept], col[kept]))]  # column-major: CasADi's nonzero order
-    sp = ca.Sparsity.triplet(stacked.size, ncol, row[order].tolist(), col[order].tolist())
-    gathered = ca.vertcat(*values)[order.tolist()]
-    return ca.sparsity_cast(gathered, sp)
+    edges = np.asarray(bounds, dtype=np.int64)
+    position = np.full(first, -1, dtype=np.int64)  # place in `rows` of each stacked row
+    position[np.asarray(rows, dtype=np.int64)] = np.arange(edges[-1])
+    row = position[np.concatenate(row_parts)] if values else np.zeros(0, dtype=np.int64)
+    col = np.concatenate(col_parts) if values else np.zeros(0, dtype=np.int64)
+    kept = np.flatnonzero(row >= edges[0])  # rows before the first range are left out
+    part = np.searchsorted(edges, row[kept], side="right") - 1
+    # Range by range, each column-major (CasADi's nonzero order): one sort of one key.
+    key = (part * ncol + col[kept]) * max(edges[-1], 1) + row[kept]
+    order = kept[np.argsort(key, kind="stable")]
+    part = np.searchsorted(edges, row[order], side="right") - 1
+    gathered = ca.vertcat(*values)[order.tolist()] if order.size else ca.MX(0, 1)
+    out, start = [], 0
+    for j, (a, b) in enumerate(itertools.pairwise(edges)):
+        stop = start + int(np.count_nonzero(part == j))
+        colind = np.concatenate([[0], np.cumsum(np.bincount(col[order[start:stop]],
+                                                             minlength=ncol))])
+        sp = ca.Sparsity(int(b - a), ncol, colind.tolist(),
+                         (row[order[start:stop]] - a).tolist())
+        out.append(ca.sparsity_cast(gathered[start:stop], sp))
+        start = stop
+    return out

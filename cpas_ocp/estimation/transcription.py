@@ -39,7 +39,7 @@ from cpas_ocp.estimation.shooting_grid import (
     substeps_of,
 )
 from cpas_ocp.estimation.simulate import rk4_step, simulate
-from cpas_ocp.estimation.sparse_rows import stacked_rows
+from cpas_ocp.estimation.sparse_rows import row_ranges, stacked_rows
 from cpas_ocp.io.flight_test import FlightTest
 from cpas_ocp.io.model_spec import ModelSpec, spec_from_effects, spec_of_test, unfitted_sensors
 from cpas_ocp.physics.effects import Effect
@@ -143,12 +143,11 @@ def _gathered(pieces: Sequence[_Piece], destinations: Sequence[np.ndarray],
     order = np.argsort(np.concatenate(destinations))  # stacked row of each result row
     stacked = [_stack(pieces, f) for f in ("symbolic", "value", "with_jacobian")]
     times = _stack_times(pieces)
+    jacobians = row_ranges([p.jacobian for p in pieces], order, offsets)
     out = []
-    for a, b in itertools.pairwise(offsets):
+    for (a, b), jacobian in zip(itertools.pairwise(offsets), jacobians, strict=True):
         rows = order[a:b].tolist()
-        out.append(_Piece(*(x[rows] for x in stacked[:3]),
-                          stacked_rows([p.jacobian for p in pieces], order[a:b]),
-                          times[order[a:b]]))
+        out.append(_Piece(*(x[rows] for x in stacked), jacobian, times[order[a:b]]))
     return out
 
 
