@@ -31,9 +31,10 @@ import pandas as pd
 
 from cpas_ocp.estimation.estimator import Estimator
 from cpas_ocp.estimation.simulate import simulate_problem
-from cpas_ocp.io.flight_test import FlightTest, load_test
+from cpas_ocp.io.flight_test import load_test
 from cpas_ocp.io.problems import load_problem
 from cpas_ocp.physics.atmosphere import StandardAtmosphere, density_at
+from cpas_ocp.physics.flight_test import FlightTest
 
 
 def sounding(folder: Path, step_m: float) -> None:

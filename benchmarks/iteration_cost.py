@@ -37,9 +37,10 @@ from diagnosis_cost import hidden_cases
 from cpas_ocp.errors import SolverFailure
 from cpas_ocp.estimation.estimator import Estimator, Settings
 from cpas_ocp.estimation.simulate import simulate_problem
-from cpas_ocp.io.flight_test import FlightTest, load_test
+from cpas_ocp.io.flight_test import load_test
 from cpas_ocp.io.model_spec import baseline_spec
 from cpas_ocp.io.problems import load_problem
+from cpas_ocp.physics.flight_test import FlightTest
 
 PATHS = {"expressions": {"point_cache": False, "damping": False},
          "cached": {"damping": False, "window_margin": None},

@@ -68,9 +68,9 @@ from cpas_ocp.estimation.estimator import Estimator
 from cpas_ocp.estimation.kinematic_track import kinematic_track
 from cpas_ocp.estimation.reduction import reduce_and_guess, stage_starts
 from cpas_ocp.estimation.simulate import Trajectory, simulate, simulate_problem
-from cpas_ocp.io.flight_test import FlightTest, Parachute
 from cpas_ocp.io.problems import load_problem
 from cpas_ocp.physics.effects import baseline_effects
+from cpas_ocp.physics.flight_test import FlightTest, Parachute
 from cpas_ocp.physics.inflation import fill_length, infinite_mass_cds
 from cpas_ocp.physics.model import Model
 from cpas_ocp.physics.parameters import param_name

@@ -32,10 +32,11 @@ from scipy.stats import chi2
 from cpas_ocp.errors import SolverFailure
 from cpas_ocp.estimation.estimator import Estimator, Fit, Settings
 from cpas_ocp.estimation.simulate import simulate_problem
-from cpas_ocp.io.flight_test import FlightTest, load_test
+from cpas_ocp.io.flight_test import load_test
 from cpas_ocp.io.model_spec import ModelSpec, spec_of_test
 from cpas_ocp.io.problems import load_problem
 from cpas_ocp.physics.effects import RigidRiser
+from cpas_ocp.physics.flight_test import FlightTest
 
 MAX_ITERATIONS = 200  # each fit that converges takes 100-140
 

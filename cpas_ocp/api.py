@@ -37,11 +37,12 @@ from cpas_ocp.inference.diagnostics import window_statistics, worst_of
 from cpas_ocp.inference.model_comparison import Comparison, compare
 from cpas_ocp.inference.phase_windows import phase_windows
 from cpas_ocp.inference.result_claim import Claim, check_drag_areas
-from cpas_ocp.io.flight_test import FlightTest, load_test
+from cpas_ocp.io.flight_test import load_test
 from cpas_ocp.io.model_spec import ModelSpec, load_model_file, spec_of_test
 from cpas_ocp.io.problems import load_problem
 from cpas_ocp.physics.effects.base import Effect
 from cpas_ocp.physics.effects.registry import EffectType, load_plugins
+from cpas_ocp.physics.flight_test import FlightTest
 from cpas_ocp.reports.discrepancy_report import write_comparison, write_diagnosis, write_discovery
 from cpas_ocp.reports.report import write_report
 from cpas_ocp.reports.report_data import bound_flag

@@ -58,10 +58,10 @@ if TYPE_CHECKING:
     from cpas_ocp.inference.result_claim import Claim
     from cpas_ocp.io.flight_log import FlightCard
     from cpas_ocp.io.flight_record import FlightRecord
-    from cpas_ocp.io.flight_test import FlightTest
     from cpas_ocp.io.model_spec import ModelSpec
     from cpas_ocp.io.recorder_clocks import RecorderEstimates
     from cpas_ocp.physics.effects.registry import EffectType
+    from cpas_ocp.physics.flight_test import FlightTest
     from cpas_ocp.reports.display_units import DisplayUnits
 
 

@@ -33,9 +33,10 @@ from cpas_ocp.estimation.shooting_grid import (
 )
 from cpas_ocp.estimation.simulate import rk4_step, simulate, simulate_problem
 from cpas_ocp.estimation.stage_curve_fit import inside_bounds
-from cpas_ocp.io.flight_test import FlightTest, load_test
+from cpas_ocp.io.flight_test import load_test
 from cpas_ocp.io.model_spec import spec_of_test
 from cpas_ocp.io.problems import load_problem
+from cpas_ocp.physics.flight_test import FlightTest
 from tests.rocket_logs import altimeter_log
 
 START_ALTITUDE_M = 9000.0  # m MSL, under the drogue at 40 m/s

@@ -16,8 +16,9 @@ from cpas_ocp.estimation.stage_curve_fit import (
     fit_stage_curve,
     fitted_names,
 )
-from cpas_ocp.io.flight_test import Parachute, load_test
+from cpas_ocp.io.flight_test import load_test
 from cpas_ocp.physics.effects import baseline_effects
+from cpas_ocp.physics.flight_test import Parachute
 from cpas_ocp.physics.model import Model
 from cpas_ocp.physics.units import FT
 

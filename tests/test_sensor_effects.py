@@ -20,9 +20,10 @@ from scipy.stats import chi2
 
 from cpas_ocp.estimation.estimator import Estimator
 from cpas_ocp.estimation.simulate import initial_state, simulate, simulate_problem
-from cpas_ocp.io.flight_test import FlightTest, load_test
+from cpas_ocp.io.flight_test import load_test
 from cpas_ocp.io.problems import load_problem
 from cpas_ocp.physics.effects import Effect, SensorBias, SensorLag, baseline_effects
+from cpas_ocp.physics.flight_test import FlightTest
 from cpas_ocp.physics.model import Model
 
 CASES = {

@@ -25,11 +25,12 @@ from cpas_ocp.estimation.reduction import initial_guess
 from cpas_ocp.estimation.simulate import simulate_problem
 from cpas_ocp.estimation.uncertainty import Covariance
 from cpas_ocp.io import flight_test
-from cpas_ocp.io.flight_test import FlightTest, load_test
+from cpas_ocp.io.flight_test import load_test
 from cpas_ocp.io.model_spec import spec_of_test
 from cpas_ocp.io.problems import load_problem
 from cpas_ocp.physics.atmosphere import density_at
 from cpas_ocp.physics.effects.canopy_inflation import BAND_BLEND_M, banded_cds
+from cpas_ocp.physics.flight_test import FlightTest
 from cpas_ocp.physics.units import G0
 from cpas_ocp.reports.flight_report import (
     descent_rates,

@@ -24,9 +24,10 @@ import pytest
 
 import cpas_ocp as co
 from cpas_ocp.estimation.simulate import simulate_problem
-from cpas_ocp.io.flight_test import FlightTest, load_test
+from cpas_ocp.io.flight_test import load_test
 from cpas_ocp.io.problems import Problem
 from cpas_ocp.physics.atmosphere import SiteAtmosphere
+from cpas_ocp.physics.flight_test import FlightTest
 
 PAGE = Path(__file__).resolve().parents[1] / "docs" / "test-folder.md"
 

@@ -29,7 +29,8 @@ import pandas as pd
 
 from cpas_ocp.campaign.parallel import run_tasks
 from cpas_ocp.errors import InputError, PluginError, SolverFailure
-from cpas_ocp.io.flight_test import MANIFEST, Parachute
+from cpas_ocp.io.flight_test import MANIFEST
+from cpas_ocp.physics.flight_test import Parachute
 from cpas_ocp.physics.parameters import param_name, split_name
 from cpas_ocp.progress import progress_line
 

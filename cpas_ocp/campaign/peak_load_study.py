@@ -39,7 +39,8 @@ from cpas_ocp.campaign.peak_loads import (
 )
 from cpas_ocp.errors import InputError
 from cpas_ocp.estimation.estimator import Fit
-from cpas_ocp.io.flight_test import MANIFEST, FlightTest, load_test
+from cpas_ocp.io.flight_test import MANIFEST, load_test
+from cpas_ocp.physics.flight_test import FlightTest
 from cpas_ocp.physics.model import Model
 from cpas_ocp.physics.parameters import param_name
 from cpas_ocp.physics.units import LBF

@@ -78,9 +78,9 @@ from cpas_ocp.inference.noise_test import NoiseTest, noise_test
 from cpas_ocp.inference.phase_windows import phase_windows
 from cpas_ocp.inference.restarts import IMPROVEMENT_CHI2, restart_start_times
 from cpas_ocp.interrupts import Interrupted
-from cpas_ocp.io.flight_test import FlightTest
 from cpas_ocp.io.model_spec import ModelSpec
 from cpas_ocp.physics.effects.registry import EffectType, load_plugin
+from cpas_ocp.physics.flight_test import FlightTest
 from cpas_ocp.physics.parameters import split_name
 
 MAX_STEPS = 4  # effects added at most, by default

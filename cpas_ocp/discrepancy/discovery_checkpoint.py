@@ -33,10 +33,10 @@ from cpas_ocp.estimation.estimator import Estimator
 from cpas_ocp.estimation.fit import Settings, SolverStats
 from cpas_ocp.inference.diagnostics import WindowStatistic
 from cpas_ocp.inference.model_comparison import LikelihoodRatio
-from cpas_ocp.io.flight_test import FlightTest
 from cpas_ocp.io.model_spec import load_model_file
 from cpas_ocp.io.strict_json import json_text
 from cpas_ocp.physics.effects.registry import EffectType, load_plugin
+from cpas_ocp.physics.flight_test import FlightTest
 
 RESUME_FILE = "resume.json"
 FORMAT = 1

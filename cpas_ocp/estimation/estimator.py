@@ -61,9 +61,9 @@ from cpas_ocp.estimation.solve import (
     _Monitor,
 )
 from cpas_ocp.estimation.transcription import NlpTranscription
-from cpas_ocp.io.flight_test import FlightTest
 from cpas_ocp.io.model_spec import ModelSpec
 from cpas_ocp.physics.effects import Effect
+from cpas_ocp.physics.flight_test import FlightTest
 
 __all__ = ["DESCENT_CONVERGED", "DIVERGED_FACTOR", "EVENTS", "MAX_LATTICE_STEP_S",
            "MIN_GRID_STEP_S", "POLISH_CONSTRAINT_TOL", "PRIORS", "PSEUDO_SENSORS",

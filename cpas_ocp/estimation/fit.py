@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from cpas_ocp.io.flight_test import FlightTest
+from cpas_ocp.physics.flight_test import FlightTest
 from cpas_ocp.physics.model import Model
 
 

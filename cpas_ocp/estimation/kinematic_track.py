@@ -23,8 +23,9 @@ import numpy as np
 from scipy.signal import savgol_filter
 
 from cpas_ocp.errors import InputError
-from cpas_ocp.io.flight_test import MANIFEST, FlightTest
+from cpas_ocp.io.flight_test import MANIFEST
 from cpas_ocp.physics.atmosphere import geometric_altitude
+from cpas_ocp.physics.flight_test import FlightTest
 
 SMOOTH_S = 5.0  # Savitzky-Golay window of the vertical track (s)
 RESAMPLE_S = 0.05  # uniform grid the altitude is resampled to before smoothing (s)

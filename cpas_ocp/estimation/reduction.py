@@ -38,9 +38,10 @@ from cpas_ocp.estimation.stage_curve_fit import (
     fit_stage_curve,
     fitted_names,
 )
-from cpas_ocp.io.flight_test import MANIFEST, FlightTest, Parachute
+from cpas_ocp.io.flight_test import MANIFEST
 from cpas_ocp.physics.atmosphere import density_at, wind_at
 from cpas_ocp.physics.effects.canopy_inflation import steady_parameter_names
+from cpas_ocp.physics.flight_test import FlightTest, Parachute
 from cpas_ocp.physics.model import Model
 from cpas_ocp.physics.parameters import param_name, split_name
 from cpas_ocp.physics.units import G0

@@ -22,16 +22,11 @@ import numpy as np
 import pandas as pd
 
 from cpas_ocp.errors import InputError
-from cpas_ocp.io.flight_test import (
-    MANIFEST,
-    SENSOR_COLUMNS,
-    FlightTest,
-    load_test,
-    test_from_manifest,
-)
+from cpas_ocp.io.flight_test import MANIFEST, load_test, test_from_manifest
 from cpas_ocp.io.model_spec import spec_from_block
 from cpas_ocp.io.problems import Problem
 from cpas_ocp.physics.effects import Effect
+from cpas_ocp.physics.flight_test import SENSOR_COLUMNS, FlightTest
 from cpas_ocp.physics.integration import rk4
 from cpas_ocp.physics.model import Model
 from cpas_ocp.physics.units import FACTORS

@@ -38,7 +38,7 @@ import casadi as ca
 import numpy as np
 from scipy.optimize import least_squares
 
-from cpas_ocp.io.flight_test import Parachute
+from cpas_ocp.physics.flight_test import Parachute
 from cpas_ocp.physics.inflation import (
     fill_length,
     finite_mass_cds,

@@ -40,9 +40,9 @@ from cpas_ocp.estimation.shooting_grid import (
 )
 from cpas_ocp.estimation.simulate import rk4_step, simulate
 from cpas_ocp.estimation.sparse_rows import row_ranges, stacked_rows
-from cpas_ocp.io.flight_test import FlightTest
 from cpas_ocp.io.model_spec import ModelSpec, spec_from_effects, spec_of_test, unfitted_sensors
 from cpas_ocp.physics.effects import Effect
+from cpas_ocp.physics.flight_test import FlightTest
 from cpas_ocp.physics.model import CORE_STATES, timing_label
 
 # Alternations of integrating the trajectory and meeting the other constraints that

@@ -42,10 +42,10 @@ from cpas_ocp.inference.result_claim import (
     start_shifts,
 )
 from cpas_ocp.inference.shape_restarts import restart_shapes
-from cpas_ocp.io.flight_test import FlightTest
 from cpas_ocp.io.model_spec import ModelSpec
 from cpas_ocp.physics.effects import Effect
 from cpas_ocp.physics.effects.registry import BUILTIN
+from cpas_ocp.physics.flight_test import FlightTest
 
 
 def relaxed_spec(spec: ModelSpec, test: FlightTest) -> ModelSpec | None:

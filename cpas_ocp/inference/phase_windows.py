@@ -47,7 +47,7 @@ from cpas_ocp.physics.parameters import param_name
 
 if TYPE_CHECKING:
     from cpas_ocp.estimation.estimator import Fit
-    from cpas_ocp.io.flight_test import FlightTest, Parachute
+    from cpas_ocp.physics.flight_test import FlightTest, Parachute
 
 KINDS = ("deployment", "inflation", "steady")
 # Events that start a canopy's deployment, whichever of them was observed first.

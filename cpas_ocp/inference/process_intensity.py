@@ -35,9 +35,9 @@ from dataclasses import dataclass
 from cpas_ocp.errors import InputError, SolverFailure
 from cpas_ocp.estimation.estimator import Estimator, Fit
 from cpas_ocp.inference.continuation import solve_checked
-from cpas_ocp.io.flight_test import FlightTest
 from cpas_ocp.io.model_spec import ModelSpec
 from cpas_ocp.physics.effects.wind_process import WindProcess
+from cpas_ocp.physics.flight_test import FlightTest
 
 
 @dataclass(frozen=True)

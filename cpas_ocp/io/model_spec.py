@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 
 from cpas_ocp.errors import InputError
-from cpas_ocp.io.flight_test import MANIFEST, FlightTest, read_json, validate_block
+from cpas_ocp.io.flight_test import MANIFEST, read_json, validate_block
 from cpas_ocp.physics.effects import baseline_effects
 from cpas_ocp.physics.effects.base import Effect
 from cpas_ocp.physics.effects.registry import (
@@ -48,6 +48,7 @@ from cpas_ocp.physics.effects.registry import (
     EffectType,
     load_plugin,
 )
+from cpas_ocp.physics.flight_test import FlightTest
 from cpas_ocp.physics.model import Model
 from cpas_ocp.physics.units import conversion
 

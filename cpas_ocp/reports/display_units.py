@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Any
 from cpas_ocp.physics.units import FACTORS, SI_UNIT
 
 if TYPE_CHECKING:
-    from cpas_ocp.io.flight_test import FlightTest
+    from cpas_ocp.physics.flight_test import FlightTest
 
 SYSTEMS = ("si", "us")
 

@@ -43,11 +43,11 @@ from cpas_ocp.io.flight_log import (
     descent_load_factor_peak,
     import_snatches,
 )
-from cpas_ocp.io.flight_test import Event, Parachute
 from cpas_ocp.io.model_spec import ModelSpec
 from cpas_ocp.physics.atmosphere import density_at
 from cpas_ocp.physics.effects.canopy_inflation import BAND_BLEND_M
 from cpas_ocp.physics.effects.wind_process import WindProcess
+from cpas_ocp.physics.flight_test import Event, Parachute
 from cpas_ocp.physics.parameters import param_name, split_name
 from cpas_ocp.physics.units import FACTORS, G0
 from cpas_ocp.reports.display_units import DisplayUnits, pretty

@@ -17,10 +17,10 @@ import matplotlib.pyplot as plt
 import pandas as pd
 
 from cpas_ocp.estimation.reduction import Reduction, reduce_and_guess, stage_starts
-from cpas_ocp.io.flight_test import FlightTest
 from cpas_ocp.io.model_spec import ModelSpec
 from cpas_ocp.io.output_folder import atomic_folder
 from cpas_ocp.io.strict_json import json_text
+from cpas_ocp.physics.flight_test import FlightTest
 from cpas_ocp.physics.model import Model
 from cpas_ocp.reports.display_units import DisplayUnits, display_units, pretty
 

@@ -56,8 +56,8 @@ from cpas_ocp.physics.parameters import Parameter, param_name
 from cpas_ocp.physics.units import G0
 
 if TYPE_CHECKING:
-    from cpas_ocp.io.flight_test import FlightTest
-    from cpas_ocp.physics.model import ModelContext
+    from cpas_ocp.physics.flight_test import FlightTest
+    from cpas_ocp.physics.model_context import ModelContext
 
 K_ENCLOSED = 1.0
 K_APPARENT = 0.5

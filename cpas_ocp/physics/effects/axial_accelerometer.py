@@ -31,8 +31,8 @@ from cpas_ocp.physics.parameters import Parameter, param_name
 from cpas_ocp.physics.units import G0
 
 if TYPE_CHECKING:
-    from cpas_ocp.io.flight_test import FlightTest
-    from cpas_ocp.physics.model import ModelContext
+    from cpas_ocp.physics.flight_test import FlightTest
+    from cpas_ocp.physics.model_context import ModelContext
 
 KIND = "axial_accelerometer"
 BODY_CDS = 1e-3  # m^2: the weight of the body's own axis before any canopy opens

@@ -27,8 +27,8 @@ import numpy as np
 from cpas_ocp.physics.parameters import Parameter
 
 if TYPE_CHECKING:
-    from cpas_ocp.io.flight_test import FlightTest
-    from cpas_ocp.physics.model import ModelContext
+    from cpas_ocp.physics.flight_test import FlightTest
+    from cpas_ocp.physics.model_context import ModelContext
 
 
 @dataclass(frozen=True)

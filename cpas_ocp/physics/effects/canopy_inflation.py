@@ -50,8 +50,8 @@ from cpas_ocp.physics.inflation import (
 from cpas_ocp.physics.parameters import Parameter, param_name, split_name
 
 if TYPE_CHECKING:
-    from cpas_ocp.io.flight_test import FlightTest, Parachute
-    from cpas_ocp.physics.model import ModelContext
+    from cpas_ocp.physics.flight_test import FlightTest, Parachute
+    from cpas_ocp.physics.model_context import ModelContext
 
 # Delay from mortar fire to inflation start used only when no bag-strip or
 # line-stretch observation exists (s).

@@ -30,8 +30,8 @@ from cpas_ocp.physics.inflation import smoothstep
 from cpas_ocp.physics.parameters import Parameter, param_name
 
 if TYPE_CHECKING:
-    from cpas_ocp.io.flight_test import FlightTest, Parachute
-    from cpas_ocp.physics.model import ModelContext
+    from cpas_ocp.physics.flight_test import FlightTest, Parachute
+    from cpas_ocp.physics.model_context import ModelContext
 
 ON_S = 0.03  # the load builds up over the mortar's stroke (s)
 OFF_S = 0.02  # and ends over this time around the inflation start (s)

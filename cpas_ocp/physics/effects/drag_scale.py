@@ -21,8 +21,8 @@ from cpas_ocp.physics.effects.base import Effect
 from cpas_ocp.physics.parameters import Parameter, param_name
 
 if TYPE_CHECKING:
-    from cpas_ocp.io.flight_test import FlightTest
-    from cpas_ocp.physics.model import ModelContext
+    from cpas_ocp.physics.flight_test import FlightTest
+    from cpas_ocp.physics.model_context import ModelContext
 
 
 @dataclass(frozen=True)

@@ -65,8 +65,8 @@ from cpas_ocp.physics.parameters import Parameter, param_name
 from cpas_ocp.physics.units import G0
 
 if TYPE_CHECKING:
-    from cpas_ocp.io.flight_test import FlightTest
-    from cpas_ocp.physics.model import ModelContext
+    from cpas_ocp.physics.flight_test import FlightTest
+    from cpas_ocp.physics.model_context import ModelContext
 
 DEPLOY_S = 0.05  # time over which the packed link becomes a tension-only riser (s)
 # Natural frequency (Hz; the upper end keeps RK4 stable on 10 ms grids) and damping ratio.

@@ -65,8 +65,8 @@ from cpas_ocp.physics.parameters import Parameter, param_name
 from cpas_ocp.physics.units import G0
 
 if TYPE_CHECKING:
-    from cpas_ocp.io.flight_test import FlightTest, Parachute
-    from cpas_ocp.physics.model import ModelContext
+    from cpas_ocp.physics.flight_test import FlightTest, Parachute
+    from cpas_ocp.physics.model_context import ModelContext
 
 MORTAR_STROKE_S = 0.03  # duration of the mortar's push on the pack (s)
 LIFT_S = 0.1  # duration of the switch from a held to a pulled Main bag (s)

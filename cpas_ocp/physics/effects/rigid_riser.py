@@ -26,7 +26,7 @@ from cpas_ocp.physics.parameters import param_name
 from cpas_ocp.physics.units import G0
 
 if TYPE_CHECKING:
-    from cpas_ocp.physics.model import ModelContext
+    from cpas_ocp.physics.model_context import ModelContext
 
 
 SLACK_N = 50.0  # width of the smooth zero clip of riser tension (N)

@@ -18,8 +18,8 @@ from cpas_ocp.physics.effects.base import Effect
 from cpas_ocp.physics.parameters import Parameter, param_name
 
 if TYPE_CHECKING:
-    from cpas_ocp.io.flight_test import FlightTest
-    from cpas_ocp.physics.model import ModelContext
+    from cpas_ocp.physics.flight_test import FlightTest
+    from cpas_ocp.physics.model_context import ModelContext
 
 # A plausible zero offset, as a share of the largest reading of the test: instruments
 # specify theirs against full scale, a load cell's typically within 0.5-1 % of it, and a

@@ -23,7 +23,7 @@ from cpas_ocp.physics.effects.base import Effect
 from cpas_ocp.physics.parameters import param_name
 
 if TYPE_CHECKING:
-    from cpas_ocp.physics.model import ModelContext
+    from cpas_ocp.physics.model_context import ModelContext
 
 
 @dataclass(frozen=True)
