@@ -34,7 +34,8 @@ import pytest
 
 import tests.test_rocket_log_import as generator
 from cpas_ocp.cli import main
-from cpas_ocp.io.flight_test import load_test, validate_block
+from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.io.json_files import validate_block
 from cpas_ocp.physics.atmosphere import pressure_altitude
 from cpas_ocp.physics.units import FACTORS, G0
 from tests.test_rocket_log_import import (

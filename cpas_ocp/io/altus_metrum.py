@@ -41,7 +41,7 @@ import pandas as pd
 
 from cpas_ocp.errors import InputError
 from cpas_ocp.io.flight_record import MIN_SATELLITES, Channel, FlightRecord, new_fixes
-from cpas_ocp.io.flight_test import MAX_MAGNITUDE
+from cpas_ocp.io.json_files import MAX_MAGNITUDE
 
 REQUIRED = ("time", "state_name", "pressure", "altitude", "acceleration")
 # Columns a new sensor record changes: the barometer, the accelerometers, the IMU, and the

@@ -54,7 +54,7 @@ from cpas_ocp.io.flight_record import (
     samples_frame,
     time_ordered,
 )
-from cpas_ocp.io.flight_test import read_json, validate_block
+from cpas_ocp.io.json_files import read_json, validate_block
 from cpas_ocp.physics.units import FACTORS, G0
 
 # The flight states a state column may give (the schema's `names` targets).

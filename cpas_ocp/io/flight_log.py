@@ -93,15 +93,8 @@ from cpas_ocp.io.flight_events import (
     second_difference_sigma,
 )
 from cpas_ocp.io.flight_record import FlightRecord, enu_about, pressure_of_altitude
-from cpas_ocp.io.flight_test import (
-    FORMAT,
-    MANIFEST,
-    check_magnitudes,
-    load_test,
-    read_json,
-    validate_block,
-    validate_manifest,
-)
+from cpas_ocp.io.flight_test import FORMAT, MANIFEST, load_test, validate_manifest
+from cpas_ocp.io.json_files import check_magnitudes, read_json, validate_block
 from cpas_ocp.io.plausibility import (
     MAX_DESCENT_M_S,
     MAX_SPEED_M_S,

@@ -33,7 +33,7 @@ import numpy as np
 import pandas as pd
 
 from cpas_ocp.errors import InputError
-from cpas_ocp.io.flight_test import MAX_MAGNITUDE
+from cpas_ocp.io.json_files import MAX_MAGNITUDE
 from cpas_ocp.physics.atmosphere import StandardAtmosphere, pressure_altitude
 from cpas_ocp.physics.units import G0
 

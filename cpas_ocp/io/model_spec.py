@@ -38,7 +38,8 @@ from typing import Any
 import numpy as np
 
 from cpas_ocp.errors import InputError
-from cpas_ocp.io.flight_test import MANIFEST, read_json, validate_block
+from cpas_ocp.io.flight_test import MANIFEST
+from cpas_ocp.io.json_files import read_json, validate_block
 from cpas_ocp.physics.effects import baseline_effects
 from cpas_ocp.physics.effects.base import Effect
 from cpas_ocp.physics.effects.registry import (
