@@ -3,18 +3,20 @@
 Each test phase is one multiple-shooting NLP (CasADi, Ipopt) whose decision
 variables are the inflation parameters, scale factors and start times and
 whose objective is the sigma-weighted GPS, IMU and riser residuals.  The
-package follows the data: `io` (test folders, logs, model files) -> `physics`
-(atmosphere, inflation laws, effects, the model) -> `estimation` (reduction,
-NLP, solve, covariance) -> `inference` (is it a result, profiles, what-if,
-model comparison) -> `discrepancy` (diagnosis, discovery) and `campaign`
-(many tests, dispersions, Monte Carlo) -> `reports`; `cli` is the command line.
+package follows the data: `physics` (the test description, atmosphere,
+inflation laws, effects, the model) <- `io` (test folders, logs, model files
+read into it) <- `estimation` (reduction, NLP, solve, covariance) <-
+`inference` (is it a result, profiles, what-if, model comparison) <-
+`discrepancy` (diagnosis, discovery) and `campaign` (many tests, dispersions,
+Monte Carlo) <- `reports` <- `api` (the workflows) <- `cli` (the command line
+over them); each imports only those before it.
 
 The Python interface (`cpas_ocp.api`), for notebooks:
 
     import cpas_ocp as co
     test = co.simulate("drogue", "drogue-test", seed=1)   # or co.load_test(folder)
-    rec = co.reconstruct(test)
-    rec.parameters, rec.worst
+    rec = co.reconstruct(test)        # a notebook shows its parameter table
+    rec.parameters, rec.worst, rec.criteria, print(rec.summary())
     rec.report("report"); rec.diagnose(); rec.discover(); rec.compare("model.json")
 """
 
@@ -22,10 +24,18 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-__all__ = ["Reconstruction", "load_model", "load_test", "reconstruct", "simulate"]
+__all__ = ["Reconstruction", "fit_estimator", "load_model", "load_test", "reconstruct",
+           "simulate"]
 
 if TYPE_CHECKING:
-    from cpas_ocp.api import Reconstruction, load_model, load_test, reconstruct, simulate
+    from cpas_ocp.api import (
+        Reconstruction,
+        fit_estimator,
+        load_model,
+        load_test,
+        reconstruct,
+        simulate,
+    )
 
 
 def __getattr__(name: str) -> Any:

@@ -21,6 +21,7 @@ undetermined: `result_claim`) is returned with `rec.is_result` False and
 from __future__ import annotations
 
 import dataclasses
+import html
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -30,13 +31,15 @@ import pandas as pd
 
 from cpas_ocp.discrepancy.diagnosis import Diagnosis, diagnose
 from cpas_ocp.discrepancy.discovery import Discovery, discover
-from cpas_ocp.estimation.estimator import Estimator, Fit
+from cpas_ocp.estimation.estimator import Estimator, Fit, Settings
 from cpas_ocp.estimation.simulate import simulate_problem
 from cpas_ocp.estimation.uncertainty import Covariance
+from cpas_ocp.inference.continuation import solve_checked
 from cpas_ocp.inference.diagnostics import window_statistics, worst_of
-from cpas_ocp.inference.model_comparison import Comparison, compare
+from cpas_ocp.inference.model_comparison import Comparison, Criteria, compare
 from cpas_ocp.inference.phase_windows import phase_windows
-from cpas_ocp.inference.result_claim import Claim, check_drag_areas
+from cpas_ocp.inference.process_intensity import IntensityChoice, choose_intensity
+from cpas_ocp.inference.result_claim import Claim, check_claim, check_drag_areas
 from cpas_ocp.io.flight_test import load_test
 from cpas_ocp.io.model_spec import ModelSpec, load_model_file, spec_of_test
 from cpas_ocp.io.problems import load_problem
@@ -44,10 +47,12 @@ from cpas_ocp.physics.effects.base import Effect
 from cpas_ocp.physics.effects.registry import EffectType, load_plugins
 from cpas_ocp.physics.flight_test import FlightTest
 from cpas_ocp.reports.discrepancy_report import write_comparison, write_diagnosis, write_discovery
-from cpas_ocp.reports.report import write_report
+from cpas_ocp.reports.display_units import DisplayUnits
+from cpas_ocp.reports.report import fit_summary, parameter_table, write_report
 from cpas_ocp.reports.report_data import bound_flag
 
-__all__ = ["Reconstruction", "load_model", "load_test", "reconstruct", "simulate"]
+__all__ = ["Reconstruction", "fit_estimator", "load_model", "load_test", "reconstruct",
+           "simulate"]
 
 
 def simulate(problem: str, out: str | Path, seed: int, effects: Sequence[Effect] | None = None,
@@ -68,21 +73,45 @@ def load_model(path: str | Path, plugins: Sequence[str | Path] = ()) -> ModelSpe
 
 
 def reconstruct(test: FlightTest | str | Path, model: ModelSpec | str | Path | None = None,
-                plugins: Sequence[str | Path] = (), rescale_sigmas: bool = False
+                plugins: Sequence[str | Path] = (), rescale_sigmas: bool = False,
+                settings: Settings | None = None, hessian: str = "gauss-newton",
+                wind_intensities: Sequence[float] = (), progress: bool = False
                 ) -> Reconstruction:
     """Reconstruct a test (a loaded test or its folder) with `model` (a spec, a model file,
-    or None for the manifest's): the fit from the offline reduction, what it may claim
-    (`result_claim`), and its covariance.  Raises SolverFailure where it does not
-    converge."""
-    from cpas_ocp.inference.continuation import solve_checked
+    or None for the manifest's) and the estimator's `settings`: the fit from the offline
+    reduction, what it may claim (`result_claim`), and its covariance (`fit_estimator`).
+    Raises SolverFailure where it does not converge."""
     if not isinstance(test, FlightTest):
         test = load_test(test)
     effects = load_plugins(plugins)
     spec = model if isinstance(model, ModelSpec) else (
         spec_of_test(test) if model is None else load_model_file(model, effects))
-    est, fit, claim = solve_checked(Estimator(test, spec))
-    cov = est.covariance(fit, rescale_sigmas)
-    return Reconstruction(est, fit, cov, check_drag_areas(claim, fit, cov), effects)
+    return fit_estimator(Estimator(test, spec, settings=settings), rescale_sigmas, hessian,
+                         wind_intensities, progress, effects)
+
+
+def fit_estimator(est: Estimator, rescale_sigmas: bool = False, hessian: str = "gauss-newton",
+                  wind_intensities: Sequence[float] = (), progress: bool = False,
+                  plugins: Mapping[str, EffectType] | None = None) -> Reconstruction:
+    """The one path from a built estimator to a reconstruction, for every command: solve
+    from the offline reduction, moving start windows the data press against and
+    restarting opening shapes left on guessed bounds (`continuation.solve_checked`; the
+    estimator of the result is the one that gave the fit), or, given
+    `wind_intensities`, fit the wind process at each of those factors on its intensity
+    and keep the one of largest evidence (`process_intensity.choose_intensity`); then
+    the claim and the covariance (`hessian`: "gauss-newton" or "exact"; `rescale_sigmas`
+    multiplies it by chi-square/dof).  Raises SolverFailure where no fit converges."""
+    choice = None
+    if wind_intensities:
+        choice = choose_intensity(est.test, est.spec, tuple(wind_intensities), progress=progress)
+        est, fit = choice.estimator, choice.fit
+        claim = check_claim(est, fit)
+        claim.notes.append(choice.summary())
+    else:
+        est, fit, claim = solve_checked(est, progress=progress)
+    cov = est.covariance(fit, rescale_sigmas, hessian)
+    return Reconstruction(est, fit, cov, check_drag_areas(claim, fit, cov), dict(plugins or {}),
+                          choice)
 
 
 @dataclass
@@ -95,6 +124,7 @@ class Reconstruction:
     covariance: Covariance
     claim: Claim
     plugins: dict[str, EffectType]
+    intensity_choice: IntensityChoice | None = None  # where the wind's intensity was chosen
 
     @property
     def spec(self) -> ModelSpec:
@@ -129,6 +159,32 @@ class Reconstruction:
     @property
     def chi_square_per_dof(self) -> float:
         return self.fit.chi_square / self.fit.dof
+
+    @property
+    def criteria(self) -> Criteria:
+        """Chi-square, AIC and BIC with the sensors' sigmas known (only differences between
+        fits of the same data mean anything)."""
+        return Criteria.of(self.fit)
+
+    def summary(self, units: DisplayUnits | None = None) -> str:
+        """The parameter table with sigmas and intervals, the fit's statistics and what it
+        may claim, as `cpas-ocp reconstruct` prints them."""
+        return "\n\n".join([parameter_table(self.fit, self.covariance, units),
+                             fit_summary(self.fit, units), self.claim.text()])
+
+    def __repr__(self) -> str:
+        state = "a result" if self.is_result else "not a result"
+        return (f"<Reconstruction of {self.fit.test.name}: {len(self.fit.free)} parameters, "
+                f"chi-square/dof {self.chi_square_per_dof:.3f}, {state}>")
+
+    def _repr_html_(self) -> str:
+        """What a notebook shows: the claim in one line, the fit's statistics, and the
+        parameter table."""
+        state = ("a result" if self.is_result else
+                 "<b>not a result</b>: " + html.escape("; ".join(self.problems)))
+        head = (f"<p><b>{html.escape(self.fit.test.name)}</b>: chi-square/dof "
+                f"{self.chi_square_per_dof:.3f} ({self.fit.dof} dof), {state}</p>")
+        return head + self.parameters.to_html(float_format=lambda v: f"{v:.6g}")
 
     @property
     def worst(self) -> str:

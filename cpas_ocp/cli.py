@@ -992,34 +992,26 @@ def _estimator(test: FlightTest, args: argparse.Namespace, spec: ModelSpec) -> E
 
 def _fit_and_covariance(est: Estimator, args: argparse.Namespace
                         ) -> tuple[Estimator, Fit, Covariance, Claim]:
-    """Solve, check what the fit may claim (moving start windows the data press against;
-    the estimator returned is the one that gave the fit), and the covariance the command
-    line asks for (a warning where the data leave a parameter combination undetermined)."""
-    from cpas_ocp.inference.continuation import solve_checked
-    from cpas_ocp.inference.result_claim import check_drag_areas
-    if getattr(args, "wind_intensity", None):
-        from cpas_ocp.inference.process_intensity import choose_intensity
-        from cpas_ocp.inference.result_claim import check_claim
-        print(f"choosing the wind process's intensity ({len(args.wind_intensity)} fits) ...",
+    """`api.fit_estimator` with the command line's options, announced, and a warning for
+    every parameter combination the data leave undetermined and every reason the fit is
+    not yet a result."""
+    from cpas_ocp.api import fit_estimator
+    intensities = getattr(args, "wind_intensity", None) or ()
+    if intensities:
+        print(f"choosing the wind process's intensity ({len(intensities)} fits) ...",
               flush=True)
-        choice = choose_intensity(est.test, est.spec, args.wind_intensity,
-                                  progress=not args.verbose)
-        print(choice.text(), flush=True)
-        est, fit = choice.estimator, choice.fit
-        claim = check_claim(est, fit)
-        claim.notes.append(choice.summary())
-    else:
-        est, fit, claim = solve_checked(est, progress=not args.verbose)
     if args.hessian == "exact":
-        print("exact-Hessian covariance ...", flush=True)
-    cov = est.covariance(fit, args.rescale_sigmas, args.hessian)
-    check_drag_areas(claim, fit, cov)
-    if cov.undetermined:
-        print(f"warning: the data do not determine {', '.join(cov.undetermined)} "
+        print("the fit, then its exact-Hessian covariance ...", flush=True)
+    rec = fit_estimator(est, args.rescale_sigmas, args.hessian, intensities,
+                        progress=not args.verbose)
+    if rec.intensity_choice is not None:
+        print(rec.intensity_choice.text(), flush=True)
+    if rec.covariance.undetermined:
+        print(f"warning: the data do not determine {', '.join(rec.covariance.undetermined)} "
               f"(see the identifiability lines)", file=sys.stderr)
-    for problem in claim.problems():
+    for problem in rec.problems:
         print(f"warning: {problem}", file=sys.stderr)
-    return est, fit, cov, claim
+    return rec.estimator, rec.fit, rec.covariance, rec.claim
 
 
 if __name__ == "__main__":  # python -m cpas_ocp.cli, as the cpas-ocp script
