@@ -46,7 +46,8 @@ from cpas_ocp.io.flight_test import load_test
 name, arg = case.split(":")
 if name == "prometheus":
     from cpas_ocp.io.altus_metrum import read_altus_log
-    from cpas_ocp.io.flight_log import import_flight, load_card
+    from cpas_ocp.io.flight_log import import_flight
+    from cpas_ocp.io.flight_card import load_card
     import_flight(read_altus_log(Path(root).parent / "shared" / "data" / "prometheus-2022"
                                  / arg), load_card("prometheus"), work / "test")
     test = load_test(work / "test")

@@ -27,7 +27,8 @@ from cpas_ocp.errors import SolverFailure
 from cpas_ocp.estimation.estimator import Estimator, Fit, Settings, default_grid_step
 from cpas_ocp.estimation.simulate import simulate_problem
 from cpas_ocp.io.altus_metrum import read_altus_log
-from cpas_ocp.io.flight_log import import_flight, load_card
+from cpas_ocp.io.flight_card import load_card
+from cpas_ocp.io.flight_log import import_flight
 from cpas_ocp.io.flight_test import load_test
 from cpas_ocp.io.problems import load_problem
 from cpas_ocp.physics.flight_test import FlightTest

@@ -56,7 +56,7 @@ if TYPE_CHECKING:
     from cpas_ocp.estimation.estimator import Estimator, Fit
     from cpas_ocp.estimation.uncertainty import Covariance
     from cpas_ocp.inference.result_claim import Claim
-    from cpas_ocp.io.flight_log import FlightCard
+    from cpas_ocp.io.flight_card import FlightCard
     from cpas_ocp.io.flight_record import FlightRecord
     from cpas_ocp.io.model_spec import ModelSpec
     from cpas_ocp.io.recorder_clocks import RecorderEstimates
@@ -764,7 +764,8 @@ def _card_options(s: argparse.ArgumentParser) -> None:
 
 
 def _import(args: argparse.Namespace) -> int:
-    from cpas_ocp.io.flight_log import import_flight, load_card
+    from cpas_ocp.io.flight_card import load_card
+    from cpas_ocp.io.flight_log import import_flight
     from cpas_ocp.io.log_formats import read_flight_log
     card = load_card(args.card)
     log_format, columns = args.format, args.columns
@@ -784,7 +785,7 @@ def _import(args: argparse.Namespace) -> int:
 
 
 def _flight(args: argparse.Namespace) -> int:
-    from cpas_ocp.io.flight_log import load_card
+    from cpas_ocp.io.flight_card import load_card
     card = load_card(args.card)
     beside = _beside(card)
     data = args.data if args.data is not None else (

@@ -19,16 +19,15 @@ from cpas_ocp.cli import main
 from cpas_ocp.errors import InputError
 from cpas_ocp.estimation.estimator import Estimator
 from cpas_ocp.io.altus_metrum import read_altus_log
+from cpas_ocp.io.flight_card import card_from_dict, load_card
+from cpas_ocp.io.flight_events import second_difference_sigma
 from cpas_ocp.io.flight_log import (
-    card_from_dict,
     fit_lapse_rate,
     import_flight,
-    load_card,
     opening_peak,
-    second_difference_sigma,
-    settled_time,
 )
 from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.io.log_noise import settled_time
 from cpas_ocp.physics.atmosphere import (
     SiteAtmosphere,
     StandardAtmosphere,

@@ -382,7 +382,7 @@ def test_correlation_length_of_white_and_correlated_noise() -> None:
     truth, sigma_x sqrt(9 / n) (the sum stops where rho falls into the white band, which
     drops a tail of a few per cent), where every raw sample weighed at the raw scatter
     gives it three times too small."""
-    from cpas_ocp.io.flight_log import block_sigma, correlation_length, independent_blocks
+    from cpas_ocp.io.log_noise import block_sigma, correlation_length, independent_blocks
     t = np.arange(20000) * 0.01
     trend = 3000.0 - 20.0 * t
     for seed in range(10):

@@ -18,7 +18,8 @@ from cpas_ocp.estimation.estimator import Estimator
 from cpas_ocp.inference.process_intensity import without_wind
 from cpas_ocp.inference.profile_likelihood import THRESHOLD
 from cpas_ocp.io.altus_metrum import read_altus_log
-from cpas_ocp.io.flight_log import import_flight, load_card
+from cpas_ocp.io.flight_card import load_card
+from cpas_ocp.io.flight_log import import_flight
 from cpas_ocp.io.flight_test import load_test
 from cpas_ocp.io.model_spec import spec_of_test
 from cpas_ocp.io.recorder_clocks import clock_offset

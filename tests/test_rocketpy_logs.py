@@ -21,7 +21,7 @@ import pandas as pd
 import pytest
 
 from cpas_ocp.cli import main
-from cpas_ocp.io.flight_log import load_card
+from cpas_ocp.io.flight_card import load_card
 from cpas_ocp.io.flight_test import load_test
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"

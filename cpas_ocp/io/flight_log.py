@@ -49,14 +49,14 @@ folder:
   fitted to the GPS fixes of the descent (`fit_lapse_rate`; in boost the
   receiver lags the vehicle by tens of metres);
 * noise sigmas from the data: the altimeter's per canopy phase, from its
-  scatter about the local trend (`scatter_sigma`; under a 30 m/s drogue the
+  scatter about the local trend (`log_noise.scatter_sigma`; under a 30 m/s drogue the
   static pressure swings by metres over seconds), the GPS altitude's from the
   lapse-rate fit's residuals.  A later canopy's altimeter sigma applies from
-  the time its descent has settled (`settled_time`), not from its deployment:
+  the time its descent has settled (`log_noise.settled_time`), not from its deployment:
   until then the vehicle still falls fast and is jerked about by the opening,
   and the static port errs as it did under the canopy before.  The
   accelerometer's sigma is the RMS of its scatter about the local trend
-  (`scatter_rms`: the swing's jolts are part of the swing), under each
+  (`log_noise.scatter_rms`: the swing's jolts are part of the swing), under each
   canopy's steady descent and apart over each later canopy's opening (from
   the charge until the descent has settled, at least `OPENING_WINDOW_S`),
   where the shock cord bounces the body by g's within a sample.
@@ -67,12 +67,9 @@ it loads, so a failed import leaves nothing behind.
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import shutil
 import tempfile
-from dataclasses import dataclass, field
-from importlib import resources
 from itertools import pairwise
 from pathlib import Path
 from typing import Any
@@ -80,10 +77,10 @@ from typing import Any
 import numpy as np
 import pandas as pd
 from scipy.optimize import minimize_scalar
-from scipy.signal import savgol_filter
 
 from cpas_ocp.errors import InputError
 from cpas_ocp.io.altus_metrum import AltusLog
+from cpas_ocp.io.flight_card import ASSUMED_CD, FlightCard, card_quantity, pad_temperature
 from cpas_ocp.io.flight_events import (
     CLUSTER_GAP_S,
     DROGUE_WINDOW_S,
@@ -94,7 +91,19 @@ from cpas_ocp.io.flight_events import (
 )
 from cpas_ocp.io.flight_record import FlightRecord, enu_about, pressure_of_altitude
 from cpas_ocp.io.flight_test import FORMAT, MANIFEST, load_test, validate_manifest
-from cpas_ocp.io.json_files import check_magnitudes, read_json, validate_block
+from cpas_ocp.io.import_reports import ImportSummary, Snatch
+from cpas_ocp.io.log_noise import (
+    MIN_DESCENT_SAMPLES,
+    RATE_WINDOW_S,
+    STEADY_RATE_S,
+    block_sigma,
+    dead_note,
+    dead_samples,
+    independent_blocks,
+    local_slope,
+    scatter_rms,
+    settled_time,
+)
 from cpas_ocp.io.plausibility import (
     MAX_DESCENT_M_S,
     MAX_SPEED_M_S,
@@ -103,138 +112,63 @@ from cpas_ocp.io.plausibility import (
     check_speed,
     check_steady_accelerometer,
 )
-from cpas_ocp.io.problems import problem_names
 from cpas_ocp.io.strict_json import json_text
 from cpas_ocp.physics.atmosphere import (
     ISA_LAPSE_K_M,
-    R_AIR,
     SiteAtmosphere,
-    StandardAtmosphere,
     pressure_altitude,
 )
 from cpas_ocp.physics.effects.canopy_inflation import MAX_CD
 from cpas_ocp.physics.effects.registry import SENSOR_EFFECTS
-from cpas_ocp.physics.units import FACTORS, G0
+from cpas_ocp.physics.units import G0
 
 TOUCHDOWN_MARGIN_S = 0.5  # phase ends this long before the detected touchdown (s)
+
+
 EVENT_SIGMA_S = 0.1  # timing sigma of a flight-state change (one descent sample, s)
+
+
 MIN_EVENT_SIGMA_S = 1e-6  # least event sigma a manifest states (its times' resolution, s)
+
+
 EJECTION_EXCLUDE_S = 0.3  # altimeter samples left out after an ejection charge (s)
+
+
 MIN_ACCEL_SIGMA = 0.1  # floor of the accelerometer noise sigma (m/s^2)
+
+
 MIN_BARO_SIGMA_M = 0.3  # floor of the altimeter noise sigma (the pressure resolution, m)
+
+
 LAPSE_BOUNDS_K_M = (0.002, 0.0098)  # search range of a fitted lapse rate (to the dry adiabat)
-SCATTER_WINDOW_S = 8.0  # window of the local trend a sensor's scatter is taken about (s)
+
+
 SERIES_MARGIN_S = 1.5  # series extend this far beyond the phase: a 1 Hz GPS covers it (s)
-RATE_WINDOW_S = 2.0  # window of the local descent rate that tells when a canopy has settled (s)
-SETTLED_RATE_FACTOR = 1.25  # settled: the local rate within this factor of the steady one
-STEADY_RATE_S = 10.0  # the settled descent rate under a canopy is taken over this long (s)
+
+
 OPENING_WINDOW_S = 3.0  # an opening-load peak is looked for this long after the charge (s)
+
+
 OPENING_BASELINE_S = 5.0  # the steady reading before a charge is taken over this long (s)
+
+
 OPENING_PEAK_SIGMAS = 5.0  # a peak counts when this many scatter sigmas off the steady reading
-MIN_DESCENT_S = 5.0  # a log must go on this long after the first deployment to be fitted (s)
-MIN_DESCENT_SAMPLES = 20  # ... with this many altimeter samples
-ACF_FLOOR = 0.05  # a noise's autocorrelation counts until it first falls below this
+
+
+# A log must go on this long after the first deployment to be fitted (s), with at least
+# log_noise.MIN_DESCENT_SAMPLES altimeter samples.
+MIN_DESCENT_S = 5.0
+
+
+
+
 LAUNCH_RISE_M = 10.0  # launch: the altitude has risen this far above its lowest so far (m) ...
+
+
 LAUNCH_LEAD_S = 1.0  # ... and the pad's samples end this long before that (s)
+
+
 MIN_PAD_SAMPLES = 10  # the pad's level is their median where the log has this many
-STUCK_RUN_S = 2.0  # a reading repeated exactly for this long (s) ...
-STUCK_RUN_SAMPLES = 10  # ... and this many samples is a dead channel
-CLIP_RUN_SAMPLES = 3  # a channel's extreme reading met this often is its range's end: clipped
-ASSUMED_CD = 0.75  # drag coefficient on pi D_o^2 / 4 of a canopy whose card gives no diameter
-DEFAULT_DRY_MASS_FRACTION = 0.005  # of the vehicle's mass: a canopy's where the card gives none
-
-
-@dataclass(frozen=True)
-class FlightCard:
-    """What a flight log does not hold; see the module docstring."""
-
-    name: str
-    title: str
-    label: str
-    data_folder: str
-    logs: tuple[str, ...]
-    vehicle: dict[str, Any]
-    parachutes: tuple[dict[str, Any], ...]
-    site: dict[str, Any]
-    model: dict[str, Any]
-    nominal: dict[str, dict[str, Any]]
-    source: str
-    events: dict[str, dict[str, Any]] = field(default_factory=dict)
-    data_format: str | None = None  # the logs' built-in format, for `flight`
-    # or their column map: a file relative to the card's folder, or the map inline
-    data_columns: str | dict[str, Any] | None = None
-
-
-def card_from_dict(raw: dict[str, Any], source: str) -> FlightCard:
-    """A card from its JSON object; InputError naming the field that breaks
-    `data_schemas/flight_card.schema.json` (or whose numbers are beyond any test's).
-
-    The canopies' optional fields are filled in here (`canopy_defaults`), and the vehicle's
-    forebody drag area is 0 where the card gives none (the canopies' drag areas then carry
-    the body's), so that the manifest the import writes states every value it was built
-    with."""
-    validate_block(raw, "flight_card.schema.json", source)
-    check_magnitudes(raw, source)
-    data = raw.get("data", {})
-    return FlightCard(raw["name"], raw.get("title", raw["name"]), raw.get("label", ""),
-                      data.get("folder", ""), tuple(data.get("logs", ())),
-                      {"forebody_cds": {"value": 0.0, "unit": "m^2"}, **raw["vehicle"]},
-                      tuple(canopy_defaults(raw["parachutes"], raw["vehicle"], source)),
-                      raw["site"], raw.get("model") or {}, raw.get("nominal", {}), source,
-                      raw.get("events", {}), data.get("format"), data.get("columns"))
-
-
-def canopy_defaults(parachutes: list[dict[str, Any]], vehicle: dict[str, Any], source: str
-                    ) -> list[dict[str, Any]]:
-    """The card's canopies with what they leave out filled in: ``type`` drogue for the
-    first and main for the others, ``inflation`` finite mass, one stage ``open``, and a
-    ``dry_mass`` of `DEFAULT_DRY_MASS_FRACTION` of the vehicle's (a canopy's mass only adds
-    to the descent mass it flies with).  A missing ``diameter`` stays missing: the import
-    takes it from the descent (`canopy_diameters`)."""
-    out = []
-    for i, chute in enumerate(parachutes):
-        if chute.get("open_at_start"):
-            raise InputError(source, f"parachutes[{i}].open_at_start", "a canopy the log sees "
-                             "deploy (a flight card's canopies each open at an event of the "
-                             "log; open_at_start is for a test folder whose phase begins "
-                             "under an open canopy)")
-        if len(chute.get("stages", ())) > 1:
-            raise InputError(source, f"parachutes[{i}].stages", "one stage: the import finds "
-                             "no disreef events in a rocket log")
-        filled = {"type": "drogue" if i == 0 else "main", "inflation": "finite_mass",
-                  "stages": ["open"], **chute}
-        if "dry_mass" not in chute:
-            mass = _si(vehicle.get("mass"), "mass", source, "vehicle.mass")
-            filled["dry_mass"] = {"value": round(DEFAULT_DRY_MASS_FRACTION * mass, 4),
-                                  "unit": "kg"}
-        out.append(filled)
-    return out
-
-
-def load_card(name_or_path: str) -> FlightCard:
-    """A built-in flight card by problem name, or a card file."""
-    path = Path(name_or_path)
-    if path.suffix == ".json":
-        return card_from_dict(read_json(path, "an existing flight-card JSON file"), str(path))
-    names = problem_names("flight_log")
-    if name_or_path not in names:
-        raise InputError("flight card", "name", f"a card file (.json) or one of "
-                         f"{', '.join(names)}; got {name_or_path!r}")
-    raw = json.loads(resources.files("cpas_ocp.problem_data")
-                     .joinpath(f"{name_or_path}.json").read_text())
-    return card_from_dict(raw, f"problems/{name_or_path}.json")
-
-
-def _si(q: dict[str, Any], dim: str, source: str, field: str) -> float:
-    """The quantity `q` ({value, unit}) of dimension `dim` in SI; InputError naming `field`
-    of `source` where it is no such quantity."""
-    unit = q.get("unit") if isinstance(q, dict) else None
-    value = q.get("value") if isinstance(q, dict) else None
-    if not isinstance(unit, str) or unit not in FACTORS[dim] \
-            or not isinstance(value, int | float) or isinstance(value, bool):
-        raise InputError(source, field, f"{{value, unit}} with a {dim} unit "
-                         f"({', '.join(sorted(FACTORS[dim]))})")
-    return float(q["value"]) * FACTORS[dim][unit]
 
 
 def fit_lapse_rate(fixes: pd.DataFrame, pressure: pd.Series, times: pd.Series,
@@ -263,155 +197,6 @@ def fit_lapse_rate(fixes: pd.DataFrame, pressure: pd.Series, times: pd.Series,
     return lapse, offset, float(np.std(residual(lapse), ddof=2))
 
 
-def _scatter(t: np.ndarray, values: np.ndarray) -> np.ndarray | None:
-    """`values` less their local quadratic trend over SCATTER_WINDOW_S (a Savitzky-Golay
-    filter on a uniform resampling); None where the samples span too short a time."""
-    grid = np.arange(t[0], t[-1], 0.1)
-    window = min(int(SCATTER_WINDOW_S / 0.1) // 2 * 2 + 1, len(grid) // 2 * 2 - 1)
-    if window < 5:
-        return None
-    return values - np.interp(t, grid, savgol_filter(np.interp(grid, t, values), window, 2))
-
-
-def scatter_sigma(t: np.ndarray, values: np.ndarray) -> float:
-    """Robust sigma (1.4826 MAD) of `values` about their local quadratic trend over
-    SCATTER_WINDOW_S (`_scatter`).
-
-    Unlike the second differences this counts disturbances correlated over a
-    few seconds, such as the static-pressure swings of a rocket swinging under
-    a fast drogue, as noise; the descent itself (speed changing over tens of
-    seconds) stays in the trend."""
-    r = _scatter(t, values)
-    if r is None:
-        return second_difference_sigma(values)
-    return float(1.4826 * np.median(np.abs(r - np.median(r))))
-
-
-def integrated_time(r: np.ndarray) -> float:
-    """The integrated autocorrelation time (samples) of the residual series `r`:
-    1 + 2 sum_k rho_k, the sum over the lags before rho first falls below `ACF_FLOOR` or
-    below 2/sqrt(n), the band within which white noise's sample autocorrelation of n
-    samples stays (so that chance correlations of a white series do not add up); 1 for
-    fewer than 20 samples."""
-    if r.size < MIN_DESCENT_SAMPLES:
-        return 1.0
-    r = r - r.mean()
-    var = float(np.dot(r, r))
-    if var == 0.0:
-        return 1.0
-    floor = max(ACF_FLOOR, 2.0 / np.sqrt(r.size))
-    total = 1.0
-    for k in range(1, r.size // 4):
-        rho = float(np.dot(r[:-k], r[k:])) / var
-        if rho < floor:
-            break
-        total += 2.0 * rho
-    return total
-
-
-def correlation_length(t: np.ndarray, values: np.ndarray) -> int:
-    """The integrated autocorrelation time (`integrated_time`, rounded, samples) of
-    `values`' scatter about their local trend (`_scatter`): the number of samples that
-    carry as much information as one independent sample.  1 for white noise or too few
-    samples (under 80)."""
-    r = _scatter(t, values)
-    if r is None or r.size < 4 * MIN_DESCENT_SAMPLES:
-        return 1
-    return max(1, round(integrated_time(r)))
-
-
-def settled(t: np.ndarray, steady_end: float = np.inf) -> np.ndarray:
-    """Which of the times `t` (s, one canopy's segment) lie in its settled descent: the
-    later half of the span up to `steady_end` (the next canopy's charge, or the phase's
-    end).  An opening's deceleration or the landing, which a local quadratic trend does
-    not follow, would read there as correlated noise."""
-    end = min(float(t[-1]), steady_end)
-    return (t >= 0.5 * (t[0] + end)) & (t <= end)
-
-
-def block_sigma(blocks: pd.DataFrame, steady_end: float = np.inf) -> float:
-    """The noise sigma to weigh block means (`independent_blocks`) by: their robust
-    scatter about the local trend (`scatter_sigma`) times the square root of their own
-    integrated autocorrelation time in the settled descent (`settled`).  Adjacent blocks
-    of a correlated noise still share its tail (for an AR(1) noise in blocks of its
-    integrated time, adjacent means correlate at 0.36), and weighing them as independent
-    would state sigmas too small by that root."""
-    t, values = blocks["time"].to_numpy(float), blocks.iloc[:, 1].to_numpy(float)
-    steady = settled(t, steady_end)
-    r = _scatter(t[steady], values[steady]) if steady.sum() >= 2 else None
-    tail = 1.0 if r is None else max(1.0, integrated_time(r))
-    return scatter_sigma(t, values) * float(np.sqrt(tail))
-
-
-def independent_blocks(frame: pd.DataFrame, steady_end: float = np.inf
-                       ) -> tuple[pd.DataFrame, int]:
-    """`frame` (``time`` s and one channel) averaged in consecutive blocks of
-    `correlation_length` samples, each block's mean at its mean time, blocks never spanning
-    a gap (a left-out charge window: over 1.5 sample intervals); with the block size.  The
-    correlation is measured in the settled descent (`settled`, up to `steady_end`).
-
-    Block means of correlated noise are nearly independent, weighed at `block_sigma`: a
-    fit that weighs every raw sample at the raw scatter would
-    count each piece of information that many times over, and state sigmas that many
-    times too small.  Over a block (well under a second) the descent's curvature moves the
-    mean from the mid-time value by a·L²/24, centimetres against metres of noise."""
-    if len(frame) < 2:
-        return frame.reset_index(drop=True), 1
-    t = frame["time"].to_numpy(float)
-    steady = settled(t, steady_end)
-    size = correlation_length(t[steady], frame.iloc[:, 1].to_numpy(float)[steady])
-    if size <= 1:
-        return frame.reset_index(drop=True), 1
-    run = np.r_[0, np.cumsum(np.diff(t) > 1.5 * sample_interval(t))]
-    position = np.zeros(t.size, dtype=int)
-    for r in np.unique(run):
-        sel = run == r
-        position[sel] = np.arange(sel.sum()) // size
-    keys = run * (t.size + 1) + position
-    return frame.groupby(keys, sort=True).mean().reset_index(drop=True), size
-
-
-def scatter_rms(t: np.ndarray, values: np.ndarray) -> float:
-    """RMS of `values` about their local quadratic trend over SCATTER_WINDOW_S (`_scatter`):
-    the sigma of a disturbance whose tails belong to it.  An accelerometer on a body
-    swinging under its canopy reads jolts of g when the swing reverses (both Prometheus
-    recorders read +2.5 to +3 g at 148.6-148.8 s under a drogue whose median reading is
-    -1.65 g): part of the swing, not glitches, so its variance, not a robust spread of
-    its middle, is the noise (under the drogue, 4.6 m/s^2 against 3.5 robust)."""
-    r = _scatter(t, values)
-    if r is None:
-        return second_difference_sigma(values)
-    return float(np.sqrt(np.mean(r**2)))
-
-
-def settled_time(t: np.ndarray, altitude: np.ndarray, t_from: float, t_to: float) -> float:
-    """When the descent after a deployment at `t_from` has settled (s): the first time from
-    which the local descent rate (slope of a line through `RATE_WINDOW_S` of altitude
-    samples, m/s) stays within `SETTLED_RATE_FACTOR` of the steady rate (the median local
-    rate over the second half of [`t_from`, `t_to`]) for a further window.  `t_from`
-    where the samples are too few to tell."""
-    centres = np.arange(t_from + RATE_WINDOW_S / 2, t_to - RATE_WINDOW_S / 2, RATE_WINDOW_S / 2)
-    rates = np.array([_slope(t, altitude, c - RATE_WINDOW_S / 2, c + RATE_WINDOW_S / 2)
-                      for c in centres])
-    late = centres >= 0.5 * (t_from + t_to)
-    if not np.isfinite(rates[late]).any():
-        return t_from
-    steady = abs(float(np.nanmedian(rates[late])))
-    ok = np.abs(rates) <= SETTLED_RATE_FACTOR * steady
-    for i in range(centres.size - 2):
-        if ok[i] and ok[i + 1] and ok[i + 2]:
-            return float(centres[i] - RATE_WINDOW_S / 2)
-    return t_from
-
-
-def _slope(t: np.ndarray, values: np.ndarray, lo: float, hi: float) -> float:
-    """Slope (per s) of a line through the samples in [lo, hi]; NaN with fewer than 4."""
-    m = (t >= lo) & (t <= hi)
-    if m.sum() < 4:
-        return float("nan")
-    return float(np.polyfit(t[m] - lo, values[m], 1)[0])
-
-
 def drag_ceiling(t: np.ndarray, height: np.ndarray, density: np.ndarray, t_charge: float,
                  t_settled: float, t_next: float) -> float | None:
     """The largest axial reading (m/s^2, one g subtracted) the canopies' drag can give in
@@ -428,160 +213,15 @@ def drag_ceiling(t: np.ndarray, height: np.ndarray, density: np.ndarray, t_charg
     model makes.  `height` (m) and `density` (kg/m^3) are the altimeter's
     samples at times `t`.  None where the rates cannot be told."""
     early = t_charge - EVENT_SIGMA_S
-    v_c = -_slope(t, height, early - RATE_WINDOW_S, early)
+    v_c = -local_slope(t, height, early - RATE_WINDOW_S, early)
     end = min(t_settled + STEADY_RATE_S, t_next)
-    v_s = -_slope(t, height, t_settled, end)
+    v_s = -local_slope(t, height, t_settled, end)
     if not (v_c > 0.0 and v_s > 0.0):
         return None
     at_charge = (t >= early - RATE_WINDOW_S) & (t <= early)
     settled = (t >= t_settled) & (t <= end)
     ratio = float(np.mean(density[at_charge]) / np.mean(density[settled]))
     return G0 * ratio * (v_c / v_s) ** 2 - G0
-
-
-@dataclass(frozen=True)
-class Snatch:
-    """A later canopy's opening as the accelerometer read it against the drag ceiling
-    (`drag_ceiling`): the ceiling (m/s^2, an axial reading), the samples above it left
-    out as the shock cord's snatch, and the largest of them (m/s^2) with its time (s)."""
-
-    ceiling_m_s2: float
-    samples_left_out: int
-    largest_m_s2: float | None
-    at_s: float | None
-
-    def text(self) -> str:
-        head = f"drag ceiling of the axial reading {self.ceiling_m_s2 / G0:.1f} g"
-        if self.largest_m_s2 is None:
-            return head + ", no sample above it"
-        return (head + f"; {self.samples_left_out} sample(s) above it left out as the shock "
-                f"cord's snatch, the largest {self.largest_m_s2 / G0:.1f} g at {self.at_s:.2f} s")
-
-
-def _import_report(folder: Path | None, key: str) -> Any:
-    """Entry `key` of the import report (``import.json``) of the test folder `folder`; None
-    for a folder that was not imported, or whose report lacks it or was edited out of
-    shape (the reports then only lack what it would have said)."""
-    report = None if folder is None else folder / "import.json"
-    if report is None or not report.is_file():
-        return None
-    try:
-        return json.loads(report.read_text()).get(key)
-    except (ValueError, AttributeError):
-        return None
-
-
-def import_snatches(folder: Path | None) -> dict[str, Snatch]:
-    """The snatches an import left out of the test folder `folder` (its ``import.json``);
-    empty where it holds none (`_import_report`)."""
-    try:
-        return {name: Snatch(**fields)
-                for name, fields in (_import_report(folder, "snatch") or {}).items()}
-    except (TypeError, AttributeError):
-        return {}
-
-
-def import_nominal(folder: Path | None) -> dict[str, dict[str, Any]]:
-    """The card's nominal drag areas an import kept in the test folder `folder` (its
-    ``import.json``): ``{parameter: {value, unit, source}}``; empty where it holds none, or
-    an entry that is not such an area."""
-    nominal = _import_report(folder, "nominal")
-    if not isinstance(nominal, dict):
-        return {}
-    return {name: spec for name, spec in nominal.items() if isinstance(spec, dict)
-            and isinstance(spec.get("value"), int | float) and spec.get("unit") in FACTORS["area"]}
-
-
-@dataclass(frozen=True)
-class ImportSummary:
-    """What an import did, for the import report (`import.json`)."""
-
-    recorder: str
-    phase: tuple[float, float]
-    events: dict[str, float]
-    site: SiteAtmosphere
-    lapse_fit: tuple[float, float, float] | None
-    baro_sigma_m: list[float]
-    samples: dict[str, int]
-    dropped: dict[str, int]
-    accel_sigma: list[float] = field(default_factory=list)  # m/s^2, per segment
-    snatches: dict[str, Snatch] = field(default_factory=dict)  # per later canopy
-    flight_events: dict[str, FlightEvent] = field(default_factory=dict)  # time, sigma, source
-    notes: list[str] = field(default_factory=list)
-    nominal: dict[str, dict[str, Any]] = field(default_factory=dict)  # the card's, as given
-
-    def text(self) -> str:
-        """A few lines for the terminal."""
-        events = ", ".join(f"{k} {v:.2f} s" for k, v in self.events.items())
-        lines = [f"{self.recorder} log: phase {self.phase[0]:.2f}-{self.phase[1]:.2f} s; {events}",
-                 f"site: {self.site.elevation_m:.0f} m, {self.site.pressure_pa:.0f} Pa, "
-                 f"{self.site.temperature_k:.1f} K, lapse rate "
-                 f"{1e3 * self.site.lapse_rate_k_m:.2f} K/km"]
-        if self.lapse_fit is not None:
-            lines.append(f"  (lapse rate fitted to the GPS fixes: GPS offset "
-                         f"{self.lapse_fit[1]:+.1f} m, residual sigma {self.lapse_fit[2]:.1f} m)")
-        lines.append("altimeter sigma per canopy phase: "
-                     + ", ".join(f"{s:.2f} m" for s in self.baro_sigma_m))
-        if self.accel_sigma:
-            lines.append("accelerometer sigma per steady descent and opening (the swing "
-                         "counted): " + ", ".join(f"{s:.2f} m/s²" for s in self.accel_sigma))
-        for name, snatch in self.snatches.items():
-            lines.append(f"{name}'s opening: {snatch.text()}")
-        if self.flight_events:
-            lines.append("flight events: " + ", ".join(
-                f"{k} {e.time:.2f} ± {e.sigma:.2f} s ({e.source})"
-                for k, e in self.flight_events.items()))
-        lines.extend(f"note: {n}" for n in self.notes)
-        lines.append("samples: " + ", ".join(f"{k} {v}" for k, v in self.samples.items())
-                     + "; dropped: " + ", ".join(f"{k} {v}" for k, v in self.dropped.items()))
-        return "\n".join(lines)
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"recorder": self.recorder, "phase_s": list(self.phase), "events_s": self.events,
-                "site": {"elevation_m": self.site.elevation_m,
-                         "pressure_pa": self.site.pressure_pa,
-                         "temperature_k": self.site.temperature_k,
-                         "lapse_rate_k_km": 1e3 * self.site.lapse_rate_k_m},
-                "lapse_fit": None if self.lapse_fit is None else
-                {"lapse_rate_k_km": 1e3 * self.lapse_fit[0], "gps_offset_m": self.lapse_fit[1],
-                 "residual_sigma_m": self.lapse_fit[2]},
-                "baro_sigma_m": self.baro_sigma_m, "accel_sigma_m_s2": self.accel_sigma,
-                "snatch": {k: dataclasses.asdict(v) for k, v in self.snatches.items()},
-                "flight_events": {k: {"time_s": e.time, "sigma_s": e.sigma, "source": e.source}
-                                  for k, e in self.flight_events.items()},
-                "notes": self.notes, "samples": self.samples, "dropped": self.dropped,
-                "nominal": self.nominal}
-
-
-def dead_samples(t: np.ndarray, values: np.ndarray, clipped: bool = False) -> np.ndarray:
-    """Which samples a channel did not measure: runs of one exact reading repeated for at
-    least `STUCK_RUN_S` and `STUCK_RUN_SAMPLES` samples (a dead or zeroed channel: a real
-    sensor's noise, or a descent of metres per second, changes the reading within that),
-    and with `clipped`, every sample at the channel's largest or smallest reading where that
-    exact reading comes `CLIP_RUN_SAMPLES` times or more (the sensor's range: the force went
-    beyond it; a real peak of a noisy channel is not matched to the last digit).  `t` in
-    s."""
-    if values.size < 2:
-        return np.zeros(values.size, dtype=bool)
-    change = np.flatnonzero(np.diff(values) != 0.0) + 1
-    first, end = np.r_[0, change], np.r_[change, values.size]  # runs [first, end)
-    run = end - first
-    dead_run = (run >= STUCK_RUN_SAMPLES) & (t[end - 1] - t[first] >= STUCK_RUN_S)
-    dead = np.repeat(dead_run, run)
-    if clipped:
-        for rail in (values.max(), values.min()):
-            at_rail = values == rail
-            if at_rail.sum() >= CLIP_RUN_SAMPLES:
-                dead |= at_rail
-    return dead
-
-
-def dead_note(channel: str, t: np.ndarray, values: np.ndarray, unit: str) -> str:
-    """A sentence on the samples `dead_samples` left out of `channel`."""
-    readings = ", ".join(f"{v:g}" for v in np.unique(values)[:3])
-    return (f"{channel}: {t.size} samples between {t.min():.2f} and {t.max():.2f} s left out: "
-            f"the channel repeats one reading ({readings} {unit}) for {STUCK_RUN_S:g} s or "
-            "more, or sits at its range's end: it did not measure there")
 
 
 def descent_drag_areas(deploy: dict[str, float], parachutes: list[dict[str, Any]],
@@ -595,14 +235,15 @@ def descent_drag_areas(deploy: dict[str, float], parachutes: list[dict[str, Any]
     the flown mass; the canopy's own is that less what the earlier canopies showed (all of
     it where that is not less: a canopy cut away).  The forebody's drag area is in the
     first canopy's."""
-    mass = _si(card.vehicle.get("mass"), "mass", card.source, "vehicle.mass") + sum(
-        _si(c["dry_mass"], "mass", card.source, "parachutes.dry_mass") for c in parachutes)
+    mass = card_quantity(card.vehicle.get("mass"), "mass", card.source, "vehicle.mass") + sum(
+        card_quantity(c["dry_mass"], "mass", card.source, "parachutes.dry_mass")
+        for c in parachutes)
     order = sorted(deploy, key=deploy.__getitem__)
     areas = []
     for k, name in enumerate(order):
         t_to = deploy[order[k + 1]] if k + 1 < len(order) else t_end
         mid = 0.5 * (settled_time(t, h, deploy[name], t_to) + t_to)
-        rate = -_slope(t, h, mid, t_to)
+        rate = -local_slope(t, h, mid, t_to)
         sel = (t >= mid) & (t <= t_to)
         if not rate > 0.0:
             areas.append(float("nan"))
@@ -632,7 +273,7 @@ def canopy_diameters(parachutes: list[dict[str, Any]], areas: dict[str, float],
     for i, chute in enumerate(parachutes):
         name, own = chute["name"], areas[chute["name"]]
         if "diameter" in chute:
-            d = _si(chute["diameter"], "length", card.source, f"parachutes[{i}].diameter")
+            d = card_quantity(chute["diameter"], "length", card.source, f"parachutes[{i}].diameter")
             bound = MAX_CD * np.pi * d**2 / 4.0
             if np.isfinite(own) and own > bound:
                 notes.append(f"{name}: the card's diameter {d:.2f} m bounds its drag area at "
@@ -663,14 +304,22 @@ ROCKET_EFFECTS: tuple[str | dict[str, Any], ...] = (
     {"effect": "wind_process", "components": ["up"], "knot_s": 4.0, "tau_s": 20.0,
      "sigma_vertical": 1.0},
     "canopy_inflation", "forebody_drag", "rigid_riser", "baro")
+
+
 ALTIMETER_ERRORS = ("baro_bias", "baro_lag")
+
+
 # Held opening shape of a canopy deployed near apogee (the effect's default fill constant,
 # linear growth): its fill time n D_o / V_i divides by the small speed at deployment, and
 # no sensor of a rocket log resolves that opening.  A later canopy whose opening no
 # accelerometer reads has its shape exponent held (linear growth): the altimeter sees the
 # opening's duration, not the curve's shape.
 HELD_FILL_CONSTANT = 8.0
+
+
 HELD_EXPOPEN = 1.0
+
+
 MIN_START_WINDOW_S = 2.0  # least half-width of an inflation start's window about its event
 
 
@@ -713,32 +362,6 @@ def rocket_model(block: dict[str, Any], sensor_kinds: list[str],
     return {**block, "effects": effects, "fix": {**fix, **block.get("fix", {})}}
 
 
-TEMPERATURE_UNITS = {"K": (1.0, 0.0), "degC": (1.0, 273.15), "degF": (5.0 / 9.0, 255.372222)}
-
-
-def pad_temperature(site: dict[str, Any], p0: float, elevation: float, source: str
-                    ) -> tuple[float, str]:
-    """The air temperature on the pad (K) and where it came from: the card's
-    ``temperature``, or its ``surface_density`` with the pad pressure `p0` (Pa) through the
-    gas law T = p / (R rho), or the standard atmosphere's at the site's `elevation` (m)."""
-    if "temperature" in site:
-        scale, offset = TEMPERATURE_UNITS[site["temperature"]["unit"]]
-        t0 = scale * float(site["temperature"]["value"]) + offset
-        if not t0 > 0.0:
-            raise InputError(source, "site.temperature", f"a temperature above absolute zero; "
-                             f"got {t0:.2f} K")
-        return t0, f"pad temperature {t0:.1f} K from the card's site.temperature"
-    if "surface_density" in site:
-        rho0 = _si(site["surface_density"], "density", source, "site.surface_density")
-        t0 = p0 / (R_AIR * rho0)
-        return t0, (f"pad temperature {t0:.1f} K from the card's surface density "
-                    f"{rho0:.3f} kg/m^3 and the pad pressure (T = p / (R rho))")
-    standard = StandardAtmosphere()
-    t0 = float(standard.pressure(elevation)) / (R_AIR * float(standard.density(elevation)))
-    return t0, (f"pad temperature {t0:.1f} K: the standard atmosphere's at {elevation:.0f} m "
-                "(the card gives neither site.temperature nor site.surface_density)")
-
-
 def pad_pressure(baro: pd.DataFrame, events: dict[str, FlightEvent], card: FlightCard
                  ) -> tuple[float, str]:
     """The air pressure on the pad (Pa) and a sentence saying where it came from.
@@ -750,7 +373,7 @@ def pad_pressure(baro: pd.DataFrame, events: dict[str, FlightEvent], card: Fligh
     precede it (the log starts at launch), the lowest reading before the rise: the
     recorder's first samples, taken as the rocket left the pad."""
     if "pressure" in card.site:
-        p0 = _si(card.site["pressure"], "pressure", card.source, "site.pressure")
+        p0 = card_quantity(card.site["pressure"], "pressure", card.source, "site.pressure")
         return p0, f"pad pressure {p0:.0f} Pa from the card's site.pressure"
     t, h = baro["time"].to_numpy(), baro["altitude"].to_numpy()
     rise = np.flatnonzero(h - np.minimum.accumulate(h) > LAUNCH_RISE_M)
@@ -778,9 +401,9 @@ def card_events(card: FlightCard, baro: pd.DataFrame, pad_altitude: float,
     out: dict[str, FlightEvent] = {}
     for name, spec in card.events.items():
         field_name = f"events.{name}"
-        sigma = _si(spec["sigma"], "time", card.source, f"{field_name}.sigma")
+        sigma = card_quantity(spec["sigma"], "time", card.source, f"{field_name}.sigma")
         if "time" in spec:
-            t_event = _si(spec["time"], "time", card.source, f"{field_name}.time")
+            t_event = card_quantity(spec["time"], "time", card.source, f"{field_name}.time")
             first, last = float(baro["time"].iloc[0]), float(baro["time"].iloc[-1])
             if not first <= t_event <= last:
                 raise InputError(card.source, f"{field_name}.time", f"a time the log covers "
@@ -788,7 +411,7 @@ def card_events(card: FlightCard, baro: pd.DataFrame, pad_altitude: float,
                                  f"the log's own clock); got {t_event:.2f} s")
             out[name] = FlightEvent(t_event, sigma, "the card")
             continue
-        height = _si(spec["altitude"], "length", card.source, f"{field_name}.altitude")
+        height = card_quantity(spec["altitude"], "length", card.source, f"{field_name}.altitude")
         t, h = baro["time"].to_numpy(), baro["altitude"].to_numpy() - pad_altitude
         top = events["apogee"].time if "apogee" in events else float(t[np.argmax(h)])
         below = np.flatnonzero((t > top) & (h <= height))
@@ -872,7 +495,7 @@ def import_flight(log: FlightRecord | AltusLog, card: FlightCard, out: str | Pat
     pad_altitude = float(pressure_altitude(p0))
     notes.append(pad_note)
     site_spec = card.site
-    elevation = _si(site_spec.get("elevation"), "length", card.source, "site.elevation")
+    elevation = card_quantity(site_spec.get("elevation"), "length", card.source, "site.elevation")
     t0, t0_note = pad_temperature(site_spec, p0, elevation, card.source)
     check_pad_air(record, p0, t0, "card" if "temperature" in site_spec else
                   "density" if "surface_density" in site_spec else "standard", elevation,
@@ -953,7 +576,7 @@ def import_flight(log: FlightRecord | AltusLog, card: FlightCard, out: str | Pat
         lapse_fit = fit_lapse_rate(descent, baro["pressure"], baro["time"], elevation, p0, t0)
         lapse = lapse_fit[0]
     else:
-        lapse = _si(lapse_spec, "lapse_rate", card.source, "site.lapse_rate")
+        lapse = card_quantity(lapse_spec, "lapse_rate", card.source, "site.lapse_rate")
         if not 0.0 < lapse <= LAPSE_BOUNDS_K_M[1]:
             raise InputError(card.source, "site.lapse_rate", f"a lapse rate above 0 and at "
                              f"most the dry adiabat's {1e3 * LAPSE_BOUNDS_K_M[1]:g} K/km (or "

@@ -5,7 +5,7 @@ sensors and their noise), the simulation set-up (initial state, duration,
 sample rates, how observed events relate to the truth), and the synthetic
 truth, in SI, under exactly the parameter names a reconstruction reports.  A
 real-flight one (``"kind": "flight_log"``) is a flight card instead
-(`flight_log.FlightCard`): the logs it reads and what they do not hold.
+(`flight_card.FlightCard`): the logs it reads and what they do not hold.
 """
 
 from __future__ import annotations

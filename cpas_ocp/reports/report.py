@@ -15,7 +15,7 @@ from cpas_ocp.inference.diagnostics import sensor_summary, worst_windows
 from cpas_ocp.inference.model_comparison import Criteria
 from cpas_ocp.inference.phase_windows import PhaseWindow, phase_windows
 from cpas_ocp.inference.profile_likelihood import Profile
-from cpas_ocp.io.flight_log import import_nominal
+from cpas_ocp.io.import_reports import import_nominal
 from cpas_ocp.io.output_folder import atomic_folder
 from cpas_ocp.io.strict_json import json_text
 from cpas_ocp.physics.units import SI_UNIT

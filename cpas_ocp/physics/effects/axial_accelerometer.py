@@ -16,7 +16,7 @@ the openings' load peaks are predicted by the same drag that flies the
 trajectory: the accelerometer times and sizes the openings.  The swing is
 not modelled; its scatter about the mean attitude is noise of the sensor,
 whose sigma the importer takes per canopy phase from the scatter about a
-local trend (`flight_log.scatter_sigma`), not from the white-noise floor.
+local trend (`log_noise.scatter_sigma`), not from the white-noise floor.
 """
 
 from __future__ import annotations

@@ -1,0 +1,135 @@
+"""What an import of a flight log records beside the test folder (`import.json`): the
+shock-cord snatches left out of the accelerometer, the card's nominal drag areas, and the
+import's summary.
+"""
+
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from cpas_ocp.io.flight_events import (
+    FlightEvent,
+)
+from cpas_ocp.physics.atmosphere import (
+    SiteAtmosphere,
+)
+from cpas_ocp.physics.units import FACTORS, G0
+
+
+@dataclass(frozen=True)
+class Snatch:
+    """A later canopy's opening as the accelerometer read it against the drag ceiling
+    (`drag_ceiling`): the ceiling (m/s^2, an axial reading), the samples above it left
+    out as the shock cord's snatch, and the largest of them (m/s^2) with its time (s)."""
+
+    ceiling_m_s2: float
+    samples_left_out: int
+    largest_m_s2: float | None
+    at_s: float | None
+
+    def text(self) -> str:
+        head = f"drag ceiling of the axial reading {self.ceiling_m_s2 / G0:.1f} g"
+        if self.largest_m_s2 is None:
+            return head + ", no sample above it"
+        return (head + f"; {self.samples_left_out} sample(s) above it left out as the shock "
+                f"cord's snatch, the largest {self.largest_m_s2 / G0:.1f} g at {self.at_s:.2f} s")
+
+
+def _import_report(folder: Path | None, key: str) -> Any:
+    """Entry `key` of the import report (``import.json``) of the test folder `folder`; None
+    for a folder that was not imported, or whose report lacks it or was edited out of
+    shape (the reports then only lack what it would have said)."""
+    report = None if folder is None else folder / "import.json"
+    if report is None or not report.is_file():
+        return None
+    try:
+        return json.loads(report.read_text()).get(key)
+    except (ValueError, AttributeError):
+        return None
+
+
+def import_snatches(folder: Path | None) -> dict[str, Snatch]:
+    """The snatches an import left out of the test folder `folder` (its ``import.json``);
+    empty where it holds none (`_import_report`)."""
+    try:
+        return {name: Snatch(**fields)
+                for name, fields in (_import_report(folder, "snatch") or {}).items()}
+    except (TypeError, AttributeError):
+        return {}
+
+
+def import_nominal(folder: Path | None) -> dict[str, dict[str, Any]]:
+    """The card's nominal drag areas an import kept in the test folder `folder` (its
+    ``import.json``): ``{parameter: {value, unit, source}}``; empty where it holds none, or
+    an entry that is not such an area."""
+    nominal = _import_report(folder, "nominal")
+    if not isinstance(nominal, dict):
+        return {}
+    return {name: spec for name, spec in nominal.items() if isinstance(spec, dict)
+            and isinstance(spec.get("value"), int | float) and spec.get("unit") in FACTORS["area"]}
+
+
+@dataclass(frozen=True)
+class ImportSummary:
+    """What an import did, for the import report (`import.json`)."""
+
+    recorder: str
+    phase: tuple[float, float]
+    events: dict[str, float]
+    site: SiteAtmosphere
+    lapse_fit: tuple[float, float, float] | None
+    baro_sigma_m: list[float]
+    samples: dict[str, int]
+    dropped: dict[str, int]
+    accel_sigma: list[float] = field(default_factory=list)  # m/s^2, per segment
+    snatches: dict[str, Snatch] = field(default_factory=dict)  # per later canopy
+    flight_events: dict[str, FlightEvent] = field(default_factory=dict)  # time, sigma, source
+    notes: list[str] = field(default_factory=list)
+    nominal: dict[str, dict[str, Any]] = field(default_factory=dict)  # the card's, as given
+
+    def text(self) -> str:
+        """A few lines for the terminal."""
+        events = ", ".join(f"{k} {v:.2f} s" for k, v in self.events.items())
+        lines = [f"{self.recorder} log: phase {self.phase[0]:.2f}-{self.phase[1]:.2f} s; {events}",
+                 f"site: {self.site.elevation_m:.0f} m, {self.site.pressure_pa:.0f} Pa, "
+                 f"{self.site.temperature_k:.1f} K, lapse rate "
+                 f"{1e3 * self.site.lapse_rate_k_m:.2f} K/km"]
+        if self.lapse_fit is not None:
+            lines.append(f"  (lapse rate fitted to the GPS fixes: GPS offset "
+                         f"{self.lapse_fit[1]:+.1f} m, residual sigma {self.lapse_fit[2]:.1f} m)")
+        lines.append("altimeter sigma per canopy phase: "
+                     + ", ".join(f"{s:.2f} m" for s in self.baro_sigma_m))
+        if self.accel_sigma:
+            lines.append("accelerometer sigma per steady descent and opening (the swing "
+                         "counted): " + ", ".join(f"{s:.2f} m/s²" for s in self.accel_sigma))
+        for name, snatch in self.snatches.items():
+            lines.append(f"{name}'s opening: {snatch.text()}")
+        if self.flight_events:
+            lines.append("flight events: " + ", ".join(
+                f"{k} {e.time:.2f} ± {e.sigma:.2f} s ({e.source})"
+                for k, e in self.flight_events.items()))
+        lines.extend(f"note: {n}" for n in self.notes)
+        lines.append("samples: " + ", ".join(f"{k} {v}" for k, v in self.samples.items())
+                     + "; dropped: " + ", ".join(f"{k} {v}" for k, v in self.dropped.items()))
+        return "\n".join(lines)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"recorder": self.recorder, "phase_s": list(self.phase), "events_s": self.events,
+                "site": {"elevation_m": self.site.elevation_m,
+                         "pressure_pa": self.site.pressure_pa,
+                         "temperature_k": self.site.temperature_k,
+                         "lapse_rate_k_km": 1e3 * self.site.lapse_rate_k_m},
+                "lapse_fit": None if self.lapse_fit is None else
+                {"lapse_rate_k_km": 1e3 * self.lapse_fit[0], "gps_offset_m": self.lapse_fit[1],
+                 "residual_sigma_m": self.lapse_fit[2]},
+                "baro_sigma_m": self.baro_sigma_m, "accel_sigma_m_s2": self.accel_sigma,
+                "snatch": {k: dataclasses.asdict(v) for k, v in self.snatches.items()},
+                "flight_events": {k: {"time_s": e.time, "sigma_s": e.sigma, "source": e.source}
+                                  for k, e in self.flight_events.items()},
+                "notes": self.notes, "samples": self.samples, "dropped": self.dropped,
+                "nominal": self.nominal}

@@ -1,0 +1,221 @@
+"""A log's noise and its dead stretches: the scatter of a series about its local trend, its
+correlation length, independent blocks of a descent, the time a canopy has settled, and
+readings a stuck or clipped channel repeated.  Units are the series' own (SI).
+"""
+
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+from scipy.signal import savgol_filter
+
+from cpas_ocp.io.flight_events import (
+    sample_interval,
+    second_difference_sigma,
+)
+
+MIN_DESCENT_SAMPLES = 20  # least altimeter samples of a descent that is fitted
+
+ACF_FLOOR = 0.05  # a noise's autocorrelation counts until it first falls below this
+
+
+SCATTER_WINDOW_S = 8.0  # window of the local trend a sensor's scatter is taken about (s)
+
+
+RATE_WINDOW_S = 2.0  # window of the local descent rate that tells when a canopy has settled (s)
+
+
+SETTLED_RATE_FACTOR = 1.25  # settled: the local rate within this factor of the steady one
+
+
+STEADY_RATE_S = 10.0  # the settled descent rate under a canopy is taken over this long (s)
+
+
+STUCK_RUN_S = 2.0  # a reading repeated exactly for this long (s) ...
+
+
+STUCK_RUN_SAMPLES = 10  # ... and this many samples is a dead channel
+
+
+CLIP_RUN_SAMPLES = 3  # a channel's extreme reading met this often is its range's end: clipped
+
+
+def _scatter(t: np.ndarray, values: np.ndarray) -> np.ndarray | None:
+    """`values` less their local quadratic trend over SCATTER_WINDOW_S (a Savitzky-Golay
+    filter on a uniform resampling); None where the samples span too short a time."""
+    grid = np.arange(t[0], t[-1], 0.1)
+    window = min(int(SCATTER_WINDOW_S / 0.1) // 2 * 2 + 1, len(grid) // 2 * 2 - 1)
+    if window < 5:
+        return None
+    return values - np.interp(t, grid, savgol_filter(np.interp(grid, t, values), window, 2))
+
+
+def scatter_sigma(t: np.ndarray, values: np.ndarray) -> float:
+    """Robust sigma (1.4826 MAD) of `values` about their local quadratic trend over
+    SCATTER_WINDOW_S (`_scatter`).
+
+    Unlike the second differences this counts disturbances correlated over a
+    few seconds, such as the static-pressure swings of a rocket swinging under
+    a fast drogue, as noise; the descent itself (speed changing over tens of
+    seconds) stays in the trend."""
+    r = _scatter(t, values)
+    if r is None:
+        return second_difference_sigma(values)
+    return float(1.4826 * np.median(np.abs(r - np.median(r))))
+
+
+def integrated_time(r: np.ndarray) -> float:
+    """The integrated autocorrelation time (samples) of the residual series `r`:
+    1 + 2 sum_k rho_k, the sum over the lags before rho first falls below `ACF_FLOOR` or
+    below 2/sqrt(n), the band within which white noise's sample autocorrelation of n
+    samples stays (so that chance correlations of a white series do not add up); 1 for
+    fewer than 20 samples."""
+    if r.size < MIN_DESCENT_SAMPLES:
+        return 1.0
+    r = r - r.mean()
+    var = float(np.dot(r, r))
+    if var == 0.0:
+        return 1.0
+    floor = max(ACF_FLOOR, 2.0 / np.sqrt(r.size))
+    total = 1.0
+    for k in range(1, r.size // 4):
+        rho = float(np.dot(r[:-k], r[k:])) / var
+        if rho < floor:
+            break
+        total += 2.0 * rho
+    return total
+
+
+def correlation_length(t: np.ndarray, values: np.ndarray) -> int:
+    """The integrated autocorrelation time (`integrated_time`, rounded, samples) of
+    `values`' scatter about their local trend (`_scatter`): the number of samples that
+    carry as much information as one independent sample.  1 for white noise or too few
+    samples (under 80)."""
+    r = _scatter(t, values)
+    if r is None or r.size < 4 * MIN_DESCENT_SAMPLES:
+        return 1
+    return max(1, round(integrated_time(r)))
+
+
+def settled(t: np.ndarray, steady_end: float = np.inf) -> np.ndarray:
+    """Which of the times `t` (s, one canopy's segment) lie in its settled descent: the
+    later half of the span up to `steady_end` (the next canopy's charge, or the phase's
+    end).  An opening's deceleration or the landing, which a local quadratic trend does
+    not follow, would read there as correlated noise."""
+    end = min(float(t[-1]), steady_end)
+    return (t >= 0.5 * (t[0] + end)) & (t <= end)
+
+
+def block_sigma(blocks: pd.DataFrame, steady_end: float = np.inf) -> float:
+    """The noise sigma to weigh block means (`independent_blocks`) by: their robust
+    scatter about the local trend (`scatter_sigma`) times the square root of their own
+    integrated autocorrelation time in the settled descent (`settled`).  Adjacent blocks
+    of a correlated noise still share its tail (for an AR(1) noise in blocks of its
+    integrated time, adjacent means correlate at 0.36), and weighing them as independent
+    would state sigmas too small by that root."""
+    t, values = blocks["time"].to_numpy(float), blocks.iloc[:, 1].to_numpy(float)
+    steady = settled(t, steady_end)
+    r = _scatter(t[steady], values[steady]) if steady.sum() >= 2 else None
+    tail = 1.0 if r is None else max(1.0, integrated_time(r))
+    return scatter_sigma(t, values) * float(np.sqrt(tail))
+
+
+def independent_blocks(frame: pd.DataFrame, steady_end: float = np.inf
+                       ) -> tuple[pd.DataFrame, int]:
+    """`frame` (``time`` s and one channel) averaged in consecutive blocks of
+    `correlation_length` samples, each block's mean at its mean time, blocks never spanning
+    a gap (a left-out charge window: over 1.5 sample intervals); with the block size.  The
+    correlation is measured in the settled descent (`settled`, up to `steady_end`).
+
+    Block means of correlated noise are nearly independent, weighed at `block_sigma`: a
+    fit that weighs every raw sample at the raw scatter would
+    count each piece of information that many times over, and state sigmas that many
+    times too small.  Over a block (well under a second) the descent's curvature moves the
+    mean from the mid-time value by a·L²/24, centimetres against metres of noise."""
+    if len(frame) < 2:
+        return frame.reset_index(drop=True), 1
+    t = frame["time"].to_numpy(float)
+    steady = settled(t, steady_end)
+    size = correlation_length(t[steady], frame.iloc[:, 1].to_numpy(float)[steady])
+    if size <= 1:
+        return frame.reset_index(drop=True), 1
+    run = np.r_[0, np.cumsum(np.diff(t) > 1.5 * sample_interval(t))]
+    position = np.zeros(t.size, dtype=int)
+    for r in np.unique(run):
+        sel = run == r
+        position[sel] = np.arange(sel.sum()) // size
+    keys = run * (t.size + 1) + position
+    return frame.groupby(keys, sort=True).mean().reset_index(drop=True), size
+
+
+def scatter_rms(t: np.ndarray, values: np.ndarray) -> float:
+    """RMS of `values` about their local quadratic trend over SCATTER_WINDOW_S (`_scatter`):
+    the sigma of a disturbance whose tails belong to it.  An accelerometer on a body
+    swinging under its canopy reads jolts of g when the swing reverses (both Prometheus
+    recorders read +2.5 to +3 g at 148.6-148.8 s under a drogue whose median reading is
+    -1.65 g): part of the swing, not glitches, so its variance, not a robust spread of
+    its middle, is the noise (under the drogue, 4.6 m/s^2 against 3.5 robust)."""
+    r = _scatter(t, values)
+    if r is None:
+        return second_difference_sigma(values)
+    return float(np.sqrt(np.mean(r**2)))
+
+
+def settled_time(t: np.ndarray, altitude: np.ndarray, t_from: float, t_to: float) -> float:
+    """When the descent after a deployment at `t_from` has settled (s): the first time from
+    which the local descent rate (slope of a line through `RATE_WINDOW_S` of altitude
+    samples, m/s) stays within `SETTLED_RATE_FACTOR` of the steady rate (the median local
+    rate over the second half of [`t_from`, `t_to`]) for a further window.  `t_from`
+    where the samples are too few to tell."""
+    centres = np.arange(t_from + RATE_WINDOW_S / 2, t_to - RATE_WINDOW_S / 2, RATE_WINDOW_S / 2)
+    rates = np.array([local_slope(t, altitude, c - RATE_WINDOW_S / 2, c + RATE_WINDOW_S / 2)
+                      for c in centres])
+    late = centres >= 0.5 * (t_from + t_to)
+    if not np.isfinite(rates[late]).any():
+        return t_from
+    steady = abs(float(np.nanmedian(rates[late])))
+    ok = np.abs(rates) <= SETTLED_RATE_FACTOR * steady
+    for i in range(centres.size - 2):
+        if ok[i] and ok[i + 1] and ok[i + 2]:
+            return float(centres[i] - RATE_WINDOW_S / 2)
+    return t_from
+
+
+def local_slope(t: np.ndarray, values: np.ndarray, lo: float, hi: float) -> float:
+    """Slope (per s) of a line through the samples in [lo, hi]; NaN with fewer than 4."""
+    m = (t >= lo) & (t <= hi)
+    if m.sum() < 4:
+        return float("nan")
+    return float(np.polyfit(t[m] - lo, values[m], 1)[0])
+
+
+def dead_samples(t: np.ndarray, values: np.ndarray, clipped: bool = False) -> np.ndarray:
+    """Which samples a channel did not measure: runs of one exact reading repeated for at
+    least `STUCK_RUN_S` and `STUCK_RUN_SAMPLES` samples (a dead or zeroed channel: a real
+    sensor's noise, or a descent of metres per second, changes the reading within that),
+    and with `clipped`, every sample at the channel's largest or smallest reading where that
+    exact reading comes `CLIP_RUN_SAMPLES` times or more (the sensor's range: the force went
+    beyond it; a real peak of a noisy channel is not matched to the last digit).  `t` in
+    s."""
+    if values.size < 2:
+        return np.zeros(values.size, dtype=bool)
+    change = np.flatnonzero(np.diff(values) != 0.0) + 1
+    first, end = np.r_[0, change], np.r_[change, values.size]  # runs [first, end)
+    run = end - first
+    dead_run = (run >= STUCK_RUN_SAMPLES) & (t[end - 1] - t[first] >= STUCK_RUN_S)
+    dead = np.repeat(dead_run, run)
+    if clipped:
+        for rail in (values.max(), values.min()):
+            at_rail = values == rail
+            if at_rail.sum() >= CLIP_RUN_SAMPLES:
+                dead |= at_rail
+    return dead
+
+
+def dead_note(channel: str, t: np.ndarray, values: np.ndarray, unit: str) -> str:
+    """A sentence on the samples `dead_samples` left out of `channel`."""
+    readings = ", ".join(f"{v:g}" for v in np.unique(values)[:3])
+    return (f"{channel}: {t.size} samples between {t.min():.2f} and {t.max():.2f} s left out: "
+            f"the channel repeats one reading ({readings} {unit}) for {STUCK_RUN_S:g} s or "
+            "more, or sits at its range's end: it did not measure there")
