@@ -26,11 +26,13 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
 from cpas_ocp.discrepancy.diagnosis import Diagnosis, diagnose
 from cpas_ocp.discrepancy.discovery import Discovery, discover
+from cpas_ocp.discrepancy.score_test import extended_spec
 from cpas_ocp.estimation.estimator import Estimator, Fit, Settings
 from cpas_ocp.estimation.simulate import simulate_problem
 from cpas_ocp.estimation.uncertainty import Covariance
@@ -39,15 +41,18 @@ from cpas_ocp.inference.diagnostics import window_statistics, worst_of
 from cpas_ocp.inference.model_comparison import Comparison, Criteria, compare
 from cpas_ocp.inference.phase_windows import phase_windows
 from cpas_ocp.inference.process_intensity import IntensityChoice, choose_intensity
+from cpas_ocp.inference.profile_likelihood import Profile, profile
 from cpas_ocp.inference.result_claim import Claim, check_claim, check_drag_areas
+from cpas_ocp.inference.whatif import WhatIfResult, parameter_bounds, parse_constraint, what_if
 from cpas_ocp.io.flight_test import load_test
 from cpas_ocp.io.model_spec import ModelSpec, load_model_file, spec_of_test
 from cpas_ocp.io.problems import load_problem
 from cpas_ocp.physics.effects.base import Effect
-from cpas_ocp.physics.effects.registry import EffectType, load_plugins
+from cpas_ocp.physics.effects.registry import BUILTIN, EffectType, load_plugins
 from cpas_ocp.physics.flight_test import FlightTest
 from cpas_ocp.reports.discrepancy_report import write_comparison, write_diagnosis, write_discovery
 from cpas_ocp.reports.display_units import DisplayUnits
+from cpas_ocp.reports.plots import sensor_axes
 from cpas_ocp.reports.report import fit_summary, parameter_table, write_report
 from cpas_ocp.reports.report_data import bound_flag
 
@@ -185,6 +190,40 @@ class Reconstruction:
         head = (f"<p><b>{html.escape(self.fit.test.name)}</b>: chi-square/dof "
                 f"{self.chi_square_per_dof:.3f} ({self.fit.dof} dof), {state}</p>")
         return head + self.parameters.to_html(float_format=lambda v: f"{v:.6g}")
+
+    def plot(self, sensor: str, axes: Sequence[plt.Axes] | None = None, windows: bool = True
+             ) -> list[plt.Axes]:
+        """Model against measurement of `sensor`, each channel over its normalised residuals
+        (two axes per channel, into `axes` where given), the phase windows shaded unless
+        `windows` is False; returns the axes (`plots.sensor_axes`)."""
+        shown = phase_windows(self.fit) if windows else ()
+        return sensor_axes(self.fit, sensor, shown, axes=axes)
+
+    def spec_with(self, *effects: str) -> ModelSpec:
+        """This fit's model with the library's or the plug-ins' `effects` added where the
+        composition accepts them (for `compare`: the two models are then nested)."""
+        registry = {**BUILTIN, **self.plugins}
+        spec = self.spec
+        for name in effects:
+            if name not in registry:
+                raise ValueError(f"no effect {name!r}; the library's and the plug-ins': "
+                                 f"{', '.join(sorted(registry))}")
+            spec = extended_spec(self.fit, spec, registry[name].build({}, "(spec_with)", name))
+        return spec
+
+    def profile(self, name: str, span: float = 3.0, points: int = 13,
+                progress: bool = False) -> Profile:
+        """The profile likelihood of free parameter `name` over the estimate -+ `span`
+        sigma at `points` values (`cpas-ocp reconstruct --profile`)."""
+        return profile(self.estimator, self.fit, self.covariance, name, span, points, progress)
+
+    def what_if(self, *constraints: str, progress: bool = False) -> WhatIfResult:
+        """The fit re-solved under `constraints` ('NAME == VALUE [UNIT]', 'NAME <= VALUE',
+        a peak limit such as 'peak_load[drogue1] <= 30000 lbf'): what each costs in
+        chi-square, its test, and how far it pushes the rest (`cpas-ocp whatif`)."""
+        parsed = [parse_constraint(text, self.estimator) for text in constraints]
+        parameter_bounds(parsed, self.estimator)  # contradictions refused before the fits
+        return what_if(self.estimator, self.fit, self.covariance, parsed, progress)
 
     @property
     def worst(self) -> str:

@@ -24,7 +24,6 @@
 # baseline model leaves out.
 
 # %%
-import json
 import tempfile
 from pathlib import Path
 
@@ -35,7 +34,6 @@ import matplotlib.pyplot as plt
 
 import cpas_ocp as co
 from cpas_ocp.physics.effects import AddedMass, baseline_effects
-from cpas_ocp.physics.effects.registry import BASELINE
 
 work = Path(tempfile.mkdtemp(prefix="cpas-notebook-"))
 truth = {"added_mass_factor[fbcp1]": 1.4, "added_mass_factor[fbcp2]": 1.4}
@@ -51,24 +49,17 @@ test = co.simulate("fbcp", work / "fbcp", seed=1,
 
 # %%
 rec = co.reconstruct(test)
-print(f"chi-square/dof {rec.chi_square_per_dof:.3f}; a result: {rec.is_result}")
-print(rec.parameters.round(4))
+print(repr(rec))  # in Jupyter, `rec` alone on a cell's last line shows its parameter table
+print(rec.summary())
 
 # %% [markdown]
 # ## 2. Where the model fits worst
 
 # %%
 print(rec.worst)
-riser = next(r for r in rec.fit.residuals if r.sensor == "riser_fbcp1")
-fig, ax = plt.subplots(2, 1, sharex=True, figsize=(8, 5))
-ax[0].plot(riser.t, riser.measured / 1e3, ".", ms=2, label="measured")
-ax[0].plot(riser.t, riser.model / 1e3, "-", label="model")
-ax[0].set_ylabel("riser_fbcp1 tension [kN]")
-ax[0].legend()
-ax[1].plot(riser.t, riser.normalized, ".", ms=2)
-ax[1].set_ylabel("residual [σ]")
-ax[1].set_xlabel("time [s]")
-fig.savefig(work / "riser_fbcp1.png", dpi=80)
+axes = rec.plot("riser_fbcp1")  # tension over its residuals, the phase windows shaded
+axes[0].figure.savefig(work / "riser_fbcp1.png", dpi=80)
+plt.close(axes[0].figure)
 
 # %% [markdown]
 # ## 3. What is missing
@@ -83,11 +74,10 @@ print(diag.verdict())
 # %% [markdown]
 # ## 4. Add it and watch the error fall
 #
-# A model file names the effects; the comparison fits it from the baseline fit,
-# so the two models are nested and the likelihood ratio is a test.
+# The fit's own model with the effect added (a model file with the effect in its
+# list does the same); the comparison fits it from the baseline fit, so the two
+# models are nested and the likelihood ratio is a test.
 
 # %%
-model = work / "added_mass.json"
-model.write_text(json.dumps({"effects": [*BASELINE, "added_mass"]}))
-comparison = rec.compare(model, labels=("baseline", "added mass"))
+comparison = rec.compare(rec.spec_with("added_mass"), labels=("baseline", "added mass"))
 print(comparison.text())

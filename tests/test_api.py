@@ -40,3 +40,42 @@ def test_a_reconstruction_shows_its_parameters_statistics_and_claim(drogue_folde
         assert name in text, name
     assert rec.claim.text() in text
     assert f"AIC {crit.aic:.1f}" in text
+
+
+def test_a_reconstruction_plots_profiles_constrains_and_extends_its_model(drogue_folder
+                                                                          ) -> None:
+    import matplotlib.pyplot as plt
+    import numpy as np
+    import pytest
+
+    rec = co.reconstruct(drogue_folder(1))
+    sensor = next(r.sensor for r in rec.fit.residuals if r.channel == "tension")
+    rows = [r for r in rec.fit.residuals if r.sensor == sensor]
+    axes = rec.plot(sensor)
+    assert len(axes) == 2 * len(rows)
+    # The residual axis carries the normalised residuals themselves.
+    drawn = [line.get_ydata() for line in axes[1].get_lines() if len(line.get_ydata()) > 2]
+    assert any(np.array_equal(y, rows[0].normalized) for y in drawn)
+    plt.close(axes[0].figure)
+    with pytest.raises(ValueError, match="no residuals of a sensor 'nothing'"):
+        rec.plot("nothing")
+
+    extended = rec.spec_with("added_mass")
+    assert "added_mass" in extended.effect_names
+    assert set(rec.spec.effect_names) < set(extended.effect_names)
+    with pytest.raises(ValueError, match="no effect 'no_such_effect'"):
+        rec.spec_with("no_such_effect")
+
+    name = next(n for n in rec.fit.free if n.startswith("Ck["))
+    prof = rec.profile(name, span=1.0, points=3)
+    assert prof.values[1] == pytest.approx(rec.fit.parameters[name])
+    assert prof.delta_chi_square[1] == pytest.approx(0.0, abs=1e-3)
+    # One sigma off the estimate the profile rises by about one (the quadratic prediction),
+    # 0.5-2 allowing for the curvature the linearisation leaves out.
+    assert all(0.5 < d < 2.0 for d in prof.delta_chi_square[[0, 2]]), prof.delta_chi_square
+
+    held = rec.fit.parameters[name] + 2.0 * rec.covariance.std[name]
+    result = rec.what_if(f"{name} == {held!r}")
+    assert result.constrained.parameters[name] == pytest.approx(held, rel=1e-6)
+    # Holding a parameter 2 sigma off costs about 4 in chi-square (as above, 2-8).
+    assert 2.0 < result.delta_chi_square < 8.0, result.delta_chi_square

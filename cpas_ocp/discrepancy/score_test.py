@@ -219,7 +219,7 @@ def score_test(fit: Fit, spec: ModelSpec, entry: EffectType,
         result.note = "has no parameters in this test"
         return result
     try:
-        extended = _extended_spec(fit, spec, effect)
+        extended = extended_spec(fit, spec, effect)
     except InputError as exc:
         result.note = f"does not apply to this test: {exc.expectation}"
         return result
@@ -519,7 +519,7 @@ def confirmed_ranking(tests: list[ScoreTest]) -> list[ScoreTest]:
     return done + rank(rest)
 
 
-def _extended_spec(fit: Fit, spec: ModelSpec, effect: Effect) -> ModelSpec:
+def extended_spec(fit: Fit, spec: ModelSpec, effect: Effect) -> ModelSpec:
     """`spec` with `effect` added where the composition accepts it (replacing the effect it
     `replaces`); when no position composes, the first PluginError (the plug-in's code failed
     where its place was right), else the first InputError."""

@@ -38,32 +38,50 @@ if TYPE_CHECKING:
 
 
 
-def plot_sensors(fit: Fit, folder: Path, units: DisplayUnits | None = None) -> list[Path]:
-    """One figure per sensor: each channel's data and model (in `units`, default the
-    test's own), normalised residuals beneath."""
+def sensor_axes(fit: Fit, sensor: str, windows: Sequence[PhaseWindow] = (),
+                units: DisplayUnits | None = None, axes: Sequence[plt.Axes] | None = None
+                ) -> list[plt.Axes]:
+    """Draw one sensor of a fit: for each channel the model over the measurement (in
+    `units`, default the test's own) and beneath it the normalised residuals with the +-1
+    and +-3 sigma bands; the phase `windows` that apply to the sensor (its own canopy's
+    for a load cell) shaded by kind.  Into `axes` (two per channel: value, residual),
+    else a new figure's; returns the axes drawn."""
     units = units or display_units(fit.test)
-    paths = []
-    for sensor in dict.fromkeys(r.sensor for r in fit.residuals
-                                if r.sensor not in fit.pseudo_sensors):
-        rows = [r for r in fit.residuals if r.sensor == sensor]
-        fig, axes = plt.subplots(2 * len(rows), 1, figsize=(10, 2.6 * len(rows) + 1.5),
-                                 sharex=True, gridspec_kw={"height_ratios": [3, 1] * len(rows)})
-        for i, r in enumerate(rows):
-            unit, k = units.channel(r.channel)
-            ax, axr = axes[2 * i], axes[2 * i + 1]
-            ax.plot(r.t, r.measured * k, ".", ms=1.5, color="0.55", label="measured")
-            ax.plot(r.t, r.model * k, "-", lw=1.0, color="C3", label="model")
-            ax.set_ylabel(f"{r.channel} [{pretty(unit)}]")
-            ax.legend(loc="best", fontsize=8)
-            axr.plot(r.t, r.normalized, ".", ms=1.5, color="C0")
-            axr.axhline(0, color="k", lw=0.5)
-            axr.set_ylabel("res/σ")
-            lim = max(4.0, float(np.percentile(np.abs(r.normalized), 99.5)))
-            axr.set_ylim(-lim, lim)
-        axes[-1].set_xlabel("time [s]")
-        paths.append(_save(fig, f"{fit.test.name}: {sensor}, model vs measurement",
-                           folder / f"sensor_{sensor}.png"))
-    return paths
+    rows = [r for r in fit.residuals if r.sensor == sensor]
+    if not rows:
+        raise ValueError(f"no residuals of a sensor {sensor!r} in this fit; its sensors: "
+                         f"{', '.join(dict.fromkeys(r.sensor for r in fit.residuals))}")
+    if axes is None:
+        _, grid = plt.subplots(2 * len(rows), 1, figsize=(10, 2.8 * len(rows) + 1.5),
+                               sharex=True, gridspec_kw={"height_ratios": [3, 1.4] * len(rows)})
+        axes = list(grid)
+    if len(axes) != 2 * len(rows):
+        raise ValueError(f"{sensor} has {len(rows)} channels: give {2 * len(rows)} axes")
+    shown = windows_for_sensor(fit.test, sensor, windows) if windows else []
+    for i, r in enumerate(rows):
+        unit, k = units.channel(r.channel)
+        ax, axr = axes[2 * i], axes[2 * i + 1]
+        _shade_windows([ax, axr], shown, legend=i == 0)
+        ax.plot(r.t, r.measured * k, ".", ms=1.5, color="0.55", label="measured")
+        ax.plot(r.t, r.model * k, "-", lw=1.0, color="C3", label="model")
+        ax.set_ylabel(f"{r.channel} [{pretty(unit)}]")
+        ax.legend(loc="best", fontsize=7, ncol=2)
+        _plot_normalized(axr, r)
+    axes[-1].set_xlabel("time [s]")
+    return list(axes)
+
+
+def _fitted_sensors(fit: Fit) -> list[str]:
+    """The sensors with residuals in a fit, the effects' pseudo-observations left out."""
+    return list(dict.fromkeys(r.sensor for r in fit.residuals
+                              if r.sensor not in fit.pseudo_sensors))
+
+
+def plot_sensors(fit: Fit, folder: Path, units: DisplayUnits | None = None) -> list[Path]:
+    """One figure per sensor (``sensor_<sensor>.png``, `sensor_axes` without windows)."""
+    return [_save(sensor_axes(fit, sensor, (), units)[0].figure,
+                  f"{fit.test.name}: {sensor}, model vs measurement",
+                  folder / f"sensor_{sensor}.png") for sensor in _fitted_sensors(fit)]
 
 
 def plot_events(fit: Fit, folder: Path) -> Path | None:
@@ -234,31 +252,11 @@ WINDOW_COLOURS = {"deployment": "#cfe2f3", "inflation": "#f9d5cf", "steady": "#d
 
 def plot_sensor_residuals(fit: Fit, windows: Sequence[PhaseWindow], folder: Path,
                           units: DisplayUnits | None = None) -> list[Path]:
-    """One figure per sensor (``residuals_<sensor>.png``): for each channel the model over
-    the measurement (in `units`, default the test's own), and beneath it the normalised
-    residuals with the +-1 and +-3 sigma bands; the phase windows that apply to the sensor
-    (its own canopy's for a load cell) are shaded by kind, each kind labelled once."""
-    units = units or display_units(fit.test)
-    paths = []
-    for sensor in dict.fromkeys(r.sensor for r in fit.residuals
-                                if r.sensor not in fit.pseudo_sensors):
-        rows = [r for r in fit.residuals if r.sensor == sensor]
-        shown = windows_for_sensor(fit.test, sensor, windows)
-        fig, axes = plt.subplots(2 * len(rows), 1, figsize=(10, 2.8 * len(rows) + 1.5),
-                                 sharex=True, gridspec_kw={"height_ratios": [3, 1.4] * len(rows)})
-        for i, r in enumerate(rows):
-            unit, k = units.channel(r.channel)
-            ax, axr = axes[2 * i], axes[2 * i + 1]
-            _shade_windows([ax, axr], shown, legend=i == 0)
-            ax.plot(r.t, r.measured * k, ".", ms=1.5, color="0.55", label="measured")
-            ax.plot(r.t, r.model * k, "-", lw=1.0, color="C3", label="model")
-            ax.set_ylabel(f"{r.channel} [{pretty(unit)}]")
-            ax.legend(loc="best", fontsize=7, ncol=2)
-            _plot_normalized(axr, r)
-        axes[-1].set_xlabel("time [s]")
-        paths.append(_save(fig, f"{fit.test.name}: {sensor}, residuals by phase window",
-                           folder / f"residuals_{sensor}.png"))
-    return paths
+    """One figure per sensor (``residuals_<sensor>.png``, `sensor_axes` with the phase
+    windows shaded)."""
+    return [_save(sensor_axes(fit, sensor, windows, units)[0].figure,
+                  f"{fit.test.name}: {sensor}, residuals by phase window",
+                  folder / f"residuals_{sensor}.png") for sensor in _fitted_sensors(fit)]
 
 
 def plot_residual_comparison(fit_a: Fit, fit_b: Fit, labels: tuple[str, str],
