@@ -30,7 +30,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
-from cpas_ocp.discrepancy.diagnosis import Diagnosis, diagnose
+from cpas_ocp.discrepancy.diagnosis import ALPHA, CONFIRM_TOP, Diagnosis, diagnose
 from cpas_ocp.discrepancy.discovery import Discovery, discover
 from cpas_ocp.discrepancy.score_test import extended_spec
 from cpas_ocp.estimation.estimator import Estimator, Fit, Settings
@@ -42,7 +42,13 @@ from cpas_ocp.inference.model_comparison import Comparison, Criteria, compare
 from cpas_ocp.inference.phase_windows import phase_windows
 from cpas_ocp.inference.process_intensity import IntensityChoice, choose_intensity
 from cpas_ocp.inference.profile_likelihood import Profile, profile
-from cpas_ocp.inference.result_claim import Claim, check_claim, check_drag_areas
+from cpas_ocp.inference.result_claim import (
+    Claim,
+    check_claim,
+    check_drag_areas,
+    start_shifts,
+    with_start_shifts,
+)
 from cpas_ocp.inference.whatif import WhatIfResult, parameter_bounds, parse_constraint, what_if
 from cpas_ocp.io.flight_test import load_test
 from cpas_ocp.io.model_spec import ModelSpec, load_model_file, spec_of_test
@@ -230,17 +236,23 @@ class Reconstruction:
         """One line: the sensor channel and phase window that depart from the noise most."""
         return worst_of(window_statistics(self.fit, phase_windows(self.fit)))
 
-    def report(self, out: str | Path) -> Path:
+    def report(self, out: str | Path, profiles: Sequence[Profile] = (),
+               units: DisplayUnits | None = None) -> Path:
         """Write the report folder `cpas-ocp reconstruct` writes (result.json,
-        parameters.csv, report.md, figures) to `out`."""
-        return write_report(self.fit, self.covariance, out, claim=self.claim)
+        parameters.csv, report.md, report.html, figures) to `out`, with `profiles`, tables
+        and figures in `units` (default the test's own)."""
+        return write_report(self.fit, self.covariance, out, list(profiles), self.claim, units)
 
-    def diagnose(self, out: str | Path | None = None) -> Diagnosis:
-        """Where the model fails and which effect it lacks (`cpas-ocp diagnose`); the folder
-        written to `out` where given."""
-        diag = diagnose(self.fit, self.spec, self.plugins)
+    def diagnose(self, out: str | Path | None = None, confirm: int = CONFIRM_TOP,
+                 alpha: float = ALPHA, progress: bool = False,
+                 units: DisplayUnits | None = None) -> Diagnosis:
+        """Where the model fails and which effect it lacks (`cpas-ocp diagnose`): every
+        library and plug-in effect the model leaves out tested at family-wise level
+        `alpha`, the `confirm` leading ones refitted; the folder written to `out` where
+        given."""
+        diag = diagnose(self.fit, self.spec, self.plugins, confirm, alpha, progress=progress)
         if out is not None:
-            write_diagnosis(diag, self.covariance, out)
+            write_diagnosis(diag, self.covariance, out, units)
         return diag
 
     def discover(self, out: str | Path | None = None, max_steps: int = 4) -> Discovery:
@@ -252,11 +264,14 @@ class Reconstruction:
         return found
 
     def compare(self, model: ModelSpec | str | Path, out: str | Path | None = None,
-                labels: tuple[str, str] = ("this", "other")) -> Comparison:
+                labels: tuple[str, str] = ("this", "other"), progress: bool = False,
+                units: DisplayUnits | None = None) -> Comparison:
         """This model against `model` (a spec or a model file), the second started from
-        this fit (`cpas-ocp compare`); the folder written to `out` where given."""
+        this fit, with the start windows this fit had to move moved in it too
+        (`cpas-ocp compare`); the folder written to `out` where given."""
         other = model if isinstance(model, ModelSpec) else load_model_file(model, self.plugins)
-        comparison = compare(self.fit, self.covariance, self.spec, other, labels)
+        other = with_start_shifts(other, start_shifts(self.spec))
+        comparison = compare(self.fit, self.covariance, self.spec, other, labels, progress)
         if out is not None:
-            write_comparison(comparison, out)
+            write_comparison(comparison, out, units)
         return comparison

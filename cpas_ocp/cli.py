@@ -53,9 +53,9 @@ from cpas_ocp.errors import InputError, NotAResult, PluginError, SolverFailure
 from cpas_ocp.io.output_folder import check_output
 
 if TYPE_CHECKING:
+    from cpas_ocp.api import Reconstruction
     from cpas_ocp.estimation.estimator import Estimator, Fit
     from cpas_ocp.estimation.uncertainty import Covariance
-    from cpas_ocp.inference.result_claim import Claim
     from cpas_ocp.io.flight_card import FlightCard
     from cpas_ocp.io.flight_record import FlightRecord
     from cpas_ocp.io.model_spec import ModelSpec
@@ -475,37 +475,32 @@ def _reconstruct(args: argparse.Namespace) -> int:
 
 
 def _whatif(args: argparse.Namespace) -> int:
-    from cpas_ocp.inference.whatif import parameter_bounds, parse_constraint, what_if, whatif_text
+    from cpas_ocp.inference.whatif import parameter_bounds, parse_constraint, whatif_text
     from cpas_ocp.io.flight_test import load_test
     test = load_test(args.test_dir)
     est = _estimator(test, args, _spec(test, args))
     constraints = [parse_constraint(text, est) for text in args.constrain]
     parameter_bounds(constraints, est)  # contradictions are refused before the fits
     print(f"solving without the constraints: {est.size_text()} ...", flush=True)
-    est, fit, cov, claim = _fit_and_covariance(est, args)
-    if not claim.is_result:
+    rec = _reconstruction(est, args)
+    if not rec.is_result:
         raise NotAResult("the fit without the constraints is not a result, so a what-if from "
-                         "it means nothing: " + "; ".join(claim.problems()))
-    constraints = [parse_constraint(text, est) for text in args.constrain]
+                         "it means nothing: " + "; ".join(rec.problems))
     print("solving with them ...", flush=True)
-    print(whatif_text(what_if(est, fit, cov, constraints, progress=not args.verbose)))
+    print(whatif_text(rec.what_if(*args.constrain, progress=not args.verbose)))
     return 0
 
 
 def _diagnose(args: argparse.Namespace) -> int:
-    from cpas_ocp.discrepancy.diagnosis import diagnose
     from cpas_ocp.io.flight_test import load_test
-    from cpas_ocp.reports.discrepancy_report import write_diagnosis
     test = load_test(args.test_dir)
     plugins = _plugins(args)
-    spec = _spec(test, args, plugins)
-    est = _estimator(test, args, spec)
+    est = _estimator(test, args, _spec(test, args, plugins))
     print(f"solving: {est.size_text()} ...", flush=True)
-    est, fit, cov, _ = _fit_and_covariance(est, args)
+    rec = _reconstruction(est, args, plugins)
     print("testing the effects the model does not use ...", flush=True)
-    diag = diagnose(fit, est.spec, plugins, args.confirm, args.alpha,
-                    progress=not args.verbose)
-    out = write_diagnosis(diag, cov, args.out, _units(test, args))
+    out = Path(args.out)
+    diag = rec.diagnose(out, args.confirm, args.alpha, not args.verbose, _units(test, args))
     print()
     print(diag.text())
     print(f"\ndiagnosis written to {out} (diagnosis.md, diagnosis.json, windows.csv, figures)")
@@ -567,8 +562,8 @@ def _discover(args: argparse.Namespace) -> int:
         chain = None
         est = _estimator(test, args, _spec(test, args, plugins))
         print(f"solving: {est.size_text()} ...", flush=True)
-        est, fit, _, claim = _fit_and_covariance(est, args)
-        spec = est.spec
+        rec = _reconstruction(est, args, plugins)
+        est, fit, claim, spec = rec.estimator, rec.fit, rec.claim, rec.spec
         # The chain is read from its start: a first fit the data press against guessed
         # bounds is said so in the report, not only on the terminal (a misfit is what the
         # chain is for, and its table shows it); kept with the steps, so a resumed run says
@@ -639,11 +634,8 @@ def _resumed_options(args: argparse.Namespace, context: dict) -> None:
 
 
 def _compare(args: argparse.Namespace) -> int:
-    from cpas_ocp.inference.model_comparison import compare
-    from cpas_ocp.inference.result_claim import start_shifts, with_start_shifts
     from cpas_ocp.io.flight_test import load_test
     from cpas_ocp.io.model_spec import load_model_file, spec_of_test
-    from cpas_ocp.reports.discrepancy_report import write_comparison
     if len(args.model) != 2:
         raise InputError("(command line)", "--model",
                          f"exactly two models (--model A --model B); got {len(args.model)}")
@@ -657,12 +649,10 @@ def _compare(args: argparse.Namespace) -> int:
         labels = (f"A: {labels[0]}", f"B: {labels[1]}")
     est = _estimator(test, args, specs[0])
     print(f"solving {labels[0]}: {est.size_text()} ...", flush=True)
-    est, fit_a, cov_a, _ = _fit_and_covariance(est, args)
-    # Start windows the first fit had to move are moved in the second model too.
-    spec_b = with_start_shifts(specs[1], start_shifts(est.spec))
+    rec = _reconstruction(est, args, plugins)
     print(f"solving {labels[1]} from it ...", flush=True)
-    comparison = compare(fit_a, cov_a, est.spec, spec_b, labels, progress=not args.verbose)
-    out = write_comparison(comparison, args.out, _units(test, args))
+    out = Path(args.out)
+    comparison = rec.compare(specs[1], out, labels, not args.verbose, _units(test, args))
     print()
     print(comparison.text())
     print(f"\ncomparison written to {out} (comparison.md, comparison.json, windows.csv, "
@@ -858,21 +848,19 @@ def _flight_log(args: argparse.Namespace, card: FlightCard, log: Path, record: F
     `_flight_import` (a function of its own so that one log's fits and refits are freed
     before the next log's): its drag areas and start times, for the recorders'
     comparison."""
-    from cpas_ocp.discrepancy.diagnosis import diagnose
     from cpas_ocp.inference.process_intensity import without_wind
     from cpas_ocp.io.flight_test import load_test
     from cpas_ocp.io.recorder_clocks import RecorderEstimates
-    from cpas_ocp.reports.discrepancy_report import write_diagnosis
     from cpas_ocp.reports.flight_report import air_motion_text, flight_text, held_opening_profiles
     folder = args.out / log.stem
     print(f"== {log.name}: reconstruct", flush=True)
     test = load_test(folder / "test")
-    est, fit, cov, out = _run_reconstruction(test, args, _spec(test, args), folder / "report")
+    rec, out = _run_reconstruction(test, args, _spec(test, args), folder / "report")
+    est, fit, cov = rec.estimator, rec.fit, rec.covariance
     still = without_wind(est.spec, test)
     air = None if still is None else _flight_still_air(test, args, still, folder)
     print("diagnosing the residuals ...", flush=True)
-    diag = diagnose(fit, est.spec, progress=not args.verbose)
-    write_diagnosis(diag, cov, folder / "diagnosis")
+    diag = rec.diagnose(folder / "diagnosis", progress=not args.verbose)
     print("profiling the opening's held parameters ...", flush=True)
     held = held_opening_profiles(fit, est.spec, progress=not args.verbose)
     text = flight_text(fit, cov, card.nominal, diag, held)
@@ -898,7 +886,8 @@ def _flight_still_air(test: FlightTest, args: argparse.Namespace, spec: ModelSpe
     still_args = argparse.Namespace(**{**vars(args), "wind_intensity": None})
     est = _estimator(test, still_args, spec)
     try:
-        est, fit, cov, claim = _fit_and_covariance(est, still_args)
+        still = _reconstruction(est, still_args)
+        est, fit, cov, claim = still.estimator, still.fit, still.covariance, still.claim
     except SolverFailure as exc:
         print(f"the fit in still air did not converge: {exc}", file=sys.stderr)
         return (f"## Air motion\n\nThe fit in still air (the card's model without its "
@@ -934,12 +923,10 @@ def _demo(args: argparse.Namespace) -> int:
 
 
 def _run_reconstruction(test: FlightTest, args: argparse.Namespace, spec: ModelSpec,
-                        out: Path | None = None
-                        ) -> tuple[Estimator, Fit, Covariance, Path]:
+                        out: Path | None = None) -> tuple[Reconstruction, Path]:
     """Solve, write the report folder (`out`, default --out) and print the tables and the
     fit's claim; NotAResult, after the report is written, where the fit is not a result."""
-    from cpas_ocp.inference.profile_likelihood import profile, require_free
-    from cpas_ocp.reports.report import fit_summary, parameter_table, write_report
+    from cpas_ocp.inference.profile_likelihood import require_free
     est = _estimator(test, args, spec)
     names = getattr(args, "profile", [])
     for name in names:
@@ -947,29 +934,26 @@ def _run_reconstruction(test: FlightTest, args: argparse.Namespace, spec: ModelS
     print(f"solving: {est.size_text()} ...", flush=True)
     target = out if out is not None else args.out
     try:
-        est, fit, cov, claim = _fit_and_covariance(est, args)
+        rec = _reconstruction(est, args)
     except SolverFailure as exc:
         from cpas_ocp.reports.failure_report import write_failure_report
         folder = write_failure_report(exc, target)
         print(f"NOT CONVERGED: why is in {folder / 'failure.md'}", file=sys.stderr)
         raise
-    profiles = [profile(est, fit, cov, n, args.profile_span, args.profile_points,
-                        progress=not args.verbose) for n in names]
+    profiles = [rec.profile(n, args.profile_span, args.profile_points,
+                            progress=not args.verbose) for n in names]
     units = _units(test, args)
-    out = write_report(fit, cov, target, profiles, claim, units)
+    out = rec.report(target, profiles, units)
     print()
-    print(parameter_table(fit, cov, units))
-    print()
-    print(fit_summary(fit, units))
+    print(rec.summary(units))
     for prof in profiles:
         print(f"profile likelihood, {prof.text()}")
-    print(claim.text())
     print(f"\nreport written to {out} (result.json, parameters.csv, report.md, figures)")
     print(f"interactive report: {out / 'report.html'}")
-    if not claim.is_result:
+    if not rec.is_result:
         raise NotAResult(f"the fit converged but is not a result (see the claim in "
-                         f"{out / 'report.md'}): {claim.problems()[0]}")
-    return est, fit, cov, out
+                         f"{out / 'report.md'}): {rec.problems[0]}")
+    return rec, out
 
 
 def _estimator(test: FlightTest, args: argparse.Namespace, spec: ModelSpec) -> Estimator:
@@ -991,11 +975,11 @@ def _estimator(test: FlightTest, args: argparse.Namespace, spec: ModelSpec) -> E
     return est
 
 
-def _fit_and_covariance(est: Estimator, args: argparse.Namespace
-                        ) -> tuple[Estimator, Fit, Covariance, Claim]:
-    """`api.fit_estimator` with the command line's options, announced, and a warning for
-    every parameter combination the data leave undetermined and every reason the fit is
-    not yet a result."""
+def _reconstruction(est: Estimator, args: argparse.Namespace,
+                    plugins: dict[str, EffectType] | None = None) -> Reconstruction:
+    """`api.fit_estimator` with the command line's options (and the plug-in effects its
+    diagnosis may test), announced, and a warning for every parameter combination the
+    data leave undetermined and every reason the fit is not yet a result."""
     from cpas_ocp.api import fit_estimator
     intensities = getattr(args, "wind_intensity", None) or ()
     if intensities:
@@ -1004,7 +988,7 @@ def _fit_and_covariance(est: Estimator, args: argparse.Namespace
     if args.hessian == "exact":
         print("the fit, then its exact-Hessian covariance ...", flush=True)
     rec = fit_estimator(est, args.rescale_sigmas, args.hessian, intensities,
-                        progress=not args.verbose)
+                        progress=not args.verbose, plugins=plugins)
     if rec.intensity_choice is not None:
         print(rec.intensity_choice.text(), flush=True)
     if rec.covariance.undetermined:
@@ -1012,7 +996,7 @@ def _fit_and_covariance(est: Estimator, args: argparse.Namespace
               f"(see the identifiability lines)", file=sys.stderr)
     for problem in rec.problems:
         print(f"warning: {problem}", file=sys.stderr)
-    return rec.estimator, rec.fit, rec.covariance, rec.claim
+    return rec
 
 
 if __name__ == "__main__":  # python -m cpas_ocp.cli, as the cpas-ocp script
