@@ -55,7 +55,7 @@ def test_a_reconstruction_plots_profiles_constrains_and_extends_its_model(drogue
     assert len(axes) == 2 * len(rows)
     # The residual axis carries the normalised residuals themselves.
     drawn = [line.get_ydata() for line in axes[1].get_lines() if len(line.get_ydata()) > 2]
-    assert any(np.array_equal(y, rows[0].normalized) for y in drawn)
+    assert any(np.array_equal(y, rows[0].normalised) for y in drawn)
     plt.close(axes[0].figure)
     with pytest.raises(ValueError, match="no residuals of a sensor 'nothing'"):
         rec.plot("nothing")

@@ -222,7 +222,7 @@ def test_the_worst_window_of_a_slow_channel_is_at_least_its_whole_misfit() -> No
                          np.full(t_gps.size, 3.0))
     fit = SimpleNamespace(residuals=[baro, gps], pseudo_sensors=("events", "priors"))
     worst = worst_windows(fit, top=3)
-    assert worst[0].sensor == "gps" and worst[0].normalized_rms >= 2.42
+    assert worst[0].sensor == "gps" and worst[0].normalised_rms >= 2.42
     assert all(w.samples >= MIN_WINDOW_SAMPLES for w in worst)
     gps_windows = [w for w in worst if w.sensor == "gps"]
     assert gps_windows[0].t1 - gps_windows[0].t0 >= (MIN_WINDOW_SAMPLES - 1) * 1.0

@@ -160,12 +160,12 @@ def test_window_chi_squares_add_up_to_each_channel(problem_fit, problem: str) ->
         mine = [s for s in stats if (s.sensor, s.channel) == (r.sensor, r.channel)]
         assert {s.window for s in mine} <= names
         assert sum(s.samples for s in mine) == r.t.size
-        chi2 = float(np.sum(r.normalized**2))
+        chi2 = float(np.sum(r.normalised**2))
         assert sum(s.chi_square for s in mine) == pytest.approx(chi2, rel=1e-12)
         assert sum(s.fraction for s in mine) == pytest.approx(chi2 / fit.chi_square, rel=1e-12)
         by_name = {w.name: w for w in windows}
         for s in mine:
-            assert s.normalized_rms == pytest.approx(np.sqrt(s.chi_square / s.samples))
+            assert s.normalised_rms == pytest.approx(np.sqrt(s.chi_square / s.samples))
             # The statistic spans the samples it counts, inside its window's bounds.
             assert s.t0 <= s.t1 and {s.t0, s.t1} <= set(r.t)
             if s.window != OUTSIDE:

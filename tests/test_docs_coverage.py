@@ -26,7 +26,7 @@ import pandas as pd
 import pytest
 
 from cpas_ocp.cli import main
-from cpas_ocp.io.flight_test import test_from_manifest as flight_test_from
+from cpas_ocp.io.flight_test import flight_test_from_manifest
 from cpas_ocp.io.problems import load_problem, problem_names
 from cpas_ocp.physics.effects.registry import BASELINE, BUILTIN, EffectType
 from cpas_ocp.physics.parameters import Parameter, split_name
@@ -124,7 +124,7 @@ def problem_test(name: str):
     t_end = float(problem.simulation["t_end"])
     series = {s["name"]: pd.DataFrame({"time": np.arange(0.0, t_end, 0.1)})
               for s in manifest["sensors"]}
-    return flight_test_from(manifest, Path(name), series=series)
+    return flight_test_from_manifest(manifest, Path(name), series=series)
 
 
 @pytest.fixture(scope="module")

@@ -24,7 +24,7 @@ def test_an_unconverged_solve_writes_a_failure_report_and_no_result(drogue_folde
     # The last iterate's figures are there to show why, each sensor and free parameter.
     manifest = json.loads((folder / "manifest.json").read_text())
     assert set(failure["residuals_last_iterate"]) >= {s["name"] for s in manifest["sensors"]}
-    assert all(e["normalized_rms"] > 0 for e in failure["residuals_last_iterate"].values())
+    assert all(e["normalised_rms"] > 0 for e in failure["residuals_last_iterate"].values())
     assert failure["parameters_last_iterate"] and failure["worst_windows_last_iterate"]
     text = (out / "failure.md").read_text()
     assert text.startswith("# NOT CONVERGED") and "Nothing here is a result" in text

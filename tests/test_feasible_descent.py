@@ -12,7 +12,7 @@ from scipy.optimize import minimize_scalar
 from cpas_ocp.estimation.estimator import STALL_ITERATIONS, STALL_SHARE, _Monitor
 from cpas_ocp.estimation.feasible_descent import DescentProblem, bounded_step, descend
 from cpas_ocp.estimation.structured_secant import StructuredSecant
-from cpas_ocp.estimation.uncertainty import linearize
+from cpas_ocp.estimation.uncertainty import linearise
 
 
 def _rosenbrock(z: np.ndarray) -> tuple[np.ndarray, sp.csc_matrix]:
@@ -28,7 +28,7 @@ def _unconstrained(residual_jacobian, lower: np.ndarray, upper: np.ndarray) -> D
     index = np.arange(n)
 
     def lin(z: np.ndarray):
-        return linearize(residual_jacobian, lambda z: (np.zeros(0), sp.csc_matrix((0, n))),
+        return linearise(residual_jacobian, lambda z: (np.zeros(0), sp.csc_matrix((0, n))),
                          z, np.zeros(0), np.zeros(0), index, lower, upper)
 
     def feasible(z: np.ndarray) -> tuple[np.ndarray, float]:
@@ -66,7 +66,7 @@ def test_a_bound_holds_only_a_step_that_would_cross_it() -> None:
         return np.array([z[0] - 1.0, z[1] + 1.0]), sp.identity(2, format="csc")
 
     problem = _unconstrained(residuals, np.zeros(2), np.full(2, 3.0))
-    step = bounded_step(problem.linearize(np.zeros(2)), problem).step
+    step = bounded_step(problem.linearise(np.zeros(2)), problem).step
     np.testing.assert_allclose(step, [1.0, 0.0], atol=1e-12)
 
 
@@ -74,7 +74,7 @@ def test_a_descent_that_cannot_fall_says_so() -> None:
     """At a point that is no minimum but whose feasible neighbours all lie higher (here
     the feasible point always returns a worse value), the descent ends unconverged."""
     base = _unconstrained(_rosenbrock, np.full(2, -5.0), np.full(2, 5.0))
-    worse = DescentProblem(base.linearize, lambda z: (z, 1e9), base.residual_value,
+    worse = DescentProblem(base.linearise, lambda z: (z, 1e9), base.residual_value,
                            base.param_index, base.lower, base.upper)
     z0 = np.array([-1.2, 1.0])
     end = descend(z0, 24.2, worse, tol=1e-8, max_steps=50)
@@ -189,7 +189,7 @@ def test_a_step_along_a_steep_feasible_curve_ends_where_the_curve_offers_nothing
         return np.array([z[0] - 1.0]), sp.csc_matrix(np.ones((1, 1)))
 
     base = _unconstrained(residual, np.full(1, -5.0), np.full(1, 5.0))
-    steep = DescentProblem(base.linearize, lambda z: (z, (z[0] - 1.0) ** 2 + K * z[0] ** 2),
+    steep = DescentProblem(base.linearise, lambda z: (z, (z[0] - 1.0) ** 2 + K * z[0] ** 2),
                            base.residual_value, base.param_index, base.lower, base.upper)
     z0 = np.zeros(1)
     learnt = descend(z0, 1.0, steep, tol=1e-3, max_steps=10, learn=True)

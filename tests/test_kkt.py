@@ -11,7 +11,7 @@ import scipy.sparse as sp
 
 from cpas_ocp.estimation.uncertainty import (
     POORLY_DETERMINED,
-    Linearization,
+    Linearisation,
     _by_weight,
     _leading_rows,
     _oriented,
@@ -25,7 +25,7 @@ NX, NODES = 2, 6  # states per node, nodes
 
 
 def _chain_problem(seed: int, singular: bool = False, split: float = 0.0
-                   ) -> tuple[Linearization, np.ndarray]:
+                   ) -> tuple[Linearisation, np.ndarray]:
     """A small shooting problem: z = (x_0 .. x_5, p_1, p_2, c), gaps x_{k+1} - M x_k - b p,
     one capture relation, p_1 on nothing; residuals see every node and p.  `singular`:
     p_1 and p_2 enter only through their sum, apart from a residual-only difference of
@@ -50,14 +50,14 @@ def _chain_problem(seed: int, singular: bool = False, split: float = 0.0
         J[:, n_states + 1] = J[:, n_states] * (1.0 + split * rng.standard_normal(J.shape[0]))
         A[:, n_states + 1] = A[:, n_states]
     c = 1e-3 * rng.standard_normal(A.shape[0])
-    lin = Linearization(np.zeros(nz), rng.standard_normal(40), sp.csc_matrix(J),
+    lin = Linearisation(np.zeros(nz), rng.standard_normal(40), sp.csc_matrix(J),
                         sp.csc_matrix(A), c, np.zeros(2, dtype=bool),
                         chain_rows=NX * (NODES - 1),
                         dependent=np.arange(NX, n_states))
     return lin, np.arange(n_states, n_states + 2)
 
 
-def _dense_kkt(lin: Linearization) -> np.ndarray:
+def _dense_kkt(lin: Linearisation) -> np.ndarray:
     J, A = lin.J.toarray(), lin.A.toarray()
     return np.block([[J.T @ J, A.T], [A, np.zeros((A.shape[0], A.shape[0]))]])
 

@@ -84,7 +84,7 @@ def test_every_observed_event_time_is_a_residual(pilot_fit) -> None:
     for label, r in events.items():
         observed = fit.test.event(*label.removesuffix("]").split("["))
         assert r.measured[0] == observed.time and r.sigma[0] == observed.sigma
-        assert abs(r.normalized[0]) < 4.0, label
+        assert abs(r.normalised[0]) < 4.0, label
 
 
 def test_predicted_main_bag_strip_is_the_simulated_crossing(problem_folder) -> None:

@@ -104,7 +104,7 @@ def test_both_logs_fit_their_noise_with_the_air_motion_and_the_accelerometer(
         lo, hi = _opening(fit)
         opening = (accel.t >= lo) & (accel.t < hi)
         assert opening.sum() >= 20
-        assert np.sqrt(np.mean(accel.normalized[opening] ** 2)) <= 1.5
+        assert np.sqrt(np.mean(accel.normalised[opening] ** 2)) <= 1.5
 
 
 def test_two_recorders_agree(mega_fit, metrum_fit) -> None:

@@ -30,7 +30,7 @@ def test_report_folder_carries_values_uncertainties_and_fit_statistics(drogue_fi
         assert lo < entry["value"] < hi
     solver = result["solver"]
     assert solver["success"] and solver["iterations"] > 0 and solver["wall_s"] > 0
-    assert {"rms", "normalized_rms"} <= set(next(iter(result["residuals"].values())))
+    assert {"rms", "normalised_rms"} <= set(next(iter(result["residuals"].values())))
 
     k, n = len(fit.free), fit.n_samples
     assert result["fit"]["aic"] == pytest.approx(fit.chi_square + 2 * k)

@@ -87,7 +87,7 @@ def _manifest(**drogue: object) -> dict:
 
 def _load(manifest: dict, tmp_path: Path):
     series = {"baro": pd.DataFrame({"time": np.arange(0.0, 60.0, 0.1)})}
-    return flight_test.test_from_manifest(manifest, tmp_path, series=series)
+    return flight_test.flight_test_from_manifest(manifest, tmp_path, series=series)
 
 
 def _parameter_names(test: FlightTest) -> list[str]:
@@ -221,7 +221,7 @@ def test_a_band_the_descent_never_enters_is_refused(tmp_path: Path) -> None:
     manifest = _manifest(altitude_bands=[100_000])
     series = {"baro": pd.DataFrame({"time": np.arange(0.0, 60.0, 0.1),
                                     "altitude": np.linspace(2600.0, 1500.0, 600)})}
-    test = flight_test.test_from_manifest(manifest, tmp_path, series=series)
+    test = flight_test.flight_test_from_manifest(manifest, tmp_path, series=series)
     with pytest.raises(InputError) as err:
         initial_guess(test, spec_of_test(test).model(test), {})
     assert err.value.field == "parachutes[0].altitude_bands"

@@ -158,7 +158,7 @@ def test_an_axial_accelerometer_is_a_fitted_sensor(tmp_path) -> None:
     for name in ("axis_cos[drogue1]", "axis_cos[drogue2]"):
         assert abs(fit.parameters[name] - 0.8) < 4.0 * cov.std[name], name
     accel = next(r for r in fit.residuals if r.sensor == "accelerometer")
-    assert np.sqrt(np.mean(accel.normalized**2)) < 1.1
+    assert np.sqrt(np.mean(accel.normalised**2)) < 1.1
 
 
 def test_a_rocket_descent_through_gusts_is_reconstructed_with_the_process(tmp_path) -> None:

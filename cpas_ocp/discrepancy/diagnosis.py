@@ -217,7 +217,7 @@ class Diagnosis:
                 acted.add((w.sensor, w.channel, w.window))
                 if departs(now, level):
                     reasons.append(f"{w.sensor}.{w.channel} {w.window} still departs from the "
-                                   f"noise (normalised RMS {now.normalized_rms:.2f}, "
+                                   f"noise (normalised RMS {now.normalised_rms:.2f}, "
                                    f"{100 * share:.0f} % of its excess removed)")
             # Structure the refit leaves in the windows the effect acts in; where the effect
             # is a stand-in, the strongest structure it leaves elsewhere too.

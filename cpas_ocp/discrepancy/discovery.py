@@ -134,7 +134,7 @@ class DiscoveryStep:
     @property
     def channel_rms(self) -> dict[str, float]:
         """Normalised RMS of each sensor channel ("sensor.channel"), pseudo-sensors left out."""
-        return {f"{r.sensor}.{r.channel}": float(np.sqrt(np.mean(r.normalized**2)))
+        return {f"{r.sensor}.{r.channel}": float(np.sqrt(np.mean(r.normalised**2)))
                 for r in self.fit.residuals
                 if r.sensor not in self.fit.pseudo_sensors and r.t.size}
 
@@ -162,7 +162,7 @@ class DiscoveryStep:
         if self.diagnosis is None:
             return self.recorded_worst
         w = worst_window(self.diagnosis.statistics)
-        return None if w is None else (f"{w.sensor}.{w.channel} {w.window}", w.normalized_rms)
+        return None if w is None else (f"{w.sensor}.{w.channel} {w.window}", w.normalised_rms)
 
 
 @dataclass

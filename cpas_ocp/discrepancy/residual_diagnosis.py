@@ -82,7 +82,7 @@ class Finding:
     t0: float
     t1: float
     samples: int
-    normalized_rms: float
+    normalised_rms: float
     ljung_box_p: float
     frequency_hz: float
     periodicity_p: float
@@ -97,7 +97,7 @@ class Finding:
     def text(self) -> str:
         """One line: where, and what the residual there shows."""
         head = (f"{self.sensor} {self.channel}, {self.window} ({self.t0:.2f}-{self.t1:.2f} s, "
-                f"{self.samples} samples, normalised RMS {self.normalized_rms:.2f})")
+                f"{self.samples} samples, normalised RMS {self.normalised_rms:.2f})")
         parts = []
         if LJUNG_BOX in self.rejected:
             parts.append(f"not white (Ljung-Box p {_p(self.ljung_box_p)})")
@@ -160,18 +160,18 @@ def diagnose_residuals(fit: Fit, windows: Sequence[PhaseWindow], alpha: float = 
         for i in [*range(len(applicable)), -1]:
             name = applicable[i].name if i >= 0 else OUTSIDE
             for run in _runs(r.t, index == i):
-                if run.size >= MIN_SAMPLES and np.ptp(r.normalized[run]) > 0:
+                if run.size >= MIN_SAMPLES and np.ptp(r.normalised[run]) > 0:
                     finding, p_values = _examine(_subset(r, run), name, sigs)
                     tests += [(len(findings), label, p) for label, p in p_values]
                     findings.append(finding)
                     tested += run.size
-        if tested < MIN_TESTED_FRACTION * r.t.size and np.ptp(r.normalized) > 0:
+        if tested < MIN_TESTED_FRACTION * r.t.size and np.ptp(r.normalised) > 0:
             finding, p_values = _examine(r, WHOLE_PHASE, sigs)
             tests += [(len(findings), label, p) for label, p in p_values]
             findings.append(finding)
     _holm(findings, tests, alpha)
     return sorted(findings, key=lambda f: (not f.significant, f.p_adjusted,
-                                           -f.normalized_rms))
+                                           -f.normalised_rms))
 
 
 def signature_text(findings: Sequence[Finding], top: int = 3) -> str:
@@ -187,7 +187,7 @@ def signature_text(findings: Sequence[Finding], top: int = 3) -> str:
              "channel windows depart from white noise):"]
     for k, f in enumerate(hits):
         where = (f"{'strongest' if k == 0 else 'then'} in {f.sensor} {f.channel}, window "
-                 f"{f.window} ({f.t0:.2f}-{f.t1:.2f} s, normalised RMS {f.normalized_rms:.2f})")
+                 f"{f.window} ({f.t0:.2f}-{f.t1:.2f} s, normalised RMS {f.normalised_rms:.2f})")
         what = []
         if PERIODICITY in f.rejected:
             what.append(f"periodic at {f.frequency_hz:.2f} Hz")
@@ -204,7 +204,7 @@ def signature_text(findings: Sequence[Finding], top: int = 3) -> str:
 def _examine(r: SensorResidual, window: str,
              sigs: Sequence[Signature]) -> tuple[Finding, list[tuple[str, float]]]:
     """Every test on one contiguous run of one channel; the finding and its (label, p)."""
-    e = r.normalized
+    e = r.normalised
     rate = 1.0 / float(np.median(np.diff(r.t)))
     lb = ljung_box(e)
     per = periodicity(e, rate)

@@ -183,7 +183,7 @@ def signature_correlations(residual: SensorResidual, signatures: Sequence[Signat
     n = int(sel.sum())
     if n < MIN_EFFECTIVE_SAMPLES:
         return []
-    e = residual.normalized[sel] - np.mean(residual.normalized[sel])
+    e = residual.normalised[sel] - np.mean(residual.normalised[sel])
     ee = float(e @ e)
     if ee <= 0.0:
         return []

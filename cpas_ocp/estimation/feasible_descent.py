@@ -38,11 +38,11 @@ import numpy as np
 from cpas_ocp.estimation.structured_secant import StructuredSecant
 from cpas_ocp.estimation.uncertainty import (
     GaussNewtonStep,
-    Linearization,
+    Linearisation,
     ReducedProblem,
     gauss_newton,
     measured_decrement,
-    reduce_linearization,
+    reduce_linearisation,
 )
 
 # Halvings of a step whose feasible end is not lower before the descent gives up.
@@ -71,7 +71,7 @@ class DescentProblem:
     weighted residuals at a point (for the curvature along a step), and where the free
     parameters lie in the decision vector with their scaled bounds."""
 
-    linearize: Callable[[np.ndarray], Linearization]
+    linearise: Callable[[np.ndarray], Linearisation]
     feasible_point: Callable[[np.ndarray], tuple[np.ndarray, float] | None]
     residual_value: Callable[[np.ndarray], np.ndarray]
     param_index: np.ndarray
@@ -79,7 +79,7 @@ class DescentProblem:
     upper: np.ndarray
 
 
-def bounded_step(lin: Linearization, problem: DescentProblem,
+def bounded_step(lin: Linearisation, problem: DescentProblem,
                  curvature: tuple[np.ndarray, np.ndarray] | None = None,
                  red: ReducedProblem | None = None) -> GaussNewtonStep:
     """The Gauss-Newton step at `lin` with each free parameter that sits on a bound held
@@ -101,10 +101,10 @@ def bounded_step(lin: Linearization, problem: DescentProblem,
                         curvature=curvature)
 
 
-def free_reduction(lin: Linearization, problem: DescentProblem) -> ReducedProblem:
+def free_reduction(lin: Linearisation, problem: DescentProblem) -> ReducedProblem:
     """`lin` reduced with only its states held, the free parameters all free: the
     coordinates the learnt curvature lives in, and the first reduction of `bounded_step`."""
-    return reduce_linearization(replace(lin, held=np.setdiff1d(lin.held, problem.param_index)))
+    return reduce_linearisation(replace(lin, held=np.setdiff1d(lin.held, problem.param_index)))
 
 
 def descend(z: np.ndarray, chi2: float, problem: DescentProblem, tol: float,
@@ -123,7 +123,7 @@ def descend(z: np.ndarray, chi2: float, problem: DescentProblem, tol: float,
     decrement = np.inf
     secant = StructuredSecant() if learn else None
     for k in range(max_steps + 1):
-        lin = problem.linearize(z)
+        lin = problem.linearise(z)
         red = free_reduction(lin, problem)
         gn = bounded_step(lin, problem, red=red)
         decrement = measured_decrement(problem.residual_value, lin, gn)

@@ -149,7 +149,7 @@ class SensorResidual:
     sigma: np.ndarray
 
     @property
-    def normalized(self) -> np.ndarray:
+    def normalised(self) -> np.ndarray:
         return (self.measured - self.model) / self.sigma
 
 
@@ -200,7 +200,7 @@ class Fit:
 
     @property
     def chi_square(self) -> float:
-        return float(sum(np.sum(r.normalized**2) for r in self.residuals))
+        return float(sum(np.sum(r.normalised**2) for r in self.residuals))
 
     @property
     def n_samples(self) -> int:

@@ -16,15 +16,15 @@ from cpas_ocp.estimation.fit import (
 from cpas_ocp.estimation.uncertainty import (
     HESSIANS,
     Covariance,
-    Linearization,
+    Linearisation,
     gauss_newton_step,
     kkt_covariance,
-    linearize,
+    linearise,
     log_det_information,
 )
 
 
-def _violation(lin: Linearization) -> float:
+def _violation(lin: Linearisation) -> float:
     """Largest scaled constraint violation of a linearisation's point (0 without any)."""
     return float(np.max(np.abs(lin.c))) if lin.c.size else 0.0
 
@@ -48,18 +48,18 @@ class Linearising:
             fn = self._lagrangian_hessian_product()
             product = lambda Z: np.asarray(  # noqa: E731
                 fn.map(Z.shape[1], "serial")(fit.z, fit.multipliers, Z))
-        return kkt_covariance(self._linearize(fit.z), self._param_index, self.pscale,
+        return kkt_covariance(self._linearise(fit.z), self._param_index, self.pscale,
                               self.free, scale_by_residual, product)
 
     def gauss_newton_estimate(self, z: np.ndarray, release: Sequence[str] = ()
                               ) -> tuple[dict[str, float], Covariance]:
         """The free parameters after one Gauss-Newton step from `z` (SI), and their covariance
-        there; parameters in `release` are treated as unbounded (see `_linearize`).
+        there; parameters in `release` are treated as unbounded (see `_linearise`).
 
         At the optimum of a model with some parameters held at null values, the
         step's components along them are their linearised estimates (`score_test`).
         """
-        lin = self._linearize(z, release)
+        lin = self._linearise(z, release)
         cov = kkt_covariance(lin, self._param_index, self.pscale, self.free)
         return self.free_values(z + gauss_newton_step(lin)), cov
 
@@ -67,13 +67,13 @@ class Linearising:
         """log det of the Gauss-Newton information of every free coordinate at `fit`, in the
         scaled decision vector (`uncertainty.log_det_information`): the volume term of a
         Laplace approximation (`process_intensity`)."""
-        return log_det_information(self._linearize(fit.z))
+        return log_det_information(self._linearise(fit.z))
 
     def gauss_newton_point(self, z: np.ndarray) -> tuple[np.ndarray, float]:
         """The end of one full Gauss-Newton step from the decision vector `z` (the linearised
         constraints met there), clipped into the variables' bounds, and the chi-square
         at `z`: both from one linearisation."""
-        lin = self._linearize(z)
+        lin = self._linearise(z)
         step_end = np.clip(z + gauss_newton_step(lin), self._lbz, self._ubz)
         return step_end, float(lin.r @ lin.r)
 
@@ -88,7 +88,7 @@ class Linearising:
                                                 [ca.jtimes(grad, self._z, v)])
         return self._hessian_product
 
-    def _linearize(self, z: np.ndarray, release: Sequence[str] = ()) -> Linearization:
+    def _linearise(self, z: np.ndarray, release: Sequence[str] = ()) -> Linearisation:
         """The problem linearised at `z`; the free parameters named in `release` are treated
         as unbounded (a score test's parameters sit on a bound at their null values)."""
         idx = self._param_index
@@ -100,12 +100,12 @@ class Linearising:
             i = self.free.index(name)
             lower[i], upper[i] = -np.inf, np.inf
         points = self._points
-        return linearize(points.residual_jacobian, points.constraints, z, self._lbg, self._ubg,
+        return linearise(points.residual_jacobian, points.constraints, z, self._lbg, self._ubg,
                          idx, lower, upper, chain_rows=n_states - nx,
                          dependent=np.arange(nx, n_states), pinned=pinned)
 
     def evaluate(self, z: np.ndarray) -> tuple[float, float]:
         """Chi-square at the decision vector `z` and its largest scaled constraint violation
         (the shooting gaps in units of the state scales)."""
-        lin = self._linearize(z)
+        lin = self._linearise(z)
         return float(lin.r @ lin.r), _violation(lin)

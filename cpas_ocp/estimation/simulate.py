@@ -22,7 +22,7 @@ import numpy as np
 import pandas as pd
 
 from cpas_ocp.errors import InputError
-from cpas_ocp.io.flight_test import MANIFEST, load_test, test_from_manifest
+from cpas_ocp.io.flight_test import MANIFEST, flight_test_from_manifest, load_test
 from cpas_ocp.io.model_spec import spec_from_block
 from cpas_ocp.io.problems import Problem
 from cpas_ocp.physics.effects import Effect
@@ -136,7 +136,7 @@ def simulate_problem(problem: Problem, out: str | Path, seed: int,
         rate = float(sim["rates_hz"][s["name"]])
         sample_times[s["name"]] = t0 + np.arange(round((t1 - t0) * rate) + 1) / rate
     planned = {name: pd.DataFrame({"time": t}) for name, t in sample_times.items()}
-    test = test_from_manifest(manifest, out, series=planned)
+    test = flight_test_from_manifest(manifest, out, series=planned)
     model = _truth_model(problem, test, effects)
     # Effects whose parameters are a random process (`simulation.drawn`: the air's
     # motion) take them from a stream of their own, so that the sensor noise of a seed

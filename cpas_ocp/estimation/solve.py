@@ -29,7 +29,7 @@ from cpas_ocp.estimation.nlp_functions import MarquardtDamping, ipopt_functions
 from cpas_ocp.estimation.uncertainty import (
     DECREMENT_FLOOR,
     GaussNewtonStep,
-    Linearization,
+    Linearisation,
     gauss_newton,
     measured_decrement,
 )
@@ -508,7 +508,7 @@ class Solving:
         start = min(points, key=lambda p: p[1])
         idx = self._param_index
         lower, upper = bounds
-        problem = DescentProblem(self._linearize, self.feasible_point,
+        problem = DescentProblem(self._linearise, self.feasible_point,
                                  self._points.residual_value, idx, lower[idx], upper[idx])
         learn = self.settings.descent_curvature
         return descend(*start, problem, tol, min(self.settings.descent_steps, left), learn)
@@ -562,7 +562,7 @@ class Solving:
         iterations for what one step does.
         """
         tol = self.settings.chi2_step_tol or 0.0
-        lin = self._linearize(z)
+        lin = self._linearise(z)
         violation = _violation(lin)
         # An inequality (a what-if limit) inactive at z might be crossed by the finishing
         # step unseen: the linearisation holds only the active ones.
@@ -593,7 +593,7 @@ class Solving:
                     return decrement, projection[0].z
         return found
 
-    def _finishing_steps(self, lin: Linearization, gn: GaussNewtonStep, tol: float
+    def _finishing_steps(self, lin: Linearisation, gn: GaussNewtonStep, tol: float
                          ) -> tuple[tuple[float, np.ndarray] | None,
                                     tuple[float, np.ndarray] | None]:
         """Up to FINISHING_STEPS Gauss-Newton steps of the estimator's own from `lin`'s
@@ -653,24 +653,24 @@ class Solving:
         return stop, first
 
     @staticmethod
-    def _feasible(candidate: tuple[Linearization, GaussNewtonStep], tol: float) -> bool:
+    def _feasible(candidate: tuple[Linearisation, GaussNewtonStep], tol: float) -> bool:
         """Whether a candidate's point meets STOP_CONSTRAINT_TOL and closing its remaining
         gaps is worth less than `tol` in chi-square."""
         lin, gn = candidate
         return _violation(lin) <= STOP_CONSTRAINT_TOL and abs(gn.restoration) <= tol
 
     def _candidate(self, z: np.ndarray, lower: np.ndarray, upper: np.ndarray, limit: float
-                   ) -> tuple[Linearization, GaussNewtonStep] | None:
+                   ) -> tuple[Linearisation, GaussNewtonStep] | None:
         """The linearisation and Gauss-Newton step at a point where the run might stop, if it
         lies within the bounds and its scaled constraints within `limit` (judged on their
         values first: 3 ms on `drogue`, where a linearisation takes 70)."""
         if np.any(z < lower) or np.any(z > upper) \
                 or not self._value_violation(z) <= limit:  # NaN too
             return None
-        lin = self._linearize(z)
+        lin = self._linearise(z)
         return lin, gauss_newton(lin)
 
-    def _measured_decrement(self, lin: Linearization, gn: GaussNewtonStep) -> float:
+    def _measured_decrement(self, lin: Linearisation, gn: GaussNewtonStep) -> float:
         """The chi-square decrease still to be had along `gn` from `lin.z`, its curvature
         measured (`uncertainty.measured_decrement`)."""
         return measured_decrement(self._points.residual_value, lin, gn)

@@ -147,7 +147,7 @@ class Covariance:
 
 
 @dataclass
-class Linearization:
+class Linearisation:
     """The estimation problem linearised at a point z (scaled decision vector).
 
     r, J: weighted residuals and their Jacobian; A, c: Jacobian and violation
@@ -173,11 +173,11 @@ class Linearization:
 Evaluation = Callable[[np.ndarray], tuple[np.ndarray, sp.csc_matrix]]
 
 
-def linearize(residual_jacobian: Evaluation, constraints: Evaluation, z: np.ndarray,
+def linearise(residual_jacobian: Evaluation, constraints: Evaluation, z: np.ndarray,
               lbg: np.ndarray, ubg: np.ndarray, param_index: np.ndarray, lower: np.ndarray,
               upper: np.ndarray, chain_rows: int = 0,
               dependent: np.ndarray | None = None,
-              pinned: np.ndarray | None = None) -> Linearization:
+              pinned: np.ndarray | None = None) -> Linearisation:
     """Linearise at `z`: `residual_jacobian(z)` gives (r, dr/dz), `constraints(z)` gives
     (g, dg/dz) (`nlp_functions.PointEvaluations`); `param_index` locates the free
     parameters in z, `lower`/`upper` are their scaled bounds; the first `chain_rows`
@@ -194,7 +194,7 @@ def linearize(residual_jacobian: Evaluation, constraints: Evaluation, z: np.ndar
     on_bound = (zp - lower < 1e-6 * bspan) | (upper - zp < 1e-6 * bspan)
     held = np.concatenate([np.asarray(pinned if pinned is not None else [], dtype=int),
                            param_index[on_bound]])
-    return Linearization(z, r, J, A.tocsc(), c, on_bound, chain_rows,
+    return Linearisation(z, r, J, A.tocsc(), c, on_bound, chain_rows,
                          np.asarray(dependent if dependent is not None else [], dtype=int),
                          np.sort(held))
 
@@ -219,7 +219,7 @@ class ReducedProblem:
     b: np.ndarray
 
 
-def reduce_linearization(lin: Linearization) -> ReducedProblem:
+def reduce_linearisation(lin: Linearisation) -> ReducedProblem:
     """Eliminate the `dependent` columns through the first `chain_rows` constraints."""
     nz = lin.z.size
     A = lin.A.tocsr()
@@ -317,18 +317,18 @@ UNDETERMINED_LOADING = 1e-2
 WEIGHT_SHOWN = 0.05  # smallest component of a weak combination that is named
 
 
-def log_det_information(lin: Linearization) -> float:
+def log_det_information(lin: Linearisation) -> float:
     """log det of the Gauss-Newton information (J'J) of the free coordinates in the scaled
     decision vector, on the null space of the constraints that remain after the shooting
     gaps: the Laplace approximation's volume term.  Directions the data do not determine
     enter at SINGULAR_RATIO of the largest curvature (a constant where they do not change
     between the models compared)."""
-    ns = _null_space(reduce_linearization(lin))
+    ns = _null_space(reduce_linearisation(lin))
     floor = SINGULAR_RATIO * max(ns.largest, 1e-300)
     return float(np.sum(np.log(np.maximum(ns.H_eigenvalues, floor))))
 
 
-def kkt_covariance(lin: Linearization, param_index: np.ndarray, param_scale: np.ndarray,
+def kkt_covariance(lin: Linearisation, param_index: np.ndarray, param_scale: np.ndarray,
                    names: list[str], scale_by_residual: bool = False,
                    hessian_product: Callable[[np.ndarray], np.ndarray] | None = None
                    ) -> Covariance:
@@ -337,7 +337,7 @@ def kkt_covariance(lin: Linearization, param_index: np.ndarray, param_scale: np.
     `hessian_product(Z)` returns H Z for the Hessian H of the Lagrangian in the
     scaled decision vector; without it the Gauss-Newton curvature is used.
     """
-    red = reduce_linearization(lin)
+    red = reduce_linearisation(lin)
     if hessian_product is None:
         ns = _null_space(red)
     else:
@@ -450,7 +450,7 @@ def _leading_rows(P: np.ndarray, names: list[str]) -> list[int]:
     return picked + [i for i in range(len(names)) if i not in picked]
 
 
-def gauss_newton_decrement(lin: Linearization) -> float:
+def gauss_newton_decrement(lin: Linearisation) -> float:
     """Chi-square decrease the Gauss-Newton step from `lin.z` predicts, counted from the
     point's feasible projection (`GaussNewtonStep.decrement`)."""
     return gauss_newton(lin).decrement
@@ -484,7 +484,7 @@ class GaussNewtonStep:
     projection: np.ndarray  # the step to the feasible projection (to first order)
 
 
-def gauss_newton(lin: Linearization, red: ReducedProblem | None = None,
+def gauss_newton(lin: Linearisation, red: ReducedProblem | None = None,
                  curvature: tuple[np.ndarray, np.ndarray] | None = None) -> GaussNewtonStep:
     """The Gauss-Newton step, its decrement and the gaps' restoration cost, from one
     factorisation (`red`: `lin` already reduced).
@@ -497,7 +497,7 @@ def gauss_newton(lin: Linearization, red: ReducedProblem | None = None,
         dz, after, projected, to_projection, _ = _gauss_newton(lin, red)
         return GaussNewtonStep(dz, max(float(projected @ projected - after @ after), 0.0),
                                float(projected @ projected - lin.r @ lin.r), to_projection)
-    red = red or reduce_linearization(lin)
+    red = red or reduce_linearisation(lin)
     columns, S = curvature
     at = np.searchsorted(columns, red.free)
     known = (at < columns.size) & (columns[np.minimum(at, columns.size - 1)] == red.free)
@@ -514,7 +514,7 @@ DECREMENT_FLOOR = 1e-4  # chi-square: below it the decrement is taken as the mod
 
 
 def measured_decrement(residual_value: Callable[[np.ndarray], np.ndarray],
-                       lin: Linearization, gn: GaussNewtonStep) -> float:
+                       lin: Linearisation, gn: GaussNewtonStep) -> float:
     """The chi-square decrease still to be had along the Gauss-Newton step `gn` from
     `lin.z`, with the step's curvature measured rather than taken from the
     Gauss-Newton model.
@@ -541,7 +541,7 @@ def measured_decrement(residual_value: Callable[[np.ndarray], np.ndarray],
     return decrement**2 / curvature if curvature > 0.0 else np.inf
 
 
-def gauss_newton_step(lin: Linearization) -> np.ndarray:
+def gauss_newton_step(lin: Linearisation) -> np.ndarray:
     """The Gauss-Newton step dz (scaled decision vector) of `gauss_newton_decrement`.
 
     At a fit of a smaller model extended by parameters at their null values,
@@ -551,14 +551,14 @@ def gauss_newton_step(lin: Linearization) -> np.ndarray:
     return _gauss_newton(lin)[0]
 
 
-def _gauss_newton(lin: Linearization, red: ReducedProblem | None = None,
+def _gauss_newton(lin: Linearisation, red: ReducedProblem | None = None,
                   hessian: np.ndarray | None = None
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
     """The step dz, the weighted residuals r + J dz it predicts, those it predicts at the
     point's feasible projection, the step to that projection, and the chi-square fall
     from the projection that the quadratic model with `hessian` (the reduced Hessian in
     w, default Gauss-Newton's) predicts, -g'y with g its gradient."""
-    red = red or reduce_linearization(lin)
+    red = red or reduce_linearisation(lin)
     ns = _null_space(red, hessian)
     base = red.r + red.JZ @ ns.dw0
     gradient = ns.N.T @ (red.JZ.T @ base)

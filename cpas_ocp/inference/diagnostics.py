@@ -23,7 +23,7 @@ class Window:
     channel: str
     t0: float
     t1: float
-    normalized_rms: float
+    normalised_rms: float
     samples: int
 
 
@@ -33,10 +33,10 @@ def sensor_summary(fit: Fit) -> dict[str, dict]:
     for r in fit.residuals:
         entry = out.setdefault(r.sensor, {"rms": {}, "chi_square": 0.0, "samples": 0})
         entry["rms"][r.channel] = float(np.sqrt(np.mean((r.measured - r.model) ** 2)))
-        entry["chi_square"] += float(np.sum(r.normalized**2))
+        entry["chi_square"] += float(np.sum(r.normalised**2))
         entry["samples"] += int(r.t.size)
     for entry in out.values():
-        entry["normalized_rms"] = float(np.sqrt(entry["chi_square"] / entry["samples"]))
+        entry["normalised_rms"] = float(np.sqrt(entry["chi_square"] / entry["samples"]))
     return out
 
 
@@ -63,7 +63,7 @@ def worst_windows(fit: Fit, width: float = 0.5, top: int = 3) -> list[Window]:
     for r in fit.residuals:
         if r.sensor not in fit.pseudo_sensors:
             candidates += _windows(r, width)
-    candidates.sort(key=lambda w: w.normalized_rms, reverse=True)
+    candidates.sort(key=lambda w: w.normalised_rms, reverse=True)
     chosen: list[Window] = []
     for w in candidates:
         if all(w.sensor != c.sensor or w.t1 <= c.t0 or w.t0 >= c.t1 for c in chosen):
@@ -86,7 +86,7 @@ def _windows(r: SensorResidual, width: float) -> list[Window]:
     """The windows of one channel (`worst_windows`): blocks of consecutive samples and the
     runs straddling neighbouring blocks; t0, t1 are their first and last samples' times."""
     order = np.argsort(r.t, kind="stable")
-    t, z2 = np.asarray(r.t)[order], (np.asarray(r.normalized) ** 2)[order]
+    t, z2 = np.asarray(r.t)[order], (np.asarray(r.normalised) ** 2)[order]
     if t.size == 0:
         return []
     n = window_samples(t, width)
@@ -103,7 +103,7 @@ class WindowStatistic:
     """The residuals of one sensor channel in one phase window.
 
     rms: root mean square of measured minus model (SI, the channel's unit);
-    normalized_rms: that of (measured - model) / sigma (1 for a model that
+    normalised_rms: that of (measured - model) / sigma (1 for a model that
     explains the data to the noise); chi_square: the window's sum of squared
     normalised residuals; fraction: its share of the fit's total chi-square.
     t0, t1 (s): the first and last of the channel's samples counted in the
@@ -119,7 +119,7 @@ class WindowStatistic:
     t1: float
     samples: int
     rms: float
-    normalized_rms: float
+    normalised_rms: float
     chi_square: float
     fraction: float
 
@@ -144,7 +144,7 @@ def window_statistics(fit: Fit, windows: Sequence[PhaseWindow]) -> list[WindowSt
             continue
         applicable = windows_for_sensor(fit.test, r.sensor, windows)
         index = window_index(r.t, applicable)
-        z2 = r.normalized**2
+        z2 = r.normalised**2
         d2 = (r.measured - r.model) ** 2
         for i in [*range(len(applicable)), -1]:
             sel = index == i
@@ -184,7 +184,7 @@ def worst_of(stats: Sequence[WindowStatistic]) -> str:
         return "no sensor samples to compare with the model"
     return (f"{w.sensor} {w.channel}, {w.window} ({w.t0:.2f}-{w.t1:.2f} s): chi-square "
             f"{w.chi_square:.1f} on {w.samples} samples (excess {w.excess:+.1f}), normalised "
-            f"RMS {w.normalized_rms:.2f}, {100 * w.fraction:.1f} % of the total chi-square")
+            f"RMS {w.normalised_rms:.2f}, {100 * w.fraction:.1f} % of the total chi-square")
 
 
 def excess_removed(before: Sequence[WindowStatistic], after: Sequence[WindowStatistic],

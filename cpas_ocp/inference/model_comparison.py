@@ -144,7 +144,7 @@ def one_sided_count(spec: ModelSpec, fit: Fit, null: dict[str, float]) -> int:
 
 def channel_rms(fit: Fit) -> dict[str, float]:
     """Normalised residual RMS per sensor channel (``sensor.channel``)."""
-    return {f"{r.sensor}.{r.channel}": float(np.sqrt(np.mean(r.normalized**2)))
+    return {f"{r.sensor}.{r.channel}": float(np.sqrt(np.mean(r.normalised**2)))
             for r in fit.residuals}
 
 

@@ -342,7 +342,7 @@ class Claim:
                 "fit_p_value": self.fit_p_value, "low_p_value": self.low_p_value,
                 "misfit_factor": self.misfit_factor,
                 "worst_sensor": self.worst_sensor or None,
-                "worst_sensor_normalized_rms": _number(self.worst_sensor_rms),
+                "worst_sensor_normalised_rms": _number(self.worst_sensor_rms),
                 "bound_statistic": self.bound_statistic, "bound_p_value": self.bound_p_value,
                 "held_bounds": [{**vars(h), "physical": bool(h.physical),
                                  "beyond": _number(h.beyond), "beyond_z": _number(h.beyond_z),
@@ -368,7 +368,7 @@ def overstated_text(ratio: float, low_p_value: float) -> str:
 def worst_sensor(fit: Fit) -> tuple[str, float]:
     """The sensor (not events, priors or a process's innovations) whose normalised residual
     RMS is largest, and that RMS; ('', nan) where the fit has none."""
-    rms = {s: e["normalized_rms"] for s, e in sensor_summary(fit).items()
+    rms = {s: e["normalised_rms"] for s, e in sensor_summary(fit).items()
            if s not in fit.pseudo_sensors}
     if not rms:
         return "", float("nan")
@@ -396,7 +396,7 @@ def process_departures(fit: Fit) -> list[ProcessDeparture]:
     for r in fit.residuals:
         if r.sensor not in penalised or r.t.size == 0:
             continue
-        innovation = -r.normalized  # the penalty is the model; its measurement is 0
+        innovation = -r.normalised  # the penalty is the model; its measurement is 0
         k = int(np.argmax(np.abs(innovation)))
         if abs(innovation[k]) > PROCESS_SIGMAS and not any(
                 d.effect == r.sensor and d.kind == "knot" for d in out):
@@ -419,7 +419,7 @@ def process_misfits(fit: Fit, alpha: float = ALPHA) -> list[str]:
     for r in fit.residuals:
         if r.sensor not in penalised or r.t.size == 0:
             continue
-        block = float(np.sum(r.normalized**2))
+        block = float(np.sum(r.normalised**2))
         p = float(chi2_law.sf(block, r.t.size))
         if p < alpha and block <= MAX_MISFIT * r.t.size:
             out.append(f"the {r.t.size} innovations of {r.sensor} {r.channel} have normalised "

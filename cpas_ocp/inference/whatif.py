@@ -199,9 +199,9 @@ class WhatIfResult:
 
     def channel_changes(self) -> dict[str, float]:
         """Chi-square change per sensor channel (``sensor.channel``), largest rise first."""
-        before = {(r.sensor, r.channel): float(np.sum(r.normalized**2))
+        before = {(r.sensor, r.channel): float(np.sum(r.normalised**2))
                   for r in self.free.residuals}
-        after = {(r.sensor, r.channel): float(np.sum(r.normalized**2))
+        after = {(r.sensor, r.channel): float(np.sum(r.normalised**2))
                  for r in self.constrained.residuals}
         changes = {f"{s}.{c}": after[(s, c)] - before[(s, c)] for s, c in before}
         return dict(sorted(changes.items(), key=lambda kv: -kv[1]))
@@ -212,7 +212,7 @@ class WhatIfResult:
         for a, b in zip(self.free.residuals, self.constrained.residuals, strict=True):
             edges = np.arange(a.t[0], a.t[-1] + WINDOW_S, WINDOW_S)
             index = np.digitize(a.t, edges) - 1
-            rise = np.bincount(index, b.normalized**2 - a.normalized**2, minlength=len(edges))
+            rise = np.bincount(index, b.normalised**2 - a.normalised**2, minlength=len(edges))
             for k in np.argsort(-rise)[:top]:
                 rows.append((f"{a.sensor}.{a.channel}", float(edges[k]),
                              float(edges[k] + WINDOW_S), float(rise[k])))

@@ -143,10 +143,10 @@ def load_test(folder: str | Path) -> FlightTest:
     """Load and validate a test folder; everything returned is in SI."""
     folder = Path(folder)
     manifest = read_json(folder / MANIFEST, "a test folder must contain manifest.json")
-    return test_from_manifest(manifest, folder)
+    return flight_test_from_manifest(manifest, folder)
 
 
-def test_from_manifest(manifest: dict[str, Any], folder: Path,
+def flight_test_from_manifest(manifest: dict[str, Any], folder: Path,
                        series: dict[str, pd.DataFrame] | None = None) -> FlightTest:
     """Build a FlightTest from a manifest object whose CSV files live in `folder`.
 

@@ -222,7 +222,7 @@ def _table(page: Page, frame: pd.DataFrame) -> None:
 def _before_after(table: pd.DataFrame, labels: tuple[str, str]) -> pd.DataFrame:
     """Normalised RMS per channel and window, one column per model."""
     wide = table.pivot_table(index=["sensor", "channel", "window"], columns="model",
-                             values="normalized_rms", sort=False).reset_index()
+                             values="normalised_rms", sort=False).reset_index()
     return wide[["sensor", "channel", "window", *labels]]
 
 
@@ -282,7 +282,7 @@ def write_discovery(discovery: Discovery, out: str | Path,
             "steps": [{"added": s.added, "dropped": s.dropped, "admitted_by": s.admitted_by,
                        "model_file": f"step_{k}.json", "chi_square": s.fit.chi_square,
                        "dof": s.fit.dof, "aic": s.criteria.aic, "bic": s.criteria.bic,
-                       "channel_normalized_rms": s.channel_rms,
+                       "channel_normalised_rms": s.channel_rms,
                        "excess_chi_square_removed": s.explained,
                        "window_excess_removed": [
                            {"sensor": w.sensor, "channel": w.channel, "window": w.window,
@@ -292,7 +292,7 @@ def write_discovery(discovery: Discovery, out: str | Path,
                        "start": s.start or None,
                        "seconds_to_find": s.found_s, "seconds_to_diagnose": s.diagnosed_s,
                        "worst_window": None if w is None else {"where": w[0],
-                                                               "normalized_rms": w[1]},
+                                                               "normalised_rms": w[1]},
                        "verdict": s.verdict}
                       for k, (s, w) in enumerate(zip(steps, worst, strict=True))],
             "proposals": [{"step": t.step, "effect": t.proposal.name,

@@ -42,11 +42,11 @@ def failure_dict(exc: SolverFailure) -> dict[str, Any]:
         return out
     out["test"] = fit.test.name
     out["residuals_last_iterate"] = {
-        s: {"normalized_rms": e["normalized_rms"], "samples": e["samples"]}
+        s: {"normalised_rms": e["normalised_rms"], "samples": e["samples"]}
         for s, e in sensor_summary(fit).items()}
     out["worst_windows_last_iterate"] = [
         {"sensor": w.sensor, "channel": w.channel, "t0": w.t0, "t1": w.t1,
-         "normalized_rms": w.normalized_rms} for w in worst_windows(fit)]
+         "normalised_rms": w.normalised_rms} for w in worst_windows(fit)]
     out["parameters_last_iterate"] = {
         n: {"value": fit.parameters[n], "unit": fit.model.parameter(n).unit,
             "initial": fit.guess.get(n, fit.model.parameter(n).default),
@@ -73,12 +73,12 @@ def failure_markdown(exc: SolverFailure) -> str:
               f"(chi²/dof {fit.chi_square / fit.dof:.3g}).", "",
               "| sensor | samples | normalised RMS |",
               "|---|---|---|"]
-    lines += [f"| {s} | {e['samples']} | {e['normalized_rms']:.3g} |"
+    lines += [f"| {s} | {e['samples']} | {e['normalised_rms']:.3g} |"
               for s, e in d["residuals_last_iterate"].items()]
     lines += ["", "## Worst windows at the last iterate", "",
               "| sensor.channel | window (s) | normalised RMS |", "|---|---|---|"]
     lines += [f"| {w['sensor']}.{w['channel']} | {w['t0']:.2f}-{w['t1']:.2f} | "
-              f"{w['normalized_rms']:.3g} |" for w in d["worst_windows_last_iterate"]]
+              f"{w['normalised_rms']:.3g} |" for w in d["worst_windows_last_iterate"]]
     lines += ["", "## Free parameters at the last iterate", "",
               "| parameter | value | unit | initial | on a bound |", "|---|---|---|---|---|"]
     lines += [f"| {n} | {p['value']:.6g} | {p['unit']} | {p['initial']:.6g} | "

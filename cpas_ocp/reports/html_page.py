@@ -215,12 +215,12 @@ def sensor_figure(page: Page, sensor: str, channels: Sequence[ChannelSeries],
         fig.add_trace(trace(x=c.t, y=c.model, mode="lines", name="model",
                             line={"width": 1.3, "color": MODEL}, legendgroup="model",
                             showlegend=i == 0), row=top, col=1)
-        fig.add_trace(trace(x=c.t, y=c.normalized, mode="markers", name="residual / σ",
+        fig.add_trace(trace(x=c.t, y=c.normalised, mode="markers", name="residual / σ",
                             marker={"size": 3, "color": RESIDUAL}, legendgroup="res",
                             showlegend=i == 0), row=low, col=1)
         shapes += _band_shapes(low)
         fig.update_yaxes(title_text=f"{c.channel} [{pretty(c.unit)}]", row=top, col=1)
-        fig.update_yaxes(title_text="res/σ", range=_residual_range(c.normalized), row=low,
+        fig.update_yaxes(title_text="res/σ", range=_residual_range(c.normalised), row=low,
                          col=1)
     fig.update_layout(shapes=_window_shapes(spans, n) + shapes)  # bands over the windows
     fig.update_xaxes(title_text="time [s]", row=n, col=1)
@@ -271,15 +271,15 @@ def residual_comparison_figure(page: Page, sensor: str, labels: tuple[str, str],
     shapes: list[dict] = []
     for i, pair in enumerate(pairs, start=1):
         for c, label, colour in zip(pair, labels, (RESIDUAL, OTHER), strict=True):
-            rms = float(np.sqrt(np.mean(c.normalized**2)))
+            rms = float(np.sqrt(np.mean(c.normalised**2)))
             trace = page.scatter(c.t.size, f"{sensor}.{c.channel} ({label})")
-            fig.add_trace(trace(x=c.t, y=c.normalized, mode="markers",
+            fig.add_trace(trace(x=c.t, y=c.normalised, mode="markers",
                                 name=f"{label}: {c.channel}, normalised RMS {rms:.3f}",
                                 marker={"size": 3, "color": colour, "opacity": 0.7}),
                           row=i, col=1)
         shapes += _band_shapes(i)
         fig.update_yaxes(title_text=f"{pair[0].channel} res/σ",
-                         range=_residual_range(*(c.normalized for c in pair)), row=i, col=1)
+                         range=_residual_range(*(c.normalised for c in pair)), row=i, col=1)
     fig.update_layout(shapes=_window_shapes(spans, len(pairs)) + shapes)
     fig.update_xaxes(title_text="time [s]", row=len(pairs), col=1)
     fig.update_layout(title=f"{sensor}: normalised residuals, {labels[0]} and {labels[1]}",

@@ -66,7 +66,7 @@ def sensor_axes(fit: Fit, sensor: str, windows: Sequence[PhaseWindow] = (),
         ax.plot(r.t, r.model * k, "-", lw=1.0, color="C3", label="model")
         ax.set_ylabel(f"{r.channel} [{pretty(unit)}]")
         ax.legend(loc="best", fontsize=7, ncol=2)
-        _plot_normalized(axr, r)
+        _plot_normalised(axr, r)
     axes[-1].set_xlabel("time [s]")
     return list(axes)
 
@@ -278,12 +278,12 @@ def plot_residual_comparison(fit_a: Fit, fit_b: Fit, labels: tuple[str, str],
             for j, (r, label) in enumerate(zip(pair, labels, strict=True)):
                 ax = axes[i, j]
                 _shade_windows([ax], shown, legend=i == 0 and j == 0)
-                _plot_normalized(ax, r)
-                rms = float(np.sqrt(np.mean(r.normalized**2)))
+                _plot_normalised(ax, r)
+                rms = float(np.sqrt(np.mean(r.normalised**2)))
                 ax.set_title(f"{label}: {r.channel}, normalised RMS {rms:.3f}", fontsize=9)
                 if i == 0 and j == 0 and shown:
                     ax.legend(loc="upper right", fontsize=7)
-            lim = max(4.0, *(float(np.percentile(np.abs(r.normalized), 99.5)) for r in pair))
+            lim = max(4.0, *(float(np.percentile(np.abs(r.normalised), 99.5)) for r in pair))
             axes[i, 0].set_ylim(-lim, lim)
         for ax in axes[-1]:
             ax.set_xlabel("time [s]")
@@ -303,14 +303,14 @@ def _shade_windows(axes: list[plt.Axes], windows: Sequence[PhaseWindow], legend:
                       zorder=0, label=label if a is axes[0] else None)
 
 
-def _plot_normalized(ax: plt.Axes, r: SensorResidual) -> None:
+def _plot_normalised(ax: plt.Axes, r: SensorResidual) -> None:
     """Normalised residuals with the +-1 and +-3 sigma bands."""
     ax.axhspan(-3, 3, color="0.4", alpha=0.12, zorder=0.5, lw=0)
     ax.axhspan(-1, 1, color="0.4", alpha=0.2, zorder=0.6, lw=0)
-    ax.plot(r.t, r.normalized, ".", ms=1.5, color="C0", zorder=2)
+    ax.plot(r.t, r.normalised, ".", ms=1.5, color="C0", zorder=2)
     ax.axhline(0, color="k", lw=0.5, zorder=1)
     ax.set_ylabel("res/σ (±1, ±3)")
-    lim = max(4.0, float(np.percentile(np.abs(r.normalized), 99.5)))
+    lim = max(4.0, float(np.percentile(np.abs(r.normalised), 99.5)))
     ax.set_ylim(-lim, lim)
 
 

@@ -123,11 +123,11 @@ def result_dict(fit: Fit, cov: Covariance | None,
              for n, v in fit.parameters.items() if n not in fit.free}
     summary = sensor_summary(fit)
     residuals = {s: {"rms": e["rms"], "unit": {c: channel_unit(fit, s, c) for c in e["rms"]},
-                     "normalized_rms": e["normalized_rms"], "samples": e["samples"]}
+                     "normalised_rms": e["normalised_rms"], "samples": e["samples"]}
                  for s, e in summary.items()}
     n = fit.n_samples
     worst = [{"sensor": w.sensor, "channel": w.channel, "window_s": [w.t0, w.t1],
-              "normalized_rms": w.normalized_rms} for w in worst_windows(fit)]
+              "normalised_rms": w.normalised_rms} for w in worst_windows(fit)]
     return {
         "test": fit.test.name,
         "label": fit.test.label,
@@ -215,12 +215,12 @@ def fit_summary(fit: Fit, units: DisplayUnits | None = None) -> str:
     for s, e in sensor_summary(fit).items():
         rms = ", ".join(f"{c} {v * k:.4g} {unit}" for c, v in e["rms"].items()
                         for unit, k in [display_channel(fit, units, s, c)])
-        out.append(f"  {s:16s} normalised RMS {e['normalized_rms']:.3f}   (RMS {rms})")
+        out.append(f"  {s:16s} normalised RMS {e['normalised_rms']:.3f}   (RMS {rms})")
     worst = worst_windows(fit, top=1)
     if worst:
         w = worst[0]
         out.append(f"worst fit: {w.sensor}.{w.channel} in {w.t0:.2f}-{w.t1:.2f} s, "
-                   f"normalised RMS {w.normalized_rms:.2f}")
+                   f"normalised RMS {w.normalised_rms:.2f}")
     return "\n".join(out)
 
 

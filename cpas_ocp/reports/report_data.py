@@ -28,7 +28,7 @@ class ChannelSeries:
     t: np.ndarray
     measured: np.ndarray
     model: np.ndarray
-    normalized: np.ndarray
+    normalised: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -65,7 +65,7 @@ def channel_series(fit: Fit, units: DisplayUnits) -> list[ChannelSeries]:
         unit, k = units.channel(r.channel)
         out.append(ChannelSeries(r.sensor, r.channel, unit, np.asarray(r.t),
                                  np.asarray(r.measured) * k, np.asarray(r.model) * k,
-                                 np.asarray(r.normalized)))
+                                 np.asarray(r.normalised)))
     return out
 
 

@@ -1,6 +1,6 @@
 """Benchmark: the cost of linearising the estimation problem, function buffer against DM.
 
-`linearize` evaluates the weighted residuals with their Jacobian and the
+`linearise` evaluates the weighted residuals with their Jacobian and the
 constraints with theirs at a point; the statistical stopping test, every
 covariance, profile step and score test start from it.  Both ways of getting
 the values into NumPy/SciPy are timed in this process on the same estimator
@@ -11,7 +11,7 @@ and point (the reduction's start), best of `--repeat`:
 * ``buffer``: CasADi's function buffer writing into preallocated arrays on
   a pattern converted once (`nlp_functions.FunctionBuffer`, the default).
 
-    python benchmarks/linearization_cost.py [--problems drogue drogue_full ...] [--repeat 5]
+    python benchmarks/linearisation_cost.py [--problems drogue drogue_full ...] [--repeat 5]
 """
 
 from __future__ import annotations
