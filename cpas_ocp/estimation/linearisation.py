@@ -24,11 +24,6 @@ from cpas_ocp.estimation.uncertainty import (
 )
 
 
-def _violation(lin: Linearisation) -> float:
-    """Largest scaled constraint violation of a linearisation's point (0 without any)."""
-    return float(np.max(np.abs(lin.c))) if lin.c.size else 0.0
-
-
 class Linearising:
     """Linearisations of the NLP and the statistics they give."""
 
@@ -108,4 +103,4 @@ class Linearising:
         """Chi-square at the decision vector `z` and its largest scaled constraint violation
         (the shooting gaps in units of the state scales)."""
         lin = self._linearise(z)
-        return float(lin.r @ lin.r), _violation(lin)
+        return float(lin.r @ lin.r), lin.violation

@@ -24,7 +24,6 @@ from cpas_ocp.estimation.fit import (
     Fit,
     SolverStats,
 )
-from cpas_ocp.estimation.linearisation import _violation
 from cpas_ocp.estimation.nlp_functions import MarquardtDamping, ipopt_functions
 from cpas_ocp.estimation.uncertainty import (
     DECREMENT_FLOOR,
@@ -563,7 +562,7 @@ class Solving:
         """
         tol = self.settings.chi2_step_tol or 0.0
         lin = self._linearise(z)
-        violation = _violation(lin)
+        violation = lin.violation
         # An inequality (a what-if limit) inactive at z might be crossed by the finishing
         # step unseen: the linearisation holds only the active ones.
         may_polish = (self.settings.polish and violation <= POLISH_CONSTRAINT_TOL
@@ -657,7 +656,7 @@ class Solving:
         """Whether a candidate's point meets STOP_CONSTRAINT_TOL and closing its remaining
         gaps is worth less than `tol` in chi-square."""
         lin, gn = candidate
-        return _violation(lin) <= STOP_CONSTRAINT_TOL and abs(gn.restoration) <= tol
+        return lin.violation <= STOP_CONSTRAINT_TOL and abs(gn.restoration) <= tol
 
     def _candidate(self, z: np.ndarray, lower: np.ndarray, upper: np.ndarray, limit: float
                    ) -> tuple[Linearisation, GaussNewtonStep] | None:

@@ -992,7 +992,7 @@ class NlpTranscription:
 
     def _value_violation(self, z: np.ndarray) -> float:
         """Largest scaled constraint violation at `z`, from the constraint values alone (the
-        same figure as `_violation` of the linearisation there; NaN where not finite)."""
+        same figure as `Linearisation.violation` there; NaN where not finite)."""
         g = self._points.constraint_value(z)
         if not np.all(np.isfinite(g)):
             return np.nan

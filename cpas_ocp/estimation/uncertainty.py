@@ -169,6 +169,11 @@ class Linearisation:
     dependent: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
     held: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
 
+    @property
+    def violation(self) -> float:
+        """The largest scaled constraint violation at the point (0 without constraints)."""
+        return float(np.max(np.abs(self.c))) if self.c.size else 0.0
+
 
 Evaluation = Callable[[np.ndarray], tuple[np.ndarray, sp.csc_matrix]]
 
