@@ -19,6 +19,14 @@ from cpas_ocp.physics.parameters import split_name
 START_GUESS_OFFSET_S = 0.3
 
 
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """The files with slow tests first (in their own order), then the rest: with two
+    workers each taking whole files, a long file collected last ran alone at the end
+    while the other worker had nothing left; started first, the quick files fill in
+    beside it."""
+    items.sort(key=lambda item: item.get_closest_marker("slow") is None)
+
 @pytest.fixture(scope="session")
 def problem_folder(tmp_path_factory: pytest.TempPathFactory):
     """A factory: the simulated test folder of a built-in problem and seed (simulated once)."""
