@@ -6,7 +6,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from cpas_ocp.estimation.sparse_rows import row_ranges, stacked_rows
+from cpas_ocp.estimation.sparse_rows import Rows, row_ranges, stacked_parts, stacked_rows
 
 
 def _random_sparse(rng: np.random.Generator, rows: int, cols: int, density: float) -> ca.DM:
@@ -53,3 +53,19 @@ def test_row_ranges_equal_their_slices_of_the_stack() -> None:
         assert ours.sparsity() == theirs.sparsity()
         got, want = (ca.Function("f", [z], [m])(zv) for m in (ours, theirs))
         np.testing.assert_array_equal(np.asarray(ca.densify(got)), np.asarray(ca.densify(want)))
+
+
+def test_parts_gather_their_rows_from_the_matrices_they_come_from() -> None:
+    rng = np.random.default_rng(4)
+    z = ca.MX.sym("z", 5)
+    source = tuple(ca.mtimes(ca.MX(_random_sparse(rng, r, 5, 0.5)), ca.diag(z)) for r in (3, 4))
+    own = ca.mtimes(ca.MX(_random_sparse(rng, 2, 5, 0.6)), ca.diag(z))
+    order = rng.permutation(7)
+    parts = [Rows(source, order[:4]), own, Rows(source, order[4:])]
+    stack = ca.vertcat(*source)
+    theirs = ca.vertcat(stack[order[:4].tolist(), :], own, stack[order[4:].tolist(), :])
+    ours = stacked_parts(parts)
+    assert ours.sparsity() == theirs.sparsity()
+    zv = rng.normal(size=5)
+    got, want = (ca.Function("f", [z], [m])(zv) for m in (ours, theirs))
+    np.testing.assert_array_equal(np.asarray(ca.densify(got)), np.asarray(ca.densify(want)))

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
@@ -25,6 +26,37 @@ def nonzeros(mat: ca.MX) -> ca.MX:
     """The nonzeros of `mat` as a column, in its column-major order (no copy is planned:
     the pattern is only reinterpreted)."""
     return ca.sparsity_cast(mat, ca.Sparsity.dense(mat.nnz(), 1))
+
+
+@dataclass(frozen=True)
+class Rows:
+    """Rows `rows` of the stacked matrices `mats` (`vertcat(*mats)[rows, :]`), not yet
+    gathered: a stretch of a larger stack that `stacked_parts` gathers in one go."""
+
+    mats: tuple[ca.MX, ...]
+    rows: np.ndarray
+
+
+def stacked_parts(parts: Sequence[ca.MX | Rows]) -> ca.MX:
+    """The parts stacked (a matrix as it is, `Rows` as their rows), through one gather of
+    the nonzeros of every matrix they come from (each set of `Rows.mats` taken once)."""
+    mats: list[ca.MX] = []
+    rows: list[np.ndarray] = []
+    first = 0
+    placed: dict[int, int] = {}  # id of a Rows' matrices -> their first row in the stack
+    for part in parts:
+        if isinstance(part, Rows):
+            if id(part.mats) not in placed:
+                placed[id(part.mats)] = first
+                mats.extend(part.mats)
+                first += sum(mat.size1() for mat in part.mats)
+            rows.append(placed[id(part.mats)] + np.asarray(part.rows, dtype=np.int64))
+        else:
+            mats.append(part)
+            rows.append(first + np.arange(part.size1()))
+            first += part.size1()
+    chosen = np.concatenate(rows) if rows else np.zeros(0, dtype=np.int64)
+    return row_ranges(mats, chosen, [0, chosen.size])[0]
 
 
 def stacked_rows(mats: Sequence[ca.MX], rows: np.ndarray | None = None) -> ca.MX:

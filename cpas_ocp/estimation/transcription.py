@@ -39,7 +39,7 @@ from cpas_ocp.estimation.shooting_grid import (
     substeps_of,
 )
 from cpas_ocp.estimation.simulate import rk4_step, simulate
-from cpas_ocp.estimation.sparse_rows import row_ranges, stacked_rows
+from cpas_ocp.estimation.sparse_rows import Rows, stacked_parts
 from cpas_ocp.io.model_spec import ModelSpec, spec_from_effects, spec_of_test, unfitted_sensors
 from cpas_ocp.physics.effects import Effect
 from cpas_ocp.physics.flight_test import FlightTest
@@ -115,6 +115,9 @@ class _Piece:
     with_jacobian: ca.MX
     jacobian: ca.MX
     times: np.ndarray  # per row, the time (s) it belongs to; NaN where none
+    # Where the Jacobian's rows are rows of other pieces' (`_gathered`), those rows, so that
+    # the point functions gather them once from where they come (`sparse_rows`).
+    rows_of: Rows | None = None
 
     @classmethod
     def of(cls, expr: ca.MX, z: ca.MX) -> _Piece:
@@ -129,8 +132,9 @@ def _stack(pieces: Sequence[_Piece], field_name: str) -> ca.MX:
 
 
 def _stacked_jacobian(pieces: Sequence[_Piece]) -> ca.MX:
-    """The Jacobians of every piece, stacked (`sparse_rows.stacked_rows`)."""
-    return stacked_rows([p.jacobian for p in pieces])
+    """The Jacobians of every piece, stacked through one gather of nonzeros
+    (`sparse_rows.stacked_parts`)."""
+    return stacked_parts([p.jacobian if p.rows_of is None else p.rows_of for p in pieces])
 
 
 def _gathered(pieces: Sequence[_Piece], destinations: Sequence[np.ndarray],
@@ -143,11 +147,13 @@ def _gathered(pieces: Sequence[_Piece], destinations: Sequence[np.ndarray],
     order = np.argsort(np.concatenate(destinations))  # stacked row of each result row
     stacked = [_stack(pieces, f) for f in ("symbolic", "value", "with_jacobian")]
     times = _stack_times(pieces)
-    jacobians = row_ranges([p.jacobian for p in pieces], order, offsets)
+    mats = tuple(p.jacobian for p in pieces)
+    jacobian = ca.vertcat(*mats)  # for the symbolic graph; the point functions gather
     out = []
-    for (a, b), jacobian in zip(itertools.pairwise(offsets), jacobians, strict=True):
+    for a, b in itertools.pairwise(offsets):
         rows = order[a:b].tolist()
-        out.append(_Piece(*(x[rows] for x in stacked), jacobian, times[order[a:b]]))
+        out.append(_Piece(*(x[rows] for x in stacked), jacobian[rows, :], times[order[a:b]],
+                          Rows(mats, order[a:b])))
     return out
 
 
