@@ -58,7 +58,13 @@ from cpas_ocp.physics.effects.registry import BUILTIN, EffectType, load_plugins
 from cpas_ocp.physics.flight_test import FlightTest
 from cpas_ocp.reports.discrepancy_report import write_comparison, write_diagnosis, write_discovery
 from cpas_ocp.reports.display_units import DisplayUnits
-from cpas_ocp.reports.plots import sensor_axes
+from cpas_ocp.reports.plots import (
+    correlation_axes,
+    drag_area_axes,
+    events_axes,
+    profile_axes,
+    sensor_axes,
+)
 from cpas_ocp.reports.report import fit_summary, parameter_table, write_report
 from cpas_ocp.reports.report_data import bound_flag
 
@@ -204,6 +210,26 @@ class Reconstruction:
         `windows` is False; returns the axes (`plots.sensor_axes`)."""
         shown = phase_windows(self.fit) if windows else ()
         return sensor_axes(self.fit, sensor, shown, axes=axes)
+
+    def plot_drag_areas(self, axes: Sequence[plt.Axes] | None = None) -> list[plt.Axes]:
+        """Each canopy's reconstructed drag area CdS(t) against its load cell's offline
+        reduction, the inflation start times dashed (one axis per canopy); the axes."""
+        return drag_area_axes(self.fit, axes=axes)
+
+    def plot_events(self, ax: plt.Axes | None = None) -> plt.Axes | None:
+        """The observed event times with their sigmas against the model's; the axis (None
+        where the test has no observed events)."""
+        return events_axes(self.fit, ax)
+
+    def plot_correlation(self, ax: plt.Axes | None = None) -> plt.Axes | None:
+        """The free parameters' correlation map; the axis (None with fewer than two
+        determined parameters off their bounds)."""
+        return correlation_axes(self.covariance, ax)
+
+    def plot_profile(self, prof: Profile, ax: plt.Axes | None = None) -> plt.Axes:
+        """A profile (`profile`) against the covariance's parabola, both 95 % intervals
+        marked; the axis."""
+        return profile_axes(prof, ax)
 
     def spec_with(self, *effects: str) -> ModelSpec:
         """This fit's model with the library's or the plug-ins' `effects` added where the

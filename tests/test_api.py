@@ -8,6 +8,7 @@ import re
 
 import cpas_ocp as co
 from cpas_ocp.estimation.estimator import Estimator
+from cpas_ocp.estimation.fit import EVENTS
 from cpas_ocp.io.flight_test import load_test
 
 
@@ -59,6 +60,19 @@ def test_a_reconstruction_plots_profiles_constrains_and_extends_its_model(drogue
     plt.close(axes[0].figure)
     with pytest.raises(ValueError, match="no residuals of a sensor 'nothing'"):
         rec.plot("nothing")
+    canopies = rec.plot_drag_areas()
+    assert [ax.get_ylabel().split()[0] for ax in canopies] == [
+        c.name for c in rec.fit.test.parachutes]
+    events = rec.plot_events()
+    seen = sorted((r for r in rec.fit.residuals if r.sensor == EVENTS),
+                  key=lambda r: r.measured[0])  # the observed event times the fit sees
+    # drogue's events place the start windows and are not fitted: nothing to draw.
+    assert (events is None) == (not seen)
+    if events is not None:
+        assert [t.get_text() for t in events.get_yticklabels()] == [r.channel for r in seen]
+    correlation = rec.plot_correlation()
+    assert correlation is not None
+    plt.close("all")
 
     extended = rec.spec_with("added_mass")
     assert "added_mass" in extended.effect_names
@@ -73,6 +87,9 @@ def test_a_reconstruction_plots_profiles_constrains_and_extends_its_model(drogue
     # One sigma off the estimate the profile rises by about one (the quadratic prediction),
     # 0.5-2 allowing for the curvature the linearisation leaves out.
     assert all(0.5 < d < 2.0 for d in prof.delta_chi_square[[0, 2]]), prof.delta_chi_square
+    ax = rec.plot_profile(prof)
+    assert np.array_equal(ax.get_lines()[1].get_ydata(), prof.delta_chi_square)
+    plt.close("all")
 
     held = rec.fit.parameters[name] + 2.0 * rec.covariance.std[name]
     result = rec.what_if(f"{name} == {held!r}")

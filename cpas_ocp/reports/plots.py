@@ -84,12 +84,13 @@ def plot_sensors(fit: Fit, folder: Path, units: DisplayUnits | None = None) -> l
                   folder / f"sensor_{sensor}.png") for sensor in _fitted_sensors(fit)]
 
 
-def plot_events(fit: Fit, folder: Path) -> Path | None:
-    """Observed event times (with their 1 and 2 sigma) against the model's, one row each."""
+def events_axes(fit: Fit, ax: plt.Axes | None = None) -> plt.Axes | None:
+    """Observed event times (with their 1 and 2 sigma) against the model's, one row each,
+    into `ax` (else a new figure's); None where the test has no observed events."""
     rows = event_rows(fit)
     if not rows:
         return None
-    fig, ax = plt.subplots(figsize=(10, 0.6 * len(rows) + 1.6))
+    ax = ax if ax is not None else plt.subplots(figsize=(10, 0.6 * len(rows) + 1.6))[1]
     for i, e in enumerate(rows):
         ax.errorbar(e.observed, i, xerr=2 * e.sigma, fmt="none", ecolor="0.75", elinewidth=6)
         ax.errorbar(e.observed, i, xerr=e.sigma, fmt="o", color="0.35", ms=4, elinewidth=6,
@@ -100,8 +101,15 @@ def plot_events(fit: Fit, folder: Path) -> Path | None:
     ax.set_ylim(-0.7, len(rows) - 0.3)
     ax.set_xlabel("time [s]")
     ax.legend(loc="lower right", fontsize=8)
-    return _save(fig, f"{fit.test.name}: observed event times against the model",
-                 folder / "events.png")
+    return ax
+
+
+def plot_events(fit: Fit, folder: Path) -> Path | None:
+    """``events.png`` (`events_axes`); None without observed events."""
+    ax = events_axes(fit)
+    return None if ax is None else _save(
+        ax.figure, f"{fit.test.name}: observed event times against the model",
+        folder / "events.png")
 
 
 @dataclass(frozen=True)
@@ -137,16 +145,21 @@ def drag_area_curves(fit: Fit) -> list[DragAreaCurves]:
     return curves
 
 
-def plot_drag_areas(fit: Fit, folder: Path, units: DisplayUnits | None = None,
-                    curves: Sequence[DragAreaCurves] | None = None) -> Path:
+def drag_area_axes(fit: Fit, units: DisplayUnits | None = None,
+                   curves: Sequence[DragAreaCurves] | None = None,
+                   axes: Sequence[plt.Axes] | None = None) -> list[plt.Axes]:
     """Each canopy's reconstructed drag area against its offline (Eq. 3) reduction
-    (`curves`, `drag_area_curves` of the fit where not given), in `units`."""
+    (`curves`, `drag_area_curves` of the fit where not given), in `units`, one axis per
+    canopy (`axes`, else a new figure's); returns the axes."""
     units = units or display_units(fit.test)
     k, unit = units.factor("area"), pretty(units.unit("area"))
     curves = drag_area_curves(fit) if curves is None else curves
-    fig, axes = plt.subplots(len(curves), 1, figsize=(10, 3.2 * len(curves)), sharex=True,
-                             squeeze=False)
-    for ax, c in zip(axes[:, 0], curves, strict=True):
+    if axes is None:
+        axes = list(plt.subplots(len(curves), 1, figsize=(10, 3.2 * len(curves)), sharex=True,
+                                 squeeze=False)[1][:, 0])
+    if len(axes) != len(curves):
+        raise ValueError(f"{len(curves)} canopies: give {len(curves)} axes")
+    for ax, c in zip(axes, curves, strict=True):
         if c.data_t is not None and c.data_cds is not None:
             ax.plot(c.data_t, c.data_cds * k, ".", ms=1.2, color="0.6",
                     label="riser data, Eq. 3, with fitted scales")
@@ -155,8 +168,15 @@ def plot_drag_areas(fit: Fit, folder: Path, units: DisplayUnits | None = None,
             ax.axvline(t0, color="C2", lw=0.6, ls="--")
         ax.set_ylabel(f"{c.canopy} CdS [{unit}]")
         ax.legend(loc="best", fontsize=8)
-    axes[-1, 0].set_xlabel("time [s]  (dashed: reconstructed inflation start times)")
-    return _save(fig, f"{fit.test.name}: canopy drag areas", folder / "drag_areas.png")
+    axes[-1].set_xlabel("time [s]  (dashed: reconstructed inflation start times)")
+    return list(axes)
+
+
+def plot_drag_areas(fit: Fit, folder: Path, units: DisplayUnits | None = None,
+                    curves: Sequence[DragAreaCurves] | None = None) -> Path:
+    """``drag_areas.png`` (`drag_area_axes`)."""
+    return _save(drag_area_axes(fit, units, curves)[0].figure,
+                 f"{fit.test.name}: canopy drag areas", folder / "drag_areas.png")
 
 
 def plot_wind(fit: Fit, cov: Covariance | None, folder: Path,
@@ -202,9 +222,10 @@ def plot_wind(fit: Fit, cov: Covariance | None, folder: Path,
     return _save(fig, f"{fit.test.name}: air motion (wind process)", folder / "wind.png")
 
 
-def plot_correlation(cov: Covariance, name: str, folder: Path) -> Path | None:
-    """The parameters' correlation matrix as a map (undetermined parameters and those on a
-    bound left out; None where fewer than two remain)."""
+def correlation_axes(cov: Covariance, ax: plt.Axes | None = None) -> plt.Axes | None:
+    """The parameters' correlation matrix as a map, into `ax` (else a new figure's);
+    undetermined parameters and those on a bound left out; None where fewer than two
+    remain."""
     keep = [i for i, n in enumerate(cov.names) if n not in cov.undetermined
             and n not in cov.at_bound]
     if len(keep) < 2:
@@ -212,18 +233,25 @@ def plot_correlation(cov: Covariance, name: str, folder: Path) -> Path | None:
     rho = cov.correlation()[np.ix_(keep, keep)]
     labels = [cov.names[i] for i in keep]
     size = 3.0 + 0.22 * len(keep)
-    fig, ax = plt.subplots(figsize=(size + 1.2, size))
+    ax = ax if ax is not None else plt.subplots(figsize=(size + 1.2, size))[1]
     im = ax.imshow(rho, cmap="RdBu_r", vmin=-1, vmax=1)
     ax.set_xticks(range(len(keep)), labels, rotation=90, fontsize=6)
     ax.set_yticks(range(len(keep)), labels, fontsize=6)
-    fig.colorbar(im, ax=ax, shrink=0.8, label="correlation ρ")
-    return _save(fig, f"{name}: parameter correlations", folder / "correlation.png")
+    ax.figure.colorbar(im, ax=ax, shrink=0.8, label="correlation ρ")
+    return ax
 
 
-def plot_profile(prof: Profile, name: str, folder: Path) -> Path:
+def plot_correlation(cov: Covariance, name: str, folder: Path) -> Path | None:
+    """``correlation.png`` (`correlation_axes`); None where it has nothing to show."""
+    ax = correlation_axes(cov)
+    return None if ax is None else _save(ax.figure, f"{name}: parameter correlations",
+                                         folder / "correlation.png")
+
+
+def profile_axes(prof: Profile, ax: plt.Axes | None = None) -> plt.Axes:
     """A parameter's profile likelihood against the covariance's parabola, with both 95 %
-    intervals."""
-    fig, ax = plt.subplots(figsize=(7, 4.2))
+    intervals, into `ax` (else a new figure's)."""
+    ax = ax if ax is not None else plt.subplots(figsize=(7, 4.2))[1]
     fine = np.linspace(prof.values.min(), prof.values.max(), 200)
     ax.plot(fine, ((fine - prof.estimate) / prof.std) ** 2, "--", color="0.5",
             label="covariance: ((θ - θ̂)/σ)²")
@@ -238,7 +266,13 @@ def plot_profile(prof: Profile, name: str, folder: Path) -> Path:
     ax.set_ylabel("Δχ²  (95 %: 3.84)")
     ax.set_ylim(bottom=-0.2)
     ax.legend(loc="upper center", fontsize=8)
-    return _save(fig, f"{name}: profile likelihood", folder / f"profile_{file_stem(prof.name)}.png")
+    return ax
+
+
+def plot_profile(prof: Profile, name: str, folder: Path) -> Path:
+    """``profile_<name>.png`` (`profile_axes`)."""
+    return _save(profile_axes(prof).figure, f"{name}: profile likelihood",
+                 folder / f"profile_{file_stem(prof.name)}.png")
 
 
 def file_stem(text: str) -> str:
