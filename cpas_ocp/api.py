@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import dataclasses
 import html
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -31,7 +31,7 @@ import numpy as np
 import pandas as pd
 
 from cpas_ocp.discrepancy.diagnosis import ALPHA, CONFIRM_TOP, Diagnosis, diagnose
-from cpas_ocp.discrepancy.discovery import Discovery, discover
+from cpas_ocp.discrepancy.discovery import MAX_STEPS, Discovery, DiscoveryStep, discover
 from cpas_ocp.discrepancy.score_test import extended_spec
 from cpas_ocp.estimation.estimator import Estimator, Fit, Settings
 from cpas_ocp.estimation.simulate import simulate_problem
@@ -281,12 +281,18 @@ class Reconstruction:
             write_diagnosis(diag, self.covariance, out, units)
         return diag
 
-    def discover(self, out: str | Path | None = None, max_steps: int = 4) -> Discovery:
-        """Diagnose, add the confirmed effect, refit, and again (`cpas-ocp discover`); the
-        folder written to `out` where given."""
-        found = discover(self.fit, self.spec, self.plugins, max_steps)
+    def discover(self, out: str | Path | None = None, max_steps: int = MAX_STEPS,
+                 alpha: float = ALPHA, confirm: int = CONFIRM_TOP, progress: bool = False,
+                 on_step: Callable[[DiscoveryStep], None] | None = None,
+                 units: DisplayUnits | None = None) -> Discovery:
+        """Diagnose, add the confirmed effect, refit, and again, at most `max_steps` times,
+        from this fit (`cpas-ocp discover`; `on_step` is called as each step ends); the
+        folder written to `out` where given.  The command also keeps every finished step
+        on disk as it goes and resumes from them (`--resume`)."""
+        found = discover(self.fit, self.spec, self.plugins, max_steps, alpha, confirm,
+                         progress=progress, on_step=on_step, estimator=self.estimator)
         if out is not None:
-            write_discovery(found, out, self.plugins)
+            write_discovery(found, out, self.plugins, units)
         return found
 
     def compare(self, model: ModelSpec | str | Path, out: str | Path | None = None,

@@ -96,3 +96,19 @@ def test_a_reconstruction_plots_profiles_constrains_and_extends_its_model(drogue
     assert result.constrained.parameters[name] == pytest.approx(held, rel=1e-6)
     # Holding a parameter 2 sigma off costs about 4 in chi-square (as above, 2-8).
     assert 2.0 < result.delta_chi_square < 8.0, result.delta_chi_square
+
+
+def test_a_reconstruction_discovers_with_the_commands_options(drogue_folder, tmp_path,
+                                                              monkeypatch) -> None:
+    import json
+
+    from .cheap_discovery import cheap
+
+    rec = co.reconstruct(drogue_folder(1))
+    cheap(monkeypatch)  # one score test per step, no refits: the chain's bookkeeping
+    ended = []
+    found = rec.discover(tmp_path / "chain", max_steps=2, on_step=ended.append)
+    assert [s.label for s in ended] == [s.label for s in found.steps]
+    assert found.steps[0].fit.chi_square == rec.fit.chi_square  # it starts from this fit
+    written = json.loads((tmp_path / "chain" / "discovery.json").read_text())
+    assert len(written["steps"]) == len(found.steps)
