@@ -108,6 +108,7 @@ def test_a_reconstruction_discovers_with_the_commands_options(drogue_folder, tmp
     cheap(monkeypatch)  # one score test per step, no refits: the chain's bookkeeping
     ended = []
     found = rec.discover(tmp_path / "chain", max_steps=2, on_step=ended.append)
+    assert len(found.steps) == 3  # the start and two added steps (the cheap chain adds one each)
     assert [s.label for s in ended] == [s.label for s in found.steps]
     assert found.steps[0].fit.chi_square == rec.fit.chi_square  # it starts from this fit
     written = json.loads((tmp_path / "chain" / "discovery.json").read_text())
