@@ -36,16 +36,14 @@ from cpas_ocp.discrepancy.score_test import extended_spec
 from cpas_ocp.estimation.estimator import Estimator, Fit, Settings
 from cpas_ocp.estimation.simulate import simulate_problem
 from cpas_ocp.estimation.uncertainty import Covariance
-from cpas_ocp.inference.continuation import solve_checked
 from cpas_ocp.inference.diagnostics import window_statistics, worst_of
 from cpas_ocp.inference.model_comparison import Comparison, Criteria, compare
 from cpas_ocp.inference.phase_windows import phase_windows
-from cpas_ocp.inference.process_intensity import IntensityChoice, choose_intensity
+from cpas_ocp.inference.process_intensity import IntensityChoice
 from cpas_ocp.inference.profile_likelihood import Profile, profile
+from cpas_ocp.inference.reconstruction import fit_and_claim
 from cpas_ocp.inference.result_claim import (
     Claim,
-    check_claim,
-    check_drag_areas,
     start_shifts,
     with_start_shifts,
 )
@@ -110,25 +108,12 @@ def reconstruct(test: FlightTest | str | Path, model: ModelSpec | str | Path | N
 def fit_estimator(est: Estimator, rescale_sigmas: bool = False, hessian: str = "gauss-newton",
                   wind_intensities: Sequence[float] = (), progress: bool = False,
                   plugins: Mapping[str, EffectType] | None = None) -> Reconstruction:
-    """The one path from a built estimator to a reconstruction, for every command: solve
-    from the offline reduction, moving start windows the data press against and
-    restarting opening shapes left on guessed bounds (`continuation.solve_checked`; the
-    estimator of the result is the one that gave the fit), or, given
-    `wind_intensities`, fit the wind process at each of those factors on its intensity
-    and keep the one of largest evidence (`process_intensity.choose_intensity`); then
-    the claim and the covariance (`hessian`: "gauss-newton" or "exact"; `rescale_sigmas`
-    multiplies it by chi-square/dof).  Raises SolverFailure where no fit converges."""
-    choice = None
-    if wind_intensities:
-        choice = choose_intensity(est.test, est.spec, tuple(wind_intensities), progress=progress)
-        est, fit = choice.estimator, choice.fit
-        claim = check_claim(est, fit)
-        claim.notes.append(choice.summary())
-    else:
-        est, fit, claim = solve_checked(est, progress=progress)
-    cov = est.covariance(fit, rescale_sigmas, hessian)
-    return Reconstruction(est, fit, cov, check_drag_areas(claim, fit, cov), dict(plugins or {}),
-                          choice)
+    """A reconstruction of `est` (`inference.reconstruction.fit_and_claim`, the one path
+    every workflow that fits takes), with the plug-in effects its diagnosis may test.
+    Raises SolverFailure where no fit converges."""
+    done = fit_and_claim(est, rescale_sigmas, hessian, wind_intensities, progress)
+    return Reconstruction(done.estimator, done.fit, done.covariance, done.claim,
+                          dict(plugins or {}), done.intensity_choice)
 
 
 @dataclass

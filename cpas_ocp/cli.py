@@ -710,6 +710,7 @@ def _dispersions(args: argparse.Namespace) -> int:
 
 
 def _montecarlo(args: argparse.Namespace) -> int:
+    from cpas_ocp.api import fit_estimator
     from cpas_ocp.campaign.peak_load_study import (
         MARKER,
         check_columns,
@@ -718,8 +719,6 @@ def _montecarlo(args: argparse.Namespace) -> int:
         summary_text,
     )
     from cpas_ocp.estimation.estimator import Estimator
-    from cpas_ocp.inference.continuation import solve_checked
-    from cpas_ocp.inference.result_claim import check_drag_areas
     from cpas_ocp.io.flight_test import load_test
     from cpas_ocp.io.output_folder import atomic_folder
     from cpas_ocp.reports.study_reports import write_monte_carlo
@@ -730,10 +729,10 @@ def _montecarlo(args: argparse.Namespace) -> int:
         est = Estimator(test)
         check_columns(est.model, stages)
         print(f"reconstructing {test.name}: {est.size_text()} ...", flush=True)
-        est, fit, claim = solve_checked(est, progress=True)
-        check_drag_areas(claim, fit, est.covariance(fit))
-        if not claim.is_result:  # no cases are flown through a fit that is not a result
-            raise NotAResult(f"the fit of {test.name} is not a result: {claim.problems()[0]}")
+        rec = fit_estimator(est, progress=True)
+        fit = rec.fit
+        if not rec.is_result:  # no cases are flown through a fit that is not a result
+            raise NotAResult(f"the fit of {test.name} is not a result: {rec.problems[0]}")
         print(f"flying {sum(len(s.cases) for s in stages):,} cases of "
               f"{', '.join(s.label for s in stages)} on {where} ...", flush=True)
         results = run_monte_carlo(fit, stages, args.workers, args.scheduler, progress=True)

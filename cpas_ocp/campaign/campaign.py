@@ -84,17 +84,16 @@ def reconstruct_folder(folder: str) -> TestOutcome:
     """Reconstruct one test folder with its manifest's model; never raises (a picklable
     top-level function, run in a worker process)."""
     from cpas_ocp.estimation.estimator import Estimator
-    from cpas_ocp.inference.continuation import solve_checked
-    from cpas_ocp.inference.result_claim import check_drag_areas
+    from cpas_ocp.inference.reconstruction import fit_and_claim
     from cpas_ocp.io.flight_test import load_test
     t0 = time.perf_counter()
     name = Path(folder).name
     try:
         test = load_test(folder)
         name = test.name
-        est, fit, claim = solve_checked(Estimator(test))
-        cov = est.covariance(fit)
-        if not check_drag_areas(claim, fit, cov).is_result:
+        done = fit_and_claim(Estimator(test))
+        fit, cov, claim = done.fit, done.covariance, done.claim
+        if not claim.is_result:
             return TestOutcome(folder, name, "claim", "; ".join(claim.problems()),
                                wall_s=time.perf_counter() - t0)
     except (InputError, PluginError) as exc:
