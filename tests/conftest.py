@@ -20,23 +20,11 @@ START_GUESS_OFFSET_S = 0.3
 
 
 
-# The files that took longest (s, with an empty compile cache on 2 cores: 226, 185, 143,
-# 107, 87, 85, 82), started first in this order; a worker taking whole files (--dist
-# loadfile) that met one of them last ran it alone at the end.
-LONGEST_FILES = ("test_wind_process.py", "test_result_claim.py", "test_wrong_basin.py",
-                 "test_prometheus.py", "test_out_of_library.py", "test_discovery.py",
-                 "test_hidden_effects.py")
-
-
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """The longest files first (LONGEST_FILES), then the other files with slow tests, then
-    the rest: the quick files fill in beside the long ones."""
-    def rank(item: pytest.Item) -> tuple[int, int]:
-        name = item.path.name
-        if name in LONGEST_FILES:
-            return 0, LONGEST_FILES.index(name)
-        return (1 if item.get_closest_marker("slow") is not None else 2), 0
-    items.sort(key=rank)
+    """The files with slow tests first (in their own order), then the rest: with two
+    workers each taking whole files, the quick files fill in beside the long ones at the
+    end."""
+    items.sort(key=lambda item: item.get_closest_marker("slow") is None)
 
 @pytest.fixture(scope="session")
 def problem_folder(tmp_path_factory: pytest.TempPathFactory):

@@ -217,6 +217,12 @@ class Fit:
         the effects' pseudo-observations (a wind process's innovations)."""
         return (*PSEUDO_SENSORS, *dict.fromkeys(e for e, *_ in self.model.penalties))
 
+    @property
+    def sensors(self) -> list[str]:
+        """The sensors with residuals in the fit, in order, the pseudo-sensors left out."""
+        return list(dict.fromkeys(r.sensor for r in self.residuals
+                                  if r.sensor not in self.pseudo_sensors))
+
     def quantities(self) -> dict[str, np.ndarray]:
         """Every scalar model quantity (cds[P], tension[P], dynamic_pressure, ...) on the grid."""
         return self.model.quantities_along(self.t, self.x, self.parameters, self.captures)

@@ -11,7 +11,6 @@ the blocks' nonzeros into it.
 
 from __future__ import annotations
 
-import itertools
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -55,8 +54,7 @@ def stacked_parts(parts: Sequence[ca.MX | Rows]) -> ca.MX:
             mats.append(part)
             rows.append(first + np.arange(part.size1()))
             first += part.size1()
-    chosen = np.concatenate(rows) if rows else np.zeros(0, dtype=np.int64)
-    return row_ranges(mats, chosen, [0, chosen.size])[0]
+    return stacked_rows(mats, np.concatenate(rows) if rows else np.zeros(0, dtype=np.int64))
 
 
 def stacked_rows(mats: Sequence[ca.MX], rows: np.ndarray | None = None) -> ca.MX:
@@ -64,19 +62,10 @@ def stacked_rows(mats: Sequence[ca.MX], rows: np.ndarray | None = None) -> ca.MX
     the stacked matrices, as one gather of their nonzeros."""
     first = sum(mat.size1() for mat in mats)
     chosen = np.arange(first) if rows is None else np.asarray(rows, dtype=np.int64)
-    return row_ranges(mats, chosen, [0, chosen.size])[0]
-
-
-def row_ranges(mats: Sequence[ca.MX], rows: np.ndarray, bounds: Sequence[int]
-               ) -> list[ca.MX]:
-    """`[vertcat(*mats)[rows[a:b], :] for a, b in pairwise(bounds)]`, each on the exact
-    pattern of the stacked matrices, all through one gather of their nonzeros."""
     if not mats:
-        return [ca.MX(b - a, 0) for a, b in itertools.pairwise(bounds)]
+        return ca.MX(chosen.size, 0)
     if not ONE_GATHER:
-        stacked = ca.vertcat(*mats)
-        return [stacked[np.asarray(rows[a:b]).tolist(), :]
-                for a, b in itertools.pairwise(bounds)]
+        return ca.vertcat(*mats)[chosen.tolist(), :]
     ncol = mats[0].size2()
     row_parts, col_parts, values = [], [], []
     first = 0
@@ -89,25 +78,16 @@ def row_ranges(mats: Sequence[ca.MX], rows: np.ndarray, bounds: Sequence[int]
             col_parts.append(np.asarray(sp.get_col(), dtype=np.int64))
             values.append(nonzeros(mat))
         first += mat.size1()
-    edges = np.asarray(bounds, dtype=np.int64)
-    position = np.full(first, -1, dtype=np.int64)  # place in `rows` of each stacked row
-    position[np.asarray(rows, dtype=np.int64)] = np.arange(edges[-1])
-    row = position[np.concatenate(row_parts)] if values else np.zeros(0, dtype=np.int64)
-    col = np.concatenate(col_parts) if values else np.zeros(0, dtype=np.int64)
-    kept = np.flatnonzero(row >= edges[0])  # rows before the first range are left out
-    part = np.searchsorted(edges, row[kept], side="right") - 1
-    # Range by range, each column-major (CasADi's nonzero order): one sort of one key.
-    key = (part * ncol + col[kept]) * max(edges[-1], 1) + row[kept]
-    order = kept[np.argsort(key, kind="stable")]
-    part = np.searchsorted(edges, row[order], side="right") - 1
+    if not values:
+        return ca.MX(chosen.size, ncol)
+    position = np.full(first, -1, dtype=np.int64)  # result row of each stacked row
+    position[chosen] = np.arange(chosen.size)
+    row = position[np.concatenate(row_parts)]
+    col = np.concatenate(col_parts)
+    kept = np.flatnonzero(row >= 0)  # rows not chosen are left out
+    # Column-major, CasADi's nonzero order: one sort of one key.
+    order = kept[np.argsort(col[kept] * max(chosen.size, 1) + row[kept], kind="stable")]
+    colind = np.concatenate([[0], np.cumsum(np.bincount(col[order], minlength=ncol))])
+    sp = ca.Sparsity(int(chosen.size), ncol, colind.tolist(), row[order].tolist())
     gathered = ca.vertcat(*values)[order.tolist()] if order.size else ca.MX(0, 1)
-    out, start = [], 0
-    for j, (a, b) in enumerate(itertools.pairwise(edges)):
-        stop = start + int(np.count_nonzero(part == j))
-        colind = np.concatenate([[0], np.cumsum(np.bincount(col[order[start:stop]],
-                                                             minlength=ncol))])
-        sp = ca.Sparsity(int(b - a), ncol, colind.tolist(),
-                         (row[order[start:stop]] - a).tolist())
-        out.append(ca.sparsity_cast(gathered[start:stop], sp))
-        start = stop
-    return out
+    return ca.sparsity_cast(gathered, sp)

@@ -71,17 +71,11 @@ def sensor_axes(fit: Fit, sensor: str, windows: Sequence[PhaseWindow] = (),
     return list(axes)
 
 
-def _fitted_sensors(fit: Fit) -> list[str]:
-    """The sensors with residuals in a fit, the effects' pseudo-observations left out."""
-    return list(dict.fromkeys(r.sensor for r in fit.residuals
-                              if r.sensor not in fit.pseudo_sensors))
-
-
 def plot_sensors(fit: Fit, folder: Path, units: DisplayUnits | None = None) -> list[Path]:
     """One figure per sensor (``sensor_<sensor>.png``, `sensor_axes` without windows)."""
     return [_save(sensor_axes(fit, sensor, (), units)[0].figure,
                   f"{fit.test.name}: {sensor}, model vs measurement",
-                  folder / f"sensor_{sensor}.png") for sensor in _fitted_sensors(fit)]
+                  folder / f"sensor_{sensor}.png") for sensor in fit.sensors]
 
 
 def events_axes(fit: Fit, ax: plt.Axes | None = None) -> plt.Axes | None:
@@ -290,7 +284,7 @@ def plot_sensor_residuals(fit: Fit, windows: Sequence[PhaseWindow], folder: Path
     windows shaded)."""
     return [_save(sensor_axes(fit, sensor, windows, units)[0].figure,
                   f"{fit.test.name}: {sensor}, residuals by phase window",
-                  folder / f"residuals_{sensor}.png") for sensor in _fitted_sensors(fit)]
+                  folder / f"residuals_{sensor}.png") for sensor in fit.sensors]
 
 
 def plot_residual_comparison(fit_a: Fit, fit_b: Fit, labels: tuple[str, str],
@@ -301,8 +295,7 @@ def plot_residual_comparison(fit_a: Fit, fit_b: Fit, labels: tuple[str, str],
     paths = []
     # Channels are paired by name: a model may add pseudo-observations the other lacks.
     in_b = {(r.sensor, r.channel): r for r in fit_b.residuals}
-    for sensor in dict.fromkeys(r.sensor for r in fit_a.residuals
-                                if r.sensor not in fit_a.pseudo_sensors):
+    for sensor in fit_a.sensors:
         pairs = [(a, in_b[a.sensor, a.channel]) for a in fit_a.residuals
                  if a.sensor == sensor and (a.sensor, a.channel) in in_b]
         shown = windows_for_sensor(fit_a.test, sensor, windows)

@@ -71,10 +71,8 @@ def channel_series(fit: Fit, units: DisplayUnits) -> list[ChannelSeries]:
 
 def sensor_spans(fit: Fit, windows: Sequence[PhaseWindow]) -> dict[str, list[Span]]:
     """Per sensor, the phase windows that apply to it (its own canopy's for a load cell)."""
-    sensors = dict.fromkeys(r.sensor for r in fit.residuals
-                            if r.sensor not in fit.pseudo_sensors)
     return {s: [Span(w.name, w.kind, w.t0, w.t1)
-                for w in windows_for_sensor(fit.test, s, windows)] for s in sensors}
+                for w in windows_for_sensor(fit.test, s, windows)] for s in fit.sensors}
 
 
 def bound_flag(fit: Fit, cov: Covariance | None, name: str) -> str:
