@@ -24,15 +24,17 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-__all__ = ["Reconstruction", "fit_estimator", "load_model", "load_test", "reconstruct",
-           "simulate"]
+__all__ = ["Population", "Reconstruction", "fit_estimator", "load_model", "load_test",
+           "population", "reconstruct", "simulate"]
 
 if TYPE_CHECKING:
     from cpas_ocp.api import (
+        Population,
         Reconstruction,
         fit_estimator,
         load_model,
         load_test,
+        population,
         reconstruct,
         simulate,
     )

@@ -30,9 +30,16 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
+from cpas_ocp.campaign.dispersion_study import read_parameter_table
+from cpas_ocp.campaign.population_study import (
+    PopulationGroup,
+    population_groups,
+    read_covariance_table,
+)
 from cpas_ocp.discrepancy.diagnosis import ALPHA, CONFIRM_TOP, Diagnosis, diagnose
 from cpas_ocp.discrepancy.discovery import MAX_STEPS, Discovery, DiscoveryStep, discover
 from cpas_ocp.discrepancy.score_test import extended_spec
+from cpas_ocp.errors import InputError
 from cpas_ocp.estimation.estimator import Estimator, Fit, Settings
 from cpas_ocp.estimation.simulate import simulate_problem
 from cpas_ocp.estimation.uncertainty import Covariance
@@ -63,11 +70,16 @@ from cpas_ocp.reports.plots import (
     profile_axes,
     sensor_axes,
 )
+from cpas_ocp.reports.population_report import (
+    parameter_frame,
+    population_text,
+    write_population,
+)
 from cpas_ocp.reports.report import fit_summary, parameter_table, write_report
 from cpas_ocp.reports.report_data import bound_flag
 
-__all__ = ["Reconstruction", "fit_estimator", "load_model", "load_test", "reconstruct",
-           "simulate"]
+__all__ = ["Population", "Reconstruction", "fit_estimator", "load_model", "load_test",
+           "population", "reconstruct", "simulate"]
 
 
 def simulate(problem: str, out: str | Path, seed: int, effects: Sequence[Effect] | None = None,
@@ -292,3 +304,52 @@ class Reconstruction:
         if out is not None:
             write_comparison(comparison, out, units)
         return comparison
+
+
+def population(campaign: str | Path, parameters: Sequence[str] | None = None,
+               covariates: Sequence[str] = (), pool: Sequence[Sequence[tuple[str, str]]] = (),
+               full_omega: bool = True, alpha: float = 0.05) -> Population:
+    """The population of each canopy type and stage of a campaign folder (`cpas-ocp
+    campaign`): mu with the `covariates`' effects, Omega, each opening's shrunken
+    estimate and pull, and the grouping tests (`campaign.population_study`).  Each
+    list in `pool` names (type, stage) pairs fitted as one population."""
+    table = read_parameter_table(campaign)
+    covariances = read_covariance_table(campaign)
+    groups, skipped = population_groups(table, covariances, str(campaign), parameters,
+                                        covariates, pool, full_omega, alpha)
+    if not groups:
+        raise InputError(str(campaign), "(table)", "a canopy type and stage with enough "
+                         "openings for a population; " + "; ".join(skipped or ["none"]))
+    return Population(str(campaign), groups, skipped)
+
+
+@dataclass
+class Population:
+    """The populations of a campaign: one fitted `PopulationGroup` per canopy type and stage
+    (or pooled set), and a note per one left out."""
+
+    campaign: str
+    groups: list[PopulationGroup]
+    skipped: list[str]
+
+    @property
+    def table(self) -> pd.DataFrame:
+        """Per population and parameter: median with its interval, tau with its interval,
+        I^2 and the point-estimate spread."""
+        return pd.concat([parameter_frame(g) for g in self.groups], ignore_index=True)
+
+    def summary(self) -> str:
+        """What `cpas-ocp population` prints."""
+        return population_text(self.groups, self.skipped)
+
+    def report(self, out: str | Path) -> Path:
+        """The folder `cpas-ocp population` writes."""
+        return write_population(self.groups, self.skipped, out,
+                                f"Populations of {Path(self.campaign).name}")
+
+    def __repr__(self) -> str:
+        return (f"<Population of {self.campaign}: "
+                f"{', '.join(g.label for g in self.groups)}>")
+
+    def _repr_html_(self) -> str:
+        return self.table.to_html(float_format=lambda v: f"{v:.4g}", index=False)

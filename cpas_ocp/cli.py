@@ -11,6 +11,7 @@
     cpas-ocp compare TEST_DIR --model A --model B --out DIR
                                               fit two effect sets, test which the data prefer
     cpas-ocp campaign TESTS_DIR --out DIR     reconstruct many test folders, tabulate parameters
+    cpas-ocp population CAMPAIGN --out DIR    each canopy type's population: mu, Omega, groupings
     cpas-ocp dispersions CAMPAIGN --out DIR   Monte Carlo cases within the grown hulls
     cpas-ocp montecarlo TEST_DIR --cases DIR --out DIR
                                               fly the cases through a test's fit: peak loads
@@ -162,6 +163,8 @@ def _ranged(kind: type, low: float, high: float = math.inf, low_open: bool = Fal
 
 SEED = _ranged(int, 0)
 COUNT = _ranged(int, 1)
+# The test table's columns a population's mean may depend on (population_study).
+COVARIATES = ("type", "forebody", "cluster_size", "line_length")
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -250,6 +253,26 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--out", required=True, type=Path)
     _parallel_options(s)
     s.set_defaults(run=_campaign)
+
+    s = sub.add_parser("population", help="each canopy type and stage's population from a "
+                                          "campaign: mu, the between-test Omega, each "
+                                          "test's shrunken estimate, grouping tests")
+    s.add_argument("campaign", type=Path, help="a campaign folder (cpas-ocp campaign)")
+    s.add_argument("--out", required=True, type=Path)
+    s.add_argument("--parameter", action="append", dest="parameters", default=None,
+                   help="a canopy parameter to include (repeatable; default: CdS, Ck, n_p, "
+                        "n, expopen, t_k where determined)")
+    s.add_argument("--covariate", action="append", dest="covariates", default=[],
+                   choices=COVARIATES, help="a column of the test table the mean depends on "
+                                            "(repeatable)")
+    s.add_argument("--pool", action="append", default=[], type=_pooled,
+                   help="canopy types and stages fitted as one population, e.g. "
+                        "fbcp/stage1+drogue/stage1 (repeatable)")
+    s.add_argument("--diagonal", action="store_true",
+                   help="no between-test correlations (a diagonal Omega)")
+    s.add_argument("--alpha", type=float, default=0.05,
+                   help="the grouping tests' level (0.05)")
+    s.set_defaults(run=_population)
 
     s = sub.add_parser("dispersions", help="Monte Carlo cases per canopy type and stage from "
                                            "a campaign's parameter table")
@@ -679,6 +702,28 @@ def _campaign(args: argparse.Namespace) -> int:
     if failed:
         print(f"warning: {failed} of {len(outcomes)} tests failed (failures.csv)",
               file=sys.stderr)
+    return 0
+
+
+def _pooled(text: str) -> list[tuple[str, str]]:
+    """`type/stage+type/stage...` as (type, stage) pairs; argparse's error (exit 2) where
+    malformed."""
+    members = [tuple(m.split("/")) for m in text.split("+")]
+    if len(members) < 2 or any(len(m) != 2 or not all(m) for m in members):
+        raise argparse.ArgumentTypeError(f"two or more TYPE/STAGE joined by '+'; got {text!r}")
+    return [(str(t), str(s)) for t, s in members]
+
+
+def _population(args: argparse.Namespace) -> int:
+    from cpas_ocp.api import population
+    if not 0.0 < args.alpha < 1.0:
+        raise InputError("(command line)", "--alpha", f"a level in (0, 1); got {args.alpha:g}")
+    pop = population(args.campaign, args.parameters, args.covariates, args.pool,
+                     not args.diagonal, args.alpha)
+    out = pop.report(args.out)
+    print(pop.summary())
+    print(f"\npopulations written to {out} (population.md, population.csv, openings.csv, "
+          "groupings.csv, population.json, report.html)")
     return 0
 
 

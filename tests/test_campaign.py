@@ -69,6 +69,16 @@ def test_campaign_tabulates_every_test_and_reports_the_broken_one(tests_root, tm
     assert len(stages) == 2 + 2 + len(stages[stages.test == "pilot-seed1"])
     assert (stages.v_start > 0).all() and set(stages.inflation) == {"infinite_mass",
                                                                      "finite_mass"}
+    # Each test's covariance: its diagonal is the table's std squared, one row per pair.
+    cov = pd.read_csv(out / "covariances.csv")
+    assert sorted(cov.test.unique()) == sorted(table.test.unique())
+    diagonal = cov[cov.name_a == cov.name_b].merge(table, left_on=["test", "name_a"],
+                                                   right_on=["test", "name"])
+    assert len(diagonal) == table["std"].notna().sum()
+    assert (abs(diagonal.covariance - diagonal["std"] ** 2) <= 1e-9 * diagonal.covariance).all()
+    one = cov[cov.test == "fbcp-seed1"]
+    assert len(one) == len(diagonal[diagonal.test == "fbcp-seed1"]) * (
+        len(diagonal[diagonal.test == "fbcp-seed1"]) + 1) // 2
 
 
 def test_dask_cluster_gives_the_same_table(tests_root) -> None:

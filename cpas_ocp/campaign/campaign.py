@@ -40,6 +40,9 @@ COLUMNS = ["test", "parameter", "name", "parachute", "type", "stage", "forebody"
 # parameters (order, inflation law, fill-length form, D_o in m, start airspeed V_i in m/s).
 STAGE_COLUMNS = ["test", "parachute", "type", "stage", "stage_index", "inflation",
                  "fill_length", "diameter", "line_length", "v_start"]
+# Per test, the covariance of its determined parameters (SI), one row per pair (the lower
+# triangle with the diagonal): what a population fit weighs each test's estimates with.
+COVARIANCE_COLUMNS = ["test", "name_a", "name_b", "covariance"]
 
 
 @dataclass
@@ -50,7 +53,8 @@ class TestOutcome:
     "solver" (Ipopt did not converge), "claim" (converged, but the data press
     parameters against guessed bounds: not a result, `result_claim`) or "error"
     (anything else, with the exception's type and message).  `stages` holds a row per canopy stage
-    (STAGE_COLUMNS).
+    (STAGE_COLUMNS), `covariance` a row per pair of determined parameters
+    (COVARIANCE_COLUMNS).
     """
 
     folder: str
@@ -59,6 +63,7 @@ class TestOutcome:
     message: str = ""
     rows: list[dict[str, Any]] = field(default_factory=list)
     stages: list[dict[str, Any]] = field(default_factory=list)
+    covariance: list[dict[str, Any]] = field(default_factory=list)
     wall_s: float = 0.0
     iterations: int = 0
     chi_square_per_dof: float = float("nan")
@@ -125,8 +130,12 @@ def reconstruct_folder(folder: str) -> TestOutcome:
                    "diameter": c.diameter, "line_length": _line_length(c),
                    "v_start": fit.captures.get(param_name("V_start", c.name, s), np.nan)}
                   for c in test.parachutes for k, s in enumerate(c.stages)]
+    determined = [i for i, n in enumerate(cov.names) if n in std]
+    covariance = [{"test": test.name, "name_a": cov.names[a], "name_b": cov.names[b],
+                   "covariance": float(cov.matrix[a, b])}
+                  for i, a in enumerate(determined) for b in determined[: i + 1]]
     return TestOutcome(folder, test.name, "ok", rows=rows, stages=stage_rows,
-                       wall_s=time.perf_counter() - t0,
+                       covariance=covariance, wall_s=time.perf_counter() - t0,
                        iterations=fit.solver.iterations,
                        chi_square_per_dof=fit.chi_square / fit.dof)
 
@@ -164,6 +173,13 @@ def stage_table(outcomes: Sequence[TestOutcome]) -> pd.DataFrame:
     return pd.DataFrame([r for o in outcomes if o.ok for r in o.stages], columns=STAGE_COLUMNS)
 
 
+def covariance_table(outcomes: Sequence[TestOutcome]) -> pd.DataFrame:
+    """One row per reconstructed test and pair of its determined parameters, in the
+    columns of COVARIANCE_COLUMNS."""
+    return pd.DataFrame([r for o in outcomes if o.ok for r in o.covariance],
+                        columns=COVARIANCE_COLUMNS)
+
+
 def failure_table(outcomes: Sequence[TestOutcome]) -> pd.DataFrame:
     """One row per failed test: folder, name, kind of failure and its message."""
     return pd.DataFrame([{"folder": o.folder, "test": o.name, "kind": o.kind,
@@ -173,9 +189,10 @@ def failure_table(outcomes: Sequence[TestOutcome]) -> pd.DataFrame:
 
 def write_campaign(outcomes: Sequence[TestOutcome], out: str | Path) -> Path:
     """Write parameters.csv and parameters.parquet (the table), stages.csv (STAGE_COLUMNS),
-    failures.csv, the drag-area ratios between configurations (ratios_forebody.csv,
-    ratios_cluster_size.csv; where the line length varies, ratios_line_length.csv and
-    ratios_cluster_size_by_line_length.csv) and campaign.md atomically."""
+    covariances.csv (COVARIANCE_COLUMNS), failures.csv, the drag-area ratios between
+    configurations (ratios_forebody.csv, ratios_cluster_size.csv; where the line length
+    varies, ratios_line_length.csv and ratios_cluster_size_by_line_length.csv) and
+    campaign.md atomically."""
     from cpas_ocp.campaign.configuration_ratios import campaign_ratios
     from cpas_ocp.io.output_folder import atomic_folder
     out = Path(out)
@@ -185,6 +202,7 @@ def write_campaign(outcomes: Sequence[TestOutcome], out: str | Path) -> Path:
         table.to_csv(tmp / "parameters.csv", index=False)
         table.to_parquet(tmp / "parameters.parquet", index=False)
         stage_table(outcomes).to_csv(tmp / "stages.csv", index=False)
+        covariance_table(outcomes).to_csv(tmp / "covariances.csv", index=False)
         failures.to_csv(tmp / "failures.csv", index=False)
         text = campaign_text(outcomes)
         for by, ratios in campaign_ratios(table).items():

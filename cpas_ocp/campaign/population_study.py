@@ -1,0 +1,272 @@
+"""The population of each canopy type and stage from a campaign's tables, and its groupings.
+
+A campaign (`cpas-ocp campaign`) writes, per test, every parameter with its
+standard deviation (parameters.csv) and the covariance of its determined
+parameters (covariances.csv).  Here the parameters of one canopy type and stage
+(the openings: one per test and canopy) are gathered with their covariance into
+a `population_model.PopulationData` and fitted: the population mean mu (with
+the covariates' effects), the between-test covariance Omega, and each
+opening's shrunken estimate and pull.
+
+Which openings form one population is a decision the paper made by eye
+(pooling FBCP with Drogue first stages, comparing line-length ratios, cluster
+sizes and forebodies, Figures 16 and 33).  Here it is a test: for every column
+of the test table that takes two or more values within a population (forebody,
+cluster size, line length and, where types are pooled, the type), the
+openings are fitted as one population and as one per value, and the
+likelihood ratio says whether they differ (`population_model.grouping_test`).
+
+Start times and the instrument factors (drag and load-cell scales) belong to a
+test, not to a canopy, and are left out, as in `dispersion_study`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from cpas_ocp.campaign.dispersion_study import DISPERSED, check_names, check_numbers
+from cpas_ocp.campaign.population_model import (
+    GroupingTest,
+    PopulationData,
+    PopulationFit,
+    PopulationInputError,
+    fit_population,
+    grouping_test,
+)
+from cpas_ocp.errors import InputError
+
+# The columns of the parameter table a population may be grouped or regressed on.
+COVARIATE_COLUMNS = ("type", "forebody", "cluster_size", "line_length")
+
+
+class TooFewOpenings(Exception):
+    """A canopy type and stage with too few openings for a population: left out, with
+    this message as the note."""
+
+
+@dataclass
+class PopulationGroup:
+    """The population of one canopy type and stage (or of several pooled), fitted.
+
+    `point_spread` is the standard deviation of the point estimates about their
+    least-squares mean (with the same covariates) in the model's space: the
+    spread a method that ignores each test's uncertainty would disperse.  `notes`
+    say what was left out and why.
+    """
+
+    label: str
+    members: tuple[tuple[str, str], ...]  # (type, stage) pooled
+    fit: PopulationFit
+    point_spread: np.ndarray
+    groupings: list[GroupingTest] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def data(self) -> PopulationData:
+        return self.fit.data
+
+    def median(self, name: str) -> float:
+        """The population median of parameter `name` in SI at the covariates' reference
+        (the intercept): exp(mu) in log space, mu otherwise."""
+        j = self.data.names.index(name)
+        mu = float(self.fit.beta[j, 0])
+        return float(np.exp(mu)) if self.data.log[j] else mu
+
+
+def read_covariance_table(campaign: str | Path) -> pd.DataFrame | None:
+    """The campaign's covariances.csv (`campaign.COVARIANCE_COLUMNS`) in its folder or
+    beside its parameter table; None where there is none (campaigns written before it)."""
+    from cpas_ocp.campaign.campaign import COVARIANCE_COLUMNS
+    campaign = Path(campaign)
+    path = (campaign if campaign.is_dir() else campaign.parent) / "covariances.csv"
+    if not path.is_file():
+        return None
+    try:
+        cov = pd.read_csv(path)
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
+        raise InputError(str(path), "(file)", f"a campaign's covariance table: {exc}") from None
+    missing = [c for c in COVARIANCE_COLUMNS if c not in cov.columns]
+    if missing:
+        raise InputError(str(path), ", ".join(missing), "the columns of a campaign's "
+                         "covariance table")
+    for column in ("test", "name_a", "name_b"):
+        check_names(cov, path, column, "a test or parameter name")
+    check_numbers(cov, path, "covariance", "a covariance in SI")
+    return cov
+
+
+def _opening_covariance(names: Sequence[str], stds: Sequence[float],
+                        pairs: dict[tuple[str, str], float] | None) -> np.ndarray:
+    """The covariance of one opening's parameters `names` (SI): from the test's pairs where
+    the campaign wrote them, else the diagonal of `stds`."""
+    k = len(names)
+    if pairs is None:
+        return np.diag(np.square(stds))
+    V = np.empty((k, k))
+    for a in range(k):
+        for b in range(k):
+            V[a, b] = pairs.get((names[a], names[b]), pairs.get((names[b], names[a]), np.nan))
+    return V
+
+
+def _design(openings: pd.DataFrame, covariates: Sequence[str], where: str
+            ) -> tuple[np.ndarray, tuple[str, ...]]:
+    """The design matrix: an intercept, each numeric covariate about its mean, each other
+    covariate as indicators of its values after the first (sorted)."""
+    columns, names = [np.ones(len(openings))], ["intercept"]
+    for c in covariates:
+        values = openings[c]
+        if values.isna().any():
+            raise InputError(where, c, "a value for every opening of the population; "
+                             f"blank for test {openings.loc[values.isna(), 'test'].iloc[0]}")
+        levels = sorted(values.unique(), key=str)
+        if len(levels) < 2:
+            raise InputError(where, c, f"a covariate with two or more values over the "
+                             f"openings; every opening has {levels[0]}")
+        if pd.api.types.is_numeric_dtype(values):
+            x = values.to_numpy(float)
+            columns.append(x - x.mean())
+            names.append(f"{c} (per unit, about {x.mean():.4g})")
+        else:
+            for level in levels[1:]:
+                columns.append((values == level).to_numpy(float))
+                names.append(f"{c}={level}")
+    return np.column_stack(columns), tuple(names)
+
+
+def _gather(rows: pd.DataFrame, parameters: Sequence[str] | None
+            ) -> tuple[pd.DataFrame, list[str], list[str]]:
+    """Per opening (test, parachute): its value, std and full name of each parameter kept.
+    A parameter undetermined or absent in more than half the openings is left out, then
+    every opening lacking one of those kept; `notes` say which."""
+    wanted = [p for p in (parameters or DISPERSED) if p in set(rows.parameter)]
+    rows = rows[rows.parameter.isin(wanted)]
+    index = ["test", "parachute"]
+    value = rows.pivot_table(index=index, columns="parameter", values="value", aggfunc="first")
+    std = rows.pivot_table(index=index, columns="parameter", values="std", aggfunc="first")
+    std = std.reindex_like(value)
+    notes, kept = [], []
+    for p in wanted:
+        ok = value[p].notna() & std[p].notna() & (std[p] > 0)
+        if ok.mean() > 0.5:
+            kept.append(p)
+        else:
+            notes.append(f"{p} left out: determined in {int(ok.sum())} of {len(ok)} openings")
+    whole = (value[kept].notna() & std[kept].notna() & (std[kept] > 0)).all(axis=1)
+    for key in value.index[~whole]:
+        notes.append(f"{key[0]} {key[1]} left out: not every parameter determined")
+    return rows.set_index(index).loc[value.index[whole]].reset_index(), kept, notes
+
+
+def population_data(rows: pd.DataFrame, covariances: pd.DataFrame | None,
+                    parameters: Sequence[str] | None, covariates: Sequence[str],
+                    where: str) -> tuple[PopulationData, pd.DataFrame, list[str]]:
+    """The openings of `rows` (parameter-table rows of the population) as PopulationData,
+    positive parameters in log space; their covariate columns (a row per opening); and
+    notes on what was left out."""
+    kept_rows, names, notes = _gather(rows, parameters)
+    if not names:
+        raise InputError(where, "parameter", "a canopy parameter determined in most openings")
+    by_test = None if covariances is None else {
+        t: {(a, b): c for a, b, c in zip(g.name_a, g.name_b, g.covariance, strict=True)}
+        for t, g in covariances.groupby("test")}
+    ys, Vs, labels, openings = [], [], [], []
+    for (test, chute), g in kept_rows.groupby(["test", "parachute"], sort=True):
+        g = g.set_index("parameter").loc[names]
+        full = list(g["name"])
+        V = _opening_covariance(full, g["std"].to_numpy(float),
+                                None if by_test is None else by_test.get(test, {}))
+        if not np.isfinite(V).all():
+            raise InputError(where, "covariances.csv", f"every pair of {test}'s parameters "
+                             f"{', '.join(full)}; some are missing")
+        ys.append(g["value"].to_numpy(float))
+        Vs.append(V)
+        labels.append(f"{test} {chute}")
+        openings.append({c: g[c].iloc[0] for c in COVARIATE_COLUMNS} | {"test": test})
+    y, V = np.array(ys), np.array(Vs)
+    log = tuple(bool((y[:, j] > 0).all()) for j in range(len(names)))
+    for j, is_log in enumerate(log):
+        if is_log:
+            V[:, j, :] /= y[:, j, None]
+            V[:, :, j] /= y[:, j, None]
+            y[:, j] = np.log(y[:, j])
+    frame = pd.DataFrame(openings)
+    if len(ys) < len(covariates) + 3:
+        raise TooFewOpenings(f"{len(ys)} openings with every parameter determined; a "
+                             f"population with {len(covariates)} covariate(s) needs at "
+                             f"least {len(covariates) + 3}")
+    X, columns = _design(frame, covariates, where)
+    if covariances is None:
+        notes.append("covariances.csv not found: each test's parameters taken as "
+                     "uncorrelated (the campaign was written before it kept them)")
+    try:
+        data = PopulationData(tuple(names), tuple(labels), y, V, X, columns, log)
+    except PopulationInputError as exc:
+        raise InputError(where, "openings", str(exc)) from None
+    return data, frame, notes
+
+
+def population_groups(table: pd.DataFrame, covariances: pd.DataFrame | None, where: str,
+                      parameters: Sequence[str] | None = None, covariates: Sequence[str] = (),
+                      pool: Sequence[Sequence[tuple[str, str]]] = (), full_omega: bool = True,
+                      alpha: float = 0.05) -> tuple[list[PopulationGroup], list[str]]:
+    """A fitted population per canopy type and stage (each set in `pool` fitted as one), with
+    its grouping tests; and a note per type and stage left out."""
+    tests = table.test.nunique()
+    if tests < 2:
+        raise InputError(where, "test", f"a campaign of two or more reconstructed tests; "
+                         f"it holds {tests}")
+    rows = table[(table.parachute != "") & table.parameter.isin(parameters or DISPERSED)]
+    members_of = {m: tuple(p) for p in pool for m in p}
+    units = sorted({(str(t), str(s)) for t, s in zip(rows.type, rows.stage, strict=True)})
+    missing = [m for p in pool for m in p if m not in units]
+    if missing:
+        raise InputError(where, "pool", f"canopy types and stages of the campaign; "
+                         f"{missing[0][0]}/{missing[0][1]} has no parameters in it")
+    sets = list(dict.fromkeys(members_of.get(u, (u,)) for u in units))
+    groups, skipped = [], []
+    for members in sets:
+        label = " + ".join(f"{t} {s}" for t, s in members)
+        part = rows[[(t, s) in members for t, s in zip(rows.type, rows.stage, strict=True)]]
+        try:
+            data, frame, notes = population_data(part, covariances, parameters, covariates,
+                                                 where)
+        except TooFewOpenings as exc:
+            skipped.append(f"{label}: {exc}")
+            continue
+        fit = fit_population(data, full_omega)
+        coef, *_ = np.linalg.lstsq(data.X, data.y, rcond=None)
+        spread = (data.y - data.X @ coef).std(axis=0, ddof=data.p)
+        group = PopulationGroup(label, members, fit, spread, notes=notes)
+        group.groupings, more = _groupings(frame, data, full_omega, alpha, len(members) > 1)
+        group.notes += more
+        groups.append(group)
+    return groups, skipped
+
+
+def _groupings(frame: pd.DataFrame, data: PopulationData, full_omega: bool, alpha: float,
+               pooled: bool) -> tuple[list[GroupingTest], list[str]]:
+    """The grouping test of every covariate column of `frame` (a row per opening) taking two
+    or more values over the openings, each value held by at least k + 2 of them (k
+    parameters)."""
+    intercept = data.subset(np.arange(data.n), keep_columns=[0])
+    tests, notes = [], []
+    for column in COVARIATE_COLUMNS:
+        if column == "type" and not pooled:
+            continue
+        values = frame[column]
+        if values.isna().any() or values.nunique() < 2:
+            continue
+        counts = values.value_counts()
+        if counts.min() < data.k + 2:
+            notes.append(f"{column}: not tested as a grouping; {counts.idxmin()} has "
+                         f"{counts.min()} openings, fewer than {data.k + 2}")
+            continue
+        labels = [str(v) for v in values]
+        tests.append(grouping_test(intercept, labels, column, full_omega, alpha))
+    return tests, notes

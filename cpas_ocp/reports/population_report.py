@@ -1,0 +1,241 @@
+"""What a population fit prints and writes: tables, a forest plot per parameter, a page.
+
+`population_text` is what `cpas-ocp population` prints; `write_population`
+writes population.md, population.json, population.csv (per population and
+parameter: median, tau, I^2, the point-estimate spread), openings.csv (per
+opening: estimate, its sigma, shrunken estimate, pull), groupings.csv (the
+grouping tests) and report.html, whose forest plots show each opening's
+estimate with its own 95 % interval, its shrunken estimate and the population
+band mu +- 1.96 tau.
+
+Figures in log space are shown as the median exp(mu) and as tau, the
+between-test coefficient of variation to first order.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import plotly.graph_objects as go
+from plotly.subplots import make_subplots
+
+from cpas_ocp.campaign.population_model import GroupingTest, Interval
+from cpas_ocp.campaign.population_study import PopulationGroup
+from cpas_ocp.io.output_folder import atomic_folder
+from cpas_ocp.io.strict_json import json_text
+from cpas_ocp.reports.html_page import MEASURED, MODEL, RESIDUAL, Page
+
+MARKER = "population.json"
+# A pull beyond this many sigma (two-sided p 0.0027) is named.
+PULL_FLAG = 3.0
+
+
+def _back(value: float, log: bool) -> float:
+    return float(np.exp(value)) if log else value
+
+
+def parameter_frame(group: PopulationGroup) -> pd.DataFrame:
+    """Per parameter: the population median (SI) with its interval, tau with its
+    interval (log space: a coefficient of variation), I^2 and the point-estimate spread."""
+    fit, data = group.fit, group.data
+    i2 = fit.i_squared()
+    rows = []
+    for j, name in enumerate(data.names):
+        mu, tau = fit.coefficients[(name, "intercept")], fit.tau[name]
+        log = data.log[j]
+        rows.append({"population": group.label, "parameter": name,
+                     "space": "log" if log else "linear",
+                     "median": _back(mu.value, log), "median_lower": _back(mu.lower, log),
+                     "median_upper": _back(mu.upper, log), "tau": tau.value,
+                     "tau_lower": tau.lower, "tau_upper": tau.upper,
+                     "i_squared": float(i2[j]), "point_sd": float(group.point_spread[j])})
+    return pd.DataFrame(rows)
+
+
+def opening_frame(group: PopulationGroup) -> pd.DataFrame:
+    """Per opening and parameter, in SI: the estimate and its sigma, the shrunken estimate
+    and its sigma, the standardised pull; and each opening's pull p-value."""
+    data, fit = group.data, group.fit
+    theta, cov = fit.shrunken()
+    z, p = fit.pulls()
+    rows = []
+    for i, opening in enumerate(data.openings):
+        for j, name in enumerate(data.names):
+            log = data.log[j]
+            scale = np.exp(data.y[i, j]) if log else 1.0
+            shrunk = _back(theta[i, j], log)
+            rows.append({"population": group.label, "opening": opening, "parameter": name,
+                         "estimate": _back(data.y[i, j], log),
+                         "sigma": float(np.sqrt(data.V[i, j, j]) * scale),
+                         "shrunken": shrunk,
+                         "shrunken_sigma": float(np.sqrt(max(cov[i, j, j], 0.0))
+                                                 * (shrunk if log else 1.0)),
+                         "pull": float(z[i, j]), "opening_p": float(p[i])})
+    return pd.DataFrame(rows)
+
+
+def grouping_frame(groups: Sequence[PopulationGroup]) -> pd.DataFrame:
+    """One row per grouping test and parameter: the levels, the likelihood ratio, its
+    p-value and verdict, and the second level's shift of the parameter's mean."""
+    rows = []
+    for group in groups:
+        for test in group.groupings:
+            for name, shift in test.shift.items():
+                rows.append({"population": group.label, "covariate": test.covariate,
+                             "levels": " / ".join(test.levels), "statistic": test.statistic,
+                             "dof": test.dof, "p_value": test.p_value,
+                             "verdict": "separate" if test.separate else "pooled",
+                             "parameter": name, "shift": shift.value,
+                             "shift_lower": shift.lower, "shift_upper": shift.upper})
+    return pd.DataFrame(rows)
+
+
+def _interval(iv: Interval, log: bool) -> str:
+    return f"[{_back(iv.lower, log):.4g}, {_back(iv.upper, log):.4g}]"
+
+
+def grouping_line(test: GroupingTest) -> str:
+    """One sentence: which levels, the likelihood ratio and what it says."""
+    verdict = (f"separate populations (p < {test.alpha:g})" if test.separate
+               else f"one population is kept (p >= {test.alpha:g})")
+    shifts = ", ".join(f"{n} {s.value:+.3g} [{s.lower:+.3g}, {s.upper:+.3g}]"
+                       for n, s in test.shift.items())
+    return (f"{test.covariate} ({' vs '.join(test.levels)}): 2 ln LR = {test.statistic:.2f} "
+            f"on {test.dof} dof, p = {test.p_value:.3g}: {verdict}; shift of the mean "
+            f"({test.levels[1]} against {test.levels[0]}): {shifts}")
+
+
+def group_text(group: PopulationGroup) -> str:
+    """The population's table, covariate effects, correlations, pulls, groupings and notes."""
+    fit, data = group.fit, group.data
+    tests = len({o.rsplit(" ", 1)[0] for o in data.openings})
+    lines = [f"{group.label}: {data.n} openings of {tests} tests, Omega "
+             f"{'full' if fit.full_omega else 'diagonal'}, "
+             f"{'restricted' if fit.reml else 'full'} likelihood; t intervals on {fit.dof} dof",
+             f"  {'parameter':10s} {'median':>10s} {'95 % interval':>22s} {'tau':>7s} "
+             f"{'95 % interval':>18s} {'I^2':>5s} {'point SD':>8s}"]
+    for row in parameter_frame(group).itertuples():
+        lines.append(f"  {row.parameter:10s} {row.median:10.4g} "
+                     f"{f'[{row.median_lower:.4g}, {row.median_upper:.4g}]':>22s} "
+                     f"{row.tau:7.3g} {f'[{row.tau_lower:.3g}, {row.tau_upper:.3g}]':>18s} "
+                     f"{row.i_squared:5.2f} {row.point_sd:8.3g}")
+    lines.append("  (median exp(mu) in SI; tau and the point SD in log space, a coefficient "
+                 "of variation, where the space is log)")
+    for column in data.columns[1:]:
+        effects = ", ".join(f"{n} {fit.coefficients[(n, column)].value:+.3g} "
+                            f"[{fit.coefficients[(n, column)].lower:+.3g}, "
+                            f"{fit.coefficients[(n, column)].upper:+.3g}]" for n in data.names)
+        lines.append(f"  effect of {column}: {effects}")
+    corr = fit.correlation()
+    strong = [(data.names[a], data.names[b], corr[a, b]) for a in range(data.k)
+              for b in range(a) if np.isfinite(corr[a, b]) and abs(corr[a, b]) >= 0.5]
+    if fit.full_omega and strong:
+        lines.append("  between-test correlations |rho| >= 0.5: "
+                     + ", ".join(f"{a} ~ {b} {r:+.2f}" for a, b, r in strong))
+    z, _ = fit.pulls()
+    flagged = [(data.openings[i], data.names[int(np.argmax(abs(z[i])))], z[i].max())
+               for i in range(data.n) if np.abs(z[i]).max() > PULL_FLAG]
+    lines.append(f"  openings pulled beyond {PULL_FLAG:g} sigma: "
+                 + (", ".join(f"{o} ({n})" for o, n, _ in flagged) if flagged else "none"))
+    lines += ["  grouping " + grouping_line(t) for t in group.groupings]
+    lines += [f"  note: {n}" for n in group.notes]
+    return "\n".join(lines)
+
+
+def population_text(groups: Sequence[PopulationGroup], skipped: Sequence[str]) -> str:
+    return "\n\n".join([group_text(g) for g in groups]
+                       + (["not fitted:\n" + "\n".join(f"  {s}" for s in skipped)]
+                          if skipped else []))
+
+
+def forest_figure(group: PopulationGroup) -> go.Figure:
+    """One panel per parameter: each opening's estimate with its own 95 % interval, its
+    shrunken estimate, and the population median with the band mu +- 1.96 tau (at the
+    covariates' reference)."""
+    frame = opening_frame(group)
+    data, fit = group.data, group.fit
+    fig = make_subplots(rows=1, cols=data.k, shared_yaxes=True,
+                        subplot_titles=list(data.names), horizontal_spacing=0.02)
+    for j, name in enumerate(data.names):
+        f = frame[frame.parameter == name]
+        log = data.log[j]
+        mu, tau = fit.coefficients[(name, "intercept")].value, fit.tau[name].value
+        lo, hi = _back(mu - 1.96 * tau, log), _back(mu + 1.96 * tau, log)
+        fig.add_vrect(x0=lo, x1=hi, fillcolor=MODEL, opacity=0.12, line_width=0,
+                      row=1, col=j + 1)
+        fig.add_vline(x=_back(mu, log), line_color=MODEL, row=1, col=j + 1)
+        half = 1.96 * f.sigma.to_numpy()
+        fig.add_trace(go.Scatter(x=f.estimate, y=f.opening, mode="markers",
+                                 marker={"color": MEASURED}, name="estimate ± 1.96σ",
+                                 error_x={"type": "data", "array": half, "visible": True},
+                                 showlegend=j == 0), row=1, col=j + 1)
+        fig.add_trace(go.Scatter(x=f.shrunken, y=f.opening, mode="markers",
+                                 marker={"color": RESIDUAL, "symbol": "diamond"},
+                                 name="shrunken", showlegend=j == 0), row=1, col=j + 1)
+        if log:
+            fig.update_xaxes(type="log", row=1, col=j + 1)
+    fig.update_layout(height=120 + 18 * data.n,
+                      title=f"{group.label}: estimates, shrunken estimates and the population "
+                            "(median, ±1.96 τ)")
+    return fig
+
+
+def population_page(groups: Sequence[PopulationGroup], skipped: Sequence[str],
+                    title: str) -> Page:
+    page = Page(title)
+    for group in groups:
+        page.heading(group.label)
+        frame = parameter_frame(group)
+        page.table(["parameter", "space", "median", "95 % interval", "tau", "95 % interval",
+                    "I²", "point SD"],
+                   [[r.parameter, r.space, r.median, f"[{r.median_lower:.4g}, "
+                     f"{r.median_upper:.4g}]", r.tau, f"[{r.tau_lower:.3g}, {r.tau_upper:.3g}]",
+                     r.i_squared, r.point_sd] for r in frame.itertuples()])
+        page.figure(forest_figure(group), rows=1, time_axis=False)
+        for test in group.groupings:
+            page.paragraph(grouping_line(test))
+        for note in group.notes:
+            page.paragraph(note, "note")
+    if skipped:
+        page.heading("Not fitted")
+        for s in skipped:
+            page.paragraph(s, "note")
+    return page
+
+
+def population_summary(groups: Sequence[PopulationGroup]) -> list[dict[str, Any]]:
+    """The JSON form: per population its members, parameters, coefficients, Omega and
+    groupings."""
+    out = []
+    for g in groups:
+        fit = g.fit
+        out.append({"population": g.label, "members": [list(m) for m in g.members],
+                    "openings": list(g.data.openings), "parameters": list(g.data.names),
+                    "log_space": list(g.data.log), "columns": list(g.data.columns),
+                    "beta": fit.beta.tolist(), "omega": fit.omega.tolist(),
+                    "full_omega": fit.full_omega, "log_likelihood": fit.log_likelihood,
+                    "table": parameter_frame(g).to_dict("records"),
+                    "groupings": grouping_frame([g]).to_dict("records"), "notes": g.notes})
+    return out
+
+
+def write_population(groups: Sequence[PopulationGroup], skipped: Sequence[str],
+                     out: str | Path, title: str) -> Path:
+    """Write the population folder atomically (see the module's docstring)."""
+    with atomic_folder(out, MARKER) as tmp:
+        pd.concat([parameter_frame(g) for g in groups]).to_csv(tmp / "population.csv",
+                                                               index=False)
+        pd.concat([opening_frame(g) for g in groups]).to_csv(tmp / "openings.csv",
+                                                             index=False)
+        grouping_frame(groups).to_csv(tmp / "groupings.csv", index=False)
+        (tmp / MARKER).write_text(json_text({"populations": population_summary(groups),
+                                             "skipped": list(skipped)}))
+        (tmp / "population.md").write_text(
+            f"# {title}\n\n```\n{population_text(groups, skipped)}\n```\n\n"
+            "Forest plots: report.html\n")
+        population_page(groups, skipped, title).write(tmp / "report.html")
+    return Path(out)
