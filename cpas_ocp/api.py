@@ -30,9 +30,15 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
-from cpas_ocp.campaign.dispersion_study import read_parameter_table
+from cpas_ocp.campaign.dispersion_study import (
+    DispersionModel,
+    dispersion_models,
+    read_parameter_table,
+    read_stage_table,
+)
 from cpas_ocp.campaign.population_study import (
     PopulationGroup,
+    population_dispersions,
     population_groups,
     read_covariance_table,
 )
@@ -77,9 +83,10 @@ from cpas_ocp.reports.population_report import (
 )
 from cpas_ocp.reports.report import fit_summary, parameter_table, write_report
 from cpas_ocp.reports.report_data import bound_flag
+from cpas_ocp.reports.study_reports import write_dispersions
 
-__all__ = ["Population", "Reconstruction", "fit_estimator", "load_model", "load_test",
-           "population", "reconstruct", "simulate"]
+__all__ = ["Dispersions", "Population", "Reconstruction", "dispersions", "fit_estimator",
+           "load_model", "load_test", "population", "reconstruct", "simulate"]
 
 
 def simulate(problem: str, out: str | Path, seed: int, effects: Sequence[Effect] | None = None,
@@ -353,3 +360,38 @@ class Population:
 
     def _repr_html_(self) -> str:
         return self.table.to_html(float_format=lambda v: f"{v:.4g}", index=False)
+
+
+@dataclass
+class Dispersions:
+    """A campaign's Monte Carlo input: a model per canopy type and stage, the types and
+    stages left out, notes, whether drag-area envelopes were drawn, and the folder."""
+
+    models: list[DispersionModel]
+    skipped: list[str]
+    notes: list[str]
+    envelopes: bool
+    out: Path
+
+
+def dispersions(campaign: str | Path, out: str | Path, cases: int, seed: int,
+                from_population: bool = False) -> Dispersions:
+    """`cases` Monte Carlo cases per canopy type and stage of a campaign (`cpas-ocp
+    dispersions`), from the point estimates' dispersions within the grown hulls, or with
+    `from_population` from each type and stage's fitted population (`population`); the
+    folder written to `out`."""
+    table = read_parameter_table(campaign)
+    stages = read_stage_table(campaign)
+    models, skipped = dispersion_models(table)
+    if not models:
+        raise InputError(str(campaign), "(table)",
+                         "a canopy type and stage with enough tests to disperse; "
+                         + ("; ".join(skipped) or "the table has no canopy's "
+                            "CdS, Ck, n_p, n, expopen or t_k"))
+    notes: list[str] = []
+    if from_population:
+        pop = population(campaign)
+        models, notes = population_dispersions(models, pop.groups)
+        notes += [f"no population: {s}" for s in pop.skipped]
+    written = write_dispersions(models, skipped, cases, seed, out, table, stages)
+    return Dispersions(models, skipped, notes, stages is not None, written)

@@ -280,6 +280,10 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--out", required=True, type=Path)
     s.add_argument("--cases", type=COUNT, default=200_000, help="cases per canopy (200,000)")
     s.add_argument("--seed", type=SEED, required=True)
+    s.add_argument("--population", action="store_true",
+                   help="draw each canopy type and stage from its fitted population (mu, "
+                        "Omega: each test's uncertainty taken out of the spread) instead of "
+                        "from its point estimates; still within the caps and the grown hull")
     s.set_defaults(run=_dispersions)
 
     s = sub.add_parser("montecarlo", help="reconstruct a test folder and fly the dispersed "
@@ -728,28 +732,17 @@ def _population(args: argparse.Namespace) -> int:
 
 
 def _dispersions(args: argparse.Namespace) -> int:
-    from cpas_ocp.campaign.dispersion_study import (
-        dispersion_models,
-        read_parameter_table,
-        read_stage_table,
-    )
-    from cpas_ocp.reports.study_reports import write_dispersions
-    table = read_parameter_table(args.campaign)
-    stages = read_stage_table(args.campaign)
-    models, skipped = dispersion_models(table)
-    if not models:
-        raise InputError(str(args.campaign), "(table)",
-                         "a canopy type and stage with enough tests to disperse; "
-                         + ("; ".join(skipped) or "the table has no canopy's "
-                            "CdS, Ck, n_p, n, expopen or t_k"))
-    out = write_dispersions(models, skipped, args.cases, args.seed, args.out, table, stages)
-    for model in models:
+    from cpas_ocp.api import dispersions
+    done = dispersions(args.campaign, args.out, args.cases, args.seed, args.population)
+    for model in done.models:
         print(model.text())
-    for note in skipped:
+    for note in done.skipped:
         print(f"not dispersed: {note}")
-    if stages is None:
+    for note in done.notes:
+        print(note)
+    if not done.envelopes:
         print("no stages.csv beside the campaign's table: drag-area envelopes not drawn")
-    print(f"\ndispersions written to {out} (cases_*.parquet, dispersions.json, "
+    print(f"\ndispersions written to {done.out} (cases_*.parquet, dispersions.json, "
           "dispersions.md, figures)")
     return 0
 

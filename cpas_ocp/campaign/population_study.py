@@ -22,6 +22,7 @@ test, not to a canopy, and are left out, as in `dispersion_study`.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -29,7 +30,13 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from cpas_ocp.campaign.dispersion_study import DISPERSED, check_names, check_numbers
+from cpas_ocp.campaign.dispersion_study import (
+    DISPERSED,
+    DispersionModel,
+    check_names,
+    check_numbers,
+)
+from cpas_ocp.campaign.distributions import generator
 from cpas_ocp.campaign.population_model import (
     GroupingTest,
     PopulationData,
@@ -65,6 +72,7 @@ class PopulationGroup:
     point_spread: np.ndarray
     groupings: list[GroupingTest] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
+    units: dict[str, str] = field(default_factory=dict)  # parameter -> its SI unit
 
     @property
     def data(self) -> PopulationData:
@@ -223,12 +231,12 @@ def population_groups(table: pd.DataFrame, covariances: pd.DataFrame | None, whe
                          f"it holds {tests}")
     rows = table[(table.parachute != "") & table.parameter.isin(parameters or DISPERSED)]
     members_of = {m: tuple(p) for p in pool for m in p}
-    units = sorted({(str(t), str(s)) for t, s in zip(rows.type, rows.stage, strict=True)})
-    missing = [m for p in pool for m in p if m not in units]
+    kinds = sorted({(str(t), str(s)) for t, s in zip(rows.type, rows.stage, strict=True)})
+    missing = [m for p in pool for m in p if m not in kinds]
     if missing:
         raise InputError(where, "pool", f"canopy types and stages of the campaign; "
                          f"{missing[0][0]}/{missing[0][1]} has no parameters in it")
-    sets = list(dict.fromkeys(members_of.get(u, (u,)) for u in units))
+    sets = list(dict.fromkeys(members_of.get(u, (u,)) for u in kinds))
     groups, skipped = [], []
     for members in sets:
         label = " + ".join(f"{t} {s}" for t, s in members)
@@ -242,7 +250,8 @@ def population_groups(table: pd.DataFrame, covariances: pd.DataFrame | None, whe
         fit = fit_population(data, full_omega)
         coef, *_ = np.linalg.lstsq(data.X, data.y, rcond=None)
         spread = (data.y - data.X @ coef).std(axis=0, ddof=data.p)
-        group = PopulationGroup(label, members, fit, spread, notes=notes)
+        group = PopulationGroup(label, members, fit, spread, notes=notes,
+                                units=dict(zip(part.parameter, part.unit, strict=True)))
         group.groupings, more = _groupings(frame, data, full_omega, alpha, len(members) > 1)
         group.notes += more
         groups.append(group)
@@ -270,3 +279,81 @@ def _groupings(frame: pd.DataFrame, data: PopulationData, full_omega: bool, alph
         labels = [str(v) for v in values]
         tests.append(grouping_test(intercept, labels, column, full_omega, alpha))
     return tests, notes
+
+
+# Candidates drawn per batch when drawing a population's cases inside the caps and hull.
+DRAW_BATCH = 65_536
+
+
+@dataclass
+class PopulationDispersion(DispersionModel):
+    """A canopy type and stage's Monte Carlo model drawn from its fitted population:
+    (the population's parameters) ~ N(mu, Omega) in the model's space, mu at the
+    covariates' reference, every case inside the point-estimate model's caps and its
+    grown hull (redrawn until it is); parameters the population leaves out drawn from
+    their point-estimate dispersions, as `DispersionModel` does."""
+
+    population: PopulationGroup | None = None
+
+    @classmethod
+    def of(cls, model: DispersionModel, group: PopulationGroup) -> PopulationDispersion:
+        fields = {f.name: getattr(model, f.name) for f in dataclasses.fields(DispersionModel)}
+        return cls(**fields, population=group)
+
+    def draw(self, n: int, seed: int) -> pd.DataFrame:
+        """`n` cases, every parameter a column (SI), reproducible by `seed`."""
+        group = self.population
+        assert group is not None
+        rng = generator(seed)
+        data, fit = group.data, group.fit
+        w, U = np.linalg.eigh(fit.omega)
+        root = U * np.sqrt(np.clip(w, 0.0, None))
+        names = [p for p in data.names if p in self.dispersions]
+        idx = [data.names.index(p) for p in names]
+        kept: list[np.ndarray] = []
+        got, drawn = 0, 0
+        while got < n:
+            if drawn > 1000 * n + 100_000:
+                raise RuntimeError(f"{self.label}: fewer than 1 in 1000 population draws fall "
+                                   "inside the caps and the hull")
+            z = fit.beta[:, 0] + rng.standard_normal((DRAW_BATCH, data.k)) @ root.T
+            x = np.where(np.array(data.log), np.exp(z), z)[:, idx]
+            ok = np.ones(DRAW_BATCH, dtype=bool)
+            for j, p in enumerate(names):
+                d = self.dispersions[p]
+                ok &= (x[:, j] >= d.lower_cap) & (x[:, j] <= d.upper_cap)
+            if self.hull is not None and set(self.hull_names) <= set(names):
+                ok &= self.hull.contains(x[:, [names.index(h) for h in self.hull_names]])
+            kept.append(x[ok])
+            got += int(ok.sum())
+            drawn += DRAW_BATCH
+        out = dict(zip(names, np.concatenate(kept)[:n].T, strict=True))
+        for name, dispersion in self.dispersions.items():
+            if name not in out:
+                out[name] = dispersion.sample(n, rng)
+        return pd.DataFrame(out)[list(self.dispersions)]
+
+    def text(self) -> str:
+        group = self.population
+        assert group is not None
+        sd = ", ".join(f"{p} {group.fit.tau[p].value:.3g} (point estimates "
+                       f"{group.point_spread[j]:.3g})" for j, p in enumerate(group.data.names))
+        return (super().text() + f"\n  cases drawn from the population N(mu, Omega) of "
+                f"{group.label} ({group.data.n} openings), inside the caps and the hull above "
+                f"(from the point estimates); between-test sigma in log space: {sd}")
+
+
+def population_dispersions(models: Sequence[DispersionModel], groups: Sequence[PopulationGroup]
+                           ) -> tuple[list[DispersionModel], list[str]]:
+    """Each model whose type and stage has a population of its own drawn from it; a note per
+    model left with its point-estimate dispersions."""
+    own = {g.members[0]: g for g in groups if len(g.members) == 1}
+    out, notes = [], []
+    for model in models:
+        group = own.get((model.type, model.stage))
+        if group is None:
+            notes.append(f"{model.label}: no population of its own; point-estimate dispersions")
+            out.append(model)
+        else:
+            out.append(PopulationDispersion.of(model, group))
+    return out, notes

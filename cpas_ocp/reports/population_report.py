@@ -152,22 +152,23 @@ def population_text(groups: Sequence[PopulationGroup], skipped: Sequence[str]) -
                           if skipped else []))
 
 
+def _unit(group: PopulationGroup, name: str) -> str:
+    """The parameter's SI unit as the campaign's table gives it."""
+    return group.units.get(name, "SI")
+
+
 def forest_figure(group: PopulationGroup) -> go.Figure:
     """One panel per parameter: each opening's estimate with its own 95 % interval, its
     shrunken estimate, and the population median with the band mu +- 1.96 tau (at the
     covariates' reference)."""
     frame = opening_frame(group)
     data, fit = group.data, group.fit
-    fig = make_subplots(rows=1, cols=data.k, shared_yaxes=True,
-                        subplot_titles=list(data.names), horizontal_spacing=0.02)
+    fig = make_subplots(rows=1, cols=data.k, shared_yaxes=True, horizontal_spacing=0.02)
     for j, name in enumerate(data.names):
         f = frame[frame.parameter == name]
         log = data.log[j]
         mu, tau = fit.coefficients[(name, "intercept")].value, fit.tau[name].value
         lo, hi = _back(mu - 1.96 * tau, log), _back(mu + 1.96 * tau, log)
-        fig.add_vrect(x0=lo, x1=hi, fillcolor=MODEL, opacity=0.12, line_width=0,
-                      row=1, col=j + 1)
-        fig.add_vline(x=_back(mu, log), line_color=MODEL, row=1, col=j + 1)
         half = 1.96 * f.sigma.to_numpy()
         fig.add_trace(go.Scatter(x=f.estimate, y=f.opening, mode="markers",
                                  marker={"color": MEASURED}, name="estimate ± 1.96σ",
@@ -176,9 +177,12 @@ def forest_figure(group: PopulationGroup) -> go.Figure:
         fig.add_trace(go.Scatter(x=f.shrunken, y=f.opening, mode="markers",
                                  marker={"color": RESIDUAL, "symbol": "diamond"},
                                  name="shrunken", showlegend=j == 0), row=1, col=j + 1)
-        if log:
-            fig.update_xaxes(type="log", row=1, col=j + 1)
-    fig.update_layout(height=120 + 18 * data.n,
+        fig.update_xaxes(title_text=f"{name} ({_unit(group, name)})", row=1, col=j + 1)
+        # After the traces: plotly leaves shapes out of subplots that are still empty.
+        fig.add_vrect(x0=lo, x1=hi, fillcolor=MODEL, opacity=0.12, line_width=0,
+                      row=1, col=j + 1)
+        fig.add_vline(x=_back(mu, log), line_color=MODEL, row=1, col=j + 1)
+    fig.update_layout(height=160 + 18 * data.n,
                       title=f"{group.label}: estimates, shrunken estimates and the population "
                             "(median, ±1.96 τ)")
     return fig

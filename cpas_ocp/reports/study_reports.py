@@ -16,6 +16,7 @@ import pandas as pd
 from cpas_ocp.campaign.dispersion_study import DispersionModel
 from cpas_ocp.campaign.drag_area_envelope import drag_area_envelope, stage_conditions
 from cpas_ocp.campaign.peak_load_study import MARKER, StageLoads, summary_text
+from cpas_ocp.campaign.population_study import PopulationDispersion
 from cpas_ocp.estimation.estimator import Fit
 from cpas_ocp.io.output_folder import atomic_folder
 from cpas_ocp.io.strict_json import json_text
@@ -53,6 +54,9 @@ def write_dispersions(models: list[DispersionModel], skipped: list[str], cases: 
                 figures.append(plot_drag_area_envelope(envelope, tmp / f"envelope_{stem}.png"))
             summary.append({
                 "type": model.type, "stage": model.stage, "tests": model.tests,
+                "drawn_from": (f"population of {model.population.label}"
+                               if isinstance(model, PopulationDispersion)
+                               and model.population is not None else "point estimates"),
                 "cases": cases, "seed": seed + i,
                 "dispersions": {k: dataclasses.asdict(d) for k, d in model.dispersions.items()},
                 "hull": None if model.hull is None else {
