@@ -135,8 +135,9 @@ def test_grouping_keeps_one_population_and_separates_a_shifted_one() -> None:
 
 
 def write_campaign_tables(folder, seed: int, tests: int = 12, v_scale: float = 1.0) -> None:
-    """A campaign's parameters.csv and covariances.csv drawn from the population above: half
-    the tests of type fbcp with 14 ft lines, half drogue with 10.5 ft; two canopies each."""
+    """A campaign's parameters.csv and covariances.csv drawn from the population above: the
+    tests fbcp and drogue in turn, each type's tests with 14 ft and 10.5 ft lines in turn;
+    two canopies each."""
     rng = np.random.default_rng(seed)
     names, units = ("CdS", "n_p", "Ck"), ("m^2", "1", "1")
     rows, cov = [], []
@@ -151,8 +152,8 @@ def write_campaign_tables(folder, seed: int, tests: int = 12, v_scale: float = 1
             for n, f, v, s, u in zip(names, full, value, sd * value, units, strict=True):
                 rows.append({"test": test, "parameter": n, "name": f, "parachute": chute,
                              "type": kind, "stage": "stage1", "forebody": "capsule",
-                             "cluster_size": 2, "line_length": 4.2672 if kind == "fbcp"
-                             else 3.2004, "value": v, "std": s, "unit": u})
+                             "cluster_size": 2, "line_length": (4.2672, 3.2004)[t // 2 % 2],
+                             "value": v, "std": s, "unit": u})
             S = np.diag(sd * value) ** 2 * v_scale
             for a in range(3):
                 for b in range(a + 1):
@@ -230,3 +231,37 @@ def test_a_malformed_pool_is_exit_2(tmp_path, capsys) -> None:
                  "--pool", "fbcp"]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "--pool" in err and "TYPE/STAGE" in err
+
+
+def test_the_python_interface_gives_the_command_s_table(tmp_path) -> None:
+    import cpas_ocp as co
+    campaign = tmp_path / "campaign"
+    write_campaign_tables(campaign, seed=6)
+    pop = co.population(campaign, covariates=["line_length"])
+    assert [g.label for g in pop.groups] == ["drogue stage1", "fbcp stage1"]
+    assert "<table" in pop._repr_html_() and "fbcp stage1" in repr(pop)
+    assert pop.summary().startswith("drogue stage1: 12 openings of 6 tests")
+    out = pop.report(tmp_path / "out")
+    written = pd.read_csv(out / "population.csv")
+    assert np.allclose(written["tau"], pop.table["tau"]) and len(written) == 6
+
+
+def test_dispersions_drawn_from_the_population_stay_in_the_caps(tmp_path, capsys) -> None:
+    campaign = tmp_path / "campaign"
+    write_campaign_tables(campaign, seed=7)
+    runs = []
+    for k in (1, 2):
+        out = tmp_path / f"cases{k}"
+        assert main(["dispersions", str(campaign), "--out", str(out), "--cases", "3000",
+                     "--seed", "4", "--population"]) == 0
+        runs.append(out)
+    assert "cases drawn from the population" in capsys.readouterr().out
+    summary = json.loads((runs[0] / "dispersions.json").read_text())
+    for model in summary["models"]:
+        assert model["drawn_from"] == f"population of {model['type']} {model['stage']}"
+        cases = pd.read_parquet(runs[0] / f"cases_{model['type']}_{model['stage']}.parquet")
+        assert len(cases) == 3000
+        for name, d in model["dispersions"].items():
+            assert cases[name].between(d["lower_cap"], d["upper_cap"]).all()
+        again = pd.read_parquet(runs[1] / f"cases_{model['type']}_{model['stage']}.parquet")
+        pd.testing.assert_frame_equal(cases, again)
