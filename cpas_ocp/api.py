@@ -22,14 +22,17 @@ from __future__ import annotations
 
 import dataclasses
 import html
+import shutil
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
+from cpas_ocp import interrupts
 from cpas_ocp.campaign.dispersion_study import (
     DispersionModel,
     dispersion_models,
@@ -43,9 +46,20 @@ from cpas_ocp.campaign.population_study import (
     read_covariance_table,
 )
 from cpas_ocp.discrepancy.diagnosis import ALPHA, CONFIRM_TOP, Diagnosis, diagnose
-from cpas_ocp.discrepancy.discovery import MAX_STEPS, Discovery, DiscoveryStep, discover
+from cpas_ocp.discrepancy.discovery import (
+    MAX_STEPS,
+    Discovery,
+    DiscoveryStep,
+    InterruptedDiscovery,
+    discover,
+)
+from cpas_ocp.discrepancy.discovery_checkpoint import (
+    checkpoint_context,
+    read_checkpoint,
+    write_checkpoint,
+)
 from cpas_ocp.discrepancy.score_test import extended_spec
-from cpas_ocp.errors import InputError
+from cpas_ocp.errors import InputError, PluginError
 from cpas_ocp.estimation.estimator import Estimator, Fit, Settings
 from cpas_ocp.estimation.simulate import simulate_problem
 from cpas_ocp.estimation.uncertainty import Covariance
@@ -63,12 +77,13 @@ from cpas_ocp.inference.result_claim import (
 from cpas_ocp.inference.whatif import WhatIfResult, parameter_bounds, parse_constraint, what_if
 from cpas_ocp.io.flight_test import load_test
 from cpas_ocp.io.model_spec import ModelSpec, load_model_file, spec_of_test
+from cpas_ocp.io.output_folder import check_output
 from cpas_ocp.io.problems import load_problem
 from cpas_ocp.physics.effects.base import Effect
 from cpas_ocp.physics.effects.registry import BUILTIN, EffectType, load_plugins
 from cpas_ocp.physics.flight_test import FlightTest
 from cpas_ocp.reports.discrepancy_report import write_comparison, write_diagnosis, write_discovery
-from cpas_ocp.reports.display_units import DisplayUnits
+from cpas_ocp.reports.display_units import DisplayUnits, display_units
 from cpas_ocp.reports.plots import (
     correlation_axes,
     drag_area_axes,
@@ -288,16 +303,26 @@ class Reconstruction:
     def discover(self, out: str | Path | None = None, max_steps: int = MAX_STEPS,
                  alpha: float = ALPHA, confirm: int = CONFIRM_TOP, progress: bool = False,
                  on_step: Callable[[DiscoveryStep], None] | None = None,
-                 units: DisplayUnits | None = None) -> Discovery:
+                 units: DisplayUnits | None = None,
+                 plugin_files: Sequence[str | Path] = ()) -> Discovery:
         """Diagnose, add the confirmed effect, refit, and again, at most `max_steps` times,
-        from this fit (`cpas-ocp discover`; `on_step` is called as each step ends); the
-        folder written to `out` where given.  The command also keeps every finished step
-        on disk as it goes and resumes from them (`--resume`)."""
-        found = discover(self.fit, self.spec, self.plugins, max_steps, alpha, confirm,
-                         progress=progress, on_step=on_step, estimator=self.estimator)
-        if out is not None:
-            write_discovery(found, out, self.plugins, units)
-        return found
+        from this fit (`cpas-ocp discover`; `on_step` is called as each step ends).  With
+        `out`, the folder is written whole at every point the chain is whole, so a run
+        stopped keeps its finished steps and `resume_discovery(out)` goes on from them
+        (`discover_kept`; `plugin_files` are the files of this fit's plug-in effects,
+        which a resumed run loads again)."""
+        if out is None:
+            return discover(self.fit, self.spec, self.plugins, max_steps, alpha, confirm,
+                            progress=progress, on_step=on_step, estimator=self.estimator)
+        if self.fit.test.path is None:
+            raise InputError("(test)", "path", "a test read from a folder, for a discovery "
+                             "kept on disk")
+        context = discovery_context(self.fit.test.path, plugin_files, max_steps, alpha,
+                                    confirm, None if units is None else units.system)
+        if not self.is_result:
+            context["first_fit"] = f"the first fit is not a result: {self.problems[0]}"
+        return discover_kept(out, self.fit, self.spec, self.plugins, context, units,
+                             estimator=self.estimator, progress=progress, on_step=on_step)
 
     def compare(self, model: ModelSpec | str | Path, out: str | Path | None = None,
                 labels: tuple[str, str] = ("this", "other"), progress: bool = False,
@@ -395,3 +420,77 @@ def dispersions(campaign: str | Path, out: str | Path, cases: int, seed: int,
         notes += [f"no population: {s}" for s in pop.skipped]
     written = write_dispersions(models, skipped, cases, seed, out, table, stages)
     return Dispersions(models, skipped, notes, stages is not None, written)
+
+
+def discovery_context(test_dir: str | Path, plugin_files: Sequence[str | Path], max_steps: int,
+                      alpha: float, confirm: int, units: str | None) -> dict:
+    """What a kept discovery stores to be resumed: the test folder, the plug-in files and
+    the options, paths absolute."""
+    return {"test_dir": str(Path(test_dir).resolve()),
+            "plugin": [str(Path(f).resolve()) for f in plugin_files],
+            "max_steps": max_steps, "alpha": alpha, "confirm": confirm, "units": units}
+
+
+def discover_kept(out: str | Path, fit: Fit, spec: ModelSpec, plugins: Mapping[str, EffectType],
+                  context: Mapping[str, Any], units: DisplayUnits | None = None, *,
+                  estimator: Estimator | None = None, resume: Discovery | None = None,
+                  progress: bool = False,
+                  on_step: Callable[[DiscoveryStep], None] | None = None) -> Discovery:
+    """`discover` from `fit` (of `spec`) with the folder `out` written whole, with signals
+    held off, at every point the chain is whole: the report so far and what resuming
+    needs (`discovery_checkpoint`; `context` from `discovery_context`, its "first_fit"
+    a note the report keeps).  The options are the context's.  On a signal the finished
+    steps are written, marked stopped with how to go on, and `InterruptedDiscovery` is
+    raised again; a user's mistake (a plug-in that fails) leaves no folder it created."""
+    out = Path(out)
+    whole = [len(resume.steps) if resume is not None else 0]  # steps last written whole
+    note = context.get("first_fit")
+
+    def kept(chain: Discovery, figures: bool = False) -> Path:
+        if note and note not in chain.notes:
+            chain.notes.append(note)
+        with interrupts.deferred():
+            return write_discovery(chain, out, {**plugins, **chain.plugins}, units,
+                                   figures=figures,
+                                   extra=lambda tmp: write_checkpoint(chain, tmp, context))
+
+    def checkpoint(chain: Discovery) -> None:
+        kept(chain)
+        whole[0] = len(chain.steps)
+
+    new_folder = not out.exists() or not any(out.iterdir())
+    try:
+        found = discover(fit, spec, plugins, context["max_steps"], context["alpha"],
+                         context["confirm"], progress=progress, on_step=on_step,
+                         estimator=estimator, on_whole=checkpoint, resume=resume)
+    except (InputError, PluginError):
+        if new_folder:
+            shutil.rmtree(out, ignore_errors=True)
+        raise
+    except InterruptedDiscovery as exc:
+        # The chain as it last was whole (a step under way may have been appended since).
+        exc.partial.steps = exc.partial.steps[:max(whole[0], 1)]
+        exc.partial.stopped += f"; `cpas-ocp discover --resume {out}` goes on from here"
+        kept(exc.partial)
+        raise
+    kept(found, figures=True)
+    return found
+
+
+def resume_discovery(folder: str | Path, progress: bool = False,
+                     on_step: Callable[[DiscoveryStep], None] | None = None,
+                     on_read: Callable[[Discovery], None] | None = None) -> Discovery:
+    """Go on with the discovery kept in `folder` (`discover_kept`) from its last finished
+    step, with its test folder, plug-in files and options; `on_read` is called with the
+    chain read back, before the discovery goes on."""
+    folder = Path(folder)
+    context = checkpoint_context(folder)
+    check_output(folder)
+    test = load_test(context["test_dir"])
+    plugins = load_plugins(context["plugin"])
+    chain = read_checkpoint(folder, test, plugins)
+    if on_read is not None:
+        on_read(chain)
+    return discover_kept(folder, chain.steps[0].fit, chain.steps[0].spec, plugins, context,
+                         display_units(test, context["units"]), resume=chain,
+                         progress=progress, on_step=on_step)

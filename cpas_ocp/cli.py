@@ -553,51 +553,9 @@ def _diagnosis_options(s: argparse.ArgumentParser, resumable: bool = False) -> N
 
 
 def _discover(args: argparse.Namespace) -> int:
-    from cpas_ocp.discrepancy.discovery import (
-        Discovery,
-        DiscoveryStep,
-        InterruptedDiscovery,
-        discover,
-    )
-    from cpas_ocp.discrepancy.discovery_checkpoint import (
-        checkpoint_context,
-        read_checkpoint,
-        write_checkpoint,
-    )
+    from cpas_ocp.api import discover_kept, discovery_context, resume_discovery
+    from cpas_ocp.discrepancy.discovery import Discovery, DiscoveryStep, InterruptedDiscovery
     from cpas_ocp.io.flight_test import load_test
-    from cpas_ocp.reports.discrepancy_report import write_discovery
-    if args.resume is not None:
-        _resumed_options(args, checkpoint_context(args.resume))
-        check_output(args.out)
-    elif args.test_dir is None or args.out is None:
-        raise InputError("(command line)", "test_dir, --out",
-                         "a test folder and --out DIR, or --resume DIR")
-    test = load_test(args.test_dir)
-    plugins = _plugins(args)
-    units = _units(test, args)
-    context = {"test_dir": str(args.test_dir.resolve()),
-               "plugin": [str(Path(f).resolve()) for f in args.plugin],
-               "max_steps": args.max_steps, "alpha": args.alpha, "confirm": args.confirm,
-               "units": args.units}
-    if args.resume is not None:
-        print(f"reading the finished steps in {args.resume} ...", flush=True)
-        chain = read_checkpoint(args.resume, test, plugins)
-        est, fit, spec = None, chain.steps[0].fit, chain.steps[0].spec
-        print(f"  {len(chain.steps)} step(s) read; going on from step {len(chain.steps) - 1}",
-              flush=True)
-    else:
-        chain = None
-        est = _estimator(test, args, _spec(test, args, plugins))
-        print(f"solving: {est.size_text()} ...", flush=True)
-        rec = _reconstruction(est, args, plugins)
-        est, fit, claim, spec = rec.estimator, rec.fit, rec.claim, rec.spec
-        # The chain is read from its start: a first fit the data press against guessed
-        # bounds is said so in the report, not only on the terminal (a misfit is what the
-        # chain is for, and its table shows it); kept with the steps, so a resumed run says
-        # it too.
-        if not claim.is_result:
-            context["first_fit"] = f"the first fit is not a result: {claim.problems()[0]}"
-    whole = [len(chain.steps) if chain is not None else 0]  # steps the folder last held whole
 
     def said(step: DiscoveryStep) -> None:
         print(f"step {step.label} ({step.found_s + step.diagnosed_s:.0f} s): chi-square "
@@ -605,59 +563,46 @@ def _discover(args: argparse.Namespace) -> int:
               f"{step.diagnosis.verdict().splitlines()[0] if step.diagnosis else ''}",
               flush=True)
 
-    def kept(chain: Discovery, figures: bool = False) -> Path:
-        # The folder, written whole with signals held off: the report so far and what
-        # `--resume` needs (`discovery_checkpoint`).
-        if context.get("first_fit") and context["first_fit"] not in chain.notes:
-            chain.notes.append(context["first_fit"])
-        with interrupts.deferred():
-            return write_discovery(chain, args.out, {**plugins, **chain.plugins}, units,
-                                   figures=figures,
-                                   extra=lambda tmp: write_checkpoint(chain, tmp, context))
+    def read(chain: Discovery) -> None:
+        print(f"  {len(chain.steps)} step(s) read; going on from step {len(chain.steps) - 1}"
+              "\ndiagnosing, step by step ...", flush=True)
 
-    def checkpoint(chain: Discovery) -> None:
-        kept(chain)
-        whole[0] = len(chain.steps)
-
-    print("diagnosing, step by step ...", flush=True)
-    new_folder = not args.out.exists() or not any(args.out.iterdir())
     try:
-        found = discover(fit, spec, plugins, args.max_steps, args.alpha, args.confirm,
-                         progress=not args.verbose, on_step=said, estimator=est,
-                         on_whole=checkpoint, resume=chain)
-    except (InputError, PluginError):
-        # A user's mistake (a plug-in that fails) leaves nothing half-written; any other
-        # ending keeps the steps finished.
-        if new_folder:
-            shutil.rmtree(args.out, ignore_errors=True)
-        raise
+        if args.resume is not None:
+            print(f"reading the finished steps in {args.resume} ...", flush=True)
+            out = args.resume
+            found = resume_discovery(out, progress=not args.verbose, on_step=said,
+                                     on_read=read)
+        else:
+            if args.test_dir is None or args.out is None:
+                raise InputError("(command line)", "test_dir, --out",
+                                 "a test folder and --out DIR, or --resume DIR")
+            out = args.out
+            test = load_test(args.test_dir)
+            plugins = _plugins(args)
+            est = _estimator(test, args, _spec(test, args, plugins))
+            print(f"solving: {est.size_text()} ...", flush=True)
+            rec = _reconstruction(est, args, plugins)
+            context = discovery_context(args.test_dir, args.plugin, args.max_steps,
+                                        args.alpha, args.confirm, args.units)
+            # A first fit the data press against guessed bounds is said in the report too,
+            # and kept with the steps so that a resumed run says it as well.
+            if not rec.is_result:
+                context["first_fit"] = f"the first fit is not a result: {rec.problems[0]}"
+            print("diagnosing, step by step ...", flush=True)
+            found = discover_kept(out, rec.fit, rec.spec, plugins, context, _units(test, args),
+                                  estimator=rec.estimator, progress=not args.verbose,
+                                  on_step=said)
     except InterruptedDiscovery as exc:
-        # The steps finished are kept: the chain as it last was whole (a step under way
-        # may have been appended since), marked as stopped; `--resume` goes on from it.
-        partial = exc.partial
-        partial.steps = partial.steps[:max(whole[0], 1)]
-        partial.stopped += f"; `cpas-ocp discover --resume {args.out}` goes on from here"
-        out = kept(partial)
-        _say(f"interrupted ({exc}); the {len(partial.steps)} finished step(s) written "
+        _say(f"interrupted ({exc}); the {len(exc.partial.steps)} finished step(s) written "
              f"to {out} (discovery.md, discovery.json, step_K.json); go on with "
              f"cpas-ocp discover --resume {out}")
         return exc.exit_code
-    out = kept(found, figures=True)
     print()
     print(found.text())
     print(f"\ndiscovery written to {out} (discovery.md, discovery.html, discovery.json, "
           "discovery.png, step_K.json)")
     return 0
-
-
-def _resumed_options(args: argparse.Namespace, context: dict) -> None:
-    """The test folder and options of the discovery being resumed (`--resume`), into
-    `args`; its output folder is the one resumed."""
-    args.out = args.resume
-    args.test_dir = Path(context["test_dir"])
-    args.plugin = [Path(f) for f in context["plugin"]]
-    for name in ("max_steps", "alpha", "confirm", "units"):
-        setattr(args, name, context[name])
 
 
 def _compare(args: argparse.Namespace) -> int:

@@ -73,6 +73,8 @@ class PopulationGroup:
     groupings: list[GroupingTest] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
     units: dict[str, str] = field(default_factory=dict)  # parameter -> its SI unit
+    # A row per opening (in the order of `data.openings`): its test and table columns.
+    covariates: pd.DataFrame = field(default_factory=pd.DataFrame)
 
     @property
     def data(self) -> PopulationData:
@@ -251,7 +253,8 @@ def population_groups(table: pd.DataFrame, covariances: pd.DataFrame | None, whe
         coef, *_ = np.linalg.lstsq(data.X, data.y, rcond=None)
         spread = (data.y - data.X @ coef).std(axis=0, ddof=data.p)
         group = PopulationGroup(label, members, fit, spread, notes=notes,
-                                units=dict(zip(part.parameter, part.unit, strict=True)))
+                                units=dict(zip(part.parameter, part.unit, strict=True)),
+                                covariates=frame)
         group.groupings, more = _groupings(frame, data, full_omega, alpha, len(members) > 1)
         group.notes += more
         groups.append(group)
