@@ -82,13 +82,15 @@ class Prediction:
     """The predicted covariance of one instrumentation at the nominal parameters.
 
     `values`: nominal values (SI) of the free parameters; `scale`: their typical
-    magnitudes; `residuals`: the number of weighted residuals the plan gives.
+    magnitudes; `units`: their SI units; `residuals`: the number of weighted residuals
+    the plan gives.
     """
 
     instrumentation: Instrumentation
     covariance: Covariance
     values: dict[str, float]
     scale: dict[str, float]
+    units: dict[str, str]
     residuals: int
 
     def sigma(self, name: str) -> float | None:
@@ -96,8 +98,11 @@ class Prediction:
         return self.covariance.std.get(name)
 
     def status(self, name: str) -> str:
-        """'determined', 'poorly determined' (in a weak combination), 'undetermined' or
-        'on a bound'."""
+        """'determined', 'poorly determined' (in a weak combination), 'undetermined', 'on a
+        bound', or 'not estimated' (the instrumentation's model has no such parameter: the
+        scale of a sensor it goes without)."""
+        if name not in self.covariance.names:
+            return "not estimated"
         if name in self.covariance.at_bound:
             return "on a bound"
         if name in self.covariance.undetermined:
@@ -308,6 +313,7 @@ def predicted_covariance(problem: Problem, instr: Instrumentation,
         residuals = sum(len(s.time) * len(s.channels) for s in test.sensors)
         return Prediction(instr, cov, {n: values[n] for n in est.free},
                           {n: model.parameter(n).scale for n in est.free},
+                          {n: model.parameter(n).unit for n in est.free},
                           residuals + len(test.events))
 
 
