@@ -24,14 +24,15 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-__all__ = ["Dispersions", "Population", "Reconstruction", "dispersions", "fit_estimator",
-           "load_model", "load_test", "population", "reconstruct", "simulate"]
+__all__ = ["Dispersions", "Population", "Reconstruction", "design", "dispersions",
+           "fit_estimator", "load_model", "load_test", "population", "reconstruct", "simulate"]
 
 if TYPE_CHECKING:
     from cpas_ocp.api import (
         Dispersions,
         Population,
         Reconstruction,
+        design,
         dispersions,
         fit_estimator,
         load_model,

@@ -74,14 +74,18 @@ from cpas_ocp.inference.result_claim import (
     start_shifts,
     with_start_shifts,
 )
+from cpas_ocp.inference.test_design import TestDesign
+from cpas_ocp.inference.test_design import design as design_test
 from cpas_ocp.inference.whatif import WhatIfResult, parameter_bounds, parse_constraint, what_if
 from cpas_ocp.io.flight_test import load_test
 from cpas_ocp.io.model_spec import ModelSpec, load_model_file, spec_of_test
 from cpas_ocp.io.output_folder import check_output
 from cpas_ocp.io.problems import load_problem
+from cpas_ocp.io.test_plan import load_plan
 from cpas_ocp.physics.effects.base import Effect
 from cpas_ocp.physics.effects.registry import BUILTIN, EffectType, load_plugins
 from cpas_ocp.physics.flight_test import FlightTest
+from cpas_ocp.reports.design_report import write_design
 from cpas_ocp.reports.discrepancy_report import write_comparison, write_diagnosis, write_discovery
 from cpas_ocp.reports.display_units import DisplayUnits, display_units
 from cpas_ocp.reports.plots import (
@@ -100,8 +104,8 @@ from cpas_ocp.reports.report import fit_summary, parameter_table, write_report
 from cpas_ocp.reports.report_data import bound_flag
 from cpas_ocp.reports.study_reports import write_dispersions
 
-__all__ = ["Dispersions", "Population", "Reconstruction", "dispersions", "fit_estimator",
-           "load_model", "load_test", "population", "reconstruct", "simulate"]
+__all__ = ["Dispersions", "Population", "Reconstruction", "design", "dispersions",
+           "fit_estimator", "load_model", "load_test", "population", "reconstruct", "simulate"]
 
 
 def simulate(problem: str, out: str | Path, seed: int, effects: Sequence[Effect] | None = None,
@@ -114,6 +118,17 @@ def simulate(problem: str, out: str | Path, seed: int, effects: Sequence[Effect]
     if truth:
         base = dataclasses.replace(base, truth={**base.truth, **truth})
     return simulate_problem(base, out, seed, effects=None if effects is None else list(effects))
+
+
+def design(plan: str | Path, out: str | Path | None = None) -> TestDesign:
+    """The design of the next test from the plan file `plan` (`inference.test_design`): each
+    candidate instrumentation's predicted sigma, the single changes ranked by the sigma they
+    remove from the plan's parameters of interest, the failure table; the folder
+    `cpas-ocp design` writes is written to `out` where given."""
+    found = design_test(load_plan(plan))
+    if out is not None:
+        write_design(found, out)
+    return found
 
 
 def load_model(path: str | Path, plugins: Sequence[str | Path] = ()) -> ModelSpec:

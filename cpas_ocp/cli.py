@@ -21,6 +21,8 @@
                                               import-altus LOG ... is import --format altus
     cpas-ocp flight NAME --out DIR            import a real flight's logs, reconstruct, compare
                                               with the nominal drag areas and the measured descent
+    cpas-ocp design PLAN --out DIR            predict each parameter's sigma under planned
+                                              instrumentations, rank single sensor changes
     cpas-ocp demo [--out DIR]                 simulate the built-in Drogue test and reconstruct it
 
 Exit codes: 0 success; 1 an internal error (one line, the traceback in a log
@@ -332,6 +334,12 @@ def _parser() -> argparse.ArgumentParser:
     _solver_options(s)
     s.set_defaults(run=_flight)
 
+    s = sub.add_parser("design", help="predict the sigma of every parameter under planned "
+                       "instrumentations and rank single sensor changes (a plan file)")
+    s.add_argument("plan", type=Path)
+    s.add_argument("--out", required=True, type=Path)
+    s.set_defaults(run=_design)
+
     s = sub.add_parser("demo", help="simulate the built-in Drogue test and reconstruct it")
     s.add_argument("--out", type=Path, default=Path("cpas-demo"))
     s.add_argument("--seed", type=SEED, default=1)
@@ -480,6 +488,16 @@ def _simulate(args: argparse.Namespace) -> int:
     from cpas_ocp.io.problems import load_problem
     test = simulate_problem(load_problem(args.name), args.out, args.seed)
     print(f"wrote test folder {args.out} ({test.name}) with truth.json")
+    return 0
+
+
+def _design(args: argparse.Namespace) -> int:
+    from cpas_ocp.api import design
+    from cpas_ocp.reports.design_report import design_text
+    found = design(args.plan, args.out)
+    print(design_text(found))
+    print(f"\ndesign written to {args.out} (design.html, sigma.csv, changes.csv, failures.csv,"
+          f" design.json)")
     return 0
 
 

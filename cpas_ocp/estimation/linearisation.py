@@ -5,7 +5,7 @@ information's log-determinant.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import casadi as ca
 import numpy as np
@@ -43,8 +43,16 @@ class Linearising:
             fn = self._lagrangian_hessian_product()
             product = lambda Z: np.asarray(  # noqa: E731
                 fn.map(Z.shape[1], "serial")(fit.z, fit.multipliers, Z))
-        return kkt_covariance(self._linearise(fit.z), self._param_index, self.pscale,
-                              self.free, scale_by_residual, product)
+        return self.covariance_at(fit.z, scale_by_residual, product)
+
+    def covariance_at(self, z: np.ndarray, scale_by_residual: bool = False,
+                      hessian_product: Callable[[np.ndarray], np.ndarray] | None = None
+                      ) -> Covariance:
+        """Covariance of the free parameters at the decision vector `z` (a fit's, or the
+        nominal point of a planned test, where with noise-free data it is the inverse
+        Fisher information); `hessian_product` as in `kkt_covariance`."""
+        return kkt_covariance(self._linearise(z), self._param_index, self.pscale,
+                              self.free, scale_by_residual, hessian_product)
 
     def gauss_newton_estimate(self, z: np.ndarray, release: Sequence[str] = ()
                               ) -> tuple[dict[str, float], Covariance]:

@@ -103,14 +103,17 @@ def model_outputs(model: Model, traj: Trajectory, params: dict[str, float], sens
 
 
 def simulate_problem(problem: Problem, out: str | Path, seed: int,
-                     effects: list[Effect] | None = None, noise: bool = True) -> FlightTest:
+                     effects: list[Effect] | None = None, noise: bool = True,
+                     known_only: bool = False) -> FlightTest:
     """Simulate `problem` with sensor noise drawn from `seed`; write a test folder at `out`.
 
     The truth model is `effects` if given, else the problem's ``simulation.model``
     block (a hidden effect the manifest's model lacks), else the manifest's.
 
     `noise=False` writes the noise-free outputs (event times stay noisy), for
-    checking a transcription against the simulator.
+    checking a transcription against the simulator.  `known_only` leaves out true values
+    of parameters the model lacks (the scale of a sensor a planned test goes without)
+    rather than refusing them.
 
     Writes manifest.json, one CSV per sensor (in the manifest's units) and
     truth.json (``{"parameters": {name: value}}``, SI).  Nothing is left
@@ -145,7 +148,9 @@ def simulate_problem(problem: Problem, out: str | Path, seed: int,
         effect = next(e for e in model.effects if e.name == name)
         truth.update(effect.draw(test, np.random.default_rng([seed, 1])))
     unknown = sorted(set(truth) - set(model.parameter_names))
-    if unknown:
+    if known_only:
+        truth = {k: v for k, v in truth.items() if k not in unknown}
+    elif unknown:
         raise ValueError(f"problem {problem.name}: truth names unknown parameters {unknown}")
     x0 = initial_state(model, sim)
     for name, quantity in derived.items():

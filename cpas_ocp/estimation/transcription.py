@@ -831,9 +831,15 @@ class NlpTranscription:
                 x0[m.state_slice(st.name)] = fit_x[:, fit.model.state_slice(st.name)].T
             elif st.pinned:
                 x0[m.state_slice(st.name), 0] = st.initial
-        p0 = np.array([known[f] for f in self.free]) / self.pscale
-        c0 = np.array([fit.captures[c.name] for c in m.captures]) / self._cscale
-        return np.concatenate([(x0 / self._xscale[:, None]).ravel(order="F"), p0, c0])
+        return self.decision_vector(x0, known, fit.captures)
+
+    def decision_vector(self, states: np.ndarray, values: dict[str, float],
+                        captures: dict[str, float]) -> np.ndarray:
+        """The scaled decision vector of the node `states` (nx x nodes, SI), the free
+        parameters' `values` (SI) and the captured values by name (SI)."""
+        p0 = np.array([values[f] for f in self.free]) / self.pscale
+        c0 = np.array([captures[c.name] for c in self.model.captures]) / self._cscale
+        return np.concatenate([(states / self._xscale[:, None]).ravel(order="F"), p0, c0])
 
     def extension_start(self, fit: Fit, values: dict[str, float] | None = None
                         ) -> tuple[np.ndarray, tuple[float, float]]:
