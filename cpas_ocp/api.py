@@ -44,6 +44,7 @@ from cpas_ocp.campaign.population_study import (
     population_dispersions,
     population_groups,
     read_covariance_table,
+    with_line_length_ratio,
 )
 from cpas_ocp.discrepancy.diagnosis import ALPHA, CONFIRM_TOP, Diagnosis, diagnose
 from cpas_ocp.discrepancy.discovery import (
@@ -360,7 +361,7 @@ def population(campaign: str | Path, parameters: Sequence[str] | None = None,
     campaign`): mu with the `covariates`' effects, Omega, each opening's shrunken
     estimate and pull, and the grouping tests (`campaign.population_study`).  Each
     list in `pool` names (type, stage) pairs fitted as one population."""
-    table = read_parameter_table(campaign)
+    table = with_line_length_ratio(read_parameter_table(campaign), read_stage_table(campaign))
     covariances = read_covariance_table(campaign)
     groups, skipped = population_groups(table, covariances, str(campaign), parameters,
                                         covariates, pool, full_omega, alpha)

@@ -166,7 +166,7 @@ def _ranged(kind: type, low: float, high: float = math.inf, low_open: bool = Fal
 SEED = _ranged(int, 0)
 COUNT = _ranged(int, 1)
 # The test table's columns a population's mean may depend on (population_study).
-COVARIATES = ("type", "forebody", "cluster_size", "line_length")
+COVARIATES = ("type", "forebody", "cluster_size", "line_length", "line_length_ratio")
 
 
 def _parser() -> argparse.ArgumentParser:

@@ -265,3 +265,27 @@ def test_dispersions_drawn_from_the_population_stay_in_the_caps(tmp_path, capsys
             assert cases[name].between(d["lower_cap"], d["upper_cap"]).all()
         again = pd.read_parquet(runs[1] / f"cases_{model['type']}_{model['stage']}.parquet")
         pd.testing.assert_frame_equal(cases, again)
+
+
+def test_the_line_length_ratio_is_a_covariate_where_the_stages_give_d_o(tmp_path) -> None:
+    """L_s / D_o from the stages table: at one D_o its effect is the line length's times D_o,
+    and the grouping by it is not tested twice."""
+    import cpas_ocp as co
+    from cpas_ocp.campaign.campaign import STAGE_COLUMNS
+    campaign = tmp_path / "campaign"
+    write_campaign_tables(campaign, seed=8)
+    table = pd.read_csv(campaign / "parameters.csv")
+    d_o = 2.1336
+    stages = table.groupby(["test", "parachute"]).first().reset_index().assign(
+        stage_index=0, inflation="infinite_mass", fill_length="diameter", diameter=d_o,
+        v_start=60.0)[STAGE_COLUMNS]
+    stages.to_csv(campaign / "stages.csv", index=False)
+    by_length = co.population(campaign, covariates=["line_length"])
+    by_ratio = co.population(campaign, covariates=["line_length_ratio"])
+    for a, b in zip(by_length.groups, by_ratio.groups, strict=True):
+        length = next(c for c in a.data.columns if c.startswith("line_length"))
+        ratio = next(c for c in b.data.columns if c.startswith("line_length_ratio"))
+        for name in a.data.names:
+            assert np.isclose(b.fit.coefficients[(name, ratio)].value,
+                              a.fit.coefficients[(name, length)].value * d_o, rtol=1e-4)
+        assert [t.covariate for t in b.groupings] == ["line_length"]

@@ -47,8 +47,23 @@ from cpas_ocp.campaign.population_model import (
 )
 from cpas_ocp.errors import InputError
 
-# The columns of the parameter table a population may be grouped or regressed on.
-COVARIATE_COLUMNS = ("type", "forebody", "cluster_size", "line_length")
+# The columns of the parameter table a population may be grouped or regressed on (the
+# line-length ratio L_s / D_o where the campaign's stages table gives each D_o).
+COVARIATE_COLUMNS = ("type", "forebody", "cluster_size", "line_length", "line_length_ratio")
+
+
+def with_line_length_ratio(table: pd.DataFrame, stages: pd.DataFrame | None) -> pd.DataFrame:
+    """The parameter table with the column line_length_ratio, each canopy's suspension-line
+    length over its nominal diameter D_o (from the stages table; blank without one)."""
+    table = table.copy()
+    if stages is None:
+        table["line_length_ratio"] = np.nan
+        return table
+    diameter = stages.groupby(["test", "parachute"]).diameter.first()
+    keys = pd.MultiIndex.from_arrays([table.test, table.parachute])
+    table["line_length_ratio"] = (table.line_length.to_numpy(float)
+                                  / diameter.reindex(keys).to_numpy(float)).round(4)
+    return table
 
 
 class TooFewOpenings(Exception):
@@ -197,7 +212,8 @@ def population_data(rows: pd.DataFrame, covariances: pd.DataFrame | None,
         ys.append(g["value"].to_numpy(float))
         Vs.append(V)
         labels.append(f"{test} {chute}")
-        openings.append({c: g[c].iloc[0] for c in COVARIATE_COLUMNS} | {"test": test})
+        openings.append({c: g[c].iloc[0] if c in g else np.nan for c in COVARIATE_COLUMNS}
+                        | {"test": test})
     y, V = np.array(ys), np.array(Vs)
     log = tuple(bool((y[:, j] > 0).all()) for j in range(len(names)))
     for j, is_log in enumerate(log):
@@ -265,15 +281,20 @@ def _groupings(frame: pd.DataFrame, data: PopulationData, full_omega: bool, alph
                pooled: bool) -> tuple[list[GroupingTest], list[str]]:
     """The grouping test of every covariate column of `frame` (a row per opening) taking two
     or more values over the openings, each value held by at least k + 2 of them (k
-    parameters)."""
+    parameters); a column splitting the openings as one tested before is not tested
+    again."""
     intercept = data.subset(np.arange(data.n), keep_columns=[0])
-    tests, notes = [], []
+    tests, notes, seen = [], [], set()
     for column in COVARIATE_COLUMNS:
         if column == "type" and not pooled:
             continue
         values = frame[column]
         if values.isna().any() or values.nunique() < 2:
             continue
+        partition = tuple(pd.factorize(values)[0])
+        if partition in seen:  # the same split as a column tested already (L_s at one D_o)
+            continue
+        seen.add(partition)
         counts = values.value_counts()
         if counts.min() < data.k + 2:
             notes.append(f"{column}: not tested as a grouping; {counts.idxmin()} has "
