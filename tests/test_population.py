@@ -289,3 +289,20 @@ def test_the_line_length_ratio_is_a_covariate_where_the_stages_give_d_o(tmp_path
             assert np.isclose(b.fit.coefficients[(name, ratio)].value,
                               a.fit.coefficients[(name, length)].value * d_o, rtol=1e-4)
         assert [t.covariate for t in b.groupings] == ["line_length"]
+
+
+@pytest.mark.parametrize("reml", [True, False])
+def test_the_likelihood_s_gradient_is_its_derivative(reml: bool) -> None:
+    """The analytic d(log L)/d(Omega), through Omega's parametrisation, against central
+    differences of the log-likelihood itself."""
+    from cpas_ocp.campaign.population_model import OmegaForm, evaluate, omega_gradient
+    data = draw(seed=9, n=25)
+    form = OmegaForm(3, full=True)
+    theta = np.array([np.log(0.04), np.log(0.07), np.log(0.02), 0.3, -0.2, 0.5])
+    ev = evaluate(data, form.omega(theta), reml)
+    analytic = np.einsum("jl,jlm->m", omega_gradient(data, ev, reml), form.jacobian(theta))
+    h = 1e-5
+    numeric = [(evaluate(data, form.omega(theta + h * e), reml).log_likelihood
+                - evaluate(data, form.omega(theta - h * e), reml).log_likelihood) / (2 * h)
+               for e in np.eye(6)]
+    assert np.allclose(analytic, numeric, rtol=1e-5, atol=1e-6 * np.abs(numeric).max())
