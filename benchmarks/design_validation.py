@@ -4,11 +4,11 @@ For a plan file (`docs/plans/drogue.json`, `docs/plans/fbcp.json`), the design i
 (`inference.test_design.design`): each candidate's predicted covariance, and the
 single changes ranked by the sigma they remove from the plan's parameters of interest.
 Then the first candidate, the top-ranked change and the runner-up (or the changes named
-with --changes) are each flown over seeds 1..N: the planned test simulated with sensor
-and event-timing noise from the seed, its truth.json moved out of the folder before the
-estimator loads it, and reconstructed as a user would (``Estimator(load_test(folder))``
-from the offline reduction, ``solve()``).  The truth is read only to check the
-estimates' mean.
+with --changes) are each flown over seeds 1..N (from --first): the planned test
+simulated with sensor and event-timing noise from the seed, its truth.json moved out of
+the folder before the estimator loads it, and reconstructed as a user would
+(``Estimator(load_test(folder))`` from the offline reduction, ``solve()``).  The truth
+is read only to check the estimates' mean.
 
 Printed per instrumentation and free parameter: the predicted sigma, the empirical
 standard deviation of the estimates over the seeds (ddof 1), their ratio, and whether
@@ -21,7 +21,7 @@ its bootstrap 95 % interval over the seeds (seeded); the change ranked first is
 confirmed when its empirical reduction is the largest.
 
     python benchmarks/design_validation.py docs/plans/drogue.json --seeds 50 --workers 2 \
-        [--changes "LABEL" ...] [--out CSV]
+        [--first 1] [--changes "LABEL" ...] [--out CSV]
 
 One `drogue` seed takes about 10-20 s on one core, one `fbcp` seed about 1 s.
 """
@@ -160,6 +160,7 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("plan", type=Path)
     parser.add_argument("--seeds", type=int, default=50)
+    parser.add_argument("--first", type=int, default=1, help="the first seed (1)")
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--changes", nargs="*", default=[])
     parser.add_argument("--out", type=Path)
@@ -171,7 +172,8 @@ def main() -> int:
     print(f"design of {plan.problem.name}: {len(found.ranking)} changes ranked in "
           f"{time.perf_counter() - t0:.0f} s; flying: "
           + "; ".join(c.instrumentation.name for c in cases))
-    runs = flown(plan.problem, cases, list(range(1, args.seeds + 1)), args.workers)
+    runs = flown(plan.problem, cases, list(range(args.first, args.first + args.seeds)),
+                 args.workers)
     rows: list[dict] = []
     estimates, seeds = {}, {}
     for case in cases:

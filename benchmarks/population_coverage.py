@@ -28,6 +28,8 @@ Scored per seed:
 - the point-estimate method: the standard deviation of the estimates over the
   openings against tau (its bias).
 
+The scoring runs on `--workers` processes (each population fit on one thread).
+
     python benchmarks/population_coverage.py [--seeds 50] [--first 1] [--workers 2]
         [--keep DIR] [--analyse-only] [--diagonal]
 
@@ -46,6 +48,7 @@ import shutil
 import sys
 import tempfile
 import time
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -218,7 +221,6 @@ def main() -> None:
     ap.add_argument("--diagonal", action="store_true", help="a diagonal Omega")
     args = ap.parse_args()
     keep = args.keep or Path(tempfile.mkdtemp(prefix="population-"))
-    scores, failed = [], 0
     t0 = time.perf_counter()
     seeds = list(range(args.first, args.first + args.seeds))
     if not args.analyse_only:
@@ -226,13 +228,12 @@ def main() -> None:
             reconstruct_seeds(seeds[b:b + BATCH], keep, args.workers)
             print(f"seeds {seeds[b]}-{seeds[min(b + BATCH, len(seeds)) - 1]} reconstructed, "
                   f"{time.perf_counter() - t0:.0f} s so far", file=sys.stderr, flush=True)
-    for seed in seeds:
-        folder = keep / f"seed{seed}"
-        if not (folder / "truth.json").is_file():
-            continue
-        failures = sum(len(read_failures(folder / s)) for s in ("same", "differ"))
-        failed += failures
-        scores.append(score_seed(seed, folder, not args.diagonal))
+    done = [s for s in seeds if (keep / f"seed{s}" / "truth.json").is_file()]
+    failed = sum(len(read_failures(keep / f"seed{s}" / c)) for s in done
+                 for c in ("same", "differ"))
+    with ProcessPoolExecutor(args.workers) as pool:
+        scores = list(pool.map(score_seed, done, [keep / f"seed{s}" for s in done],
+                               [not args.diagonal] * len(done)))
     summarise(scores)
     print(f"reconstructions that were not a result: {failed}")
     if args.keep is None:

@@ -356,15 +356,16 @@ class Reconstruction:
 
 def population(campaign: str | Path, parameters: Sequence[str] | None = None,
                covariates: Sequence[str] = (), pool: Sequence[Sequence[tuple[str, str]]] = (),
-               full_omega: bool = True, alpha: float = 0.05) -> Population:
+               full_omega: bool = True, alpha: float = 0.05, seed: int = 0) -> Population:
     """The population of each canopy type and stage of a campaign folder (`cpas-ocp
     campaign`): mu with the `covariates`' effects, Omega, each opening's shrunken
-    estimate and pull, and the grouping tests (`campaign.population_study`).  Each
-    list in `pool` names (type, stage) pairs fitted as one population."""
+    estimate and pull, and the grouping tests (`campaign.population_study`; their
+    bootstrap drawn with `seed`).  Each list in `pool` names (type, stage) pairs fitted as
+    one population."""
     table = with_line_length_ratio(read_parameter_table(campaign), read_stage_table(campaign))
     covariances = read_covariance_table(campaign)
     groups, skipped = population_groups(table, covariances, str(campaign), parameters,
-                                        covariates, pool, full_omega, alpha)
+                                        covariates, pool, full_omega, alpha, seed)
     if not groups:
         raise InputError(str(campaign), "(table)", "a canopy type and stage with enough "
                          "openings for a population; " + "; ".join(skipped or ["none"]))

@@ -274,6 +274,8 @@ def _parser() -> argparse.ArgumentParser:
                    help="no between-test correlations (a diagonal Omega)")
     s.add_argument("--alpha", type=float, default=0.05,
                    help="the grouping tests' level (0.05)")
+    s.add_argument("--seed", type=SEED, default=0,
+                   help="the seed of the grouping tests' bootstrap (0)")
     s.set_defaults(run=_population)
 
     s = sub.add_parser("dispersions", help="Monte Carlo cases per canopy type and stage from "
@@ -686,7 +688,7 @@ def _population(args: argparse.Namespace) -> int:
     if not 0.0 < args.alpha < 1.0:
         raise InputError("(command line)", "--alpha", f"a level in (0, 1); got {args.alpha:g}")
     pop = population(args.campaign, args.parameters, args.covariates, args.pool,
-                     not args.diagonal, args.alpha)
+                     not args.diagonal, args.alpha, args.seed)
     out = pop.report(args.out)
     print(pop.summary())
     print(f"\npopulations written to {out} (population.md, population.csv, openings.csv, "

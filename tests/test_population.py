@@ -27,11 +27,12 @@ MEAN = np.array([np.log(2.0), np.log(9.0), np.log(1.5)])
 EFFECT = np.array([0.06, 0.0, -0.03])  # per unit of the covariate (0 or 1)
 
 
-def draw(seed: int, n: int, k: int = 3, shift: float = 0.0, noise: float = 0.03
-         ) -> PopulationData:
-    """`n` openings of a k-parameter population with one 0/1 covariate; each estimate's
-    standard deviations `noise` times a factor in [0.5, 2], correlated 0.4 within a test.
-    The second half of the openings shifted by `shift` between-test sigmas."""
+def draw(seed: int, n: int, k: int = 3, shift: float = 0.0, noise: float = 0.03,
+         effect: bool = True) -> PopulationData:
+    """`n` openings of a k-parameter population with one 0/1 covariate (of no effect
+    without `effect`); each estimate's standard deviations `noise` times a factor in
+    [0.5, 2], correlated 0.4 within a test.  The second half of the openings shifted by
+    `shift` between-test sigmas."""
     rng = np.random.default_rng(seed)
     omega = RHO[:k, :k] * np.outer(TAU[:k], TAU[:k])
     x = (np.arange(n) % 2).astype(float)
@@ -39,7 +40,8 @@ def draw(seed: int, n: int, k: int = 3, shift: float = 0.0, noise: float = 0.03
     sd = noise * rng.uniform(0.5, 2.0, (n, 1)) * np.ones(k)
     within = 0.6 * np.eye(k) + 0.4
     V = within[None] * sd[:, :, None] * sd[:, None, :]
-    theta = MEAN[:k] + x[:, None] * EFFECT[:k] + rng.multivariate_normal(np.zeros(k), omega, n)
+    theta = (MEAN[:k] + x[:, None] * EFFECT[:k] * effect
+             + rng.multivariate_normal(np.zeros(k), omega, n))
     theta[n // 2:] += shift * TAU[:k]
     y = theta + np.array([rng.multivariate_normal(np.zeros(k), v) for v in V])
     return PopulationData(tuple("abc"[:k]), tuple(f"t{i} c1" for i in range(n)), y, V, X,
@@ -118,7 +120,8 @@ def test_intervals_cover_at_their_level() -> None:
 
 @pytest.mark.slow
 def test_grouping_keeps_one_population_and_separates_a_shifted_one() -> None:
-    """Two sets of 20 openings: drawn alike they are pooled as often as the level says;
+    """Two sets of 20 openings of two parameters: drawn alike they are pooled as often as
+    the level says (the chi-square law as it is: 10 openings per parameter apart);
     shifted by two between-test sigmas in every parameter they are separated in at least
     80 % of the draws."""
     reps = 60
@@ -128,7 +131,7 @@ def test_grouping_keeps_one_population_and_separates_a_shifted_one() -> None:
         for shift, out in ((0.0, kept), (2.0, split)):
             data = draw(seed=500 + seed, n=40, k=2, shift=shift, noise=0.02)
             intercept = data.subset(np.arange(40), keep_columns=[0])
-            out.append(grouping_test(intercept, labels, "type").separate)
+            out.append(grouping_test(intercept, labels, "type", bootstrap=0).separate)
     _, hi = stats.binom.ppf([0.005, 0.995], reps, 0.05)
     assert sum(kept) <= hi
     assert np.mean(split) >= 0.8
@@ -306,3 +309,26 @@ def test_the_likelihood_s_gradient_is_its_derivative(reml: bool) -> None:
                 - evaluate(data, form.omega(theta - h * e), reml).log_likelihood) / (2 * h)
                for e in np.eye(6)]
     assert np.allclose(analytic, numeric, rtol=1e-5, atol=1e-6 * np.abs(numeric).max())
+
+
+@pytest.mark.slow
+def test_the_bartlett_factor_is_the_statistic_s_mean_under_pooling() -> None:
+    """Three parameters, a full Omega, 12 openings a level: the bootstrap's Bartlett factor
+    of one campaign against the statistic's mean over 40 campaigns drawn from the truth
+    (per dof), within three standard errors of their difference (the statistic is about b
+    times a chi-square on dof, so each mean over 40 has a standard error b sqrt(2 / (40
+    dof))); the mean itself above 1, the chi-square law's."""
+    from cpas_ocp.campaign.population_model import OmegaForm
+    labels = np.array(["A"] * 12 + ["B"] * 12)
+    dof = 1 * 3 + OmegaForm(3, full=True).size
+    statistics = []
+    for seed in range(40):
+        data = draw(seed=900 + seed, n=24, k=3, effect=False).subset(np.arange(24),
+                                                                      keep_columns=[0])
+        statistics.append(grouping_test(data, list(labels), "type", bootstrap=0).statistic)
+    mean = float(np.mean(statistics)) / dof
+    one = draw(seed=899, n=24, k=3, effect=False).subset(np.arange(24), keep_columns=[0])
+    factor = grouping_test(one, list(labels), "type", bootstrap=40, seed=3).bartlett
+    se = mean * np.sqrt(2.0 / (dof * 40)) * np.sqrt(2.0)  # of the difference of two means
+    assert mean > 1.0
+    assert abs(factor - mean) < 3.0 * se

@@ -45,6 +45,7 @@ typical within-test variance (n - 1) sum w / ((sum w)^2 - sum w^2), w = 1/V_i,jj
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -390,24 +391,30 @@ class PopulationFit:
 
 
 def fit_population(data: PopulationData, full_omega: bool = True, reml: bool = True,
-                   intervals: bool = True, level: float = LEVEL, tau_intervals: bool = True
-                   ) -> PopulationFit:
+                   intervals: bool = True, level: float = LEVEL, tau_intervals: bool = True,
+                   start: np.ndarray | None = None) -> PopulationFit:
     """Maximise the (restricted) likelihood of `data`; with `intervals`, the coefficients'
     t intervals and, with `tau_intervals` too, each tau's profile-likelihood interval at
-    `level` (a few profile fits per parameter: the costly part).
+    `level` (a few profile fits per parameter: the costly part).  `start`: Omega's
+    parameters (`OmegaForm`) to start from, one start only; by default the moment
+    estimate and a second start with every tau a tenth of it.
 
     BLAS runs on one thread here: the matrices are a few rows wide, and with L-BFGS-B's
     vector operations on a pool of threads `cpas-ocp population` of a campaign of 20
     tests took 30 s against 6.7 s on one (2 cores busy with other work)."""
     with threadpool_limits(1):
-        return _fit_population(data, full_omega, reml, intervals, level, tau_intervals)
+        return _fit_population(data, full_omega, reml, intervals, level, tau_intervals,
+                               start)
 
 
 def _fit_population(data: PopulationData, full_omega: bool, reml: bool, intervals: bool,
-                    level: float, tau_intervals: bool) -> PopulationFit:
+                    level: float, tau_intervals: bool, start: np.ndarray | None
+                    ) -> PopulationFit:
     form = OmegaForm(data.k, full_omega and data.k > 1)
-    start = form.vector(_moment_start(data), _floor(data))
-    theta, ll = _maximise(data, form, reml, start)
+    if start is None:
+        theta, ll = _maximise(data, form, reml, form.vector(_moment_start(data), _floor(data)))
+    else:
+        theta, ll = _maximise(data, form, reml, start, second_start=False)
     omega = form.omega(theta)
     ev = evaluate(data, omega, reml)
     dof_q = data.n * data.k - data.p * data.k
@@ -458,10 +465,16 @@ class GroupingTest:
     """Pooled against separate populations for the levels of one covariate.
 
     `statistic` = 2 (sum of the separate fits' maximum log-likelihoods - the pooled
-    one's), full likelihood, against chi-square(`dof`); `separate` when its p-value is
-    below `alpha`.  `shift` holds the level's effect on each parameter's mean (the second
-    level against the first, in the model's space) with its interval, from the pooled
-    Omega with the level as a covariate."""
+    one's), full likelihood, with `dof` more parameters apart than pooled.  Its
+    chi-square(dof) law holds only for many openings per parameter: with 20 openings of
+    5 parameters and a full Omega (20 more parameters apart) it rejected a true pooling
+    in 20 % of 50 simulated campaigns at a level of 5 %.  So it is Bartlett-adjusted by a
+    parametric bootstrap (Rocke 1989): `bootstrap` campaigns drawn from the pooled fit
+    give the statistic's mean under pooling, `bartlett` = that mean / dof, and the
+    p-value is chi-square(dof)'s at statistic / bartlett.  `separate` when the p-value
+    is below `alpha`.  `shift` holds the level's effect on each parameter's mean (the
+    second level against the first, in the model's space) with its interval, from the
+    pooled Omega with the level as a covariate."""
 
     covariate: str
     levels: tuple[str, ...]
@@ -470,30 +483,56 @@ class GroupingTest:
     p_value: float
     alpha: float
     shift: dict[str, Interval]
+    bartlett: float = 1.0
+    bootstrap: int = 0
 
     @property
     def separate(self) -> bool:
         return self.p_value < self.alpha
 
 
+# Campaigns drawn from the pooled fit to Bartlett-adjust a grouping test's statistic.
+BOOTSTRAP = 40
+
+
+def _split_statistic(data: PopulationData, labels: np.ndarray, levels: tuple[str, ...],
+                     full_omega: bool) -> tuple[float, list[PopulationFit]]:
+    """2 (separate - pooled) maximum log-likelihood, and the fits (pooled first, then one
+    per level), each from both starts of `fit_population` (a bootstrap campaign started
+    from the data's own estimates stalled in a poorer optimum in 2 of 20 campaigns and
+    dragged the adjustment below 1)."""
+    parts = [data, *(data.subset(labels == level) for level in levels)]
+    fits = [fit_population(part, full_omega, reml=False, intervals=False) for part in parts]
+    separate = sum(f.log_likelihood for f in fits[1:])
+    return max(2.0 * (separate - fits[0].log_likelihood), 0.0), fits
+
+
 def grouping_test(data: PopulationData, labels: Sequence[str], covariate: str,
-                  full_omega: bool = True, alpha: float = 0.05) -> GroupingTest:
+                  full_omega: bool = True, alpha: float = 0.05, bootstrap: int = BOOTSTRAP,
+                  seed: int = 0) -> GroupingTest:
     """Test whether the openings labelled by `labels` (one label per opening, two or more
-    levels) share one population (one mean and one Omega) or need one each."""
+    levels) share one population (one mean and one Omega) or need one each; the
+    statistic Bartlett-adjusted by `bootstrap` campaigns drawn from the pooled fit with
+    the seed `seed` (0: the chi-square law as it is)."""
     levels = tuple(sorted(set(labels)))
     if len(levels) < 2:
         raise PopulationInputError(f"{covariate}: one level ({levels[0]}) over the "
                                    "openings; grouping needs two or more")
     labels_arr = np.asarray(labels)
     form = OmegaForm(data.k, full_omega and data.k > 1)
-    pooled = fit_population(data, full_omega, reml=False, intervals=False)
-    separate_ll = 0.0
-    for level in levels:
-        part = data.subset(labels_arr == level)
-        separate_ll += fit_population(part, full_omega, reml=False,
-                                      intervals=False).log_likelihood
-    statistic = max(2.0 * (separate_ll - pooled.log_likelihood), 0.0)
     dof = (len(levels) - 1) * (data.p * data.k + form.size)
+    statistic, fits = _split_statistic(data, labels_arr, levels, full_omega)
+    bartlett = 1.0
+    if bootstrap > 0:
+        rng = np.random.default_rng(seed)
+        pooled = fits[0]
+        root = np.linalg.cholesky(pooled.omega[None] + data.V)
+        mean = data.X @ pooled.beta.T
+        draws = [_split_statistic(dataclasses.replace(
+                     data, y=mean + np.einsum("ijl,il->ij", root,
+                                              rng.standard_normal((data.n, data.k)))),
+                     labels_arr, levels, full_omega)[0] for _ in range(bootstrap)]
+        bartlett = max(float(np.mean(draws)) / dof, 1e-6)
     dummies = np.column_stack([(labels_arr == level).astype(float) for level in levels[1:]])
     shifted = PopulationData(data.names, data.openings, data.y, data.V,
                              np.column_stack([data.X, dummies]),
@@ -503,4 +542,5 @@ def grouping_test(data: PopulationData, labels: Sequence[str], covariate: str,
     column = f"{covariate}={levels[1]}"
     shift = {name: with_shift.coefficients[(name, column)] for name in data.names}
     return GroupingTest(covariate, levels, statistic, dof,
-                        float(stats.chi2.sf(statistic, dof)), alpha, shift)
+                        float(stats.chi2.sf(statistic / bartlett, dof)), alpha, shift,
+                        bartlett, bootstrap)

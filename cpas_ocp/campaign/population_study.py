@@ -240,9 +240,11 @@ def population_data(rows: pd.DataFrame, covariances: pd.DataFrame | None,
 def population_groups(table: pd.DataFrame, covariances: pd.DataFrame | None, where: str,
                       parameters: Sequence[str] | None = None, covariates: Sequence[str] = (),
                       pool: Sequence[Sequence[tuple[str, str]]] = (), full_omega: bool = True,
-                      alpha: float = 0.05) -> tuple[list[PopulationGroup], list[str]]:
+                      alpha: float = 0.05, seed: int = 0
+                      ) -> tuple[list[PopulationGroup], list[str]]:
     """A fitted population per canopy type and stage (each set in `pool` fitted as one), with
-    its grouping tests; and a note per type and stage left out."""
+    its grouping tests (their bootstrap drawn with `seed`); and a note per type and stage
+    left out."""
     tests = table.test.nunique()
     if tests < 2:
         raise InputError(where, "test", f"a campaign of two or more reconstructed tests; "
@@ -271,14 +273,15 @@ def population_groups(table: pd.DataFrame, covariances: pd.DataFrame | None, whe
         group = PopulationGroup(label, members, fit, spread, notes=notes,
                                 units=dict(zip(part.parameter, part.unit, strict=True)),
                                 covariates=frame)
-        group.groupings, more = _groupings(frame, data, full_omega, alpha, len(members) > 1)
+        group.groupings, more = _groupings(frame, data, full_omega, alpha, len(members) > 1,
+                                           seed)
         group.notes += more
         groups.append(group)
     return groups, skipped
 
 
 def _groupings(frame: pd.DataFrame, data: PopulationData, full_omega: bool, alpha: float,
-               pooled: bool) -> tuple[list[GroupingTest], list[str]]:
+               pooled: bool, seed: int) -> tuple[list[GroupingTest], list[str]]:
     """The grouping test of every covariate column of `frame` (a row per opening) taking two
     or more values over the openings, each value held by at least k + 2 of them (k
     parameters); a column splitting the openings as one tested before is not tested
@@ -301,7 +304,7 @@ def _groupings(frame: pd.DataFrame, data: PopulationData, full_omega: bool, alph
                          f"{counts.min()} openings, fewer than {data.k + 2}")
             continue
         labels = [str(v) for v in values]
-        tests.append(grouping_test(intercept, labels, column, full_omega, alpha))
+        tests.append(grouping_test(intercept, labels, column, full_omega, alpha, seed=seed))
     return tests, notes
 
 

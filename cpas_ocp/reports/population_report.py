@@ -87,7 +87,8 @@ def grouping_frame(groups: Sequence[PopulationGroup]) -> pd.DataFrame:
             for name, shift in test.shift.items():
                 rows.append({"population": group.label, "covariate": test.covariate,
                              "levels": " / ".join(test.levels), "statistic": test.statistic,
-                             "dof": test.dof, "p_value": test.p_value,
+                             "dof": test.dof, "bartlett": test.bartlett,
+                             "bootstrap": test.bootstrap, "p_value": test.p_value,
                              "verdict": "separate" if test.separate else "pooled",
                              "parameter": name, "shift": shift.value,
                              "shift_lower": shift.lower, "shift_upper": shift.upper})
@@ -104,8 +105,10 @@ def grouping_line(test: GroupingTest) -> str:
                else f"one population is kept (p >= {test.alpha:g})")
     shifts = ", ".join(f"{n} {s.value:+.3g} [{s.lower:+.3g}, {s.upper:+.3g}]"
                        for n, s in test.shift.items())
+    adjusted = (f" (Bartlett factor {test.bartlett:.2f} from {test.bootstrap} campaigns "
+                "drawn pooled)" if test.bootstrap else "")
     return (f"{test.covariate} ({' vs '.join(test.levels)}): 2 ln LR = {test.statistic:.2f} "
-            f"on {test.dof} dof, p = {test.p_value:.3g}: {verdict}; shift of the mean "
+            f"on {test.dof} dof{adjusted}, p = {test.p_value:.3g}: {verdict}; shift of the mean "
             f"({test.levels[1]} against {test.levels[0]}): {shifts}")
 
 
