@@ -332,3 +332,15 @@ def test_the_bartlett_factor_is_the_statistic_s_mean_under_pooling() -> None:
     se = mean * np.sqrt(2.0 / (dof * 40)) * np.sqrt(2.0)  # of the difference of two means
     assert mean > 1.0
     assert abs(factor - mean) < 3.0 * se
+
+
+def test_omega_s_jacobian_is_its_derivative() -> None:
+    """d(Omega)/d(theta) in closed form against central differences of Omega(theta), for a
+    full Omega of four parameters."""
+    from cpas_ocp.campaign.population_model import OmegaForm
+    form = OmegaForm(4, full=True)
+    theta = np.array([-3.0, -2.5, -3.2, -2.8, 0.3, -0.4, 0.5, 0.1, -0.7, 0.2])
+    h = 1e-6
+    numeric = np.stack([(form.omega(theta + h * e) - form.omega(theta - h * e)) / (2 * h)
+                        for e in np.eye(form.size)], axis=2)
+    assert np.allclose(form.jacobian(theta), numeric, rtol=1e-6, atol=1e-9 * abs(numeric).max())

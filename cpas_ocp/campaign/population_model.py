@@ -130,10 +130,11 @@ class PopulationData:
                               tuple(self.columns[c] for c in cols), self.log)
 
 
-def correlation_matrix(partial: np.ndarray, k: int) -> np.ndarray:
-    """The k x k correlation matrix of the partial correlations `partial` (k(k-1)/2 values
-    in (-1, 1), the lower triangle row by row): the Cholesky factor built as in the
-    LKJ construction, so every vector gives a valid correlation matrix."""
+def correlation_factor(partial: np.ndarray, k: int) -> np.ndarray:
+    """The lower-triangular Cholesky factor L of the k x k correlation matrix of the partial
+    correlations `partial` (k(k-1)/2 values in (-1, 1), the lower triangle row by row), as
+    in the LKJ construction, so every vector gives a valid correlation matrix: in row i,
+    L_ij = z_ij sqrt(prod_{j'<j} (1 - z_ij'^2)) and L_ii = sqrt(prod_{j<i} (1 - z_ij^2))."""
     L = np.zeros((k, k))
     L[0, 0] = 1.0
     it = iter(partial)
@@ -142,8 +143,14 @@ def correlation_matrix(partial: np.ndarray, k: int) -> np.ndarray:
         for j in range(i):
             z = next(it)
             L[i, j] = z * np.sqrt(remaining)
-            remaining -= L[i, j] ** 2
+            remaining *= 1.0 - z * z
         L[i, i] = np.sqrt(max(remaining, 0.0))
+    return L
+
+
+def correlation_matrix(partial: np.ndarray, k: int) -> np.ndarray:
+    """The k x k correlation matrix L L' of `correlation_factor`."""
+    L = correlation_factor(partial, k)
     return L @ L.T
 
 
@@ -179,14 +186,34 @@ class OmegaForm:
         R = correlation_matrix(np.tanh(theta[self.k:]), self.k)
         return R * np.outer(tau, tau)
 
-    def jacobian(self, theta: np.ndarray, step: float = 1e-6) -> np.ndarray:
-        """d(Omega)/d(theta), (k, k, size), by central differences of `omega` (a k x k map,
-        cheap beside the likelihood it feeds)."""
-        out = np.empty((self.k, self.k, self.size))
-        for m in range(self.size):
-            e = np.zeros(self.size)
-            e[m] = step
-            out[:, :, m] = (self.omega(theta + e) - self.omega(theta - e)) / (2.0 * step)
+    def jacobian(self, theta: np.ndarray) -> np.ndarray:
+        """d(Omega)/d(theta), (k, k, size).  For log tau_m: Omega_ab (delta_am + delta_bm).
+        For the partial correlation z = tanh(u) at row i, column m of the factor L
+        (`correlation_factor`): dL_im/du = (1 - z^2) sqrt(prod_{j<m} (1 - z_ij^2)), and
+        dL_ij/du = -z L_ij for m < j <= i; then dOmega = D (dL L' + L dL') D."""
+        k = self.k
+        omega = self.omega(theta)
+        out = np.zeros((k, k, self.size))
+        for m in range(k):
+            out[m, :, m] += omega[m, :]
+            out[:, m, m] += omega[:, m]
+        if not self.full or k == 1:
+            return out
+        tau = np.exp(theta[:k])
+        z = np.tanh(theta[k:])
+        L = correlation_factor(z, k)
+        scale = np.outer(tau, tau)
+        index = k
+        for i in range(1, k):
+            remaining = 1.0
+            for m in range(i):
+                zm = z[index - k]
+                dL = np.zeros((k, k))
+                dL[i, m] = (1.0 - zm * zm) * np.sqrt(remaining)
+                dL[i, m + 1:i + 1] = -zm * L[i, m + 1:i + 1]
+                out[:, :, index] = (dL @ L.T + L @ dL.T) * scale
+                remaining *= 1.0 - zm * zm
+                index += 1
         return out
 
     def vector(self, omega: np.ndarray, floor: np.ndarray) -> np.ndarray:
@@ -496,13 +523,17 @@ BOOTSTRAP = 40
 
 
 def _split_statistic(data: PopulationData, labels: np.ndarray, levels: tuple[str, ...],
-                     full_omega: bool) -> tuple[float, list[PopulationFit]]:
+                     full_omega: bool, one_start: bool = False
+                     ) -> tuple[float, list[PopulationFit]]:
     """2 (separate - pooled) maximum log-likelihood, and the fits (pooled first, then one
-    per level), each from both starts of `fit_population` (a bootstrap campaign started
-    from the data's own estimates stalled in a poorer optimum in 2 of 20 campaigns and
-    dragged the adjustment below 1)."""
+    per level); with `one_start`, each fit from its own moment estimate only (a bootstrap
+    campaign started from the data's estimates instead stalled in a poorer optimum in 2
+    of 20 campaigns and dragged the adjustment below 1)."""
     parts = [data, *(data.subset(labels == level) for level in levels)]
-    fits = [fit_population(part, full_omega, reml=False, intervals=False) for part in parts]
+    form = OmegaForm(data.k, full_omega and data.k > 1)
+    fits = [fit_population(part, full_omega, reml=False, intervals=False,
+                           start=form.vector(_moment_start(part), _floor(part))
+                           if one_start else None) for part in parts]
     separate = sum(f.log_likelihood for f in fits[1:])
     return max(2.0 * (separate - fits[0].log_likelihood), 0.0), fits
 
@@ -531,7 +562,8 @@ def grouping_test(data: PopulationData, labels: Sequence[str], covariate: str,
         draws = [_split_statistic(dataclasses.replace(
                      data, y=mean + np.einsum("ijl,il->ij", root,
                                               rng.standard_normal((data.n, data.k)))),
-                     labels_arr, levels, full_omega)[0] for _ in range(bootstrap)]
+                     labels_arr, levels, full_omega, one_start=True)[0]
+                 for _ in range(bootstrap)]
         bartlett = max(float(np.mean(draws)) / dof, 1e-6)
     dummies = np.column_stack([(labels_arr == level).astype(float) for level in levels[1:]])
     shifted = PopulationData(data.names, data.openings, data.y, data.V,
