@@ -151,8 +151,12 @@ def test_discover_says_in_its_report_that_its_first_fit_is_not_a_result(
     import cpas_ocp.discrepancy.discovery as discovery
 
     monkeypatch.setattr("cpas_ocp.inference.continuation.MAX_WINDOW_MOVES", 0)
-    monkeypatch.setattr(discovery, "discover", lambda fit, spec, *a, **k: discovery.Discovery(
-        [discovery.DiscoveryStep(None, spec, fit)], "stopped before any diagnosis"))
+    def stopped(fit, spec, *a, **k):
+        return discovery.Discovery([discovery.DiscoveryStep(None, spec, fit)],
+                                   "stopped before any diagnosis")
+
+    monkeypatch.setattr(discovery, "discover", stopped)
+    monkeypatch.setattr("cpas_ocp.api.discover", stopped)  # the command's path to it
     test_dir = late_events(drogue_folder(1), tmp_path / "late", LATE_S)
     out = tmp_path / "discovery"
     assert main(["discover", str(test_dir), "--out", str(out)]) == 0
