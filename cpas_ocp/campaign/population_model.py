@@ -278,12 +278,17 @@ def omega_gradient(data: PopulationData, ev: _Evaluation, reml: bool) -> np.ndar
     return 0.5 * grad
 
 
-def _floor(data: PopulationData) -> np.ndarray:
-    """Per parameter, the tau below which the likelihood is flat: TAU_FLOOR times the
-    larger of the estimates' spread and their typical standard deviation."""
-    spread = np.maximum(data.y.std(axis=0), np.sqrt(np.median(
+def _spread(data: PopulationData) -> np.ndarray:
+    """Per parameter, the larger of the estimates' spread and their typical standard
+    deviation: the scale of tau's search range."""
+    return np.maximum(data.y.std(axis=0), np.sqrt(np.median(
         np.diagonal(data.V, axis1=1, axis2=2), axis=0)))
-    return TAU_FLOOR * np.maximum(spread, 1e-12)
+
+
+def _floor(data: PopulationData) -> np.ndarray:
+    """Per parameter, the tau below which the likelihood is flat: TAU_FLOOR times
+    `_spread`."""
+    return TAU_FLOOR * np.maximum(_spread(data), 1e-12)
 
 
 def _moment_start(data: PopulationData) -> np.ndarray:
@@ -306,8 +311,7 @@ def _maximise(data: PopulationData, form: OmegaForm, reml: bool, start: np.ndarr
     `start`'s (the likelihood may have a mode on the boundary)."""
     fixed = fixed or {}
     floor = np.log(_floor(data))
-    ceiling = np.log(100.0 * np.maximum(data.y.std(axis=0), np.sqrt(np.median(
-        np.diagonal(data.V, axis1=1, axis2=2), axis=0))))
+    ceiling = np.log(100.0 * _spread(data))
     free = [i for i in range(form.size) if i not in fixed]
     bounds = [(floor[i], ceiling[i]) if i < form.k else (-CORRELATION_BOUND, CORRELATION_BOUND)
               for i in free]

@@ -115,7 +115,7 @@ def grouping_line(test: GroupingTest) -> str:
 def group_text(group: PopulationGroup) -> str:
     """The population's table, covariate effects, correlations, pulls, groupings and notes."""
     fit, data = group.fit, group.data
-    tests = len({o.rsplit(" ", 1)[0] for o in data.openings})
+    tests = group.covariates.test.nunique()
     lines = [f"{group.label}: {data.n} openings of {tests} tests, Omega "
              f"{'full' if fit.full_omega else 'diagonal'}, "
              f"{'restricted' if fit.reml else 'full'} likelihood; t intervals on {fit.dof} dof",
