@@ -24,17 +24,20 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-__all__ = ["Dispersions", "Population", "Reconstruction", "design", "dispersions",
-           "fit_estimator", "load_model", "load_test", "population", "reconstruct", "simulate"]
+__all__ = ["Dispersions", "Joint", "Population", "Reconstruction", "design", "dispersions",
+           "fit_estimator", "joint", "load_model", "load_test", "population", "reconstruct",
+           "simulate"]
 
 if TYPE_CHECKING:
     from cpas_ocp.api import (
         Dispersions,
+        Joint,
         Population,
         Reconstruction,
         design,
         dispersions,
         fit_estimator,
+        joint,
         load_model,
         load_test,
         population,

@@ -23,6 +23,7 @@ from __future__ import annotations
 import dataclasses
 import html
 import shutil
+import sys
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -65,6 +66,7 @@ from cpas_ocp.estimation.estimator import Estimator, Fit, Settings
 from cpas_ocp.estimation.simulate import simulate_problem
 from cpas_ocp.estimation.uncertainty import Covariance
 from cpas_ocp.inference.diagnostics import window_statistics, worst_of
+from cpas_ocp.inference.joint_fit import JointFit, SharingError, joint_fit
 from cpas_ocp.inference.model_comparison import Comparison, Criteria, compare
 from cpas_ocp.inference.phase_windows import phase_windows
 from cpas_ocp.inference.process_intensity import IntensityChoice
@@ -89,6 +91,7 @@ from cpas_ocp.physics.flight_test import FlightTest
 from cpas_ocp.reports.design_report import write_design
 from cpas_ocp.reports.discrepancy_report import write_comparison, write_diagnosis, write_discovery
 from cpas_ocp.reports.display_units import DisplayUnits, display_units
+from cpas_ocp.reports.joint_report import joint_frame, joint_text, write_joint
 from cpas_ocp.reports.plots import (
     correlation_axes,
     drag_area_axes,
@@ -105,8 +108,9 @@ from cpas_ocp.reports.report import fit_summary, parameter_table, write_report
 from cpas_ocp.reports.report_data import bound_flag
 from cpas_ocp.reports.study_reports import write_dispersions
 
-__all__ = ["Dispersions", "Population", "Reconstruction", "design", "dispersions",
-           "fit_estimator", "load_model", "load_test", "population", "reconstruct", "simulate"]
+__all__ = ["Dispersions", "Joint", "Population", "Reconstruction", "design", "dispersions",
+           "fit_estimator", "joint", "load_model", "load_test", "population", "reconstruct",
+           "simulate"]
 
 
 def simulate(problem: str, out: str | Path, seed: int, effects: Sequence[Effect] | None = None,
@@ -402,6 +406,51 @@ class Population:
 
     def _repr_html_(self) -> str:
         return self.table.to_html(float_format=lambda v: f"{v:.4g}", index=False)
+
+
+def joint(tests: Sequence[FlightTest | str | Path], share: Mapping[str, str],
+          settings: Settings | None = None, progress: bool = False) -> Joint:
+    """Reconstruct several tests in one NLP with the parameters named in `share` held equal
+    across them: {base name: "type" | "vehicle"}, e.g. {"CdS": "type", "prf": "vehicle"}
+    for one drag area per canopy type and stage and one PRF per forebody
+    (`inference.joint_fit`).  Each test is fitted alone first, as its start."""
+    loaded = [t if isinstance(t, FlightTest) else load_test(t) for t in tests]
+    if len(loaded) < 2:
+        raise InputError("(tests)", "tests", "at least two test folders to fit jointly")
+    labels = [str(t) if not isinstance(t, FlightTest) else t.name for t in tests]
+    say = (lambda line: print(line, file=sys.stderr, flush=True)) if progress else None
+    try:
+        return Joint(joint_fit(loaded, share, settings, labels, say))
+    except SharingError as exc:
+        raise InputError("(tests)", "share", str(exc)) from None
+
+
+@dataclass
+class Joint:
+    """A joint fit of several tests (`inference.joint_fit.JointFit` as `fit`): the shared
+    parameters beside each test's own estimates, a summary, and its report folder."""
+
+    fit: JointFit
+
+    @property
+    def table(self) -> pd.DataFrame:
+        """Per shared parameter and copy: the joint estimate and sigma, the copy's own."""
+        return joint_frame(self.fit)
+
+    def summary(self) -> str:
+        """What `cpas-ocp joint` prints."""
+        return joint_text(self.fit)
+
+    def report(self, out: str | Path) -> Path:
+        """joint.md, joint.csv, parameters.csv and joint.json in `out`."""
+        write_joint(self.fit, Path(out))
+        return Path(out)
+
+    def __repr__(self) -> str:
+        return f"<Joint {self.fit!r}>"
+
+    def _repr_html_(self) -> str:
+        return self.table.to_html(float_format=lambda v: f"{v:.5g}", index=False)
 
 
 @dataclass

@@ -278,6 +278,16 @@ def _parser() -> argparse.ArgumentParser:
                    help="the seed of the grouping tests' bootstrap (0)")
     s.set_defaults(run=_population)
 
+    s = sub.add_parser("joint", help="several tests that share hardware reconstructed in one "
+                                     "NLP, the shared parameters held equal across them")
+    s.add_argument("tests", nargs="+", type=Path, help="two or more test folders")
+    s.add_argument("--share", action="append", required=True, type=_shared,
+                   help="a parameter shared across the tests: its base name, one per canopy "
+                        "type and stage (CdS), or BASE:vehicle, one per test vehicle "
+                        "(prf:vehicle) (repeatable)")
+    s.add_argument("--out", required=True, type=Path)
+    s.set_defaults(run=_joint)
+
     s = sub.add_parser("dispersions", help="Monte Carlo cases per canopy type and stage from "
                                            "a campaign's parameter table")
     s.add_argument("campaign", type=Path, help="a campaign folder or its parameters table")
@@ -681,6 +691,26 @@ def _pooled(text: str) -> list[tuple[str, str]]:
     if len(members) < 2 or any(len(m) != 2 or not all(m) for m in members):
         raise argparse.ArgumentTypeError(f"two or more TYPE/STAGE joined by '+'; got {text!r}")
     return [(str(t), str(s)) for t, s in members]
+
+
+def _shared(text: str) -> tuple[str, str]:
+    """`BASE` or `BASE:type|vehicle` as (base, over); argparse's error (exit 2) where
+    malformed."""
+    base, _, over = text.partition(":")
+    over = over or "type"
+    if not base or over not in ("type", "vehicle"):
+        raise argparse.ArgumentTypeError(f"a parameter's base name, optionally followed by "
+                                         f":type or :vehicle; got {text!r}")
+    return base, over
+
+
+def _joint(args: argparse.Namespace) -> int:
+    from cpas_ocp.api import joint
+    done = joint(args.tests, dict(args.share), progress=sys.stderr.isatty())
+    out = done.report(args.out)
+    print(done.summary())
+    print(f"\njoint fit written to {out} (joint.md, joint.csv, parameters.csv, joint.json)")
+    return 0
 
 
 def _population(args: argparse.Namespace) -> int:

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Protocol
 
 import casadi as ca
 import numpy as np
@@ -112,6 +113,10 @@ class PointEvaluations:
         self._switch = switch
         self.switched_at: int | None = None  # the evaluations made before the switch
 
+    def patterns(self) -> tuple[sp.csc_matrix, sp.csc_matrix]:
+        """The fixed patterns of the residual and constraint Jacobians."""
+        return self._buffers["rJ"].pattern(1), self._buffers["gA"].pattern(1)
+
     def _maybe_switch(self) -> None:
         if self._switch is None:
             return
@@ -164,6 +169,22 @@ class PointEvaluations:
         """g(z) and its Jacobian A(z) (CSC on the function's fixed pattern)."""
         g, A = self._get("gA", z)
         return g, A
+
+
+class PointFunctions(Protocol):
+    """What Ipopt's functions are assembled from: the residuals and constraints of the
+    scaled decision vector with their Jacobians on fixed patterns (`PointEvaluations` of
+    one test, `joint_nlp.JointNlp` of several)."""
+
+    def residual_value(self, z: np.ndarray) -> np.ndarray: ...
+
+    def residual_jacobian(self, z: np.ndarray) -> tuple[np.ndarray, sp.csc_matrix]: ...
+
+    def constraint_value(self, z: np.ndarray) -> np.ndarray: ...
+
+    def constraints(self, z: np.ndarray) -> tuple[np.ndarray, sp.csc_matrix]: ...
+
+    def patterns(self) -> tuple[sp.csc_matrix, sp.csc_matrix]: ...
 
 
 class _Oracle(ca.Callback):
@@ -282,7 +303,7 @@ class MarquardtDamping:
         self._last = (np.array(z, dtype=float), r, J)
 
 
-def ipopt_functions(points: PointEvaluations, curvature: ca.Function, small_rows: slice,
+def ipopt_functions(points: PointFunctions, curvature: ca.Function, small_rows: slice,
                     windows: ActionWindows, checked: Callable[[np.ndarray, bool], None],
                     damping: MarquardtDamping | None = None,
                     levenberg: tuple[np.ndarray, float] | None = None) -> IpoptFunctions:
@@ -310,7 +331,7 @@ def ipopt_functions(points: PointEvaluations, curvature: ca.Function, small_rows
     which the values Ipopt gets then miss (the estimator widens the windows
     and restarts where that persists).  The gradient J'r uses every entry.
     """
-    J_pattern, A_pattern = (points._buffers[name].pattern(1) for name in ("rJ", "gA"))
+    J_pattern, A_pattern = points.patterns()
     nz, ng = J_pattern.shape[1], A_pattern.shape[0]
     kept_J, kept_A = (windows.kept_matrix(i, p) for i, p in enumerate((J_pattern, A_pattern)))
     x_in = ("x", ca.Sparsity.dense(nz, 1))

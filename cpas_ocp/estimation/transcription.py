@@ -508,7 +508,7 @@ class NlpTranscription:
         self._damping = (MarquardtDamping(self._points, self._lbg, self._ubg)
                          if s.point_cache and s.damping else None)
         self._windows = ActionWindows(
-            (self._points._buffers["rJ"].pattern(1), self._points._buffers["gA"].pattern(1)),
+            self._points.patterns(),
             (_stack_times(pieces), _stack_times(g)), nlp.X.numel(),
             s.window_margin if s.point_cache else None)
         self._small_rows = small_rows
