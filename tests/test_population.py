@@ -344,3 +344,20 @@ def test_omega_s_jacobian_is_its_derivative() -> None:
     numeric = np.stack([(form.omega(theta + h * e) - form.omega(theta - h * e)) / (2 * h)
                         for e in np.eye(form.size)], axis=2)
     assert np.allclose(form.jacobian(theta), numeric, rtol=1e-6, atol=1e-9 * abs(numeric).max())
+
+
+def test_a_maximisation_that_did_not_converge_is_a_failure_not_a_result():
+    from scipy.optimize import OptimizeResult
+
+    from cpas_ocp.campaign.population_model import STATIONARY, _check_converged
+    from cpas_ocp.errors import SolverFailure
+    bounds = [(-5.0, 1.0), (-3.0, 3.0)]
+    stuck = OptimizeResult(success=False, message="ABNORMAL_TERMINATION_IN_LNSRCH", nit=7,
+                           x=np.array([0.0, 0.5]), jac=np.array([0.3, 0.0]))
+    with pytest.raises(SolverFailure, match="ABNORMAL.*after 7 iterations"):
+        _check_converged(stuck, bounds)
+    # stationary where free, pushing outwards where on a bound: the maximum itself
+    at_optimum = OptimizeResult(success=False, message="ABNORMAL_TERMINATION_IN_LNSRCH",
+                                nit=7, x=np.array([-5.0, 0.5]),
+                                jac=np.array([4.0, 0.1 * STATIONARY]))
+    _check_converged(at_optimum, bounds)

@@ -53,12 +53,18 @@ import numpy as np
 from scipy import optimize, stats
 from threadpoolctl import threadpool_limits
 
+from cpas_ocp.errors import SolverFailure
+
 # A between-test standard deviation this small against the estimates' own spread is
 # treated as zero (the optimiser's floor: the likelihood is flat below it).
 TAU_FLOOR = 1e-6
 # Partial correlations are kept within tanh(+-CORRELATION_BOUND) = +-0.995.
 CORRELATION_BOUND = 3.0
 LEVEL = 0.95
+# Largest projected gradient of the log-likelihood (per unit of log tau or partial
+# correlation's parameter) at which a maximisation L-BFGS-B did not call converged is
+# accepted: far below the statistical scale, where an interval's edge lies 1.92 down.
+STATIONARY = 1e-2
 
 
 class PopulationInputError(ValueError):
@@ -337,15 +343,31 @@ def _maximise(data: PopulationData, form: OmegaForm, reml: bool, start: np.ndarr
     if not free:
         return full(x0), -objective(x0)[0]
     best = optimize.minimize(objective, x0, jac=True, method="L-BFGS-B", bounds=bounds)
-    if not second_start:
-        return full(best.x), -float(best.fun)
-    x1 = x0.copy()
-    x1[[j for j, i in enumerate(free) if i < form.k]] -= np.log(10.0)
-    x1 = np.clip(x1, [b[0] for b in bounds], [b[1] for b in bounds])
-    other = optimize.minimize(objective, x1, jac=True, method="L-BFGS-B", bounds=bounds)
-    if other.fun < best.fun:
-        best = other
+    if second_start:
+        x1 = x0.copy()
+        x1[[j for j, i in enumerate(free) if i < form.k]] -= np.log(10.0)
+        x1 = np.clip(x1, [b[0] for b in bounds], [b[1] for b in bounds])
+        other = optimize.minimize(objective, x1, jac=True, method="L-BFGS-B", bounds=bounds)
+        if other.fun < best.fun:
+            best = other
+    _check_converged(best, bounds)
     return full(best.x), -float(best.fun)
+
+
+def _check_converged(result: optimize.OptimizeResult, bounds: list[tuple[float, float]]
+                     ) -> None:
+    """Raise SolverFailure (L-BFGS-B's message and iterations) where the likelihood's
+    maximisation ended neither converged nor at a point whose projected gradient is
+    below STATIONARY (L-BFGS-B's line search can give up at the optimum itself)."""
+    if result.success:
+        return
+    lower, upper = np.array(bounds).T
+    g = np.asarray(result.jac, dtype=float)
+    x = np.asarray(result.x, dtype=float)
+    held = ((x <= lower) & (g > 0.0)) | ((x >= upper) & (g < 0.0))
+    if np.all(np.isfinite(g)) and np.max(np.abs(np.where(held, 0.0, g))) < STATIONARY:
+        return
+    raise SolverFailure(f"population likelihood: {result.message}", int(result.nit))
 
 
 @dataclass(frozen=True)
