@@ -24,14 +24,15 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-__all__ = ["Dispersions", "Joint", "Population", "Reconstruction", "design", "dispersions",
-           "fit_estimator", "joint", "load_model", "load_test", "population", "reconstruct",
-           "simulate"]
+__all__ = ["Dispersions", "Joint", "MonteCarlo", "Population", "Reconstruction", "design",
+           "dispersions", "fit_estimator", "joint", "load_model", "load_test", "monte_carlo",
+           "population", "reconstruct", "simulate"]
 
 if TYPE_CHECKING:
     from cpas_ocp.api import (
         Dispersions,
         Joint,
+        MonteCarlo,
         Population,
         Reconstruction,
         design,
@@ -40,6 +41,7 @@ if TYPE_CHECKING:
         joint,
         load_model,
         load_test,
+        monte_carlo,
         population,
         reconstruct,
         simulate,

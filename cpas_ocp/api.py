@@ -40,6 +40,14 @@ from cpas_ocp.campaign.dispersion_study import (
     read_parameter_table,
     read_stage_table,
 )
+from cpas_ocp.campaign.peak_load_study import MARKER as MONTE_CARLO_MARKER
+from cpas_ocp.campaign.peak_load_study import (
+    StageLoads,
+    check_columns,
+    match_cases,
+    run_monte_carlo,
+    summary_text,
+)
 from cpas_ocp.campaign.population_study import (
     PopulationGroup,
     population_dispersions,
@@ -61,7 +69,7 @@ from cpas_ocp.discrepancy.discovery_checkpoint import (
     write_checkpoint,
 )
 from cpas_ocp.discrepancy.score_test import extended_spec
-from cpas_ocp.errors import InputError, PluginError
+from cpas_ocp.errors import InputError, NotAResult, PluginError
 from cpas_ocp.estimation.estimator import Estimator, Fit, Settings
 from cpas_ocp.estimation.simulate import simulate_problem
 from cpas_ocp.estimation.uncertainty import Covariance
@@ -82,7 +90,7 @@ from cpas_ocp.inference.test_design import design as design_test
 from cpas_ocp.inference.whatif import WhatIfResult, parameter_bounds, parse_constraint, what_if
 from cpas_ocp.io.flight_test import load_test
 from cpas_ocp.io.model_spec import ModelSpec, load_model_file, spec_of_test
-from cpas_ocp.io.output_folder import check_output
+from cpas_ocp.io.output_folder import atomic_folder, check_output
 from cpas_ocp.io.problems import load_problem
 from cpas_ocp.io.test_plan import load_plan
 from cpas_ocp.physics.effects.base import Effect
@@ -106,11 +114,11 @@ from cpas_ocp.reports.population_report import (
 )
 from cpas_ocp.reports.report import fit_summary, parameter_table, write_report
 from cpas_ocp.reports.report_data import bound_flag
-from cpas_ocp.reports.study_reports import write_dispersions
+from cpas_ocp.reports.study_reports import write_dispersions, write_monte_carlo
 
-__all__ = ["Dispersions", "Joint", "Population", "Reconstruction", "design", "dispersions",
-           "fit_estimator", "joint", "load_model", "load_test", "population", "reconstruct",
-           "simulate"]
+__all__ = ["Dispersions", "Joint", "MonteCarlo", "Population", "Reconstruction", "design",
+           "dispersions", "fit_estimator", "joint", "load_model", "load_test", "monte_carlo",
+           "population", "reconstruct", "simulate"]
 
 
 def simulate(problem: str, out: str | Path, seed: int, effects: Sequence[Effect] | None = None,
@@ -486,6 +494,49 @@ def dispersions(campaign: str | Path, out: str | Path, cases: int, seed: int,
         notes += [f"no population: {s}" for s in pop.skipped]
     written = write_dispersions(models, skipped, cases, seed, out, table, stages)
     return Dispersions(models, skipped, notes, stages is not None, written)
+
+
+@dataclass
+class MonteCarlo:
+    """Dispersed cases flown through a reconstruction: its `fit` and each stage's peak
+    loads (`campaign.peak_load_study.StageLoads`); the folder written to `out`."""
+
+    fit: Fit
+    results: list[StageLoads]
+    out: Path
+
+    def summary(self) -> str:
+        """What `cpas-ocp montecarlo` prints: the fit's status and each stage's quantiles."""
+        return summary_text(self.fit, self.results)
+
+
+def monte_carlo(test: FlightTest | str | Path, cases: str | Path, out: str | Path,
+                limit: int | None = None, workers: int = 2, scheduler: str | None = None,
+                progress: bool = False) -> MonteCarlo:
+    """Reconstruct `test` and fly the dispersed cases in the folder `cases` (`cpas-ocp
+    dispersions`) through its fit, on `workers` local processes or the Dask `scheduler`;
+    peak-load quantiles and figures written to `out`, whole or not at all.
+
+    The cases are matched to the test's canopies and their columns checked against its
+    model before the NLP is built; a fit that is not a result flies no case
+    (NotAResult)."""
+    test = test if isinstance(test, FlightTest) else load_test(test)
+    stages = match_cases(test, cases, limit)
+    spec = spec_of_test(test)
+    check_columns(spec.model(test), stages)
+    say = (lambda line: print(line, flush=True)) if progress else (lambda _: None)
+    with atomic_folder(out, MONTE_CARLO_MARKER) as tmp:
+        est = Estimator(test, spec)
+        say(f"reconstructing {test.name}: {est.size_text()} ...")
+        rec = fit_estimator(est, progress=progress)
+        if not rec.is_result:  # no cases are flown through a fit that is not a result
+            raise NotAResult(f"the fit of {test.name} is not a result: {rec.problems[0]}")
+        where = f"Dask scheduler {scheduler}" if scheduler else f"{workers} local processes"
+        say(f"flying {sum(len(s.cases) for s in stages):,} cases of "
+            f"{', '.join(s.label for s in stages)} on {where} ...")
+        results = run_monte_carlo(rec.fit, stages, workers, scheduler, progress=progress)
+        write_monte_carlo(rec.fit, results, tmp)
+    return MonteCarlo(rec.fit, results, Path(out))
 
 
 def discovery_context(test_dir: str | Path, plugin_files: Sequence[str | Path], max_steps: int,

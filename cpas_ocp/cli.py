@@ -743,36 +743,12 @@ def _dispersions(args: argparse.Namespace) -> int:
 
 
 def _montecarlo(args: argparse.Namespace) -> int:
-    from cpas_ocp.api import fit_estimator
-    from cpas_ocp.campaign.peak_load_study import (
-        MARKER,
-        check_columns,
-        match_cases,
-        run_monte_carlo,
-        summary_text,
-    )
-    from cpas_ocp.estimation.estimator import Estimator
-    from cpas_ocp.io.flight_test import load_test
-    from cpas_ocp.io.output_folder import atomic_folder
-    from cpas_ocp.reports.study_reports import write_monte_carlo
-    where = _where(args)
-    test = load_test(args.test_dir)
-    stages = match_cases(test, args.cases, args.limit)
-    with atomic_folder(args.out, MARKER) as tmp:
-        est = Estimator(test)
-        check_columns(est.model, stages)
-        print(f"reconstructing {test.name}: {est.size_text()} ...", flush=True)
-        rec = fit_estimator(est, progress=True)
-        fit = rec.fit
-        if not rec.is_result:  # no cases are flown through a fit that is not a result
-            raise NotAResult(f"the fit of {test.name} is not a result: {rec.problems[0]}")
-        print(f"flying {sum(len(s.cases) for s in stages):,} cases of "
-              f"{', '.join(s.label for s in stages)} on {where} ...", flush=True)
-        results = run_monte_carlo(fit, stages, args.workers, args.scheduler, progress=True)
-        write_monte_carlo(fit, results, tmp)
-    print(summary_text(fit, results))
+    from cpas_ocp.api import monte_carlo
+    done = monte_carlo(args.test_dir, args.cases, args.out, args.limit, args.workers,
+                       args.scheduler, progress=True)
+    print(done.summary())
     print(f"\nMonte Carlo written to {args.out} (quantiles_*.csv, peak_loads_*.parquet, "
-          f"peak_loads_*.png, {MARKER})")
+          "peak_loads_*.png, montecarlo.md)")
     return 0
 
 

@@ -114,10 +114,11 @@ def dispersed(problem_folder, tmp_path_factory: pytest.TempPathFactory) -> tuple
 
 @pytest.fixture
 def no_fit(monkeypatch: pytest.MonkeyPatch) -> None:
-    """`montecarlo` ends with exit 4 where its fit would begin."""
+    """`montecarlo` ends with exit 4 where its fit would begin: at the building of the
+    NLP, which comes after the cases are read, matched and their columns checked."""
     def stand_in(*_args: object, **_kwargs: object) -> None:
         raise NotAResult("fit left out by the test")
-    monkeypatch.setattr("cpas_ocp.inference.continuation.solve_checked", stand_in)
+    monkeypatch.setattr("cpas_ocp.api.Estimator", stand_in)
 
 
 def _write(path: Path, obj: object) -> str:
@@ -244,7 +245,7 @@ def test_a_corrupted_campaign_table_is_valid_or_one_line_exit_2(data, logs, tmp_
         assert (np.isfinite(values) & (values > 0.0)).all()
 
 
-@pytest.mark.slow  # each case file accepted builds the test's NLP: about 20 s in all
+@pytest.mark.slow
 @SETTINGS
 @given(data=st.data())
 def test_corrupted_monte_carlo_cases_are_valid_or_one_line_exit_2(data, dispersed, tmp_path,

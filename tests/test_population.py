@@ -354,7 +354,7 @@ def test_a_maximisation_that_did_not_converge_is_a_failure_not_a_result():
     bounds = [(-5.0, 1.0), (-3.0, 3.0)]
     stuck = OptimizeResult(success=False, message="ABNORMAL_TERMINATION_IN_LNSRCH", nit=7,
                            x=np.array([0.0, 0.5]), jac=np.array([0.3, 0.0]))
-    with pytest.raises(SolverFailure, match="ABNORMAL.*after 7 iterations"):
+    with pytest.raises(SolverFailure, match=r"ABNORMAL.*after 7 iterations"):
         _check_converged(stuck, bounds)
     # stationary where free, pushing outwards where on a bound: the maximum itself
     at_optimum = OptimizeResult(success=False, message="ABNORMAL_TERMINATION_IN_LNSRCH",
