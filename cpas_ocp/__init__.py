@@ -24,20 +24,23 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-__all__ = ["Dispersions", "Joint", "MonteCarlo", "Population", "Reconstruction", "design",
-           "dispersions", "fit_estimator", "joint", "load_model", "load_test", "monte_carlo",
-           "population", "reconstruct", "simulate"]
+__all__ = ["Campaign", "Dispersions", "Joint", "MonteCarlo", "Population", "Reconstruction",
+           "campaign", "design", "dispersions", "fit_estimator", "import_log", "joint",
+           "load_model", "load_test", "monte_carlo", "population", "reconstruct", "simulate"]
 
 if TYPE_CHECKING:
     from cpas_ocp.api import (
+        Campaign,
         Dispersions,
         Joint,
         MonteCarlo,
         Population,
         Reconstruction,
+        campaign,
         design,
         dispersions,
         fit_estimator,
+        import_log,
         joint,
         load_model,
         load_test,

@@ -34,6 +34,13 @@ import numpy as np
 import pandas as pd
 
 from cpas_ocp import interrupts
+from cpas_ocp.campaign.campaign import (
+    TestOutcome,
+    campaign_text,
+    find_tests,
+    run_campaign,
+    write_campaign,
+)
 from cpas_ocp.campaign.dispersion_study import (
     DispersionModel,
     dispersion_models,
@@ -88,7 +95,11 @@ from cpas_ocp.inference.result_claim import (
 from cpas_ocp.inference.test_design import TestDesign
 from cpas_ocp.inference.test_design import design as design_test
 from cpas_ocp.inference.whatif import WhatIfResult, parameter_bounds, parse_constraint, what_if
+from cpas_ocp.io.flight_card import FlightCard, card_folder, load_card
+from cpas_ocp.io.flight_log import import_flight
 from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.io.import_reports import ImportSummary
+from cpas_ocp.io.log_formats import read_flight_log
 from cpas_ocp.io.model_spec import ModelSpec, load_model_file, spec_of_test
 from cpas_ocp.io.output_folder import atomic_folder, check_output
 from cpas_ocp.io.problems import load_problem
@@ -116,9 +127,9 @@ from cpas_ocp.reports.report import fit_summary, parameter_table, write_report
 from cpas_ocp.reports.report_data import bound_flag
 from cpas_ocp.reports.study_reports import write_dispersions, write_monte_carlo
 
-__all__ = ["Dispersions", "Joint", "MonteCarlo", "Population", "Reconstruction", "design",
-           "dispersions", "fit_estimator", "joint", "load_model", "load_test", "monte_carlo",
-           "population", "reconstruct", "simulate"]
+__all__ = ["Campaign", "Dispersions", "Joint", "MonteCarlo", "Population", "Reconstruction",
+           "campaign", "design", "dispersions", "fit_estimator", "import_log", "joint",
+           "load_model", "load_test", "monte_carlo", "population", "reconstruct", "simulate"]
 
 
 def simulate(problem: str, out: str | Path, seed: int, effects: Sequence[Effect] | None = None,
@@ -531,12 +542,66 @@ def monte_carlo(test: FlightTest | str | Path, cases: str | Path, out: str | Pat
         rec = fit_estimator(est, progress=progress)
         if not rec.is_result:  # no cases are flown through a fit that is not a result
             raise NotAResult(f"the fit of {test.name} is not a result: {rec.problems[0]}")
-        where = f"Dask scheduler {scheduler}" if scheduler else f"{workers} local processes"
         say(f"flying {sum(len(s.cases) for s in stages):,} cases of "
-            f"{', '.join(s.label for s in stages)} on {where} ...")
+            f"{', '.join(s.label for s in stages)} on {_where(workers, scheduler)} ...")
         results = run_monte_carlo(rec.fit, stages, workers, scheduler, progress=progress)
         write_monte_carlo(rec.fit, results, tmp)
     return MonteCarlo(rec.fit, results, Path(out))
+
+
+def _where(workers: int, scheduler: str | None) -> str:
+    """Where a campaign's or a Monte Carlo's tasks run, in words."""
+    return f"Dask scheduler {scheduler}" if scheduler else f"{workers} local processes"
+
+
+@dataclass
+class Campaign:
+    """Every test folder under a folder reconstructed (`campaign.campaign.TestOutcome` per
+    test, in path order), and the folder the tables were written to."""
+
+    outcomes: list[TestOutcome]
+    out: Path
+
+    @property
+    def failed(self) -> int:
+        """How many tests gave no table rows (why is in failures.csv)."""
+        return sum(not o.ok for o in self.outcomes)
+
+    def summary(self) -> str:
+        """What `cpas-ocp campaign` prints: a line per test."""
+        return campaign_text(self.outcomes)
+
+
+def campaign(tests_dir: str | Path, out: str | Path, workers: int = 2,
+             scheduler: str | None = None, progress: bool = False) -> Campaign:
+    """Reconstruct every test folder under `tests_dir` on `workers` local processes or the
+    Dask `scheduler`, and write the campaign's tables to `out` (`cpas-ocp campaign`)."""
+    folders = find_tests(tests_dir)
+    if progress:
+        print(f"reconstructing {len(folders)} test folders on {_where(workers, scheduler)} "
+              "...", flush=True)
+    outcomes = run_campaign(folders, workers, scheduler, progress=progress)
+    return Campaign(outcomes, write_campaign(outcomes, out))
+
+
+def import_log(log: str | Path, card: str | FlightCard, out: str | Path,
+               log_format: str | None = None, columns: str | Path | None = None,
+               still_air: bool = False) -> ImportSummary:
+    """A flight log, as it came off the recorder, into a test folder at `out` under the
+    flight `card` (a built-in name, a card file or a loaded card): read as `log_format` (a
+    built-in format: altus, cats) or through the column map `columns`, else as the card's
+    ``data`` block says (`cpas-ocp import`)."""
+    card = card if isinstance(card, FlightCard) else load_card(str(card))
+    if log_format is None and columns is None:  # the card says how its logs are read
+        if card.data_format is None and card.data_columns is None:
+            raise InputError(card.source, "data.format/data.columns", "one of the two, "
+                             "saying how the card's logs are read (a built-in format, or a "
+                             "column map), or --format/--columns on the command line")
+        log_format = card.data_format
+        columns = card.data_columns if not isinstance(card.data_columns, str) \
+            else card_folder(card) / card.data_columns
+    record = read_flight_log(log, log_format, columns, f"{card.source}: data.columns")
+    return import_flight(record, card, out, still_air)
 
 
 def discovery_context(test_dir: str | Path, plugin_files: Sequence[str | Path], max_steps: int,

@@ -399,12 +399,6 @@ def _scheduler(text: str) -> str:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
-def _where(args: argparse.Namespace) -> str:
-    """Where --workers and --scheduler send the tasks, in words."""
-    return (f"Dask scheduler {args.scheduler}" if args.scheduler
-            else f"{args.workers} local processes")
-
-
 def _model_option(s: argparse.ArgumentParser, model: bool = True, plugin: bool = True
                   ) -> None:
     """--model FILE (where `model`), with --plugin FILE for the effects it names (where
@@ -664,22 +658,17 @@ def _compare(args: argparse.Namespace) -> int:
 
 
 def _campaign(args: argparse.Namespace) -> int:
-    from cpas_ocp.campaign.campaign import campaign_text, find_tests, run_campaign, write_campaign
-    where = _where(args)
-    folders = find_tests(args.tests_dir)
-    print(f"reconstructing {len(folders)} test folders on {where} ...", flush=True)
-    outcomes = run_campaign(folders, args.workers, args.scheduler, progress=True)
-    out = write_campaign(outcomes, args.out)
-    print(campaign_text(outcomes))
-    print(f"\ncampaign written to {out} (parameters.csv, parameters.parquet, stages.csv, "
+    from cpas_ocp.api import campaign
+    done = campaign(args.tests_dir, args.out, args.workers, args.scheduler, progress=True)
+    print(done.summary())
+    print(f"\ncampaign written to {done.out} (parameters.csv, parameters.parquet, stages.csv, "
           "failures.csv, ratios_*.csv, campaign.md)")
-    failed = sum(not o.ok for o in outcomes)
-    if failed == len(outcomes):  # no result at all: a failure, its reasons in failures.csv
-        print(f"error: every one of the {failed} tests failed; why is in "
-              f"{out / 'failures.csv'}", file=sys.stderr)
+    if done.failed == len(done.outcomes):  # no result at all: its reasons in failures.csv
+        print(f"error: every one of the {done.failed} tests failed; why is in "
+              f"{done.out / 'failures.csv'}", file=sys.stderr)
         return 3
-    if failed:
-        print(f"warning: {failed} of {len(outcomes)} tests failed (failures.csv)",
+    if done.failed:
+        print(f"warning: {done.failed} of {len(done.outcomes)} tests failed (failures.csv)",
               file=sys.stderr)
     return 0
 
@@ -762,32 +751,20 @@ def _card_options(s: argparse.ArgumentParser) -> None:
 
 
 def _import(args: argparse.Namespace) -> int:
-    from cpas_ocp.io.flight_card import load_card
-    from cpas_ocp.io.flight_log import import_flight
-    from cpas_ocp.io.log_formats import read_flight_log
-    card = load_card(args.card)
-    log_format, columns = args.format, args.columns
-    if log_format is None and columns is None:  # the card says how its logs are read
-        if card.data_format is None and card.data_columns is None:
-            raise InputError(card.source, "data.format/data.columns", "one of the two, "
-                             "saying how the card's logs are read (a built-in format, or a "
-                             "column map), or --format/--columns on the command line")
-        log_format = card.data_format
-        columns = card.data_columns if not isinstance(card.data_columns, str) \
-            else _beside(card) / card.data_columns
-    record = read_flight_log(args.log, log_format, columns, f"{card.source}: data.columns")
-    summary = import_flight(record, card, args.out, args.still_air)
+    from cpas_ocp.api import import_log
+    summary = import_log(args.log, args.card, args.out, args.format, args.columns,
+                         args.still_air)
     print(summary.text())
     print(f"test folder written to {args.out}")
     return 0
 
 
 def _flight(args: argparse.Namespace) -> int:
-    from cpas_ocp.io.flight_card import load_card
+    from cpas_ocp.io.flight_card import card_folder, is_card_file, load_card
     card = load_card(args.card)
-    beside = _beside(card)
+    beside = card_folder(card)
     data = args.data if args.data is not None else (
-        beside if _is_file(card) else Path("../shared/data")) / card.data_folder
+        beside if is_card_file(card) else Path("../shared/data")) / card.data_folder
     logs = args.log or list(card.logs)
     if not logs:
         raise InputError(card.source, "data.logs", "the flight logs to reconstruct (or give "
@@ -823,17 +800,6 @@ def _flight(args: argparse.Namespace) -> int:
         print(text)
         print(f"recorders compared in {args.out / 'recorders.md'}")
     return 0
-
-
-def _is_file(card: FlightCard) -> bool:
-    """Whether `card` was read from a card file (not a built-in card)."""
-    return Path(card.source).suffix == ".json" and Path(card.source).is_file()
-
-
-def _beside(card: FlightCard) -> Path:
-    """The folder a card's relative paths start from: a card file's own folder (the
-    working folder for a built-in card)."""
-    return Path(card.source).parent if _is_file(card) else Path()
 
 
 def _flight_import(card: FlightCard, log: Path, log_format: str | None,

@@ -347,3 +347,19 @@ def test_import_command_writes_the_folder_and_flight_refuses_missing_logs(
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1 and "nowhere" in err[0] and "--data" in err[0]
     assert not (tmp_path / "out").exists()
+
+
+def test_the_interface_reads_a_log_the_way_its_card_says(tmp_path: Path) -> None:
+    """`co.import_log` without a format takes the card's ``data.format``; a card that says
+    neither a format nor a column map is refused, naming both fields."""
+    import cpas_ocp as co
+    _write_log(tmp_path / "log.csv", seed=2)
+    card = tmp_path / "card.json"
+    card.write_text(json.dumps({**CARD, "data": {"folder": "", "logs": [], "format": "altus"}}))
+    summary = co.import_log(tmp_path / "log.csv", str(card), tmp_path / "test")
+    assert load_test(tmp_path / "test").t_start == pytest.approx(summary.events["drogue"])
+    silent = tmp_path / "silent.json"
+    silent.write_text(json.dumps(CARD))
+    with pytest.raises(InputError, match=r"data\.format/data\.columns"):
+        co.import_log(tmp_path / "log.csv", str(silent), tmp_path / "other")
+    assert not (tmp_path / "other").exists()

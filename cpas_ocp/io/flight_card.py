@@ -145,3 +145,14 @@ def pad_temperature(site: dict[str, Any], p0: float, elevation: float, source: s
     t0 = float(standard.pressure(elevation)) / (R_AIR * float(standard.density(elevation)))
     return t0, (f"pad temperature {t0:.1f} K: the standard atmosphere's at {elevation:.0f} m "
                 "(the card gives neither site.temperature nor site.surface_density)")
+
+
+def is_card_file(card: FlightCard) -> bool:
+    """Whether `card` was read from a card file (not a built-in card)."""
+    return Path(card.source).suffix == ".json" and Path(card.source).is_file()
+
+
+def card_folder(card: FlightCard) -> Path:
+    """The folder a card's relative paths start from: a card file's own folder (the
+    working folder for a built-in card)."""
+    return Path(card.source).parent if is_card_file(card) else Path()
