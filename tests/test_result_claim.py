@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import cpas_ocp as co
 from cpas_ocp.cli import main
 from cpas_ocp.errors import InputError
 from cpas_ocp.estimation.estimator import Estimator
@@ -124,11 +125,28 @@ def test_events_later_than_the_window_are_recovered_by_moving_the_windows(
     assert "window moved" in fit.solver.start
 
 
+@pytest.fixture(scope="module")
+def pressed(drogue_folder, tmp_path_factory):
+    """The late events fitted without window moves, which leaves the start times on their
+    windows: the folder and its `Reconstruction`, fitted once.  The commands tested with it
+    are given this fit where theirs would be made (`given`): the same estimator on the same
+    folder, so what they are tested for, what they say of it, is unchanged."""
+    folder = late_events(drogue_folder(1), tmp_path_factory.mktemp("pressed") / "late",
+                         LATE_S)
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr("cpas_ocp.inference.continuation.MAX_WINDOW_MOVES", 0)
+        return folder, co.reconstruct(folder)
+
+
+def given(monkeypatch: pytest.MonkeyPatch, rec: co.Reconstruction) -> None:
+    """Every fit the interface makes (`api.fit_estimator`) is `rec`."""
+    monkeypatch.setattr("cpas_ocp.api.fit_estimator", lambda *_a, **_k: rec)
+
+
 def test_a_fit_still_pressed_exits_4_with_its_report_saying_why(
-        drogue_folder, tmp_path, monkeypatch, capsys) -> None:
-    # Without window moves, the late events leave the start times on their windows.
-    monkeypatch.setattr("cpas_ocp.inference.continuation.MAX_WINDOW_MOVES", 0)
-    test_dir = late_events(drogue_folder(1), tmp_path / "late", LATE_S)
+        pressed, tmp_path, monkeypatch, capsys) -> None:
+    test_dir, rec = pressed
+    given(monkeypatch, rec)
     out = tmp_path / "report"
     code = main(["reconstruct", str(test_dir), "--out", str(out)])
     err = capsys.readouterr().err
@@ -144,20 +162,21 @@ def test_a_fit_still_pressed_exits_4_with_its_report_saying_why(
 
 
 def test_discover_says_in_its_report_that_its_first_fit_is_not_a_result(
-        drogue_folder, tmp_path, monkeypatch) -> None:
+        pressed, tmp_path, monkeypatch) -> None:
     """A chain started from a fit the data press against guessed bounds carries that in
     discovery.json and discovery.md (the diagnoses themselves are replaced by a chain
     that stops at once: what is tested is the command's report of its first fit)."""
     import cpas_ocp.discrepancy.discovery as discovery
 
-    monkeypatch.setattr("cpas_ocp.inference.continuation.MAX_WINDOW_MOVES", 0)
+    test_dir, rec = pressed
+    given(monkeypatch, rec)
+
     def stopped(fit, spec, *a, **k):
         return discovery.Discovery([discovery.DiscoveryStep(None, spec, fit)],
                                    "stopped before any diagnosis")
 
     monkeypatch.setattr(discovery, "discover", stopped)
     monkeypatch.setattr("cpas_ocp.api.discover", stopped)  # the command's path to it
-    test_dir = late_events(drogue_folder(1), tmp_path / "late", LATE_S)
     out = tmp_path / "discovery"
     assert main(["discover", str(test_dir), "--out", str(out)]) == 0
     notes = json.loads((out / "discovery.json").read_text())["notes"]
