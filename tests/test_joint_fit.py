@@ -102,6 +102,7 @@ def test_shared_keys_replace_canopies_by_type_and_add_the_vehicle(folders):
     assert shared_key("loadcell_scale[fbcp1]", test, "type") == "loadcell_scale[fbcp]"
 
 
+@pytest.mark.slow  # joint fits of four tests
 def test_joint_fit_recovers_the_shared_prf_and_drag_area(fitted):
     jf = fitted
     assert jf.stats.success
@@ -119,6 +120,7 @@ def test_joint_fit_recovers_the_shared_prf_and_drag_area(fitted):
         assert jf.fits[t].parameters[name] == pytest.approx(prf.value, rel=1e-9)
 
 
+@pytest.mark.slow  # joint fits of four tests
 def test_joint_covariance_is_the_two_stage_fixed_effect_one(fitted):
     """Linearised, the joint fit's information on (log CdS, log PRF) is the sum of what each
     test alone gives on its two drag areas (the canopies' 2x2 covariance kept): the
@@ -138,6 +140,7 @@ def test_joint_covariance_is_the_two_stage_fixed_effect_one(fitted):
     assert prf.std / prf.value == pytest.approx(sd_log_prf, rel=0.02)
 
 
+@pytest.mark.slow  # joint fits of four tests
 def test_a_shared_parameter_no_test_determines_is_reported_so(folders):
     """Behind the small vehicle with the wake in the model and PRF shared too, drag area and
     PRF enter every test only as their product: neither is determined."""
@@ -147,6 +150,7 @@ def test_a_shared_parameter_no_test_determines_is_reported_so(folders):
     assert not jf.estimate("CdS[fbcp,stage1]").determined
 
 
+@pytest.mark.slow  # joint fits of four tests
 def test_cli_writes_the_joint_fit(folders, tmp_path, capsys):
     out = tmp_path / "joint"
     code = main(["joint", *map(str, folders), "--share", "CdS", "--share", "prf:vehicle",
@@ -161,7 +165,8 @@ def test_cli_writes_the_joint_fit(folders, tmp_path, capsys):
 
 @pytest.mark.parametrize("argv, field", [
     (["--share", "prf:wing"], "--share"),
-    (["--share", "nothing_like_this"], "share"),
+    pytest.param(["--share", "nothing_like_this"], "share",
+                 marks=pytest.mark.slow),  # the tests' estimators are built first
 ])
 def test_cli_refuses_a_bad_declaration_in_one_line(folders, tmp_path, capsys, argv, field):
     code = main(["joint", *map(str, folders[:2]), *argv, "--out", str(tmp_path / "o")])
