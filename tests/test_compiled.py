@@ -62,7 +62,8 @@ def test_compiled_and_interpreted_estimators_agree(drogue_folder, tmp_path,
 def test_a_model_runs_in_the_vm_until_its_native_code_is_ready(drogue_folder, tmp_path,
                                                                 monkeypatch) -> None:
     """With an empty cache, the estimator evaluates in the VM while its pieces compile in
-    the background, then switches to them: the same values and Jacobians either way."""
+    the background, and a run that goes on (SWITCH_AFTER evaluations) switches to them: the
+    same values and Jacobians either way."""
     monkeypatch.setenv("CPAS_OCP_CACHE", str(tmp_path / "cache"))
     monkeypatch.setenv("CPAS_OCP_COMPILE", "1")
     test = load_test(drogue_folder(1))
@@ -75,8 +76,41 @@ def test_a_model_runs_in_the_vm_until_its_native_code_is_ready(drogue_folder, tm
     est._native[0].wait()
     z2 = z * (1.0 + 1e-3 * np.random.default_rng(7).standard_normal(z.size))
     for name in ("residual_jacobian", "constraints"):
+        if name == "constraints":  # a short run stays in the VM; a longer one switches
+            assert points.switched_at is None
+            monkeypatch.setattr("cpas_ocp.estimation.nlp_functions.SWITCH_AFTER", 2)
         a, b = getattr(points, name)(z2), getattr(reference, name)(z2)
         for x, y in zip(a, b, strict=True):
             x, y = (v.toarray() if hasattr(v, "toarray") else v for v in (x, y))
             np.testing.assert_allclose(x, y, rtol=1e-12, atol=1e-12 * np.max(np.abs(y)))
-    assert points.switched_at == 1  # after the one evaluation made in the VM
+    assert points.switched_at == 2  # after the two evaluations made in the VM
+
+
+def test_a_single_fit_compiles_after_it_ends_for_the_next_run(problem_folder,
+                                                              tmp_path) -> None:
+    """One short fit in a process runs in the VM and hands its pieces to a compiler that
+    outlives it: the libraries appear in the cache after the command has ended, and the
+    next run compiles nothing."""
+    import os
+    import subprocess
+    import sys
+    import time
+    cache = tmp_path / "cache"
+    env = {**os.environ, "CPAS_OCP_CACHE": str(cache), "CPAS_OCP_COMPILE": "1"}
+
+    def reconstruct(out: str) -> None:
+        done = subprocess.run([sys.executable, "-m", "cpas_ocp.cli", "reconstruct",
+                               str(problem_folder("fbcp", 3)), "--out", str(tmp_path / out)],
+                              env=env, capture_output=True, text=True)
+        assert done.returncode == 0, done.stderr[-2000:]
+
+    reconstruct("first")
+    began = time.monotonic()
+    while list(cache.glob(".cpas-cg-*")) and time.monotonic() - began < 600:
+        time.sleep(0.2)
+    libraries = {p: p.stat().st_mtime_ns for p in cache.glob("*.so")}
+    assert not list(cache.glob(".cpas-cg-*")) and "rk4_step" in {
+        p.name.split("-")[0] for p in libraries}
+    reconstruct("second")
+    assert {p: p.stat().st_mtime_ns for p in cache.glob("*.so")} == libraries
+    assert not list(cache.glob(".cpas-cg-*"))

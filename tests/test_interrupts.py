@@ -201,10 +201,11 @@ wait
 
 
 def _interrupted_while_compiling(command: list[str], sig: int, tmp_path: Path,
-                                 compilers: int = 1) -> None:
-    """Run the command line's `command` with a fresh compile cache and a stand-in compiler;
-    once `compilers` of them run, send `sig`: the command ends interrupted, none of the
-    compilers' processes survive, and no temporary folder is left."""
+                                 compilers: int = 1, mode: str = "1") -> None:
+    """Run the command line's `command` with a fresh compile cache and a stand-in compiler
+    (`mode`: CPAS_OCP_COMPILE, compiling in the background or first); once `compilers` of
+    them run, send `sig`: the command ends interrupted, none of the compilers' processes
+    survive, and no temporary folder is left."""
     (tmp_path / "bin").mkdir()
     (tmp_path / "bin" / "gcc").write_text(SLOW_COMPILER)
     (tmp_path / "bin" / "gcc").chmod(0o755)
@@ -212,7 +213,7 @@ def _interrupted_while_compiling(command: list[str], sig: int, tmp_path: Path,
     proc = subprocess.Popen([sys.executable, "-m", "cpas_ocp.cli", *command],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             env={**os.environ, "CPAS_OCP_CACHE": str(cache),
-                                 "CPAS_OCP_COMPILE": "1",
+                                 "CPAS_OCP_COMPILE": mode,
                                  "PATH": f"{tmp_path / 'bin'}{os.pathsep}{os.environ['PATH']}"})
     below: dict[int, str] = {}
     while proc.poll() is None and list(below.values()).count("sleep") < compilers:
@@ -229,11 +230,24 @@ def _interrupted_while_compiling(command: list[str], sig: int, tmp_path: Path,
 
 @pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads /proc")
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
-def test_an_interrupt_while_compiling_leaves_no_compiler_and_no_folder(sig, tmp_path) -> None:
-    """Interrupted while the model compiles (a fresh cache), the command kills each compiler
-    with the passes it started (gcc's cc1 and as; here a stand-in's `sleep`), and leaves no
-    temporary folder."""
-    _interrupted_while_compiling(["demo", "--out", str(tmp_path / "demo")], sig, tmp_path)
+def test_an_interrupt_while_compiling_leaves_no_compiler_and_no_folder(sig, drogue_folder,
+                                                                       tmp_path) -> None:
+    """Interrupted while the model compiles in the background (a fresh cache; a diagnosis,
+    whose second estimator starts the compilers), the command kills each compiler with the
+    passes it started (gcc's cc1 and as; here a stand-in's `sleep`), and leaves no temporary
+    folder."""
+    _interrupted_while_compiling(["diagnose", str(drogue_folder(1)), "--out",
+                                  str(tmp_path / "diagnosis")], sig, tmp_path)
+    assert not (tmp_path / "diagnosis").exists()
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads /proc")
+def test_an_interrupt_while_waiting_for_the_compiler_ends_the_build(tmp_path) -> None:
+    """Compiling first (CPAS_OCP_COMPILE=wait), a signal that arrives while the estimator's
+    build waits for its compilers ends the wait: the compilers are killed, the build ends
+    and the command is interrupted, not held until the compilers finish."""
+    _interrupted_while_compiling(["demo", "--out", str(tmp_path / "demo")], signal.SIGINT,
+                                 tmp_path, mode="wait")
     assert not list((tmp_path / "demo").glob("*"))
 
 
@@ -246,5 +260,5 @@ def test_an_interrupted_campaign_leaves_no_compiler_of_its_workers(drogue_folder
         shutil.copytree(drogue_folder(seed), tmp_path / "tests" / f"drogue{seed}")
     _interrupted_while_compiling(["campaign", str(tmp_path / "tests"), "--out",
                                   str(tmp_path / "campaign"), "--workers", "2"],
-                                 signal.SIGINT, tmp_path, compilers=2)
+                                 signal.SIGINT, tmp_path, compilers=2, mode="wait")
     assert not (tmp_path / "campaign").exists()

@@ -9,11 +9,17 @@ hash in the cache folder (``$CPAS_OCP_CACHE``, else ``~/.cache/cpas-ocp``),
 so a piece is compiled once per machine: every test folder with the same
 vehicle, parachutes, sensors and atmosphere reuses it.
 
-A model met for the first time runs in the VM while its pieces compile in
-the background (`NativeBuild`); the estimator switches to them once they
-are all there.  ``CPAS_OCP_COMPILE=wait`` compiles first, as before;
-``CPAS_OCP_COMPILE=0``, or no C compiler, keeps the VM.  Compiled functions
-carry no derivatives: each piece comes with a separately compiled Jacobian.
+A model met for the first time runs in the VM.  Its pieces compile only where
+that can pay within the process (`NativeBuild`): once the process builds a
+second estimator (a diagnosis, a discovery, a campaign's worker) or a run has
+made `nlp_functions.SWITCH_AFTER` evaluations; the estimator switches to them
+once they are all there.  A process that did neither (one short fit: a
+`reconstruct` of `drogue` makes 25 evaluations) leaves its pieces to one
+compiler started as it ends, at the lowest priority, which outlives it, so
+the next run finds them: a first run is a VM run (`benchmarks/compile_cost.py`).
+``CPAS_OCP_COMPILE=wait`` compiles first; ``CPAS_OCP_COMPILE=0``, or no C
+compiler, keeps the VM.  Compiled functions carry no derivatives: each piece
+comes with a separately compiled Jacobian.
 """
 
 from __future__ import annotations
@@ -21,6 +27,7 @@ from __future__ import annotations
 import atexit
 import hashlib
 import os
+import shlex
 import shutil
 import signal
 import subprocess
@@ -151,10 +158,12 @@ class NativeBuild:
                 self._jobs.append(job)
                 fresh = fresh or job.source == src
         COUNTS["builds"] += fresh
+        _QUEUE.builds += 1
+        if _QUEUE.builds > 1 or not in_background():  # a process of several fits
+            _QUEUE.start()
         if self._jobs and sys.stderr.isatty():
-            sys.stderr.write(f"  compiling {len(self._jobs)} model functions to native code "
-                             f"in the background (once per model structure; cache "
-                             f"{cache}) ...\n")
+            sys.stderr.write(f"  {len(self._jobs)} model functions to compile to native code "
+                             f"(once per model structure; cache {cache})\n")
         _QUEUE.advance()
 
     @property
@@ -162,11 +171,14 @@ class NativeBuild:
         """Libraries still to compile."""
         return sum(not job.done for job in self._jobs)
 
-    def ready(self) -> list[ca.Function] | None:
+    def ready(self, start: bool = True) -> list[ca.Function] | None:
         """The native functions, once every library is compiled; None before (and for good
-        where a compiler failed)."""
+        where a compiler failed).  With `start`, the compilers start if they had not (a
+        run that asks has shown it is long); without, only libraries already there count."""
         if self._native is not None or self.failed:
             return self._native
+        if start:
+            _QUEUE.start()
         _QUEUE.advance()
         if self.pending:
             return None
@@ -181,9 +193,14 @@ class NativeBuild:
 
     def wait(self) -> list[ca.Function]:
         """The native functions, waited for (the VM functions where a compiler failed).
-        Interrupted (Ctrl-C, SIGTERM, any error), every compiler of this build is killed."""
+        Interrupted (Ctrl-C, SIGTERM, any error), every compiler of this build is killed;
+        a signal held back by the estimator's build (`interrupts.deferred`) ends the wait
+        too, with the VM functions, so that the build ends and the signal is raised."""
         try:
             while (native := self.ready()) is None and not self.failed:
+                if interrupts.pending():  # a signal waits for the build around this to end
+                    _QUEUE.cancel(self._jobs)
+                    return list(self.functions)
                 time.sleep(0.05)
         except BaseException:
             _QUEUE.cancel(self._jobs)
@@ -205,6 +222,12 @@ class _Queue:
         self.waiting: list[tuple[_Job, str]] = []
         self.running: list[_Job] = []
         self._by_library: dict[Path, _Job] = {}
+        self.builds = 0  # NativeBuilds made in this process
+        self.started = False  # whether compilers run during the process (module docstring)
+
+    def start(self) -> None:
+        """Let compilers run from now on."""
+        self.started = True
 
     def job(self, source: Path, library: Path, cc: str) -> _Job:
         """The job making `library` from `source`, queued unless one is under way."""
@@ -227,7 +250,7 @@ class _Queue:
                 job.error = f"compiling {job.library.name} failed: {err[-500:]}"
             _remove(job.source.parent)
         limit = max(_cores() - 1, 1) if in_background() else _cores()
-        while self.waiting and len(self.running) < limit:
+        while self.started and self.waiting and len(self.running) < limit:
             job, cc = self.waiting.pop()  # the newest first: the model in use now
             if job.done:
                 _remove(job.source.parent)
@@ -260,6 +283,12 @@ class _Queue:
 
 
 _QUEUE = _Queue()
+
+
+def advance_compilers() -> None:
+    """Collect the compilers that ended and start those waiting (`_Queue.advance`): for a
+    run that polls its native build only from time to time."""
+    _QUEUE.advance()
 
 
 # A compiler's folder this old belongs to a process killed outright (SIGKILL): no compile
@@ -310,14 +339,38 @@ def abandon() -> None:
 
 def _at_exit() -> None:
     """At the end of the process: stopped by a signal, drop every compile (`abandon`);
-    else drop those not started and leave the running ones to finish (at the lowest
-    priority, in seconds), so the next run finds their libraries."""
+    else leave the running ones to finish and hand those not started to one compiler
+    process that builds them one after another at the lowest priority and outlives this
+    one (`_compile_after_exit`), so the next run finds their libraries."""
     if interrupts.received():
         abandon()
         return
-    for job, _ in _QUEUE.waiting:
-        _remove(job.source.parent)
-    _QUEUE.waiting.clear()
+    waiting, _QUEUE.waiting = _QUEUE.waiting, []
+    waiting = [(job, cc) for job, cc in waiting if not job.done]
+    if waiting:
+        _compile_after_exit(waiting)
+    for job, _ in waiting:  # the folders are the compiler's now
+        if job.source.parent in _FOLDERS:
+            _FOLDERS.remove(job.source.parent)
+
+
+def _compile_after_exit(jobs: list[tuple[_Job, str]]) -> None:
+    """Start one detached shell (a session of its own, at the lowest priority) that
+    compiles `jobs` one after another, each as a queued job would (`_JOB`), and removes
+    the folder of one that fails."""
+    lines = []
+    for job, cc in jobs:
+        folder = job.source.parent
+        command = ["sh", "-c", _JOB, "sh", cc, optimisation(job.source), *FLAGS, "-o",
+                   str(job.partial), str(job.source), "-lm"]
+        env = " ".join(f"{k}={shlex.quote(str(v))}" for k, v in
+                       (("PARTIAL", job.partial), ("LIBRARY", job.library), ("FOLDER", folder)))
+        lines.append(f"{env} {shlex.join(command)} 2>/dev/null || rm -rf "
+                     f"{shlex.quote(str(folder))}")
+    with suppress(OSError):
+        subprocess.Popen(["sh", "-c", "\n".join(lines)], stdin=subprocess.DEVNULL,
+                         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                         start_new_session=True, preexec_fn=_lowest_priority)
 
 
 def _forget_the_parents() -> None:

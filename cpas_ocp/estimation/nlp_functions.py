@@ -37,8 +37,16 @@ import numpy as np
 import scipy.sparse as sp
 
 from cpas_ocp.estimation.action_windows import ActionWindows
+from cpas_ocp.estimation.compiled import advance_compilers
 
 POINTS_KEPT = 2  # the accepted iterate and the line search's latest trial point
+# Model evaluations a run makes in the VM before it switches to native code compiled
+# meanwhile.  The switch rebuilds the point functions (0.5 s on `drogue`) to save about
+# 25 ms an evaluation there: it pays only in a long run.  A run that has gone on this long
+# is likely to go on as long again; a short one (a fit of `drogue` from its reduction
+# makes 25) ends in the VM and leaves the compiled code to the next run
+# (`benchmarks/compile_cost.py`).
+SWITCH_AFTER = 40
 
 
 class FunctionBuffer:
@@ -102,9 +110,10 @@ class PointEvaluations:
     def __init__(self, residual_value: ca.Function, residual_jacobian: ca.Function,
                  constraint_value: ca.Function, constraints: ca.Function,
                  switch: Callable[[], Sequence[ca.Function] | None] | None = None) -> None:
-        """`switch`, where given, is asked before each new evaluation for the same four
-        functions in faster form (native code compiled meanwhile); once it gives them,
-        they replace these (on the same patterns) and it is not asked again."""
+        """`switch`, where given, is asked before each new evaluation from the
+        SWITCH_AFTER-th on for the same four functions in faster form (native code compiled
+        meanwhile); once it gives them, they replace these (on the same patterns) and it is
+        not asked again."""
         self._buffers = {name: FunctionBuffer(fn) for name, fn in (
             ("r", residual_value), ("rJ", residual_jacobian),
             ("g", constraint_value), ("gA", constraints))}
@@ -119,6 +128,9 @@ class PointEvaluations:
 
     def _maybe_switch(self) -> None:
         if self._switch is None:
+            return
+        if sum(self.evaluations.values()) < SWITCH_AFTER:
+            advance_compilers()
             return
         functions = self._switch()
         if functions is None:

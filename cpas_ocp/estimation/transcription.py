@@ -339,7 +339,7 @@ class NlpTranscription:
             if build is not None and not in_background():
                 pieces.adopt(build.wait())
                 build = None
-            elif build is not None and (native := build.ready()) is not None:
+            elif build is not None and (native := build.ready(start=False)) is not None:
                 pieces.adopt(native)
                 build = None
         layout = (blocks, n_gap_blocks, destinations, offsets, gap_rows, n)
