@@ -699,6 +699,8 @@ def _joint(args: argparse.Namespace) -> int:
     out = done.report(args.out)
     print(done.summary())
     print(f"\njoint fit written to {out} (joint.md, joint.csv, parameters.csv, joint.json)")
+    if not done.fit.is_result:
+        raise NotAResult(f"the joint fit is not a result: {done.fit.problems[0]}")
     return 0
 
 

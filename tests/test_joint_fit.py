@@ -30,7 +30,7 @@ WAKE_MODEL = {"effects": ["canopy_inflation", "forebody_drag", "wake_deficit", "
                           "drag_scale", "loadcell_scale", "gps", "imu", "load_cell"]}
 
 
-def _variant(capsule: bool):
+def _variant(capsule: bool, cds: float = CDS):
     base = load_problem("fbcp")
     manifest = json.loads(json.dumps(base.manifest))
     truth = dict(base.truth)
@@ -38,7 +38,7 @@ def _variant(capsule: bool):
     if capsule:
         manifest["model"] = WAKE_MODEL
     for chute in CANOPIES:
-        truth[f"CdS[{chute},stage1]"] = CDS
+        truth[f"CdS[{chute},stage1]"] = cds
         if capsule:
             truth[f"prf[{chute}]"] = PRF
     return dataclasses.replace(base, manifest=manifest, truth=truth)
@@ -115,6 +115,7 @@ def test_joint_fit_recovers_the_shared_prf_and_drag_area(fitted):
         assert abs(est.value - truth) < 3.0 * est.std, (est.name, est.value, est.std)
     # chi-square of the joint fit: the tests' noise, no more
     assert abs(jf.chi2 - jf.dof) < 4.0 * np.sqrt(2.0 * jf.dof)
+    assert jf.is_result and jf.problems == []
     # each copy of a shared parameter sits at the shared value in its test's fit
     for t, name in prf.members:
         assert jf.fits[t].parameters[name] == pytest.approx(prf.value, rel=1e-9)
@@ -148,6 +149,24 @@ def test_a_shared_parameter_no_test_determines_is_reported_so(folders):
     jf = joint_fit(tests, {"CdS": "type", "prf": "type"})
     assert not jf.estimate("prf[fbcp]").determined
     assert not jf.estimate("CdS[fbcp,stage1]").determined
+    assert not jf.is_result and any("do not determine" in p for p in jf.problems)
+
+
+@pytest.mark.slow  # a joint fit of two tests
+def test_hardware_that_differs_is_not_a_result_and_the_command_exits_4(folders, tmp_path,
+                                                                       capsys):
+    """Two tests whose canopies' drag areas differ by 15 % fitted as one hardware: the joint
+    chi-square is beyond the noise, said in the report, and the command exits 4."""
+    other = tmp_path / "larger"
+    simulate_problem(_variant(False, cds=1.15 * CDS), other, 777)
+    (other / "truth.json").unlink()
+    out = tmp_path / "joint"
+    code = main(["joint", str(folders[0]), str(other), "--share", "CdS", "--out", str(out)])
+    err = capsys.readouterr().err
+    assert code == 4 and "beyond the tests' noise" in err
+    saved = json.loads((out / "joint.json").read_text())
+    assert saved["result"] is False and saved["fit_p_value"] < 1e-3
+    assert "**Not a result.**" in (out / "joint.md").read_text()
 
 
 @pytest.mark.slow  # joint fits of four tests

@@ -33,10 +33,12 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
+from scipy.stats import chi2 as chi2_law
 
 from cpas_ocp.estimation.estimator import Estimator, Fit, Settings, SolverStats
 from cpas_ocp.estimation.joint_nlp import JointNlp, Link
 from cpas_ocp.estimation.uncertainty import Covariance
+from cpas_ocp.inference.result_claim import ALPHA
 from cpas_ocp.physics.flight_test import FlightTest
 from cpas_ocp.physics.parameters import param_name, split_name
 
@@ -114,6 +116,32 @@ class JointFit:
     def dof(self) -> int:
         """Residuals less the free parameters (each shared one counted once)."""
         return self.n_residuals - self.n_free
+
+    @property
+    def fit_p_value(self) -> float:
+        """The chance of a chi-square this large from the tests' noise alone."""
+        return float(chi2_law.sf(self.chi2, max(self.dof, 1)))
+
+    @property
+    def problems(self) -> list[str]:
+        """Why the joint fit is not a result (empty where it is): a chi-square beyond the
+        tests' noise (p below `result_claim.ALPHA`, the single fit's level), a shared
+        parameter the tests do not determine together, parameters held at a bound."""
+        out = []
+        if self.fit_p_value < ALPHA:
+            out.append(f"chi-square {self.chi2:.1f} on {self.dof} degrees of freedom (p = "
+                       f"{self.fit_p_value:.2g}) is beyond the tests' noise: the shared "
+                       "parameters may differ between the tests, or the model lacks an effect")
+        open_ = [s.name for s in self.shared if not s.determined]
+        if open_:
+            out.append(f"the tests together do not determine {', '.join(open_)}")
+        if self.covariance.at_bound:
+            out.append(f"held at a bound: {', '.join(self.covariance.at_bound)}")
+        return out
+
+    @property
+    def is_result(self) -> bool:
+        return not self.problems
 
     def estimate(self, name: str) -> SharedEstimate:
         """The shared parameter `name`'s estimate."""

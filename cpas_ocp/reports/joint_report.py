@@ -70,6 +70,9 @@ def joint_text(jf: JointFit) -> str:
     lines += ["", f"Each test alone: chi-square {alone_chi2:.1f} with "
               f"{sum(len(f.free) for f in jf.individual)} free parameters; jointly "
               f"{jf.chi2:.1f} with {jf.n_free}."]
+    if not jf.is_result:
+        lines += ["", "**Not a result.** " + " ".join(f"{p[0].upper()}{p[1:]}." for p in
+                                                    jf.problems)]
     if not all(s_est.determined for s_est in jf.shared):
         lines += ["", "The tests together do not determine every shared parameter; the "
                   "combinations left open (test index:parameter):"]
@@ -85,7 +88,8 @@ def write_joint(jf: JointFit, out: Path) -> None:
         parameter_table(jf).to_csv(tmp / "parameters.csv", index=False)
         (tmp / MARKER).write_text(json_text({
             "tests": jf.labels, "status": jf.stats.status, "iterations": jf.stats.iterations,
-            "chi2": jf.chi2, "dof": jf.dof,
+            "chi2": jf.chi2, "dof": jf.dof, "fit_p_value": jf.fit_p_value,
+            "result": jf.is_result, "problems": jf.problems,
             "shared": [{"name": s.name, "value": s.value, "std": s.std,
                         "copies": [{"test": jf.labels[t], "parameter": n} for t, n in s.members]}
                        for s in jf.shared]}))
