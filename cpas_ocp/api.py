@@ -95,7 +95,7 @@ from cpas_ocp.inference.result_claim import (
 from cpas_ocp.inference.test_design import TestDesign
 from cpas_ocp.inference.test_design import design as design_test
 from cpas_ocp.inference.whatif import WhatIfResult, parameter_bounds, parse_constraint, what_if
-from cpas_ocp.io.flight_card import FlightCard, card_folder, load_card
+from cpas_ocp.io.flight_card import FlightCard, card_reading, load_card
 from cpas_ocp.io.flight_log import import_flight
 from cpas_ocp.io.flight_test import load_test
 from cpas_ocp.io.import_reports import ImportSummary
@@ -597,9 +597,7 @@ def import_log(log: str | Path, card: str | FlightCard, out: str | Path,
             raise InputError(card.source, "data.format/data.columns", "one of the two, "
                              "saying how the card's logs are read (a built-in format, or a "
                              "column map), or --format/--columns on the command line")
-        log_format = card.data_format
-        columns = card.data_columns if not isinstance(card.data_columns, str) \
-            else card_folder(card) / card.data_columns
+        log_format, columns = card_reading(card)
     record = read_flight_log(log, log_format, columns, f"{card.source}: data.columns")
     return import_flight(record, card, out, still_air)
 

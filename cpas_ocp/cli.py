@@ -762,11 +762,10 @@ def _import(args: argparse.Namespace) -> int:
 
 
 def _flight(args: argparse.Namespace) -> int:
-    from cpas_ocp.io.flight_card import card_folder, is_card_file, load_card
+    from cpas_ocp.io.flight_card import card_folder, card_reading, is_card_file, load_card
     card = load_card(args.card)
-    beside = card_folder(card)
     data = args.data if args.data is not None else (
-        beside if is_card_file(card) else Path("../shared/data")) / card.data_folder
+        card_folder(card) if is_card_file(card) else Path("../shared/data")) / card.data_folder
     logs = args.log or list(card.logs)
     if not logs:
         raise InputError(card.source, "data.logs", "the flight logs to reconstruct (or give "
@@ -778,9 +777,7 @@ def _flight(args: argparse.Namespace) -> int:
     # The command line's format or map, else the card's, else an Altus Metrum export.
     log_format, columns = args.format, args.columns
     if log_format is None and columns is None:
-        log_format = card.data_format
-        columns = beside / card.data_columns if isinstance(card.data_columns, str) \
-            else card.data_columns
+        log_format, columns = card_reading(card)
         if log_format is None and columns is None:
             log_format = "altus"
     new_out = not args.out.exists() or not any(args.out.iterdir())

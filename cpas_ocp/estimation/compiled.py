@@ -286,8 +286,8 @@ _QUEUE = _Queue()
 
 
 def advance_compilers() -> None:
-    """Collect the compilers that ended and start those waiting (`_Queue.advance`): for a
-    run that polls its native build only from time to time."""
+    """Collect the compilers that ended and, once compilers may run (`_Queue.start`),
+    start those waiting (`_Queue.advance`)."""
     _QUEUE.advance()
 
 

@@ -41,7 +41,7 @@ from cpas_ocp.errors import SolverFailure
 from cpas_ocp.estimation.action_windows import ActionWindows
 from cpas_ocp.estimation.estimator import Estimator
 from cpas_ocp.estimation.fit import Fit, SolverStats
-from cpas_ocp.estimation.nlp_functions import ipopt_functions
+from cpas_ocp.estimation.nlp_functions import bound_violations, ipopt_functions, worst_violation
 from cpas_ocp.estimation.uncertainty import (
     Covariance,
     Linearisation,
@@ -168,19 +168,16 @@ class JointNlp:
         """The joint Jacobians' patterns and gathers, bounds and the curvature function."""
         ests = self.estimators
         J_blocks, A_blocks = [], []
-        r0 = 0
+        J_row = A_row = 0
         for i, est in enumerate(ests):
             J, A = est._points.patterns()
-            J_blocks.append((J, r0, int(self.offsets[i])))
-            r0 += J.shape[0]
-        self.n_residuals = r0
-        r0 = 0
-        for i, est in enumerate(ests):
-            A = est._points.patterns()[1]
-            A_blocks.append((A, r0, int(self.offsets[i])))
-            r0 += A.shape[0]
+            J_blocks.append((J, J_row, int(self.offsets[i])))
+            A_blocks.append((A, A_row, int(self.offsets[i])))
+            J_row += J.shape[0]
+            A_row += A.shape[0]
+        self.n_residuals = J_row
         n_links = self.links_matrix.shape[0]
-        A_blocks.append((self.links_matrix, r0, 0))
+        A_blocks.append((self.links_matrix, A_row, 0))
         rows = np.concatenate([self._rows, self._n_test_rows + np.arange(n_links)])
         self._J = _Gather(J_blocks, (self.n_residuals, self.nz))
         self._A = _Gather(A_blocks, (self._n_test_rows + n_links, self.nz), rows)
@@ -275,9 +272,8 @@ class JointNlp:
         stats = solver.stats()
         z = np.asarray(sol["x"]).ravel()
         r = self.residual_value(z)
-        viol = self._violations(self.constraint_value(z))
-        worst = f"index {int(np.argmax(viol))}, violation {float(np.max(viol)):.3g}" \
-            if viol.size else ""
+        worst = worst_violation(bound_violations(self.constraint_value(z), self.lbg,
+                                                 self.ubg))
         status = str(stats["return_status"])
         iterations = int(stats["iter_count"])
         if not stats["success"]:
@@ -291,9 +287,6 @@ class JointNlp:
         J, A = self.patterns()
         return ActionWindows((J, A), (np.full(J.shape[0], np.nan), np.full(A.shape[0], np.nan)),
                              0, None)
-
-    def _violations(self, g: np.ndarray) -> np.ndarray:
-        return np.maximum(self.lbg - g, 0.0) + np.maximum(g - self.ubg, 0.0)
 
     def linearise(self, z: np.ndarray) -> Linearisation:
         """The joint problem linearised at `z` (shooting states eliminated per test)."""

@@ -183,6 +183,18 @@ class PointEvaluations:
         return g, A
 
 
+def bound_violations(g: np.ndarray, lbg: np.ndarray, ubg: np.ndarray) -> np.ndarray:
+    """How far each constraint value in `g` lies outside its bounds [lbg, ubg] (scaled)."""
+    return np.maximum(lbg - g, 0) + np.maximum(g - ubg, 0)
+
+
+def worst_violation(violations: np.ndarray) -> str:
+    """The largest of `bound_violations` and where, in words ("" without constraints)."""
+    if not violations.size:
+        return ""
+    return f"index {int(np.argmax(violations))}, violation {float(np.max(violations)):.3g}"
+
+
 class PointFunctions(Protocol):
     """What Ipopt's functions are assembled from: the residuals and constraints of the
     scaled decision vector with their Jacobians on fixed patterns (`PointEvaluations` of

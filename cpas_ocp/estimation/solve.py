@@ -24,7 +24,11 @@ from cpas_ocp.estimation.fit import (
     Fit,
     SolverStats,
 )
-from cpas_ocp.estimation.nlp_functions import MarquardtDamping, ipopt_functions
+from cpas_ocp.estimation.nlp_functions import (
+    MarquardtDamping,
+    ipopt_functions,
+    worst_violation,
+)
 from cpas_ocp.estimation.uncertainty import (
     DECREMENT_FLOOR,
     GaussNewtonStep,
@@ -457,9 +461,7 @@ class Solving:
             g = self._points.constraint_value(z)
         else:
             g, objective = np.asarray(sol["g"]).ravel(), float(sol["f"])
-        viol = self._violations(g)
-        worst = f"index {int(np.argmax(viol))}, violation {float(np.max(viol)):.3g}" \
-            if viol.size else ""
+        worst = worst_violation(self._violations(g))
         stats = SolverStats(status, success, run.iterations, wall, objective, worst, decrement,
                             "the offline reduction" if start is None else
                             "a fit" if isinstance(start, Fit) else "a given point")

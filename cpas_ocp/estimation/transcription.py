@@ -29,7 +29,7 @@ from cpas_ocp.estimation.fit import (
     default_grid_step,
 )
 from cpas_ocp.estimation.kinematic_track import kinematic_track
-from cpas_ocp.estimation.nlp_functions import MarquardtDamping, PointEvaluations
+from cpas_ocp.estimation.nlp_functions import MarquardtDamping, PointEvaluations, bound_violations
 from cpas_ocp.estimation.reduction import initial_guess
 from cpas_ocp.estimation.shooting_grid import (
     TimeWindow,
@@ -1000,7 +1000,7 @@ class NlpTranscription:
 
     def _violations(self, g: np.ndarray) -> np.ndarray:
         """How far each constraint value in `g` lies outside its bounds (scaled)."""
-        return np.maximum(self._lbg - g, 0) + np.maximum(g - self._ubg, 0)
+        return bound_violations(g, self._lbg, self._ubg)
 
     def _value_violation(self, z: np.ndarray) -> float:
         """Largest scaled constraint violation at `z`, from the constraint values alone (the

@@ -156,3 +156,11 @@ def card_folder(card: FlightCard) -> Path:
     """The folder a card's relative paths start from: a card file's own folder (the
     working folder for a built-in card)."""
     return Path(card.source).parent if is_card_file(card) else Path()
+
+
+def card_reading(card: FlightCard) -> tuple[str | None, Path | dict[str, Any] | None]:
+    """How the card says its logs are read: ``data.format`` (a built-in format) and
+    ``data.columns`` (a column map, or its file's path from the card's folder)."""
+    columns = card.data_columns
+    return card.data_format, card_folder(card) / columns if isinstance(columns, str) \
+        else columns

@@ -34,8 +34,7 @@ def joint_frame(jf: JointFit) -> pd.DataFrame:
             rows.append({"shared": s.name, "value": s.value, "std": s.std,
                          "test": jf.labels[t], "parameter": name,
                          "alone": jf.individual[t].parameters[name],
-                         "alone_std": own.std.get(name, np.nan)
-                         if name not in own.undetermined else np.nan})
+                         "alone_std": own.std.get(name, np.nan)})
     return pd.DataFrame(rows)
 
 
