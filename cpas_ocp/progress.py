@@ -10,6 +10,7 @@ from __future__ import annotations
 import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from dataclasses import dataclass
 
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
@@ -33,3 +34,33 @@ def progress_line(what: str, total: int, enabled: bool = True
             bar.update(task, advance=done, detail=detail)
 
         yield advance
+
+
+def _quiet(_line: str) -> None:
+    """Say nothing."""
+
+
+@dataclass(frozen=True)
+class Narration:
+    """Where a workflow says what it is doing and what its user should know.
+
+    say: a step under way or done ("solving: ..."), stdout on the command line;
+    warn: what the result's reader must know (an undetermined combination, a
+    sensor no effect predicts), stderr on the command line;
+    progress: whether long loops draw a progress line (`progress_line`).
+    Silent by default, as a notebook or a script wants it."""
+
+    say: Callable[[str], None] = _quiet
+    warn: Callable[[str], None] = _quiet
+    progress: bool = False
+
+
+SILENT = Narration()
+
+
+def terminal(progress: bool = True) -> Narration:
+    """Narration on the terminal: steps on stdout (flushed, so they show before the work),
+    warnings on stderr prefixed "warning: ", progress lines where `progress`."""
+    return Narration(lambda line: print(line, flush=True),
+                     lambda line: print(f"warning: {line}", file=sys.stderr, flush=True),
+                     progress)

@@ -206,9 +206,9 @@ def test_a_bad_scheduler_address_is_refused_before_the_work(address, why, tmp_pa
 def test_a_scheduler_address_dask_reads_is_accepted(address) -> None:
     from distributed.comm.addressing import parse_address
 
-    from cpas_ocp.cli import _scheduler
+    from cpas_ocp.cli.arguments import scheduler
 
-    assert _scheduler(address) == address
+    assert scheduler(address) == address
     assert parse_address(address)[0] in ("tcp", "tls", "ws", "inproc", "ucx")
 
 
@@ -277,7 +277,7 @@ def test_an_internal_error_is_one_line_exit_1_with_a_log(monkeypatch, tmp_path, 
         raise RuntimeError("a defect of the tool\nsecond line")
 
     monkeypatch.setenv("CPAS_OCP_CACHE", str(tmp_path / "cache"))
-    monkeypatch.setattr(cli, "_problems", broken)
+    monkeypatch.setattr(cli.commands, "problems", broken)
     assert main(["problems"]) == 1
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and err.startswith("internal error: RuntimeError")

@@ -87,7 +87,7 @@ def no_reconstruction(monkeypatch: pytest.MonkeyPatch) -> None:
     """`flight` ends with exit 4 where its first log's reconstruction would begin."""
     def stand_in(*_args: object) -> None:
         raise NotAResult("reconstruction left out by the test")
-    monkeypatch.setattr("cpas_ocp.cli._flight_log", stand_in)
+    monkeypatch.setattr("cpas_ocp.api.flights._flight_log", stand_in)
 
 
 @pytest.fixture(scope="module")
@@ -118,7 +118,7 @@ def no_fit(monkeypatch: pytest.MonkeyPatch) -> None:
     NLP, which comes after the cases are read, matched and their columns checked."""
     def stand_in(*_args: object, **_kwargs: object) -> None:
         raise NotAResult("fit left out by the test")
-    monkeypatch.setattr("cpas_ocp.api.Estimator", stand_in)
+    monkeypatch.setattr("cpas_ocp.api.campaigns.Estimator", stand_in)
 
 
 def _write(path: Path, obj: object) -> str:

@@ -13,7 +13,7 @@ from __future__ import annotations
 import json
 import signal
 
-from cpas_ocp import api
+from cpas_ocp.api import kept_discovery
 from cpas_ocp.cli import main
 from cpas_ocp.discrepancy import discovery
 from cpas_ocp.interrupts import Interrupted
@@ -41,7 +41,7 @@ def test_a_signal_keeps_the_finished_steps(drogue_folder, tmp_path, monkeypatch,
     monkeypatch.setattr(discovery, "diagnose", diagnose)
     monkeypatch.setattr(discovery, "next_step", next_step)
     monkeypatch.setattr(discovery, "discover", discover)
-    monkeypatch.setattr(api, "discover", discover)  # the command's path to it
+    monkeypatch.setattr(kept_discovery, "discover", discover)  # the command's path to it
     out = tmp_path / "d"
     code = main(["discover", str(drogue_folder(1)), "--out", str(out)])
     err = capsys.readouterr().err

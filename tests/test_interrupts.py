@@ -96,13 +96,14 @@ def test_a_signal_inside_a_deferred_region_waits_for_its_end() -> None:
 EARLY = """
 import sys, time
 import cpas_ocp.cli as cli
+import cpas_ocp.cli.arguments as arguments
 
-build = cli._parser
+build = arguments.parser
 def announced():
     print("parsing", flush=True)
     time.sleep(5.0)
     return build()
-cli._parser = announced
+arguments.parser = announced
 sys.exit(cli.main(sys.argv[1:]))
 """
 

@@ -139,8 +139,9 @@ def pressed(drogue_folder, tmp_path_factory):
 
 
 def given(monkeypatch: pytest.MonkeyPatch, rec: co.Reconstruction) -> None:
-    """Every fit the interface makes (`api.fit_estimator`) is `rec`."""
-    monkeypatch.setattr("cpas_ocp.api.fit_estimator", lambda *_a, **_k: rec)
+    """Every fit the interface's workflows make (`api.fit_estimator`) is `rec`."""
+    for workflows in ("reconstruction", "discrepancy"):
+        monkeypatch.setattr(f"cpas_ocp.api.{workflows}.fit_estimator", lambda *_a, **_k: rec)
 
 
 def test_a_fit_still_pressed_exits_4_with_its_report_saying_why(
@@ -176,7 +177,7 @@ def test_discover_says_in_its_report_that_its_first_fit_is_not_a_result(
                                    "stopped before any diagnosis")
 
     monkeypatch.setattr(discovery, "discover", stopped)
-    monkeypatch.setattr("cpas_ocp.api.discover", stopped)  # the command's path to it
+    monkeypatch.setattr("cpas_ocp.api.kept_discovery.discover", stopped)  # the command's path to it
     out = tmp_path / "discovery"
     assert main(["discover", str(test_dir), "--out", str(out)]) == 0
     notes = json.loads((out / "discovery.json").read_text())["notes"]

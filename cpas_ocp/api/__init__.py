@@ -1,0 +1,62 @@
+"""The Python interface for notebooks and scripts: every workflow of the command line as a
+function, each returning a result object (the command line only parses, calls and prints).
+
+    import cpas_ocp as co
+
+    test = co.simulate("drogue", "drogue-test", seed=1)   # or co.load_test(folder)
+    rec = co.reconstruct(test)        # solve, judge the fit, covariance
+    rec.parameters                    # value, sigma, 95 % interval, unit (SI)
+    rec.worst                         # where the model fits worst, one line
+    rec.report("report")              # the folder `cpas-ocp reconstruct` writes
+    diag = rec.diagnose()             # which effect is missing, or the residual's signature
+    chain = rec.discover()            # diagnose, add, refit, ... until the residual is noise
+    comp = rec.compare("model.json")  # this model against another, nested or not
+
+A fit that did not converge raises `SolverFailure` (its status and iteration
+count), never a result; a fit that converged but is not a result (a guessed bound
+pressed, chi-square/dof beyond 10, a process beyond its prior, a drag area
+undetermined: `result_claim`) is returned with `rec.is_result` False and
+`rec.problems` saying why.  Long workflows say what they do through a `Narration`
+(`progress.terminal()` on a terminal; silent by default).
+
+The modules: `preparation` (simulate, reduce, model files, test design),
+`reconstruction` (one test's fit and what follows from it), `discrepancy`
+(diagnose, discover, compare from a test folder), `kept_discovery` (a discovery
+kept on disk, resumed), `campaigns` (many tests, populations, a joint fit,
+dispersions, Monte Carlo) and `flights` (real flights' logs).
+"""
+
+from cpas_ocp.api.campaigns import (
+    Campaign,
+    Dispersions,
+    Joint,
+    MonteCarlo,
+    Population,
+    campaign,
+    dispersions,
+    joint,
+    monte_carlo,
+    population,
+)
+from cpas_ocp.api.discrepancy import compare, diagnose, discover
+from cpas_ocp.api.flights import Flight, flight, import_log
+from cpas_ocp.api.kept_discovery import resume_discovery
+from cpas_ocp.api.preparation import InitialGuess, design, load_model, reduce, simulate
+from cpas_ocp.api.reconstruction import (
+    FitOptions,
+    Reconstruction,
+    build,
+    demo,
+    fit_estimator,
+    reconstruct,
+    what_if,
+)
+from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.progress import Narration, terminal
+
+__all__ = ["Campaign", "Dispersions", "FitOptions", "Flight", "InitialGuess", "Joint",
+           "MonteCarlo", "Narration", "Population", "Reconstruction", "build", "campaign",
+           "compare", "demo", "design", "diagnose", "discover", "dispersions", "fit_estimator",
+           "flight", "import_log", "joint", "load_model", "load_test", "monte_carlo",
+           "population", "reconstruct", "reduce", "resume_discovery", "simulate", "terminal",
+           "what_if"]
