@@ -6,10 +6,14 @@ from __future__ import annotations
 import math
 import re
 
+import pytest
+
 import cpas_ocp as co
 from cpas_ocp.estimation.estimator import Estimator
 from cpas_ocp.estimation.fit import EVENTS
 from cpas_ocp.io.flight_test import load_test
+
+pytestmark = pytest.mark.slow  # fits of a whole phase
 
 
 def test_a_reconstruction_shows_its_parameters_statistics_and_claim(drogue_folder) -> None:

@@ -235,6 +235,7 @@ def steady_folder(problem_folder) -> Path:
     return problem_folder("rocket_steady", 1)
 
 
+@pytest.mark.slow
 def test_sigmas_four_times_too_small_exit_4_naming_the_sensor(steady_folder, tmp_path,
                                                               capsys) -> None:
     """rocket_steady, its right model, its altimeter's sigma stated 4x too small: chi^2/dof
@@ -250,6 +251,7 @@ def test_sigmas_four_times_too_small_exit_4_naming_the_sensor(steady_folder, tmp
     assert "**Not a result.**" in (tmp_path / "out" / "report.md").read_text()
 
 
+@pytest.mark.slow
 def test_sigmas_ten_times_too_large_warn_that_uncertainties_are_overstated(
         steady_folder, tmp_path, capsys) -> None:
     test = scaled_sigmas(steady_folder, tmp_path / "loose", 10.0)
@@ -273,6 +275,7 @@ def wind_model(folder: Path, dest: Path, sigma: float) -> Path:
     return dest
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("sigma", "code"), [(0.05, 4), (1.0, 0)])
 def test_a_wind_process_beyond_its_prior_exits_4(problem_folder, tmp_path, capsys,
                                                  sigma: float, code: int) -> None:
@@ -294,6 +297,7 @@ def test_a_wind_process_beyond_its_prior_exits_4(problem_folder, tmp_path, capsy
         assert claim["result"] is True and claim["process_departures"] == []
 
 
+@pytest.mark.slow
 def test_a_parameter_on_a_guessed_bound_is_flagged_in_every_output(problem_folder, tmp_path,
                                                                    capsys) -> None:
     """rocket_gusts (seed 2) in still air, sigmas halved: the main's drag area ends on its

@@ -32,6 +32,7 @@ def test_the_relaxed_model_puts_back_what_each_stiff_effect_replaces(elastic_fbc
     assert continuation.relaxed_spec(spec_of_test(test), test) is None
 
 
+@pytest.mark.slow
 def test_a_failed_direct_start_goes_through_the_relaxed_fit(elastic_fbcp, monkeypatch) -> None:
     test, spec = elastic_fbcp
     # One iteration cannot converge from the reduction: the fit must take the other road.

@@ -5,9 +5,12 @@ from __future__ import annotations
 
 import json
 
+import pytest
+
 from cpas_ocp.cli import main
 
 
+@pytest.mark.slow
 def test_an_unconverged_solve_writes_a_failure_report_and_no_result(drogue_folder, tmp_path,
                                                                     capsys) -> None:
     # The drogue fit takes 4 iterations from the reduction: capped at 1 it cannot converge.

@@ -16,6 +16,8 @@ import pytest
 
 from cpas_ocp.reports.report import write_report
 
+pytestmark = pytest.mark.slow  # fits of a whole phase, a browser
+
 CHROMIUM = next((p for p in ("/usr/bin/chromium", "/usr/bin/chromium-browser")
                  if Path(p).is_file()), shutil.which("chromium"))
 CHROMEDRIVER = next((p for p in ("/usr/bin/chromedriver", "/usr/lib/chromium/chromedriver")

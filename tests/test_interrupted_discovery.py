@@ -13,11 +13,15 @@ from __future__ import annotations
 import json
 import signal
 
+import pytest
+
 from cpas_ocp.api import kept_discovery
 from cpas_ocp.cli import main
 from cpas_ocp.discrepancy import discovery
 from cpas_ocp.interrupts import Interrupted
 from cpas_ocp.io.model_spec import load_model_file
+
+pytestmark = pytest.mark.slow  # a discovery
 
 
 def test_a_signal_keeps_the_finished_steps(drogue_folder, tmp_path, monkeypatch, capsys

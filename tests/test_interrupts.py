@@ -229,6 +229,7 @@ def _interrupted_while_compiling(command: list[str], sig: int, tmp_path: Path,
     assert not list(cache.glob(".cpas-cg-*")) and not list(tmp_path.glob("**/.cpas-*"))
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads /proc")
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
 def test_an_interrupt_while_compiling_leaves_no_compiler_and_no_folder(sig, drogue_folder,
@@ -242,6 +243,7 @@ def test_an_interrupt_while_compiling_leaves_no_compiler_and_no_folder(sig, drog
     assert not (tmp_path / "diagnosis").exists()
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads /proc")
 def test_an_interrupt_while_waiting_for_the_compiler_ends_the_build(tmp_path) -> None:
     """Compiling first (CPAS_OCP_COMPILE=wait), a signal that arrives while the estimator's
@@ -252,6 +254,7 @@ def test_an_interrupt_while_waiting_for_the_compiler_ends_the_build(tmp_path) ->
     assert not list((tmp_path / "demo").glob("*"))
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads /proc")
 def test_an_interrupted_campaign_leaves_no_compiler_of_its_workers(drogue_folder,
                                                                    tmp_path) -> None:

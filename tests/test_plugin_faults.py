@@ -149,6 +149,7 @@ def test_a_model_naming_a_failing_plugin_is_valid_or_one_line_exit_2(
     ("diagnose", "null_values", "NaN"),
     ("discover", "penalties", "NaN"),
 ])
+@pytest.mark.slow
 def test_a_fit_reaching_a_failing_hook_is_exit_2_naming_it(command, place, fault, fbcp,
                                                             tmp_path, capsys) -> None:
     """The hooks a fit or a score test calls: `reconstruct` with the plug-in in its model,

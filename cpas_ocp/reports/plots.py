@@ -175,9 +175,20 @@ def plot_drag_areas(fit: Fit, folder: Path, units: DisplayUnits | None = None,
 
 def plot_wind(fit: Fit, cov: Covariance | None, folder: Path,
               units: DisplayUnits | None = None) -> Path | None:
+    """``wind.png`` (`wind_axes`); None where the model has no process knots."""
+    axes = wind_axes(fit, cov, units)
+    if axes is None:
+        return None
+    return _save(axes[0, 0].figure, f"{fit.test.name}: air motion (wind process)",
+                 folder / "wind.png")
+
+
+def wind_axes(fit: Fit, cov: Covariance | None, units: DisplayUnits | None = None,
+              axes: np.ndarray | None = None) -> np.ndarray | None:
     """The wind process's estimate (`wind_process`): each component's air velocity at its
-    knots with the 95 % band (+-1.96 sigma), against time and against altitude; None
-    where the model has no process knots."""
+    knots with the 95 % band (+-1.96 sigma), against time (left) and against altitude
+    (right); into `axes` (a row of two per component, else a new figure's); the axes, or
+    None where the model has no process knots."""
     components = {}
     for name in fit.free:
         base, index = split_name(name)
@@ -190,8 +201,9 @@ def plot_wind(fit: Fit, cov: Covariance | None, folder: Path,
     kh, length = units.factor("length"), pretty(units.unit("length"))
     std = cov.std if cov is not None else {}
     q = fit.quantities()
-    fig, axes = plt.subplots(len(components), 2, figsize=(12, 2.8 * len(components) + 1.0),
-                             squeeze=False, gridspec_kw={"width_ratios": [3, 1]})
+    if axes is None:
+        axes = plt.subplots(len(components), 2, figsize=(12, 2.8 * len(components) + 1.0),
+                            squeeze=False, gridspec_kw={"width_ratios": [3, 1]})[1]
     wind = next(e for e in fit.model.effects if isinstance(e, WindProcess))
     knot_times = wind.knot_times(fit.test)
     for row, (component, knots) in enumerate(components.items()):
@@ -213,7 +225,7 @@ def plot_wind(fit: Fit, cov: Covariance | None, folder: Path,
         ax.set_xlabel(f"{component} [{speed}]")
         ax.set_ylabel(f"altitude [{length}]")
     axes[-1, 0].set_xlabel("time [s]")
-    return _save(fig, f"{fit.test.name}: air motion (wind process)", folder / "wind.png")
+    return axes
 
 
 def correlation_axes(cov: Covariance, ax: plt.Axes | None = None) -> plt.Axes | None:
@@ -289,34 +301,41 @@ def plot_sensor_residuals(fit: Fit, windows: Sequence[PhaseWindow], folder: Path
 
 def plot_residual_comparison(fit_a: Fit, fit_b: Fit, labels: tuple[str, str],
                              windows: Sequence[PhaseWindow], folder: Path) -> list[Path]:
-    """One figure per sensor (``compare_<sensor>.png``): each channel's normalised residuals
-    under model A (left) and model B (right), same scale, phase windows shaded, the
-    normalised RMS of each in its panel's title."""
-    paths = []
+    """One figure per sensor (``compare_<sensor>.png``, `residual_comparison_axes`)."""
+    return [_save(residual_comparison_axes(fit_a, fit_b, sensor, labels, windows)[0, 0].figure,
+                  f"{fit_a.test.name}: {sensor}, {labels[0]} against {labels[1]}",
+                  folder / f"compare_{sensor}.png") for sensor in fit_a.sensors]
+
+
+def residual_comparison_axes(fit_a: Fit, fit_b: Fit, sensor: str, labels: tuple[str, str],
+                             windows: Sequence[PhaseWindow] = (),
+                             axes: np.ndarray | None = None) -> np.ndarray:
+    """Each channel of `sensor`: its normalised residuals under model A (left) and model B
+    (right), same scale, phase windows shaded, the normalised RMS of each in its panel's
+    title; into `axes` (a row of two per channel the fits share, else a new figure's);
+    the axes."""
     # Channels are paired by name: a model may add pseudo-observations the other lacks.
     in_b = {(r.sensor, r.channel): r for r in fit_b.residuals}
-    for sensor in fit_a.sensors:
-        pairs = [(a, in_b[a.sensor, a.channel]) for a in fit_a.residuals
-                 if a.sensor == sensor and (a.sensor, a.channel) in in_b]
-        shown = windows_for_sensor(fit_a.test, sensor, windows)
-        fig, axes = plt.subplots(len(pairs), 2, figsize=(12, 2.2 * len(pairs) + 1.2),
-                                 sharex=True, sharey="row", squeeze=False)
-        for i, pair in enumerate(pairs):
-            for j, (r, label) in enumerate(zip(pair, labels, strict=True)):
-                ax = axes[i, j]
-                _shade_windows([ax], shown, legend=i == 0 and j == 0)
-                _plot_normalised(ax, r)
-                rms = float(np.sqrt(np.mean(r.normalised**2)))
-                ax.set_title(f"{label}: {r.channel}, normalised RMS {rms:.3f}", fontsize=9)
-                if i == 0 and j == 0 and shown:
-                    ax.legend(loc="upper right", fontsize=7)
-            lim = max(4.0, *(float(np.percentile(np.abs(r.normalised), 99.5)) for r in pair))
-            axes[i, 0].set_ylim(-lim, lim)
-        for ax in axes[-1]:
-            ax.set_xlabel("time [s]")
-        paths.append(_save(fig, f"{fit_a.test.name}: {sensor}, {labels[0]} against {labels[1]}",
-                           folder / f"compare_{sensor}.png"))
-    return paths
+    pairs = [(a, in_b[a.sensor, a.channel]) for a in fit_a.residuals
+             if a.sensor == sensor and (a.sensor, a.channel) in in_b]
+    shown = windows_for_sensor(fit_a.test, sensor, windows)
+    if axes is None:
+        axes = plt.subplots(len(pairs), 2, figsize=(12, 2.2 * len(pairs) + 1.2),
+                            sharex=True, sharey="row", squeeze=False)[1]
+    for i, pair in enumerate(pairs):
+        for j, (r, label) in enumerate(zip(pair, labels, strict=True)):
+            ax = axes[i, j]
+            _shade_windows([ax], shown, legend=i == 0 and j == 0)
+            _plot_normalised(ax, r)
+            rms = float(np.sqrt(np.mean(r.normalised**2)))
+            ax.set_title(f"{label}: {r.channel}, normalised RMS {rms:.3f}", fontsize=9)
+            if i == 0 and j == 0 and shown:
+                ax.legend(loc="upper right", fontsize=7)
+        lim = max(4.0, *(float(np.percentile(np.abs(r.normalised), 99.5)) for r in pair))
+        axes[i, 0].set_ylim(-lim, lim)
+    for ax in axes[-1]:
+        ax.set_xlabel("time [s]")
+    return axes
 
 
 def _shade_windows(axes: list[plt.Axes], windows: Sequence[PhaseWindow], legend: bool) -> None:
@@ -352,17 +371,27 @@ def _save(fig: plt.Figure, title: str, path: Path) -> Path:
 
 def plot_hull_projections(model: DispersionModel, cases: pd.DataFrame, path: Path,
                           shown: int = 5000) -> Path:
+    """The hull's projections (`hull_projection_axes`) written to `path`."""
+    return _save(hull_projection_axes(model, cases, shown)[0].figure,
+                 f"{model.label}: convex hull of the inflation parameters", path)
+
+
+def hull_projection_axes(model: DispersionModel, cases: pd.DataFrame, shown: int = 5000,
+                         axes: Sequence[plt.Axes] | None = None) -> list[plt.Axes]:
     """Each pair of hull parameters (paper Figs. 22, 26): the test points, the outline of
     their hull and of the grown hull (the convex hull of the projected vertices), the caps
-    box of the two distributions, and `shown` Monte Carlo cases."""
+    box of the two distributions, and `shown` Monte Carlo cases; into `axes` (one per
+    pair, else a new figure's); the axes."""
     names = model.hull_names
     pairs = list(itertools.combinations(range(len(names)), 2))
-    fig, axes = plt.subplots(1, len(pairs), figsize=(5 * len(pairs), 4.5), squeeze=False)
+    if axes is None:
+        axes = plt.subplots(1, len(pairs), figsize=(5 * len(pairs), 4.5), squeeze=False)[1][0]
+    axes = list(axes)
     grown = model.hull.vertices
     tests = model.test_points[list(names)].to_numpy()
     scale = (1.0 + model.hull.growth)
     own = model.hull.center + (grown - model.hull.center) / scale
-    for ax, (i, j) in zip(axes[0], pairs, strict=True):
+    for ax, (i, j) in zip(axes, pairs, strict=True):
         ax.plot(cases[names[i]].to_numpy()[:shown], cases[names[j]].to_numpy()[:shown], ".",
                 ms=1, color="0.6", label=f"Monte Carlo cases (first {shown:,})")
         for vertices, style, label in ((own, "C9-", "tests' hull"),
@@ -377,16 +406,26 @@ def plot_hull_projections(model: DispersionModel, cases: pd.DataFrame, path: Pat
         ax.plot(tests[:, i], tests[:, j], "ko", ms=4, label="tests")
         ax.set_xlabel(names[i])
         ax.set_ylabel(names[j])
-    axes[0][0].legend(fontsize=7)
-    return _save(fig, f"{model.label}: convex hull of the inflation parameters", path)
+    axes[0].legend(fontsize=7)
+    return axes
 
 
 def plot_dispersion_histograms(model: DispersionModel, cases: pd.DataFrame, path: Path) -> Path:
+    """The dispersions' histograms (`dispersion_histogram_axes`) written to `path`."""
+    return _save(dispersion_histogram_axes(model, cases)[0].figure,
+                 f"{model.label}: dispersions ({model.tests} tests)", path)
+
+
+def dispersion_histogram_axes(model: DispersionModel, cases: pd.DataFrame,
+                              axes: Sequence[plt.Axes] | None = None) -> list[plt.Axes]:
     """Per dispersed parameter: histogram of the cases (density), the fitted capped density,
-    the caps, and the test values as ticks."""
+    the caps, and the test values as ticks; into `axes` (one per parameter, else a new
+    figure's); the axes."""
     names = list(model.dispersions)
-    fig, axes = plt.subplots(1, len(names), figsize=(3.6 * len(names), 3.4), squeeze=False)
-    for ax, name in zip(axes[0], names, strict=True):
+    if axes is None:
+        axes = plt.subplots(1, len(names), figsize=(3.6 * len(names), 3.4), squeeze=False)[1][0]
+    axes = list(axes)
+    for ax, name in zip(axes, names, strict=True):
         d = model.dispersions[name]
         ax.hist(cases[name], bins=60, density=True, color="0.75", label="cases")
         x = np.linspace(d.lower_cap, d.upper_cap, 200)
@@ -397,18 +436,26 @@ def plot_dispersion_histograms(model: DispersionModel, cases: pd.DataFrame, path
         ax.plot(model.test_points[name], np.zeros(len(model.test_points)), "k|", ms=14,
                 label="tests")
         ax.set_xlabel(name)
-    axes[0][0].legend(fontsize=7)
-    return _save(fig, f"{model.label}: dispersions ({model.tests} tests)", path)
+    axes[0].legend(fontsize=7)
+    return axes
 
 
 def plot_peak_loads(result: StageLoads, path: Path) -> Path:
+    """The peak loads (`peak_load_axes`) written to `path`."""
+    return _save(peak_load_axes(result)[0].figure, f"{result.cases.label}: Monte Carlo peak "
+                 f"loads ({result.loads.tension.size:,} cases)", path)
+
+
+def peak_load_axes(result: StageLoads, axes: Sequence[plt.Axes] | None = None
+                   ) -> list[plt.Axes]:
     """A canopy stage's Monte Carlo peak riser tension: histogram (lbf) with the fitted
-    values' peak and the 50/99/99.9 % quantiles, and the exceedance probability
-    P(peak >= x) on a log scale (down to one case in the sample)."""
+    values' peak and the 50/99/99.9 % quantiles (left), and the exceedance probability
+    P(peak >= x) on a log scale, down to one case in the sample (right); into `axes`
+    (two, else a new figure's); the axes."""
     tension = np.sort(result.loads.tension) / LBF
     n = tension.size
     nominal = result.nominal.tension[0] / LBF
-    fig, (left, right) = plt.subplots(1, 2, figsize=(10, 4))
+    left, right = axes if axes is not None else plt.subplots(1, 2, figsize=(10, 4))[1]
     left.hist(tension, bins=min(80, max(10, n // 20)), color="0.7")
     right.semilogy(tension, 1.0 - np.arange(n) / n, "C0-", lw=1.2, drawstyle="steps-post")
     for ax in (left, right):
@@ -421,19 +468,26 @@ def plot_peak_loads(result: StageLoads, path: Path) -> Path:
     right.set_ylabel("P(peak ≥ x)")
     right.set_ylim(0.5 / n, 1.0)
     left.legend(fontsize=7)
-    return _save(fig, f"{result.cases.label}: Monte Carlo peak loads ({n:,} cases)", path)
+    return [left, right]
 
 
 def plot_drag_area_envelope(env: DragAreaEnvelope, path: Path) -> Path:
+    """The drag-area envelope (`drag_area_envelope_axes`) written to `path`."""
+    return _save(drag_area_envelope_axes(env).figure,
+                 f"{env.label}: drag-area growth, Monte Carlo against flight", path)
+
+
+def drag_area_envelope_axes(env: DragAreaEnvelope, ax: plt.Axes | None = None) -> plt.Axes:
     """Drag area (ft^2) against time from the stage start: the Monte Carlo min-max and 5-95 %
     bands and median (grey), the flight curves (blue), the caps-box corner curves (red: solid
     outside the grown hull, dotted inside or without a hull, each tagged at its peak) and
     the Monte Carlo cases with the extreme peaks and rises (black dashed); all at the
-    campaign's median conditions (paper Figs. 18, 27)."""
+    campaign's median conditions (paper Figs. 18, 27); into `ax` (else a new figure's);
+    the axis."""
     c = env.conditions
     area = 1.0 / FT**2
     b = env.bands
-    fig, ax = plt.subplots(figsize=(9, 5.5))
+    ax = ax if ax is not None else plt.subplots(figsize=(9, 5.5))[1]
     ax.fill_between(env.t, b["min"] * area, b["max"] * area, color="0.88",
                     label=f"Monte Carlo min-max ({env.cases:,} cases)")
     ax.fill_between(env.t, b["p05"] * area, b["p95"] * area, color="0.7", label="5-95 %")
@@ -464,15 +518,22 @@ def plot_drag_area_envelope(env: DragAreaEnvelope, path: Path) -> Path:
     ax.set_title(f"{c.inflation.replace('_', ' ')}, D_o {c.diameter / FT:.1f} ft, "
                  f"V_i {c.v_start / FT:.0f} ft/s, previous stage {c.cds_prev * area:.1f} ft² "
                  "(campaign medians)", fontsize=8)
-    return _save(fig, f"{env.label}: drag-area growth, Monte Carlo against flight", path)
+    return ax
 
 
 def plot_discovery(labels: Sequence[str], chi2_dof: Sequence[float],
                    worst_rms: Sequence[float], path: Path) -> Path:
+    """The error's fall (`discovery_axes`) written to `path`."""
+    return _save(discovery_axes(labels, chi2_dof, worst_rms).figure,
+                 "discovery: each step's model", path)
+
+
+def discovery_axes(labels: Sequence[str], chi2_dof: Sequence[float],
+                   worst_rms: Sequence[float], ax: plt.Axes | None = None) -> plt.Axes:
     """The error falling step by step: chi-square per degree of freedom and the worst
     window's normalised RMS of each step's model (`labels`: what each step added), with
-    the noise's value 1 marked."""
-    fig, ax = plt.subplots(figsize=(7.0, 4.0))
+    the noise's value 1 marked; into `ax` (else a new figure's); the axis."""
+    ax = ax if ax is not None else plt.subplots(figsize=(7.0, 4.0))[1]
     steps = np.arange(len(labels))
     ax.plot(steps, chi2_dof, "o-", label="χ²/dof")
     ax.plot(steps, worst_rms, "s--", label="worst window's normalised RMS")
@@ -480,4 +541,4 @@ def plot_discovery(labels: Sequence[str], chi2_dof: Sequence[float],
     ax.set_xticks(steps, labels, rotation=20, ha="right")
     ax.set_xlabel("model after each step")
     ax.legend()
-    return _save(fig, "discovery: each step's model", path)
+    return ax

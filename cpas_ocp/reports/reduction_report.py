@@ -65,14 +65,20 @@ def write_reduction(test: FlightTest, out: str | Path, spec: ModelSpec,
             "stage_scale": red.stage_scale,
             "stage_windows_s": {k: list(v) for k, v in red.stage_windows.items()},
         }))
-        _plot(test, red, stage_starts(test, guess), tmp / "reduction.png", shown)
+        fig = reduction_axes(test, red, stage_starts(test, guess), shown).figure
+        fig.tight_layout()
+        fig.savefig(tmp / "reduction.png", dpi=110)
+        plt.close(fig)
     return out, model, guess
 
 
-def _plot(test: FlightTest, red: Reduction, starts: dict[tuple[str, str], float],
-          path: Path, units: DisplayUnits) -> None:
+def reduction_axes(test: FlightTest, red: Reduction, starts: dict[tuple[str, str], float],
+                   units: DisplayUnits, ax: plt.Axes | None = None) -> plt.Axes:
+    """The offline reduction's drag areas (Eq. 2 from the IMU, Eq. 3 from each riser and
+    their sum) in `units`, the steady windows shaded with their stage scale, the start
+    times from the events dashed; into `ax` (else a new figure's); the axis."""
     area = units.factor("area")
-    fig, ax = plt.subplots(figsize=(10, 4.5))
+    ax = ax if ax is not None else plt.subplots(figsize=(10, 4.5))[1]
     ax.plot(red.t, red.cds_imu * area, lw=0.6, color="0.4", label="IMU, Eq. 2 (total)")
     if red.cds_riser:
         ax.plot(red.t, sum(red.cds_riser.values()) * area, lw=0.6, color="C0",
@@ -89,6 +95,4 @@ def _plot(test: FlightTest, red: Reduction, starts: dict[tuple[str, str], float]
     ax.set_ylabel(f"drag area [{pretty(units.unit('area'))}]")
     ax.set_title(f"{test.name}: offline reduction")
     ax.legend(loc="upper left", fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    return ax

@@ -37,7 +37,7 @@ from cpas_ocp.physics.effects.registry import load_plugin
 
 pytestmark = pytest.mark.slow
 
-PLUGINS = Path(__file__).parent / "plugins"
+PLUGINS = Path(__file__).parents[2] / "tests" / "plugins"
 
 
 def _discover(folder: Path, plugin: str, truth: dict[str, float], first: bool):

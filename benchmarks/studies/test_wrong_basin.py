@@ -24,8 +24,7 @@ from cpas_ocp.io.flight_test import load_test
 from cpas_ocp.io.model_spec import baseline_spec
 from cpas_ocp.io.problems import load_problem
 from cpas_ocp.physics.effects import DeploymentLoad, baseline_effects
-
-from .conftest import START_GUESS_OFFSET_S, assert_truth_within_noise, offset_events
+from tests.conftest import START_GUESS_OFFSET_S, assert_truth_within_noise, offset_events
 
 pytestmark = pytest.mark.slow
 
