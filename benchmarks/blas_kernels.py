@@ -11,7 +11,7 @@ and prints each run's outcome and wall time.  The whole suite can be given as
 `--tests tests`.
 
     python benchmarks/blas_kernels.py [--kernels default Haswell Zen Prescott]
-                                      [--tests tests/test_kkt.py ...]
+                                      [--tests tests/estimation/test_kkt.py ...]
 """
 
 from __future__ import annotations
@@ -24,9 +24,9 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-TESTS = ["tests/test_kkt.py", "tests/test_identifiability.py", "tests/test_coverage.py",
-         "tests/test_stopping.py", "tests/test_feasible_descent.py",
-         "tests/test_exact_hessian.py"]
+TESTS = ["tests/estimation/test_kkt.py", "tests/estimation/test_identifiability.py",
+         "tests/studies/test_coverage.py", "tests/estimation/test_stopping.py",
+         "tests/estimation/test_feasible_descent.py", "tests/estimation/test_exact_hessian.py"]
 
 
 def main() -> int:

@@ -2,8 +2,8 @@
 files, flight cards, Altus Metrum logs, column maps, CATS exports, flight cards for
 `flight`, campaign tables, scheduler addresses, and plug-ins that fail.
 
-Runs `tests/test_fuzz_manifest.py`, `tests/test_fuzz_files.py`,
-`tests/test_plugin_faults.py` and `tests/test_fuzz_logs.py` (its slow
+Runs `tests/io/test_fuzz_manifest.py`, `tests/io/test_fuzz_files.py`,
+`tests/cli/test_plugin_faults.py` and `tests/io/test_fuzz_logs.py` (its slow
 campaign-table test too) with `--examples` examples of each kind
 (default 2,000) drawn from `--seed` (the suite runs 30 fixed ones).  Every example must be
 valid input or a one-line exit 2 with nothing written; a failure prints

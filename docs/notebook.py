@@ -13,7 +13,7 @@
 #
 # This notebook is a plain Python file in jupytext's percent format: run it with
 # `python docs/notebook.py`, or open it in Jupyter with jupytext installed.
-# `tests/test_notebook.py` runs it as part of the suite. It goes through the loop:
+# `tests/api/test_notebook.py` runs it as part of the suite. It goes through the loop:
 #
 # 1. reconstruct a test;
 # 2. see where the model fits worst;

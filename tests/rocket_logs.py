@@ -7,7 +7,7 @@ import json
 from pathlib import Path
 
 from cpas_ocp.cli import main
-from tests.test_rocket_log_import import CARD, COLUMN_MAP, Flight, fly, write_mapped
+from tests.io.test_rocket_log_import import CARD, COLUMN_MAP, Flight, fly, write_mapped
 
 
 def altimeter_log(folder: Path, rate_hz: float, seed: int = 5) -> Path:

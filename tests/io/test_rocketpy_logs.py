@@ -1,0 +1,107 @@
+"""Two public rocket logs nobody here wrote, imported from their files as published.
+
+`../shared/data/rocketpy-logs/` holds the NDRT 2020 altimeter log (one CSV with two
+time bases: a 400 Hz accelerometer through the boost beside a 20 Hz altitude in feet
+above the pad) and the Genesis 2023 CATS filtered export (smoothed altitude, an
+accelerometer that reads exactly 0.0 from 24.4 s on, GNSS in a second file, a main
+charge no detector sees).  Each has a built-in card written from docs/flight-card.md
+(`problems/ndrt_2020.json`, `problems/genesis_2023.json`, their column maps inline),
+and each must import with one command and reconstruct to exit 0 at chi-square/dof at
+most 2 with the air's motion modelled, or exit 4 saying why.  The tests skip where the
+shared folder is absent.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from cpas_ocp.cli import main
+from cpas_ocp.io.flight_card import load_card
+from cpas_ocp.io.flight_test import load_test
+
+DATA = Path(__file__).resolve().parents[3] / "shared" / "data"
+LOGS = {"ndrt_2020": "rocketpy-logs/ndrt-2020/ndrt_2020_flight_data.csv",
+        "genesis_2023": "rocketpy-logs/genesis-2023/flight_data_faraday.csv"}
+
+pytestmark = pytest.mark.skipif(not (DATA / "rocketpy-logs").is_dir(),
+                                reason="../shared/data/rocketpy-logs is absent")
+
+
+def _import(card: str, out: Path) -> dict:
+    assert main(["import", str(DATA / LOGS[card]), "--card", card, "--out", str(out)]) == 0
+    return json.loads((out / "import.json").read_text())
+
+
+def test_ndrt_imports_its_two_time_bases_from_the_pad(tmp_path: Path) -> None:
+    """The accelerometer's own time column gives the boost; the log starts at launch, so the
+    pad is its lowest reading before the climb and the landing reads what the log reads
+    there (-7 ft against the pad), not 29 m below it;
+    the main's charge is the altimeter's pulse near the 550 ft trigger."""
+    report = _import("ndrt_2020", tmp_path / "test")
+    assert report["flight_events"]["boost"]["source"] == "accelerometer"
+    assert any("the log starts at launch" in n for n in report["notes"])
+    [landing] = [n for n in report["notes"] if n.startswith("touchdown at")]
+    # The log's own reading on the ground against its first readings, on the pad (m).
+    feet = pd.read_csv(DATA / LOGS["ndrt_2020"], skipinitialspace=True)["Altitude (Ft-AGL)"]
+    on_ground = 0.3048 * (float(feet.dropna().tail(20).median()) - float(feet.head(5).min()))
+    assert float(landing.split(", ")[1].split(" m")[0]) == pytest.approx(on_ground, abs=0.5)
+    main_charge = report["flight_events"]["main"]
+    assert main_charge["source"] == "altimeter" and 60.0 < main_charge["time_s"] < 70.0
+    assert [s.kind for s in load_test(tmp_path / "test").sensors] == ["baro"]
+
+
+def test_genesis_imports_with_its_dead_accelerometer_and_the_card_s_main(tmp_path: Path
+                                                                         ) -> None:
+    """The zeroed accelerometer is left out with a note and the folder fits the altimeter;
+    the GNSS file's fixes are read; the main is the card's 870 m crossing with its 1 s sigma;
+    no canopy diameter is given, so each comes from its steady descent; the filtered
+    altitude's correlated noise is averaged in blocks."""
+    report = _import("genesis_2023", tmp_path / "test")
+    assert any(n.startswith("accelerometer:") and "did not measure" in n
+               for n in report["notes"])
+    assert not (tmp_path / "test" / "accelerometer.csv").exists()
+    assert any(n.startswith("GNSS:") for n in report["notes"])
+    assert report["flight_events"]["main"]["sigma_s"] == 1.0
+    assert "870 m crossing" in report["flight_events"]["main"]["source"]
+    for name in ("drogue", "main"):
+        assert any(n.startswith(f"{name}: no diameter in the card") for n in report["notes"])
+    assert any("noise correlated over" in n for n in report["notes"])
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("card", sorted(LOGS))
+def test_each_log_reconstructs_to_its_noise_or_says_why(tmp_path: Path, card: str,
+                                                        capsys: pytest.CaptureFixture[str]
+                                                        ) -> None:
+    """The default rocket model (the air's vertical motion included) on each log: exit 0 with
+    chi-square/dof at most 2 and every drag area determined (a finite sigma below its
+    value), or exit 4 with the claim's reasons written; never a silent wrong answer."""
+    _import(card, tmp_path / "test")
+    code = main(["reconstruct", str(tmp_path / "test"), "--out", str(tmp_path / "report")])
+    out = capsys.readouterr().out
+    assert code in (0, 4), out
+    result = json.loads((tmp_path / "report" / "result.json").read_text())
+    effects = [e if isinstance(e, str) else e["effect"] for e in result["model"]["effects"]]
+    assert "wind_process" in effects
+    if code == 4:
+        assert not result["claim"]["result"] and result["claim"]["problems"]
+        return
+    assert result["claim"]["result"]
+    assert result["fit"]["chi_square_per_dof"] <= 2.0
+    nominal = load_card(card).nominal
+    for name in nominal:
+        estimate = result["parameters"][name]
+        assert np.isfinite(estimate["std"]) and 0.0 < estimate["std"] < estimate["value"]
+    # The report of an imported log sets each drag area against the card's nominal value,
+    # with the steady descent rates, in report.md and on the page.
+    report = (tmp_path / "report" / "report.md").read_text()
+    assert "## Steady descent rates" in report
+    for name in nominal:
+        assert f"| {name} | {result['parameters'][name]['value']:.4f} ± " in report
+    page = (tmp_path / "report" / "report.html").read_text()
+    assert "Drag areas against the card&#x27;s nominal values" in page
