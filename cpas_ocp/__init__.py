@@ -22,39 +22,20 @@ The Python interface (`cpas_ocp.api`), for notebooks:
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
-
-__all__ = ["Campaign", "Dispersions", "Joint", "MonteCarlo", "Population", "Reconstruction",
-           "campaign", "design", "dispersions", "fit_estimator", "import_log", "joint",
-           "load_model", "load_test", "monte_carlo", "population", "reconstruct", "simulate"]
-
-if TYPE_CHECKING:
-    from cpas_ocp.api import (
-        Campaign,
-        Dispersions,
-        Joint,
-        MonteCarlo,
-        Population,
-        Reconstruction,
-        campaign,
-        design,
-        dispersions,
-        fit_estimator,
-        import_log,
-        joint,
-        load_model,
-        load_test,
-        monte_carlo,
-        population,
-        reconstruct,
-        simulate,
-    )
+import importlib
+import importlib.util
+from typing import Any
 
 
 def __getattr__(name: str) -> Any:
-    """The interface's names, imported on first use (the command line starts without
-    loading the solver, the statistics and the figures it may not need)."""
-    if name in __all__:
-        from cpas_ocp import api
-        return getattr(api, name)
-    raise AttributeError(f"module 'cpas_ocp' has no attribute {name!r}")
+    """The interface's names (`cpas_ocp.api.__all__`), imported on first use: the command
+    line starts without loading the solver, the statistics and the figures it may not
+    need.  A subpackage's or module's name is left to the import system."""
+    if name == "__all__" or not (name.startswith("_")
+                                 or importlib.util.find_spec(f"{__name__}.{name}")):
+        api = importlib.import_module(f"{__name__}.api")
+        if name == "__all__":
+            return api.__all__
+        if name in api.__all__:
+            return getattr(api, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -80,4 +80,4 @@ print(diag.verdict())
 
 # %%
 comparison = rec.compare(rec.spec_with("added_mass"), labels=("baseline", "added mass"))
-print(comparison.text())
+print(co.summary(comparison))

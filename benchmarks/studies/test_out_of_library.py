@@ -34,6 +34,7 @@ from cpas_ocp.io.model_spec import baseline_spec
 from cpas_ocp.io.problems import load_problem
 from cpas_ocp.physics.effects import baseline_effects
 from cpas_ocp.physics.effects.registry import load_plugin
+from cpas_ocp.reports.discrepancy_text import discovery_text
 
 pytestmark = pytest.mark.slow
 
@@ -58,11 +59,11 @@ def _ends_at_the_noise(found, proposed: str) -> None:
     """Consistent with the noise, with no effect kept that the truth lacks: the baseline and
     the plug-in written for the hidden physics, nothing else."""
     last = found.steps[-1].fit
-    assert found.stopped == "the residuals are consistent with the noise", found.text()
+    assert found.stopped == "the residuals are consistent with the noise", discovery_text(found)
     assert found.state == "consistent"
     assert abs(last.chi_square - last.dof) < 4.0 * (2.0 * last.dof) ** 0.5
     kept = set(found.steps[-1].spec.effect_names) - set(baseline_spec().effect_names)
-    assert kept == {proposed}, found.text()
+    assert kept == {proposed}, discovery_text(found)
 
 
 @pytest.fixture(scope="module")

@@ -24,6 +24,7 @@ from cpas_ocp.io.flight_test import load_test
 from cpas_ocp.io.model_spec import baseline_spec
 from cpas_ocp.io.problems import load_problem
 from cpas_ocp.physics.effects import DeploymentLoad, baseline_effects
+from cpas_ocp.reports.discrepancy_text import discovery_text
 from tests.conftest import START_GUESS_OFFSET_S, assert_truth_within_noise, offset_events
 
 pytestmark = pytest.mark.slow
@@ -43,7 +44,7 @@ def test_a_step_in_a_wrong_basin_is_fitted_from_other_starts(tmp_path) -> None:
     est = Estimator(load_test(folder), baseline_spec())
     fit = est.solve()
     found = discover(fit, baseline_spec(), max_steps=2, estimator=est)
-    text = found.text()
+    text = discovery_text(found)
     last = found.steps[-1]
     kept = set(last.spec.effect_names) - set(baseline_spec().effect_names)
     assert kept == {"deployment_load"}, text

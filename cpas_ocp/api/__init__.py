@@ -32,11 +32,11 @@ from cpas_ocp.api.campaigns import (
     Joint,
     MonteCarlo,
     Population,
-    campaign,
     dispersions,
     joint,
     monte_carlo,
     population,
+    reconstruct_campaign,
 )
 from cpas_ocp.api.discrepancy import compare, diagnose, discover
 from cpas_ocp.api.flights import Flight, flight, import_log
@@ -53,10 +53,11 @@ from cpas_ocp.api.reconstruction import (
 )
 from cpas_ocp.io.flight_test import load_test
 from cpas_ocp.progress import Narration, terminal
+from cpas_ocp.reports.summaries import summary
 
 __all__ = ["Campaign", "Dispersions", "FitOptions", "Flight", "InitialGuess", "Joint",
-           "MonteCarlo", "Narration", "Population", "Reconstruction", "build", "campaign",
-           "compare", "demo", "design", "diagnose", "discover", "dispersions", "fit_estimator",
-           "flight", "import_log", "joint", "load_model", "load_test", "monte_carlo",
-           "population", "reconstruct", "reduce", "resume_discovery", "simulate", "terminal",
-           "what_if"]
+           "MonteCarlo", "Narration", "Population", "Reconstruction", "build", "compare", "demo",
+           "design", "diagnose", "discover", "dispersions", "fit_estimator", "flight",
+           "import_log", "joint", "load_model", "load_test", "monte_carlo", "population",
+           "reconstruct", "reconstruct_campaign", "reduce", "resume_discovery", "simulate",
+           "summary", "terminal", "what_if"]

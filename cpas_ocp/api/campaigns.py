@@ -13,10 +13,8 @@ import pandas as pd
 from cpas_ocp.api.reconstruction import fit_estimator
 from cpas_ocp.campaign.campaign import (
     TestOutcome,
-    campaign_text,
     find_tests,
     run_campaign,
-    write_campaign,
 )
 from cpas_ocp.campaign.dispersion_study import (
     DispersionModel,
@@ -30,7 +28,6 @@ from cpas_ocp.campaign.peak_load_study import (
     check_columns,
     match_cases,
     run_monte_carlo,
-    summary_text,
 )
 from cpas_ocp.campaign.population_study import (
     PopulationGroup,
@@ -47,13 +44,14 @@ from cpas_ocp.io.model_spec import spec_of_test
 from cpas_ocp.io.output_folder import atomic_folder
 from cpas_ocp.physics.flight_test import FlightTest
 from cpas_ocp.progress import Narration
+from cpas_ocp.reports.campaign_text import campaign_text, monte_carlo_text
 from cpas_ocp.reports.joint_report import joint_frame, joint_text, write_joint
 from cpas_ocp.reports.population_report import (
     parameter_frame,
     population_text,
     write_population,
 )
-from cpas_ocp.reports.study_reports import write_dispersions, write_monte_carlo
+from cpas_ocp.reports.study_reports import write_campaign, write_dispersions, write_monte_carlo
 
 
 def population(campaign: str | Path, parameters: Sequence[str] | None = None,
@@ -197,7 +195,7 @@ class MonteCarlo:
 
     def summary(self) -> str:
         """What `cpas-ocp montecarlo` prints: the fit's status and each stage's quantiles."""
-        return summary_text(self.fit, self.results)
+        return monte_carlo_text(self.fit, self.results)
 
 
 def monte_carlo(test: FlightTest | str | Path, cases: str | Path, out: str | Path,
@@ -251,7 +249,7 @@ class Campaign:
         return campaign_text(self.outcomes)
 
 
-def campaign(tests_dir: str | Path, out: str | Path, workers: int = 2,
+def reconstruct_campaign(tests_dir: str | Path, out: str | Path, workers: int = 2,
              scheduler: str | None = None, progress: bool = False) -> Campaign:
     """Reconstruct every test folder under `tests_dir` on `workers` local processes or the
     Dask `scheduler`, and write the campaign's tables to `out` (`cpas-ocp campaign`)."""

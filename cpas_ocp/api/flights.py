@@ -30,10 +30,11 @@ from cpas_ocp.io.flight_test import load_test
 from cpas_ocp.io.import_reports import ImportSummary
 from cpas_ocp.io.log_formats import read_flight_log
 from cpas_ocp.io.model_spec import ModelSpec
-from cpas_ocp.io.recorder_clocks import RecorderEstimates, recorders_text
+from cpas_ocp.io.recorder_clocks import RecorderEstimates
 from cpas_ocp.physics.flight_test import FlightTest
 from cpas_ocp.progress import SILENT, Narration
 from cpas_ocp.reports.flight_report import air_motion_text, flight_text, held_opening_profiles
+from cpas_ocp.reports.import_text import import_text, recorders_text
 
 
 def import_log(log: str | Path, card: str | FlightCard, out: str | Path,
@@ -122,7 +123,7 @@ def _flight_import(card: FlightCard, log: Path, log_format: str | None,
     summary said): the log and its record."""
     tell.say(f"== {log.name}: import")
     record = read_flight_log(log, log_format, columns, f"{card.source}: data.columns")
-    tell.say(import_flight(record, card, out / log.stem / "test").text())
+    tell.say(import_text(import_flight(record, card, out / log.stem / "test")))
     return log, record
 
 

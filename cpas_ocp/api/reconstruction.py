@@ -25,7 +25,6 @@ from cpas_ocp.discrepancy.discovery import (
 from cpas_ocp.discrepancy.score_test import extended_spec
 from cpas_ocp.errors import InputError, NotAResult, SolverFailure
 from cpas_ocp.estimation.estimator import Estimator, Fit, Settings
-from cpas_ocp.estimation.shooting_grid import grid_text
 from cpas_ocp.estimation.simulate import simulate_problem
 from cpas_ocp.estimation.uncertainty import Covariance
 from cpas_ocp.inference.diagnostics import window_statistics, worst_of
@@ -50,6 +49,7 @@ from cpas_ocp.progress import SILENT, Narration
 from cpas_ocp.reports.discrepancy_report import write_comparison, write_diagnosis
 from cpas_ocp.reports.display_units import DisplayUnits, display_units
 from cpas_ocp.reports.failure_report import write_failure_report
+from cpas_ocp.reports.fit_text import claim_text, grid_text, intensity_text
 from cpas_ocp.reports.plots import (
     correlation_axes,
     drag_area_axes,
@@ -131,7 +131,7 @@ def fit_estimator(est: Estimator, options: FitOptions | None = None,
     rec = Reconstruction(done.estimator, done.fit, done.covariance, done.claim,
                          dict(plugins or {}), done.intensity_choice)
     if rec.intensity_choice is not None:
-        tell.say(rec.intensity_choice.text())
+        tell.say(intensity_text(rec.intensity_choice))
     if rec.covariance.undetermined:
         tell.warn(f"the data do not determine {', '.join(rec.covariance.undetermined)} "
                   "(see the identifiability lines)")
@@ -192,7 +192,7 @@ def say_written(rec: Reconstruction, tell: Narration) -> None:
     tell.say("")
     tell.say(rec.summary(rec.units))
     for prof in rec.profiles:
-        tell.say(f"profile likelihood, {prof.text()}")
+        tell.say(f"profile likelihood, {prof}")
     tell.say(f"\nreport written to {rec.folder} (result.json, parameters.csv, report.md, "
              "figures)")
     tell.say(f"interactive report: {rec.folder / 'report.html'}")  # type: ignore[operator]
@@ -309,7 +309,7 @@ class Reconstruction:
         """The parameter table with sigmas and intervals, the fit's statistics and what it
         may claim, as `cpas-ocp reconstruct` prints them."""
         return "\n\n".join([parameter_table(self.fit, self.covariance, units),
-                             fit_summary(self.fit, units), self.claim.text()])
+                             fit_summary(self.fit, units), claim_text(self.claim)])
 
     def __repr__(self) -> str:
         state = "a result" if self.is_result else "not a result"

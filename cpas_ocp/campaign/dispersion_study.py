@@ -82,16 +82,6 @@ class DispersionModel:
                 out[name] = dispersion.sample(n, rng)
         return pd.DataFrame(out)[list(self.dispersions)]
 
-    def text(self) -> str:
-        lines = [f"{self.label}: {self.tests} tests"]
-        lines += ["  " + d.text() for d in self.dispersions.values()]
-        if self.hull is not None:
-            lines.append(f"  hull of ({', '.join(self.hull_names)}) grown by "
-                         f"{100 * self.hull.growth:.0f} %, {len(self.hull.vertices)} vertices")
-        else:
-            lines.append(f"  {self.note or 'no hull'}: the caps alone bound the draws")
-        return "\n".join(lines)
-
 
 def dispersion_models(table: pd.DataFrame, min_tests: int = MIN_TESTS
                       ) -> tuple[list[DispersionModel], list[str]]:

@@ -208,7 +208,7 @@ class Dispersion:
             x = dist.isf(lower_sf - u * (lower_sf - upper_sf))
         return np.clip(x, self.lower_cap, self.upper_cap)
 
-    def text(self) -> str:
+    def __str__(self) -> str:
         """One line: family, parameters, caps, AIC of every family and the KS distance."""
         params = ", ".join(f"{k}={v:.6g}" for k, v in self.parameters.items())
         others = ", ".join(f"{k} {v:.4g}" for k, v in self.gof_by_family.items()

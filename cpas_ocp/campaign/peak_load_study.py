@@ -96,18 +96,6 @@ class StageLoads:
                              "peak_tension_lbf": tension / LBF,
                              "peak_load_factor": np.quantile(self.loads.load_factor, q)})
 
-    def text(self) -> str:
-        nominal = self.nominal.tension[0]
-        lines = [f"{self.cases.label} ({self.cases.type}; {len(self.cases.cases):,} cases from "
-                 f"{self.cases.file.name}; {self.loads.t1 - self.loads.t0:.2f} s from "
-                 f"t_i = {self.loads.t0:.3f} s): fitted values peak at {nominal / LBF:,.0f} lbf, "
-                 f"{self.nominal.load_factor[0]:.2f} g",
-                 f"  {'quantile':>8s} {'tension lbf':>12s} {'tension N':>12s} {'load g':>8s}"]
-        for row in self.quantiles().itertuples():
-            lines.append(f"  {row.quantile:8.3f} {row.peak_tension_lbf:12,.0f} "
-                         f"{row.peak_tension_N:12,.0f} {row.peak_load_factor:8.3f}")
-        return "\n".join(lines)
-
 
 def read_cases(path: Path, limit: int | None = None) -> pd.DataFrame:
     """The first `limit` cases (all if None) of a cases file; InputError unless every value is
@@ -247,10 +235,3 @@ def run_monte_carlo(fit: Fit, stages: list[StageCases], workers: int = 2,
                            np.concatenate([r.load_factor[1:] for r in parts]))
         out.append(StageLoads(s, merged, nominals[k]))
     return out
-
-
-def summary_text(fit: Fit, results: list[StageLoads]) -> str:
-    """The reconstruction's status line and each stage's quantile table."""
-    head = (f"reconstruction: {fit.solver.status}, {fit.solver.iterations} iterations, "
-            f"chi^2/dof {fit.chi_square / fit.dof:.3f}")
-    return "\n\n".join([head, *(r.text() for r in results)])

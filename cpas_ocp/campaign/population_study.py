@@ -360,15 +360,6 @@ class PopulationDispersion(DispersionModel):
                 out[name] = dispersion.sample(n, rng)
         return pd.DataFrame(out)[list(self.dispersions)]
 
-    def text(self) -> str:
-        group = self.population
-        assert group is not None
-        sd = ", ".join(f"{p} {group.fit.tau[p].value:.3g} (point estimates "
-                       f"{group.point_spread[j]:.3g})" for j, p in enumerate(group.data.names))
-        return (super().text() + f"\n  cases drawn from the population N(mu, Omega) of "
-                f"{group.label} ({group.data.n} openings), inside the caps and the hull above "
-                f"(from the point estimates); between-test sigma in log space: {sd}")
-
 
 def population_dispersions(models: Sequence[DispersionModel], groups: Sequence[PopulationGroup]
                            ) -> tuple[list[DispersionModel], list[str]]:

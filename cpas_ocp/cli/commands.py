@@ -116,7 +116,7 @@ def demo(args: argparse.Namespace) -> int:
 
 def whatif(args: argparse.Namespace) -> int:
     from cpas_ocp import api
-    from cpas_ocp.inference.whatif import whatif_text
+    from cpas_ocp.reports.fit_text import whatif_text
     print(whatif_text(api.what_if(args.test_dir, args.constrain, options=_options(args),
                                   tell=_tell(args), **_model(args))))
     return 0
@@ -127,7 +127,7 @@ def diagnose(args: argparse.Namespace) -> int:
     diag = api.diagnose(args.test_dir, args.out, confirm=args.confirm, alpha=args.alpha,
                         options=_options(args), units=args.units, tell=_tell(args),
                         **_model(args))
-    _written(diag.text(), "diagnosis", args.out)
+    _written(api.summary(diag), "diagnosis", args.out)
     return 0
 
 
@@ -164,7 +164,7 @@ def discover(args: argparse.Namespace) -> int:
                  f"cpas-ocp discover --resume {out}")
         return exc.exit_code
     print()
-    print(found.text())
+    print(api.summary(found))
     print(f"\ndiscovery written to {out} (discovery.md, discovery.html, discovery.json, "
           "discovery.png, step_K.json)")
     return 0
@@ -175,13 +175,14 @@ def compare(args: argparse.Namespace) -> int:
     comparison = api.compare(args.test_dir, args.model, args.out, args.plugin,
                              _options(args), args.units, args.allow_external_plugins,
                              _tell(args))
-    _written(comparison.text(), "comparison", args.out)
+    _written(api.summary(comparison), "comparison", args.out)
     return 0
 
 
 def campaign(args: argparse.Namespace) -> int:
     from cpas_ocp import api
-    done = api.campaign(args.tests_dir, args.out, args.workers, args.scheduler, progress=True)
+    done = api.reconstruct_campaign(args.tests_dir, args.out, args.workers, args.scheduler,
+                                    progress=True)
     print(done.summary())
     print(f"\ncampaign written to {done.out} (parameters.csv, parameters.parquet, stages.csv, "
           "failures.csv, ratios_*.csv, campaign.md)")
@@ -223,7 +224,7 @@ def dispersions(args: argparse.Namespace) -> int:
     from cpas_ocp import api
     done = api.dispersions(args.campaign, args.out, args.cases, args.seed, args.population)
     for model in done.models:
-        print(model.text())
+        print(api.summary(model))
     for note in done.skipped:
         print(f"not dispersed: {note}")
     for note in done.notes:
@@ -247,9 +248,9 @@ def montecarlo(args: argparse.Namespace) -> int:
 
 def import_log(args: argparse.Namespace) -> int:
     from cpas_ocp import api
-    summary = api.import_log(args.log, args.card, args.out, args.format, args.columns,
-                             args.still_air)
-    print(summary.text())
+    imported = api.import_log(args.log, args.card, args.out, args.format, args.columns,
+                              args.still_air)
+    print(api.summary(imported))
     print(f"test folder written to {args.out}")
     return 0
 

@@ -113,7 +113,7 @@ def _periodic(structure: list[Finding], fit: Fit, canopy_of: dict[str, str]
     gates = {c.name: span([f for f in same if canopy_of.get(f.window) == c.name] or same)
              for c in fit.test.parachutes}
     where = ", ".join(sorted({f"{f.sensor} {f.window}" for f in same}))
-    reason = (f"a {f0:.2f} Hz line in {where} (strongest: {top.text()})")
+    reason = (f"a {f0:.2f} Hz line in {where} (strongest: {top})")
     windows = "".join(f"\n    {name!r}: {gate}," for name, gate in gates.items())
     return Proposal("drag_area_modulation", reason, _PERIODIC.substitute(
         frequency=f"{f0:.4f}", windows=windows, reason=_wrap(reason)))

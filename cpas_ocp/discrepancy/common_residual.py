@@ -55,7 +55,7 @@ class CommonResidual:
     effective: float
     rms: tuple[float, float]
 
-    def text(self) -> str:
+    def __str__(self) -> str:
         return (f"{self.channels[0]} and {self.channels[1]}, {self.t0:.1f}-{self.t1:.1f} s: "
                 f"{BLOCK_S:g} s means correlate r = {self.r:+.2f} over {self.blocks} blocks "
                 f"(one-sided p = {self.p_value:.2g} on {self.effective:.1f} effective samples; "

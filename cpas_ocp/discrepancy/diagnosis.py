@@ -139,7 +139,7 @@ class Diagnosis:
     def misfit_text(self) -> str:
         """What remains where nothing is found but the residuals are not noise: the noise
         test, the signature, and the next move to try."""
-        lines = [f"a misfit: {self.noise.text()}"]
+        lines = [f"a misfit: {self.noise}"]
         if self.structure:
             lines.append("the residual's signature:\n" + signature_text(self.structure))
         lines.append("next: " + next_move(self.noise, self.statistics, bool(self.structure)))
@@ -224,10 +224,10 @@ class Diagnosis:
             left = [f for f in diagnose_residuals(refit, self.windows, self.alpha)
                     if f.significant]
             inside = [f for f in left if (f.sensor, f.channel, f.window) in acted]
-            reasons += [f"structure in {f.text()}" for f in inside]
+            reasons += [f"structure in {f}" for f in inside]
             elsewhere = [f for f in left if f not in inside]
             if reasons and elsewhere:
-                reasons.append(f"and elsewhere {elsewhere[0].text()}")
+                reasons.append(f"and elsewhere {elsewhere[0]}")
         return reasons
 
     def _unresolved(self, best: ScoreTest | None) -> list[ScoreTest]:
@@ -278,25 +278,8 @@ class Diagnosis:
         if not self.consistent_with_noise:
             return ("no effect in the library explains the residual, " + self.misfit_text())
         return ("the residuals are consistent with the sensor noise: "
-                f"{self.noise.text()}; no effect is significant at the family-wise level "
+                f"{self.noise}; no effect is significant at the family-wise level "
                 f"{self.alpha:g}")
-
-    def text(self) -> str:
-        """The diagnosis as the command line prints it."""
-        m = self.family
-        lines = [f"worst fit: {self.worst}", "",
-                 f"score tests of the effects the model does not use (significant: p < "
-                 f"{self.alpha:g}/{m}):"]
-        lines += ["  " + t.text() for t in self.effects]
-        refits = [t.refit_text() for t in self.effects if t.refit_text()]
-        if refits:
-            lines += ["", "refits with the leading effects:"] + ["  " + r for r in refits]
-        if self.air is not None:
-            lines += ["", self.air.text()]
-        lines += ["", "residual structure:"]
-        lines += ["  " + f.text() for f in self.structure[:8]] or ["  none significant"]
-        lines += ["", self.verdict()]
-        return "\n".join(lines + self.notes)
 
 
 def diagnose(fit: Fit, spec: ModelSpec, candidates: Mapping[str, EffectType] | None = None,

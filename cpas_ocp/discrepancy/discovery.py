@@ -178,7 +178,7 @@ class ProposalTrial:
     tried: int
     confirmed: bool = False
 
-    def text(self) -> str:
+    def __str__(self) -> str:
         """One line: the plug-in, why it was proposed, and what its test found."""
         lr = self.test.refit
         if lr is None:
@@ -239,7 +239,7 @@ class Discovery:
             head = "in progress (the chain goes on)"
         else:
             head = "stopped early"
-        return (f"{head}: {noise.text()}; {self.stopped} ({len(self.steps) - 1} step(s), "
+        return (f"{head}: {noise}; {self.stopped} ({len(self.steps) - 1} step(s), "
                 f"{self.seconds:.0f} s)")
 
     @property
@@ -251,30 +251,6 @@ class Discovery:
     def dropped(self) -> set[str]:
         """Effects a step dropped (as stand-ins no longer needed); never tested again."""
         return {s.dropped for s in self.steps if s.dropped is not None}
-
-    def text(self) -> str:
-        """The chain as a table, then why it stopped and the last verdict."""
-        lines = [f"{'step':>4}  {'added':22s} {'chi-square':>11s} {'chi2/dof':>8s} "
-                 f"{'AIC':>10s} {'BIC':>10s} {'time':>6s}  worst window (normalised RMS); "
-                 "admitted by"]
-        for k, s in enumerate(self.steps):
-            c = s.criteria
-            worst = s.worst_window
-            where = f"{worst[0]} ({worst[1]:.2f})" if worst else "not diagnosed"
-            lines.append(f"{k:4d}  {s.label:22s} {c.chi_square:11.1f} "
-                         f"{c.chi_square / s.fit.dof:8.3f} {c.aic:10.1f} {c.bic:10.1f} "
-                         f"{s.found_s + s.diagnosed_s:5.0f}s  "
-                         f"{where}" + (f"; {s.admitted_by}" if s.admitted_by else "")
-                         + (f"; fit from {s.start}" if s.start else ""))
-        lines += [""] + [line for s in self.steps[1:] for line in s.explained_lines()]
-        if self.proposals:
-            lines += ["", "plug-ins proposed from the residual's signature, tested as written:"]
-            lines += ["  " + t.text() for t in self.proposals]
-        lines += ["", f"ending: {self.ending()}"] + [f"note: {n}" for n in self.notes]
-        last = self.steps[-1].diagnosis if self.steps else None
-        if last is not None:
-            lines += ["", "last diagnosis: " + last.verdict()]
-        return "\n".join(lines)
 
 
 class InterruptedDiscovery(Interrupted):
@@ -312,11 +288,11 @@ def next_step(diag: Diagnosis, progress: bool = False) -> DiscoveryStep | str:
                 continue
             from_other_starts(diag, other, progress)
             if not diag.implausible(other):
-                return _step_of(diag, other, f"{other.refit.text()}; {best.effect}, ranked "
+                return _step_of(diag, other, f"{other.refit}; {best.effect}, ranked "
                                              "above it, is implausible")
         return (f"{best.effect} fits part of the residual only with an implausible estimate "
                 f"({'; '.join(implausible)}): a stand-in, not added")
-    return _step_of(diag, best, best.refit.text())
+    return _step_of(diag, best, str(best.refit))
 
 
 def _unconverged(best: ScoreTest) -> bool:
@@ -417,7 +393,7 @@ def best_start(est: Estimator, fit: Fit, max_iter: int, progress: bool = False
     tried: list[tuple[Estimator, Fit, str]] = []
     moved, restarts = restart_start_times(est, fit, progress)
     if restarts:
-        tried.append((est, moved, "; ".join(r.text() for r in restarts)))
+        tried.append((est, moved, "; ".join(str(r) for r in restarts)))
     fresh = fresh_fit(fit.test, est.spec, fit.settings, max_iter, progress)
     if fresh is not None:
         tried.append((*fresh, "the offline reduction"))
@@ -632,7 +608,7 @@ def _proposed_step(out: Discovery, step: DiscoveryStep, folder: Path, alpha: flo
     best = confirmed[0].test
     assert best.spec is not None and best.refitted is not None and best.refit is not None
     from_other_starts(diag, best, progress)
-    return _step_of(diag, best, f"{best.refit.text()}; proposed/"
+    return _step_of(diag, best, f"{best.refit}; proposed/"
                                 f"{confirmed[0].proposal.file_name}, written from the "
                                 "residual's signature")
 
@@ -735,5 +711,5 @@ def _without(last: DiscoveryStep, name: str, alpha: float, progress: bool,
     if lr.dof < 1 or lr.p_value < alpha:
         return None
     scaled = f", divided by the last fit's chi2/dof {dispersion:.3f}" if dispersion > 1 else ""
-    return DiscoveryStep(None, smaller, fit, f"keeping it is not significant ({lr.text()}"
+    return DiscoveryStep(None, smaller, fit, f"keeping it is not significant ({lr}"
                                              f"{scaled})", dropped=name, estimator=est)

@@ -94,7 +94,7 @@ class Finding:
     p_adjusted: float = 1.0
     rejected: tuple[str, ...] = ()
 
-    def text(self) -> str:
+    def __str__(self) -> str:
         """One line: where, and what the residual there shows."""
         head = (f"{self.sensor} {self.channel}, {self.window} ({self.t0:.2f}-{self.t1:.2f} s, "
                 f"{self.samples} samples, normalised RMS {self.normalised_rms:.2f})")

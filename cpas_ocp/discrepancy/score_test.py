@@ -123,7 +123,7 @@ class ScoreTest:
         """p below alpha / tests (Bonferroni over `tests` effects tested together)."""
         return self.tested and self.p_value < alpha / max(tests, 1)
 
-    def text(self) -> str:
+    def __str__(self) -> str:
         """One line: statistic, p-value and the estimates, or why it was not tested."""
         if not self.tested:
             return f"{self.effect:18s} not tested: {self.note}"
@@ -143,7 +143,7 @@ class ScoreTest:
             return f"{self.effect:18s} refit: {self.refit_note}" if self.refit_note else ""
         shown = ", ".join(f"{n} = {v:.4g}" for n, v in self.refit_estimate.items())
         how = f" ({self.refit_note})" if self.refit.lower_bound else ""
-        return f"{self.effect:18s} refit: {self.refit.text()}   {shown}{how}"
+        return f"{self.effect:18s} refit: {self.refit}   {shown}{how}"
 
     def as_dict(self) -> dict:
         out = {}

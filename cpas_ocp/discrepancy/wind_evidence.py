@@ -72,19 +72,6 @@ class WindEvidence:
         value = self.two_ln_b
         return value is not None and value >= DECISIVE_2LNB
 
-    def text(self) -> str:
-        """The lines the diagnosis prints."""
-        lines = [f"air motion (the altitude sensors share their residual, Fisher's p = "
-                 f"{self.common_p:.2g}): a vertical wind process, knots every "
-                 f"{self.process.knot_s:g} s, tau {self.process.tau_s:g} s, against still air "
-                 f"(-2 log evidence {self.still:.1f}):"]
-        for p in self.points:
-            value = (f"chi-square {p.chi_square:.1f}, -2 log evidence {p.evidence:.1f}, "
-                     f"2 ln B = {self.still - p.evidence:.1f}" if p.evidence is not None
-                     else p.note)
-            lines.append(f"  sigma {p.sigma_vertical:.3g} m/s: {value}")
-        return "\n".join(lines)
-
     def verdict(self) -> str:
         """The clause the diagnosis's verdict names the process with."""
         best, fit = self.best, self.best_fit

@@ -276,14 +276,3 @@ def _nodes(levels: np.ndarray) -> np.ndarray:
         i += 2**j
         nodes.append(i)
     return np.asarray(nodes)
-
-
-def grid_text(t: np.ndarray) -> str:
-    """One line describing a shooting grid `t` (s)."""
-    steps = np.diff(t)
-    finest, longest = float(np.min(steps)), float(np.max(steps))
-    if longest - finest < 1e-9:
-        return f"shooting grid: {len(t)} nodes, uniform {finest * 1e3:g} ms"
-    fine = int(np.sum(steps < finest * 1.5))
-    return (f"shooting grid: {len(t)} nodes, steps {finest * 1e3:g}-{longest * 1e3:g} ms "
-            f"({fine} of {len(steps)} intervals at the finest, from the dynamics)")

@@ -69,7 +69,7 @@ class WeakCombination:
     std: float | None
     curvature_ratio: float
 
-    def text(self) -> str:
+    def __str__(self) -> str:
         terms = " ".join(f"{w:+.2f} {n}" for n, w in self.weights.items()) or "(no parameter)"
         if self.other > 0.05:
             terms += f" (+{self.other:.2f} initial state / captured speeds)"

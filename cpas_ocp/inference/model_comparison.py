@@ -80,7 +80,7 @@ class LikelihoodRatio:
         return chi_bar_square_sf(max(self.statistic, 0.0), self.dof - self.one_sided,
                                  self.one_sided)
 
-    def text(self) -> str:
+    def __str__(self) -> str:
         sided = f", {self.one_sided} one-sided" if self.one_sided else ""
         at_least, at_most = (">= ", "<= ") if self.lower_bound else ("", "= ")
         return (f"likelihood ratio {at_least}{self.statistic:.2f} on {self.dof} dof{sided}: "
@@ -167,25 +167,6 @@ class Comparison:
     @property
     def criteria(self) -> tuple[Criteria, Criteria]:
         return Criteria.of(self.fits[0]), Criteria.of(self.fits[1])
-
-    def text(self) -> str:
-        """The comparison table, the test, and the per-channel residual RMS before and after."""
-        a, b = self.criteria
-        width = max(len(lbl) for lbl in self.labels) + 2
-        lines = [f"{'model':{width}s} {'chi^2':>12s} {'k':>4s} {'n':>7s} {'AIC':>12s} "
-                 f"{'BIC':>12s}"]
-        for label, c in zip(self.labels, (a, b), strict=True):
-            lines.append(f"{label:{width}s} {c.chi_square:12.2f} {c.k:4d} {c.n:7d} "
-                         f"{c.aic:12.2f} {c.bic:12.2f}")
-        lines.append(f"AIC prefers {self.labels[int(b.aic < a.aic)]} by "
-                     f"{abs(a.aic - b.aic):.1f}; BIC prefers {self.labels[int(b.bic < a.bic)]} "
-                     f"by {abs(a.bic - b.bic):.1f}")
-        lines.append(self.note + (f": {self.lr.text()}" if self.lr is not None else ""))
-        before, after = channel_rms(self.fits[0]), channel_rms(self.fits[1])
-        lines += ["", f"{'normalised RMS':28s} {self.labels[0]:>12s} {self.labels[1]:>12s}"]
-        lines += [f"{ch:28s} {before[ch]:12.3f} {after.get(ch, math.nan):12.3f}"
-                  for ch in before]
-        return "\n".join(lines)
 
 
 def nesting(spec_small: ModelSpec, spec_large: ModelSpec, fit_small: Fit, fit_large: Fit

@@ -53,7 +53,7 @@ class NoiseTest:
         (sqrt(2 dof)): 0 on average for a fit at the noise."""
         return (self.chi_square - self.dof) / (2.0 * self.dof) ** 0.5 if self.dof > 0 else 0.0
 
-    def text(self) -> str:
+    def __str__(self) -> str:
         """One line: the total's test and the windows that fail."""
         line = (f"chi-square {self.chi_square:.1f} on {self.dof} degrees of freedom "
                 f"(chi2/dof {self.chi_square / max(self.dof, 1):.3f}, {self.sigmas:+.1f} sigma, "

@@ -68,18 +68,6 @@ class IntensityChoice:
         return (f"wind-process intensity chosen by marginal likelihood: vertical "
                 f"{self.best.sigma_vertical:g} m/s of {grid} m/s")
 
-    def text(self) -> str:
-        lines = ["wind-process intensity by marginal likelihood (-2 log evidence, lower is "
-                 "better):"]
-        for p in self.points:
-            mark = "  <- chosen" if p is self.best else ""
-            value = (f"chi-square {p.chi_square:11.1f}, -2 log evidence {p.evidence:11.1f}"
-                     if p.evidence is not None else p.note)
-            horizontal = (f", horizontal {p.sigma_horizontal:6.3f} m/s" if self.horizontal
-                          else "")
-            lines.append(f"  vertical {p.sigma_vertical:6.3f} m/s{horizontal}: {value}{mark}")
-        return "\n".join(lines)
-
 
 def wind_effect(spec: ModelSpec) -> WindProcess:
     """The spec's wind process; InputError where it has none."""

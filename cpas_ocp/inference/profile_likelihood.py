@@ -76,7 +76,7 @@ class Profile:
                 "wald_interval95": list(self.wald_interval()),
                 "failures": [{"value": v, "status": s} for v, s in self.failures]}
 
-    def text(self) -> str:
+    def __str__(self) -> str:
         lo, hi = self.interval()
         wlo, whi = self.wald_interval()
         edge = lambda v: "beyond the span" if v is None else f"{v:.5g}"  # noqa: E731

@@ -60,7 +60,7 @@ class Restart:
     chi_square_before: float
     chi_square_after: float
 
-    def text(self) -> str:
+    def __str__(self) -> str:
         return (f"restarted with {self.parameter} moved by {self.shift_s:+.2f} s: chi-square "
                 f"{self.chi_square_before:.2f} -> {self.chi_square_after:.2f}")
 
@@ -123,7 +123,7 @@ def restart_start_times(est: Estimator, fit: Fit, progress: bool = False,
             done.append(Restart(name, best_shift, fit.chi_square, best.chi_square))
             fit = best
     if done:
-        fit.solver.start += "; " + "; ".join(r.text() for r in done)
+        fit.solver.start += "; " + "; ".join(str(r) for r in done)
     return fit, done
 
 

@@ -155,7 +155,7 @@ class HeldBound:
     def pressed(self) -> bool:
         return bool(self.beyond_z > PRESSED_Z)
 
-    def text(self) -> str:
+    def __str__(self) -> str:
         kind = "physical" if self.physical else "guessed"
         how = (f", the data would take it {abs(self.beyond):.4g} ({self.beyond_z:.1f} sigma) "
                f"beyond" if np.isfinite(self.beyond_z) else "")
@@ -167,7 +167,7 @@ class WindowMove(Restart):
     """A start time's window moved by `shift_s` (its start at the window's edge in a fit
     that was not a plain result), and the chi-square before and after the refit."""
 
-    def text(self) -> str:
+    def __str__(self) -> str:
         return (f"{self.parameter}: window moved {self.shift_s:+.2f} s from its event "
                 f"(chi-square {self.chi_square_before:.1f} -> {self.chi_square_after:.1f})")
 
@@ -188,7 +188,7 @@ class ProcessDeparture:
     unit: str = ""
     count: int = 0
 
-    def text(self) -> str:
+    def __str__(self) -> str:
         if self.kind == "knot":
             return (f"{self.effect}: {self.name} at t = {self.t:.2f} s is "
                     f"{self.value:+.3g} {self.unit}, {self.sigmas:+.1f} sigma of its prior")
@@ -280,7 +280,7 @@ class Claim:
         if self.pressed:
             out.append(f"the data press {len(self.pressed)} parameter(s) against bounds that "
                        f"are guesses, not physical limits (p = {self.bound_p_value:.2g}): "
-                       + "; ".join(h.text() for h in self.pressed)
+                       + "; ".join(str(h) for h in self.pressed)
                        + ". The optimum lies beyond them: check the events that seed the "
                          "start windows and the model")
         if self.beyond_noise:
@@ -292,7 +292,7 @@ class Claim:
             worst = max(self.departures, key=lambda d: (d.kind != "block", abs(d.sigmas)))
             more = len(self.departures) - 1
             out.append(f"a process departs from its prior beyond {PROCESS_SIGMAS:g} sigma: "
-                       f"{worst.text()}" + (f" (and {more} more)" if more else "")
+                       f"{worst}" + (f" (and {more} more)" if more else "")
                        + "; it has absorbed something the model lacks (a late opening, a "
                          "wrong sigma): check the events and the model")
         for text in self.undetermined_drag_areas:
@@ -326,13 +326,6 @@ class Claim:
             return f"Uncertainties overstated. {overstated_text(self.ratio, self.low_p_value)}."
         return ""
 
-    def text(self) -> str:
-        lines = [f"claim: {self.verdict()}"]
-        lines += [f"  - {p}" for p in self.problems()]
-        lines += [f"  - moved {m.text()}" for m in self.moves]
-        lines += [f"  - {note}" for note in self.notes]
-        return "\n".join(lines)
-
     def as_dict(self) -> dict:
         pressed = self.pressed
         return {"result": self.is_result, "verdict": self.verdict(),
@@ -348,7 +341,7 @@ class Claim:
                                  "beyond": _number(h.beyond), "beyond_z": _number(h.beyond_z),
                                  "pressed": h in pressed} for h in self.held],
                 "process_departures": [{**vars(d), "t": _number(d.t),
-                                        "value": _number(d.value), "text": d.text()}
+                                        "value": _number(d.value), "text": str(d)}
                                        for d in self.departures],
                 "undetermined_drag_areas": self.undetermined_drag_areas,
                 "process_misfits": self.process_misfits,

@@ -256,29 +256,3 @@ def what_if(est: Estimator, fit: Fit, cov: Covariance | None,
         if con.op == "==" or abs(v - con.value) <= near:
             active.append(con.name)
     return WhatIfResult(constraints, fit, constrained, cov, active)
-
-
-def whatif_text(result: WhatIfResult, top: int = 8) -> str:
-    """The study in the terminal: cost, test, sensitivities, moved parameters, worse data."""
-    lines = [f"constraint{'s' if len(result.constraints) > 1 else ''}: "
-             + "; ".join(c.text for c in result.constraints)]
-    dof = len(result.active)
-    cov = result.covariance
-    scaled = f"; {result.statistic:.2f} after dividing by chi^2/dof" if cov and cov.scaled else ""
-    lines.append(f"chi-square {result.free.chi_square:.1f} -> {result.constrained.chi_square:.1f}"
-                 f"  (increase {result.delta_chi_square:.2f}{scaled}; likelihood-ratio p = "
-                 f"{result.p_value:.3g} on {dof} active constraint{'s' if dof != 1 else ''})")
-    units = {c.name: c.unit for c in result.constraints}
-    for name, d in result.constrained.sensitivities.items():
-        unit = units[name]
-        state = "active" if name in result.active else "inactive"
-        lines.append(f"  {name}: d(chi^2)/d(value) = {d:+.4g} per {unit} ({state})")
-    lines.append("parameters that moved most (in sigma of the unconstrained fit):")
-    moved = sorted(result.shifts().items(), key=lambda kv: -abs(np.nan_to_num(kv[1][2])))
-    for name, (a, b, z) in moved[:top]:
-        lines.append(f"  {name:30s} {a:12.6g} -> {b:12.6g}  ({z:+.2f} sigma)")
-    lines.append("chi-square change per channel: " + ", ".join(
-        f"{k} {v:+.1f}" for k, v in list(result.channel_changes().items())[:top]))
-    lines.append("windows that got worse: " + "; ".join(
-        f"{c} {t0:.1f}-{t1:.1f} s {r:+.1f}" for c, t0, t1, r in result.window_changes()))
-    return "\n".join(lines)

@@ -32,7 +32,7 @@ class Snatch:
     largest_m_s2: float | None
     at_s: float | None
 
-    def text(self) -> str:
+    def __str__(self) -> str:
         head = f"drag ceiling of the axial reading {self.ceiling_m_s2 / G0:.1f} g"
         if self.largest_m_s2 is None:
             return head + ", no sample above it"
@@ -91,32 +91,6 @@ class ImportSummary:
     flight_events: dict[str, FlightEvent] = field(default_factory=dict)  # time, sigma, source
     notes: list[str] = field(default_factory=list)
     nominal: dict[str, dict[str, Any]] = field(default_factory=dict)  # the card's, as given
-
-    def text(self) -> str:
-        """A few lines for the terminal."""
-        events = ", ".join(f"{k} {v:.2f} s" for k, v in self.events.items())
-        lines = [f"{self.recorder} log: phase {self.phase[0]:.2f}-{self.phase[1]:.2f} s; {events}",
-                 f"site: {self.site.elevation_m:.0f} m, {self.site.pressure_pa:.0f} Pa, "
-                 f"{self.site.temperature_k:.1f} K, lapse rate "
-                 f"{1e3 * self.site.lapse_rate_k_m:.2f} K/km"]
-        if self.lapse_fit is not None:
-            lines.append(f"  (lapse rate fitted to the GPS fixes: GPS offset "
-                         f"{self.lapse_fit[1]:+.1f} m, residual sigma {self.lapse_fit[2]:.1f} m)")
-        lines.append("altimeter sigma per canopy phase: "
-                     + ", ".join(f"{s:.2f} m" for s in self.baro_sigma_m))
-        if self.accel_sigma:
-            lines.append("accelerometer sigma per steady descent and opening (the swing "
-                         "counted): " + ", ".join(f"{s:.2f} m/s²" for s in self.accel_sigma))
-        for name, snatch in self.snatches.items():
-            lines.append(f"{name}'s opening: {snatch.text()}")
-        if self.flight_events:
-            lines.append("flight events: " + ", ".join(
-                f"{k} {e.time:.2f} ± {e.sigma:.2f} s ({e.source})"
-                for k, e in self.flight_events.items()))
-        lines.extend(f"note: {n}" for n in self.notes)
-        lines.append("samples: " + ", ".join(f"{k} {v}" for k, v in self.samples.items())
-                     + "; dropped: " + ", ".join(f"{k} {v}" for k, v in self.dropped.items()))
-        return "\n".join(lines)
 
     def to_dict(self) -> dict[str, Any]:
         return {"recorder": self.recorder, "phase_s": list(self.phase), "events_s": self.events,

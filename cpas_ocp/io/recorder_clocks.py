@@ -64,36 +64,3 @@ class RecorderEstimates:
 
     log: FlightRecord
     estimates: dict[str, tuple[float, float]]
-
-
-def recorders_text(recorders: list[RecorderEstimates]) -> str:
-    """Markdown comparing the recorders of one flight: the clock offset of each to the
-    first, and each shared drag area and start time with its sigma, start times in the
-    first recorder's clock, and every difference from the first in units of the
-    combined sigma (independent fits)."""
-    def shown(name: str, value: float, std: float) -> str:
-        return f"{value:.3f} ± {std:.3f}" if name.startswith("t_start") else \
-            f"{value:.4g} ± {std:.2g}"
-
-    first = recorders[0]
-    offsets = [0.0] + [clock_offset(first.log, r.log) for r in recorders[1:]]
-    lines = ["## The recorders compared", "",
-             f"Start times are in the clock of {first.log.path.name}: each later recorder's "
-             "clock offset is measured on the motor's burn (`recorder_clocks`). "
-             "Differences are from the first recorder, in combined σ.", ""]
-    for r, offset in zip(recorders[1:], offsets[1:], strict=True):
-        lines.append(f"- {r.log.path.name} reads {offset:+.3f} s against {first.log.path.name}.")
-    lines += ["", "| parameter | " + " | ".join(r.log.path.name for r in recorders) +
-              " | difference / σ |", "|---" * (len(recorders) + 2) + "|"]
-    for name, (value0, std0) in first.estimates.items():
-        cells, z = [shown(name, value0, std0)], []
-        for r, offset in zip(recorders[1:], offsets[1:], strict=True):
-            if name not in r.estimates:
-                cells.append("—")
-                continue
-            value, std = r.estimates[name]
-            value -= offset if name.startswith("t_start") else 0.0
-            cells.append(shown(name, value, std))
-            z.append(f"{(value - value0) / np.hypot(std, std0):+.1f}")
-        lines.append(f"| {name} | " + " | ".join(cells) + f" | {', '.join(z)} |")
-    return "\n".join(lines) + "\n"

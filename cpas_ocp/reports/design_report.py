@@ -72,7 +72,7 @@ def candidates_text(found: TestDesign) -> str:
         if weak:
             lines.append(f"\n{p.instrumentation.name}: {len(weak)} combination(s) the plan "
                          f"determines poorly or not at all:")
-            lines += [f"  {w.text()}" for w in weak[:WEAK_SHOWN]]
+            lines += [f"  {w}" for w in weak[:WEAK_SHOWN]]
             if len(weak) > WEAK_SHOWN:
                 lines.append(f"  ... and {len(weak) - WEAK_SHOWN} more (design.json)")
     return "\n".join(lines)
@@ -171,7 +171,7 @@ def design_record(found: TestDesign) -> dict:
                 "A": a, "D": d,
                 "sigma": {n: p.sigma(n) for n in p.covariance.names},
                 "status": {n: p.status(n) for n in p.covariance.names},
-                "weak": [w.text() for w in p.covariance.weak]}
+                "weak": [str(w) for w in p.covariance.weak]}
     return {"plan": found.plan.path, "problem": found.plan.problem.name, "method": METHOD,
             "interest": found.interest, "candidates": [prediction(p) for p in found.predictions],
             "ranking": [{"change": r.change.label, "sigma_removed": r.score
@@ -198,7 +198,7 @@ def design_page(found: TestDesign) -> Page:
     for p in found.predictions:
         if p.covariance.undetermined:
             page.warning(f"{p.instrumentation.name}: not determined: "
-                         + "; ".join(w.text() for w in p.covariance.weak if w.std is None))
+                         + "; ".join(str(w) for w in p.covariance.weak if w.std is None))
     page.heading("Predicted sigma (SI)")
     frame = sigma_frame(found)
     page.table(["parameter", "unit", "nominal",

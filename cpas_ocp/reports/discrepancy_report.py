@@ -37,6 +37,7 @@ from cpas_ocp.io.model_spec import model_block
 from cpas_ocp.io.output_folder import atomic_folder
 from cpas_ocp.io.strict_json import json_text
 from cpas_ocp.physics.effects.registry import EffectType
+from cpas_ocp.reports.discrepancy_text import comparison_text, diagnosis_text, discovery_text
 from cpas_ocp.reports.display_units import DisplayUnits, display_units, pretty
 from cpas_ocp.reports.html_page import Page, residual_comparison_figure, window_legend
 from cpas_ocp.reports.html_page import parameter_table as parameter_html
@@ -92,7 +93,7 @@ def write_diagnosis(diag: Diagnosis, cov: Covariance | None, out: str | Path,
         shown = _display_frame(table, units)
         (tmp / "diagnosis.md").write_text(
             f"# Diagnosis of {fit.test.name}\n\n{fit.test.label}\n\n"
-            f"```\n{parameter_table(fit, cov, units)}\n\n{diag.text()}\n```\n\n"
+            f"```\n{parameter_table(fit, cov, units)}\n\n{diagnosis_text(diag)}\n```\n\n"
             "## Residuals per sensor channel and phase window\n\n"
             + _markdown(shown) + "\n\n"
             + "".join(f"![{p.stem}]({p.name})\n\n" for p in figures)
@@ -103,7 +104,7 @@ def write_diagnosis(diag: Diagnosis, cov: Covariance | None, out: str | Path,
         page.preformatted(diag.verdict())
         parameter_section(page, fit, cov, units)
         page.heading("Diagnosis")
-        page.preformatted(diag.text())
+        page.preformatted(diagnosis_text(diag))
         page.heading("Residuals per sensor channel and phase window")
         _table(page, shown)
         page.heading("Sensors: model against measurement, by phase window")
@@ -155,7 +156,7 @@ def write_comparison(comparison: Comparison, out: str | Path,
         title = f"{comparison.labels[0]} against {comparison.labels[1]} on {fit_a.test.name}"
         (tmp / "comparison.md").write_text(
             f"# {title}\n\n"
-            f"```\n{comparison.text()}\n```\n\n"
+            f"```\n{comparison_text(comparison)}\n```\n\n"
             "## Normalised residual RMS per sensor channel and phase window\n\n"
             + _markdown(wide) + "\n\n"
             + "".join(f"![{p.stem}]({p.name})\n\n" for p in side)
@@ -178,8 +179,8 @@ def comparison_page(comparison: Comparison, title: str, wide: pd.DataFrame,
     page.heading("Likelihood-ratio test")
     page.paragraph(comparison.note)
     page.paragraph("no likelihood-ratio test: the models are not nested"
-                   if comparison.lr is None else comparison.lr.text())
-    page.preformatted(comparison.text())
+                   if comparison.lr is None else str(comparison.lr))
+    page.preformatted(comparison_text(comparison))
     for label, fit, cov in zip(labels, comparison.fits, comparison.covariances, strict=True):
         page.heading(f"Parameters: {label}")
         parameter_html(page, parameter_rows(fit, cov, units))
@@ -319,7 +320,7 @@ def write_discovery(discovery: Discovery, out: str | Path,
             plot_sensor_residuals(last.fit, last.windows, tmp)
         final_table = parameter_table(final, cov, units)
         (tmp / "discovery.md").write_text(
-            f"# Discovery on {steps[0].fit.test.name}\n\n```\n{discovery.text()}\n```\n\n"
+            f"# Discovery on {steps[0].fit.test.name}\n\n```\n{discovery_text(discovery)}\n```\n\n"
             + ("![the error falling step by step](discovery.png)\n\n" if figures else "")
             + f"## The last model's parameters\n\n```\n{final_table}\n```\n\n"
             "## Normalised RMS per sensor channel after each step\n\n"
@@ -329,7 +330,8 @@ def write_discovery(discovery: Discovery, out: str | Path,
             + ("Plug-ins written from the residual's signature are in `proposed/`, each "
                "tested as written: read them, edit them, pass them to `--plugin`.\n"
                if discovery.proposals else "")
-            + ("" if last is None else f"\n## The last diagnosis\n\n```\n{last.text()}\n```\n\n")
+            + ("" if last is None else
+               f"\n## The last diagnosis\n\n```\n{diagnosis_text(last)}\n```\n\n")
             + "".join(f"![{p.stem}]({p.name})\n\n" for p in drawn))
         if extra is not None:
             extra(tmp)
@@ -339,7 +341,7 @@ def write_discovery(discovery: Discovery, out: str | Path,
         page.heading("Ending")
         page.preformatted(discovery.ending())
         page.heading("The chain, step by step")
-        page.preformatted(discovery.text())
+        page.preformatted(discovery_text(discovery))
         parameter_section(page, final, cov, units)
         if last is not None:
             page.heading("Sensors: the last model against measurement, by phase window")

@@ -501,7 +501,7 @@ def missing_text(fit: Fit, diagnosis: Diagnosis | None) -> str:
     p = combined_p_value(common)
     if common:
         lines.append("- the altitude sensors against each other:")
-    lines += [f"  - {c.text()};" for c in common]
+    lines += [f"  - {c};" for c in common]
     if common and p < alpha:
         size = max(max(c.rms) for c in common)
         lines += ["", f"The altitude sensors share their residual (Fisher's combined p = {p:.2g}, "

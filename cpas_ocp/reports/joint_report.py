@@ -75,7 +75,7 @@ def joint_text(jf: JointFit) -> str:
     if not all(s_est.determined for s_est in jf.shared):
         lines += ["", "The tests together do not determine every shared parameter; the "
                   "combinations left open (test index:parameter):"]
-        lines += [f"- {w.text()}" for w in jf.covariance.weak if w.std is None]
+        lines += [f"- {w}" for w in jf.covariance.weak if w.std is None]
     return "\n".join(lines)
 
 

@@ -21,6 +21,7 @@ from cpas_ocp.io.strict_json import json_text
 from cpas_ocp.physics.units import SI_UNIT
 from cpas_ocp.reports.display_units import CHANNEL_DIMENSION, DisplayUnits, display_units
 from cpas_ocp.reports.failure_report import RESULT_MARKERS
+from cpas_ocp.reports.fit_text import claim_text
 from cpas_ocp.reports.flight_report import (
     DESCENT_RATE_HEADER,
     descent_rate_rows,
@@ -148,7 +149,7 @@ def result_dict(fit: Fit, cov: Covariance | None,
             "names": cov.names, "matrix": np.round(cov.correlation(), 6).tolist()},
         "identifiability": [] if cov is None else [
             {"weights": w.weights, "other": w.other, "std": w.std,
-             "curvature_ratio": w.curvature_ratio, "text": w.text()} for w in cov.weak],
+             "curvature_ratio": w.curvature_ratio, "text": str(w)} for w in cov.weak],
         "profiles": {p.name: p.as_dict() for p in profiles},
         "model": {"effects": [e.name for e in fit.model.effects],
                   "grid": {"nodes": len(fit.t), "finest_step_s": float(np.min(np.diff(fit.t))),
@@ -194,7 +195,7 @@ def identifiability_text(cov: Covariance) -> str:
     else:
         lines = [f"identifiability: {len(cov.weak)} combination"
                  f"{'s' if len(cov.weak) > 1 else ''} the data do not fix:"]
-        lines += [f"  {w.text()}" for w in cov.weak]
+        lines += [f"  {w}" for w in cov.weak]
     if cov.at_bound:
         lines.append(f"  on a bound, so not determined by the data and given no σ "
                      f"({len(cov.at_bound)}): {', '.join(cov.at_bound)}; the optimum lies "
@@ -285,7 +286,7 @@ def reconstruction_page(fit: Fit, cov: Covariance | None, claim: Claim | None,
         if claim.headline():
             page.warning(claim.headline())
         page.heading("Claim")
-        page.preformatted(claim.text())
+        page.preformatted(claim_text(claim))
     parameter_section(page, fit, cov, units)
     page.heading("Fit")
     page.preformatted(fit_summary(fit, units))
@@ -353,12 +354,12 @@ def write_report(fit: Fit, cov: Covariance | None, out: str | Path,
         (tmp / "report.md").write_text(
             f"# Reconstruction of {fit.test.name}\n\n{fit.test.label}\n\n{warning}```\n"
             f"{parameter_table(fit, cov, units)}\n\n{fit_summary(fit, units)}\n"
-            + (f"{claim.text()}\n" if claim is not None else "") + "```\n\n"
+            + (f"{claim_text(claim)}\n" if claim is not None else "") + "```\n\n"
             + (correlation_markdown(cov) if cov is not None else "")
             + (steady_descent_text(fit, cov, units) + "\n" if cov is not None
                and any(c.open_at_start for c in fit.test.parachutes) else "")
             + (flight_markdown(fit, cov, nominal) if cov is not None and nominal else "")
-            + "".join(f"Profile likelihood, {p.text()}\n\n" for p in profiles)
+            + "".join(f"Profile likelihood, {p}\n\n" for p in profiles)
             + "".join(f"![{p.stem}]({p.name})\n\n" for p in sorted(tmp.glob("*.png")))
             + f"{units_note(units, display_units(fit.test))}  Interactive plots: report.html\n")
         reconstruction_page(fit, cov, claim, units, curves, nominal).write(tmp / "report.html")

@@ -9,17 +9,27 @@ figures of `reports.plots`, which take the studies' results as plain data.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 from pathlib import Path
 
 import pandas as pd
 
+from cpas_ocp.campaign.campaign import (
+    TestOutcome,
+    covariance_table,
+    failure_table,
+    parameter_table,
+    stage_table,
+)
+from cpas_ocp.campaign.configuration_ratios import campaign_ratios
 from cpas_ocp.campaign.dispersion_study import DispersionModel
 from cpas_ocp.campaign.drag_area_envelope import drag_area_envelope, stage_conditions
-from cpas_ocp.campaign.peak_load_study import MARKER, StageLoads, summary_text
+from cpas_ocp.campaign.peak_load_study import MARKER, StageLoads
 from cpas_ocp.campaign.population_study import PopulationDispersion
 from cpas_ocp.estimation.estimator import Fit
 from cpas_ocp.io.output_folder import atomic_folder
 from cpas_ocp.io.strict_json import json_text
+from cpas_ocp.reports.campaign_text import campaign_text, dispersion_model_text, monte_carlo_text
 from cpas_ocp.reports.plots import (
     plot_dispersion_histograms,
     plot_drag_area_envelope,
@@ -71,7 +81,8 @@ def write_dispersions(models: list[DispersionModel], skipped: list[str], cases: 
                 "figures": [f.name for f in figures]})
         (tmp / "dispersions.json").write_text(json_text({"models": summary, "skipped": skipped}))
         (tmp / "dispersions.md").write_text(
-            "# Monte Carlo dispersions\n\n```\n" + "\n\n".join(m.text() for m in models)
+            "# Monte Carlo dispersions\n\n```\n"
+            + "\n\n".join(dispersion_model_text(m) for m in models)
             + ("\n\nnot dispersed:\n" + "\n".join(skipped) if skipped else "") + "\n```\n\n"
             + "".join(f"![{f}]({f})\n\n" for s in summary for f in s["figures"]))
     return out
@@ -87,6 +98,29 @@ def write_monte_carlo(fit: Fit, results: list[StageLoads], tmp: Path) -> list[Pa
         r.table().to_parquet(tmp / f"peak_loads_{stem}.parquet", index=False)
         figures.append(plot_peak_loads(r, tmp / f"peak_loads_{stem}.png"))
     (tmp / MARKER).write_text(
-        f"# Monte Carlo peak loads of {fit.test.name}\n\n```\n{summary_text(fit, results)}\n"
+        f"# Monte Carlo peak loads of {fit.test.name}\n\n```\n{monte_carlo_text(fit, results)}\n"
         "```\n\n" + "".join(f"![{f.name}]({f.name})\n\n" for f in figures))
     return figures
+
+
+def write_campaign(outcomes: Sequence[TestOutcome], out: str | Path) -> Path:
+    """Write parameters.csv and parameters.parquet (the table), stages.csv (STAGE_COLUMNS),
+    covariances.csv (COVARIANCE_COLUMNS), failures.csv, the drag-area ratios between
+    configurations (ratios_forebody.csv, ratios_cluster_size.csv; where the line length
+    varies, ratios_line_length.csv and ratios_cluster_size_by_line_length.csv) and
+    campaign.md atomically."""
+    out = Path(out)
+    table = parameter_table(outcomes)
+    failures = failure_table(outcomes)
+    with atomic_folder(out, "parameters.csv") as tmp:
+        table.to_csv(tmp / "parameters.csv", index=False)
+        table.to_parquet(tmp / "parameters.parquet", index=False)
+        stage_table(outcomes).to_csv(tmp / "stages.csv", index=False)
+        covariance_table(outcomes).to_csv(tmp / "covariances.csv", index=False)
+        failures.to_csv(tmp / "failures.csv", index=False)
+        text = campaign_text(outcomes)
+        for by, ratios in campaign_ratios(table).items():
+            ratios.to_csv(tmp / f"ratios_{by}.csv", index=False)
+            text += f"\n\nmean steady drag areas by {by}:\n" + ratios.to_string(index=False)
+        (tmp / "campaign.md").write_text(text + "\n")
+    return out

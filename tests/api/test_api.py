@@ -12,6 +12,7 @@ import cpas_ocp as co
 from cpas_ocp.estimation.estimator import Estimator
 from cpas_ocp.estimation.fit import EVENTS
 from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.reports.fit_text import claim_text
 
 pytestmark = pytest.mark.slow  # fits of a whole phase
 
@@ -43,7 +44,7 @@ def test_a_reconstruction_shows_its_parameters_statistics_and_claim(drogue_folde
     text = rec.summary()
     for name in rec.fit.free:
         assert name in text, name
-    assert rec.claim.text() in text
+    assert claim_text(rec.claim) in text
     assert f"AIC {crit.aic:.1f}" in text
 
 
@@ -117,3 +118,11 @@ def test_a_reconstruction_discovers_with_the_commands_options(drogue_folder, tmp
     assert found.steps[0].fit.chi_square == rec.fit.chi_square  # it starts from this fit
     written = json.loads((tmp_path / "chain" / "discovery.json").read_text())
     assert len(written["steps"]) == len(found.steps)
+
+
+def test_the_package_gives_every_name_of_the_interface() -> None:
+    import cpas_ocp
+    from cpas_ocp import api
+    assert cpas_ocp.__all__ == api.__all__
+    assert all(getattr(cpas_ocp, name) is getattr(api, name) for name in api.__all__)
+    assert not hasattr(cpas_ocp, "no_such_workflow")

@@ -110,7 +110,7 @@ def test_draws_are_reproducible_by_seed() -> None:
 
 def test_text_names_family_parameters_and_caps() -> None:
     d = fit_dispersion("expopen", np.random.default_rng(6).lognormal(0.0, 0.6, 40))
-    line = d.text()
+    line = str(d)
     assert line.startswith("expopen: lognormal(mu_log=")
     assert f"{d.lower_cap:.6g}" in line and f"{d.upper_cap:.6g}" in line
     assert "AIC" in line and "normal" in line and "uniform" in line

@@ -207,9 +207,9 @@ def test_a_clean_fit_shows_no_significant_finding(problem_fit) -> None:
     fit, _, _ = problem_fit("fbcp", 1)
     findings = diagnose_residuals(fit, phase_windows(fit))
     assert findings
-    assert not [f.text() for f in findings if f.significant]
+    assert not [str(f) for f in findings if f.significant]
     assert signature_text(findings).startswith("No residual signature beyond the noise")
-    assert all("consistent with white noise" in f.text() for f in findings)
+    assert all("consistent with white noise" in str(f) for f in findings)
 
 
 def test_an_injected_oscillation_is_found_where_and_at_what_frequency(problem_fit) -> None:
@@ -225,7 +225,7 @@ def test_an_injected_oscillation_is_found_where_and_at_what_frequency(problem_fi
     rate = 1.0 / np.median(np.diff(fit.residuals[-2].t))
     assert abs(top.frequency_hz - 5.0) <= rate / top.samples
     assert [f for f in findings if f.significant] == [top]
-    assert "Hz line" in top.text()
+    assert "Hz line" in str(top)
     text = signature_text(findings)
     assert "riser_fbcp1 tension, window steady fbcp1 stage1" in text
     assert "periodic at 5." in text
@@ -289,7 +289,7 @@ def test_a_lag_is_called_one_only_where_a_sensor_could_have_it(lag_s: float, win
     finding = Finding("gps", "up", "steady", 10.0, 10.0 + window_s, 200, 3.0, 1e-9, 1.0,
                       0.5, lag_s, 0.01, 1e-12, rejected=(LAG,), significant=True)
     assert plausible_lag(finding) is plausible
-    line = finding.text()
+    line = str(finding)
     assert ("lag of" in line) is plausible
     assert ("not as a sensor lag" in line) is not plausible
     assert f"{1e3 * lag_s:+.1f}" in line

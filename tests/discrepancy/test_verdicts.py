@@ -28,6 +28,7 @@ from cpas_ocp.io.flight_test import MANIFEST, load_test
 from cpas_ocp.io.model_spec import baseline_spec
 from cpas_ocp.io.problems import load_problem
 from cpas_ocp.io.strict_json import json_text
+from cpas_ocp.reports.discrepancy_text import diagnosis_text
 
 UNDERSTATED = 1.07  # the stated sigma are the flown ones divided by this
 
@@ -55,7 +56,7 @@ def test_a_fit_above_its_chi_square_is_not_consistent_with_the_noise(tmp_path) -
     # The expected excess: (1.07^2 - 1) dof; several sigma on drogue's dof.
     assert fit.chi_square / fit.dof == pytest.approx(UNDERSTATED**2, abs=0.04)
     diag = diagnose(fit, baseline_spec(), confirm_top=1)
-    assert diag.explanation is None and not diag.structure, diag.text()
+    assert diag.explanation is None and not diag.structure, diagnosis_text(diag)
     assert diag.noise.p_value < ALPHA
     assert not diag.consistent_with_noise and diag.state == "misfit"
     verdict = diag.verdict()

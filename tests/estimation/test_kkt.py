@@ -162,7 +162,7 @@ def test_an_undetermined_combination_is_named_and_nothing_is_nan() -> None:
     assert weak.weights["p1"] == pytest.approx(np.sqrt(0.5), abs=1e-6)
     assert weak.weights["p2"] == pytest.approx(-np.sqrt(0.5), abs=1e-6)
     assert weak.other < 1e-6
-    assert "not determined at all" in weak.text()
+    assert "not determined at all" in str(weak)
     # The step takes no part in the undetermined direction and stays finite.
     assert np.isfinite(gauss_newton_decrement(lin))
 
@@ -176,7 +176,7 @@ def test_a_poorly_determined_combination_keeps_its_finite_sigma() -> None:
     # The reported combination's sigma is the covariance's own along that direction.
     d = np.array([weak.weights["p1"], weak.weights["p2"]])
     assert weak.std == pytest.approx(float(np.sqrt(d @ cov.matrix @ d)), rel=1e-6)
-    assert f"±{weak.std:.3g}" in weak.text()
+    assert f"±{weak.std:.3g}" in str(weak)
 
 
 def test_exact_hessian_of_a_linear_problem_is_the_gauss_newton_one() -> None:

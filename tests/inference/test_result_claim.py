@@ -22,6 +22,7 @@ from cpas_ocp.inference.result_claim import check_claim
 from cpas_ocp.io.flight_test import load_test
 from cpas_ocp.io.model_spec import spec_from_block
 from cpas_ocp.physics.effects.canopy_inflation import CanopyInflation
+from cpas_ocp.reports.fit_text import claim_text
 
 pytestmark = pytest.mark.slow
 
@@ -115,7 +116,7 @@ def test_events_later_than_the_window_are_recovered_by_moving_the_windows(
     test = load_test(late_events(folder, tmp_path / "late", LATE_S))
     est, fit, claim = solve_checked(Estimator(test))
     assert claim.moves and all(m.shift_s < 0 for m in claim.moves)
-    assert claim.is_result and claim.fits_noise, claim.text()
+    assert claim.is_result and claim.fits_noise, claim_text(claim)
     # The truth basin: every start time within 4 sigma of the truth (4 sigma: 24 start
     # times and shape parameters at once; a chance miss has p < 1e-3).
     std = est.covariance(fit).std

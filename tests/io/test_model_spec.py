@@ -161,7 +161,7 @@ def test_model_file_errors_name_the_file(tmp_path) -> None:
 def test_an_external_plug_in_runs_only_when_allowed(problem_folder, tmp_path, capsys) -> None:
     """A test folder may come from anyone, and a plug-in is code: one the manifest names from
     outside its folder runs only with --allow-external-plugins."""
-    shutil.copy(Path(__file__).parents[2] / "plugins" / "breathing.py", tmp_path / "shared.py")
+    shutil.copy(Path(__file__).parents[1] / "plugins" / "breathing.py", tmp_path / "shared.py")
     folder = _with_model(problem_folder("fbcp", 1), tmp_path / "t", {"plugins": ["../shared.py"]})
     command = ["reduce", str(folder), "--out", str(tmp_path / "r")]
     assert main(command) == 2

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from cpas_ocp.io.flight_record import FlightRecord, samples_frame
-from cpas_ocp.io.recorder_clocks import RecorderEstimates, clock_offset, recorders_text
+from cpas_ocp.io.recorder_clocks import RecorderEstimates, clock_offset
+from cpas_ocp.reports.import_text import recorders_text
 
 SHIFT_S = 0.037  # the second recorder's clock reads this much more for the same instant
 NOISE = 0.5  # accelerometer noise (m/s^2), as an Altus Metrum reads on the pad

@@ -201,7 +201,7 @@ def test_the_comparison_page_shows_both_models_and_the_test(drogue_fit, tmp_path
                             "A is nested in B")
     out = write_comparison(comparison, tmp_path / "cmp")
     page = (out / "comparison.html").read_text()
-    assert lr.text() in page and "A is nested in B" in page
+    assert str(lr) in page and "A is nested in B" in page
     assert "Parameters: A" in page and "Parameters: B" in page
     for sensor in {r.sensor for r in fit.residuals if r.sensor not in fit.pseudo_sensors}:
         assert f"{sensor}: normalised residuals, A and B" in page

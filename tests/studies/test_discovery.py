@@ -34,6 +34,7 @@ from cpas_ocp.io.model_spec import baseline_spec, load_model_file
 from cpas_ocp.io.problems import load_problem
 from cpas_ocp.physics.effects import AddedMass, SensorLag, baseline_effects
 from cpas_ocp.reports.discrepancy_report import write_discovery
+from cpas_ocp.reports.discrepancy_text import diagnosis_text, discovery_text
 from tests.conftest import assert_truth_within_noise
 
 pytestmark = pytest.mark.slow
@@ -60,7 +61,7 @@ def test_each_hidden_effect_is_added_in_a_step_of_its_own(two_hidden) -> None:
     _, truth, found, _ = two_hidden
     steps = found.steps
     assert [s.added for s in steps[:1]] == [None]
-    assert sorted(s.added for s in steps[1:]) == ["added_mass", "gps_lag"], found.text()
+    assert sorted(s.added for s in steps[1:]) == ["added_mass", "gps_lag"], discovery_text(found)
     for before, after in itertools.pairwise(steps):
         # Each fall is the likelihood ratio of a nested pair, significant after correcting
         # for every effect the diagnosis before it tested.
@@ -126,16 +127,16 @@ def test_a_stand_in_leading_the_score_tests_does_not_hide_the_effect_behind_it(t
     which is the next step."""
     _, truth, found, _ = two_hidden
     step = found.steps[1]
-    assert step.added == "gps_lag", found.text()
+    assert step.added == "gps_lag", discovery_text(found)
     diag = diagnose(step.fit, step.spec, confirm_top=1)
     by_score = [t for t in rank(diag.effects) if t.tested]
     leader = by_score[0]
-    assert leader.effect == "loadcell_friction", diag.text()
-    assert leader in diag.confirmed() and diag.implausible(leader), diag.text()
+    assert leader.effect == "loadcell_friction", diagnosis_text(diag)
+    assert leader in diag.confirmed() and diag.implausible(leader), diagnosis_text(diag)
     refitted = [t.effect for t in by_score if t.refit is not None]
     assert refitted == [t.effect for t in by_score[:len(refitted)]]  # in score order
     added = next(t for t in diag.effects if t.effect == "added_mass")
-    assert added in diag.confirmed() and not diag.implausible(added), diag.text()
+    assert added in diag.confirmed() and not diag.implausible(added), diagnosis_text(diag)
     found_next = next_step(diag)
     assert isinstance(found_next, DiscoveryStep) and found_next.added == "added_mass"
     assert found_next.fit.chi_square < chi2.ppf(0.999, found_next.fit.dof)

@@ -31,6 +31,7 @@ from cpas_ocp.io.model_spec import spec_from_block, spec_of_test
 from cpas_ocp.io.problems import load_problem
 from cpas_ocp.physics.effects.registry import BASELINE
 from cpas_ocp.physics.effects.wind_process import WindProcess
+from cpas_ocp.reports.discrepancy_text import wind_evidence_text
 from cpas_ocp.reports.flight_report import air_motion_text
 
 pytestmark = pytest.mark.slow
@@ -262,7 +263,7 @@ def test_the_diagnosis_names_the_air_motion_through_gusts_and_not_in_still_air(
     assert air.best_fit.chi_square < fit.chi_square
     diag = Diagnosis(fit, [], [], [], [], air=air)
     assert diag.verdict().startswith("missing effect: wind_process, the air's vertical motion")
-    assert "2 ln B" in air.text() and "sigma 1 m/s" in air.text()
+    assert "2 ln B" in wind_evidence_text(air) and "sigma 1 m/s" in wind_evidence_text(air)
     still, still_spec = _rocket(tmp_path, 4, gusts=False)
     assert wind_evidence(still, still_spec, DIAGNOSIS_ALPHA) is None
     forced = wind_evidence(still, still_spec, 1.0)
