@@ -1,6 +1,6 @@
 """Benchmark: the cost of a fit against the length of its day-of-flight sounding.
 
-The `drogue` problem (seed 1) is given a 0-33 km sounding (standard-day
+The `drogue` problem (seed 1 unless `--seed`) is given a 0-33 km sounding (standard-day
 density, and wind columns of zeros, so that the tables describe the air the
 flight was simulated in) at 3 km, 300 m and 75 m (12, 111 and 441 rows) as
 its atmosphere, and fitted once per table in this process, the
@@ -14,7 +14,7 @@ chain of branches, one per row, the 111-row table ran the compiler out of
 memory (7.7 GB) and took 259 s to build and 435 s to solve in the virtual
 machine, and tests were cut on loading to the rows they flew through.
 
-    python benchmarks/atmosphere_table_cost.py
+    python benchmarks/atmosphere_table_cost.py [--seed 1]
 """
 
 from __future__ import annotations
@@ -23,9 +23,9 @@ import json
 import os
 import shutil
 import tempfile
-import time
 from pathlib import Path
 
+import harness
 import numpy as np
 import pandas as pd
 
@@ -52,17 +52,19 @@ def sounding(folder: Path, step_m: float) -> None:
 def fit(test: FlightTest, cache: Path) -> tuple[float, float, int, float]:
     """(build s, solve s, iterations, chi-square) with a compile cache of its own."""
     os.environ["CPAS_OCP_CACHE"] = str(cache)
-    t0 = time.perf_counter()
-    est = Estimator(test)
-    build = time.perf_counter() - t0
+    timer = harness.Timer()
+    with timer("build"):
+        est = Estimator(test)
     result = est.solve()
-    return build, result.solver.wall_s, result.solver.iterations, result.chi_square
+    return timer["build"], result.solver.wall_s, result.solver.iterations, result.chi_square
 
 
 def main() -> None:
+    args = harness.parser(__doc__, seed=1).parse_args()
+    rows = []
     with tempfile.TemporaryDirectory() as tmp:
         base = Path(tmp) / "drogue"
-        simulate_problem(load_problem("drogue"), base, 1)
+        simulate_problem(load_problem("drogue"), base, args.seed)
         print(f"{'rows':>5s} {'build s':>8s} {'solve s':>8s} {'iter':>5s} {'chi-square':>12s}"
               f" {'build ratio':>11s} {'s/it ratio':>10s}")
         first = None
@@ -75,8 +77,14 @@ def main() -> None:
             b, s, it, chi2 = fit(test, cache)
             shutil.rmtree(cache, ignore_errors=True)
             first = first or (b, s / it)
-            print(f"{len(test.atmosphere.altitude_m):5d} {b:8.1f} {s:8.1f} {it:5d} "
-                  f"{chi2:12.3f} {b / first[0]:11.2f} {s / it / first[1]:10.2f}", flush=True)
+            rows.append({"rows": len(test.atmosphere.altitude_m), "build_s": b, "solve_s": s,
+                         "iterations": it, "chi_square": chi2,
+                         "build_ratio": harness.ratio(b, first[0]),
+                         "per_iteration_ratio": harness.ratio(s / it, first[1])})
+            print(f"{rows[-1]['rows']:5d} {b:8.1f} {s:8.1f} {it:5d} {chi2:12.3f} "
+                  f"{rows[-1]['build_ratio']:11.2f} {rows[-1]['per_iteration_ratio']:10.2f}",
+                  flush=True)
+    harness.report("atmosphere_table_cost", tables=rows)
 
 
 if __name__ == "__main__":

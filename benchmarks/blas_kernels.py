@@ -16,12 +16,12 @@ and prints each run's outcome and wall time.  The whole suite can be given as
 
 from __future__ import annotations
 
-import argparse
 import os
 import subprocess
 import sys
-import time
 from pathlib import Path
+
+import harness
 
 ROOT = Path(__file__).resolve().parents[1]
 TESTS = ["tests/estimation/test_kkt.py", "tests/estimation/test_identifiability.py",
@@ -30,22 +30,29 @@ TESTS = ["tests/estimation/test_kkt.py", "tests/estimation/test_identifiability.
 
 
 def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = harness.parser(__doc__, seed=None,
+                            seed_help="recorded only: nothing here is drawn at random")
     parser.add_argument("--kernels", nargs="+", default=["default", "Haswell", "Zen", "Prescott"])
     parser.add_argument("--tests", nargs="+", default=TESTS)
     args = parser.parse_args()
     failed = 0
+    timer = harness.Timer()
+    runs = []
     for kernel in args.kernels:
         env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_CORETYPE"}
         if kernel != "default":
             env["OPENBLAS_CORETYPE"] = kernel
-        t0 = time.perf_counter()
-        done = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
-                               *args.tests], env=env, cwd=ROOT, capture_output=True, text=True)
+        with timer(kernel):
+            done = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
+                                   *args.tests], env=env, cwd=ROOT, capture_output=True,
+                                  text=True)
         summary = (done.stdout.strip().splitlines() or ["(no output)"])[-1]
-        print(f"{kernel:>10}: {summary}  ({time.perf_counter() - t0:.1f} s)", flush=True)
+        print(f"{kernel:>10}: {summary}  ({timer[kernel]:.1f} s)", flush=True)
         failed += done.returncode != 0
+        runs.append({"kernel": kernel, "passed": done.returncode == 0, "summary": summary,
+                     "wall_s": timer[kernel]})
     print("every kernel passed" if not failed else f"{failed} kernel(s) FAILED")
+    harness.report("blas_kernels", kernels=runs, failed=failed)
     return 1 if failed else 0
 
 

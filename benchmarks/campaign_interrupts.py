@@ -1,19 +1,18 @@
 """A signal to a campaign mid-run, repeated: do the worker processes end with the command?
 
 Each trial runs `cpas-ocp campaign` on three copies of a simulated `fbcp` folder
-with two workers whose every task announces itself and then pauses for ten
-minutes, sends SIGINT to the process group (as a terminal's Ctrl-C does) or
+(seed 1 unless `--seed`) with two workers whose every task announces itself and then
+pauses for ten minutes, sends SIGINT to the process group (as a terminal's Ctrl-C does) or
 SIGTERM to the command alone once both workers have started, and records
 how it ended: the exit code, whether every worker was gone within 30 s, and
 whether the command hung (no exit within 120 s) or ended before its workers
 started.  Trials may run concurrently (`--parallel`) to load the machine.
 
-    python benchmarks/campaign_interrupts.py [--trials 6] [--parallel 2]
+    python benchmarks/campaign_interrupts.py [--trials 6] [--parallel 2] [--seed 1]
 """
 
 from __future__ import annotations
 
-import argparse
 import os
 import shutil
 import signal
@@ -23,6 +22,7 @@ import tempfile
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
+import harness
 import psutil
 
 from cpas_ocp.estimation.simulate import simulate_problem
@@ -74,19 +74,23 @@ def trial(folder: Path, root: Path, sig: signal.Signals) -> str:
 
 
 def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = harness.parser(__doc__, seed=1, seed_help="seed of the simulated fbcp test")
     parser.add_argument("--trials", type=int, default=6)
     parser.add_argument("--parallel", type=int, default=2)
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp) / "fbcp"
-        simulate_problem(load_problem("fbcp"), folder, 1)
+        simulate_problem(load_problem("fbcp"), folder, args.seed)
         signals = [signal.SIGINT if k % 2 == 0 else signal.SIGTERM for k in range(args.trials)]
         with ThreadPoolExecutor(args.parallel) as pool:
             results = pool.map(lambda k: trial(folder, Path(tmp) / f"t{k}", signals[k]),
                                range(args.trials))
+            outcomes = []
             for k, result in enumerate(results):
                 print(f"trial {k + 1} ({signals[k].name}): {result}", flush=True)
+                outcomes.append({"signal": signals[k].name, "outcome": result})
+    harness.report("campaign_interrupts", trials=outcomes,
+                   hung=sum(o["outcome"].startswith("HUNG") for o in outcomes))
     return 0
 
 

@@ -23,7 +23,6 @@ the cost grows with the model's richness.
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import subprocess
@@ -32,7 +31,9 @@ import tempfile
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+import harness
+from revisions import ROOT, code_at
+
 BASELINE = "f0045d2"  # the per-block SX Jacobians, compiled whole
 WAYS = ("cold", "warm", "vm")
 # One command in a fresh process, then its peak memory and that of its largest child (a
@@ -58,22 +59,22 @@ def run(tree: Path, test: Path, model: Path | None, cache: Path, way: str, out: 
     args = [sys.executable, "-c", PROGRAM, "reconstruct", str(test), "--out", str(out)]
     if model is not None:
         args += ["--model", str(model)]
-    t0 = time.perf_counter()
-    done = subprocess.run(args, cwd=tree, env=env, capture_output=True, text=True)
-    seconds = time.perf_counter() - t0
+    timer = harness.Timer()
+    with timer("run"):
+        done = subprocess.run(args, cwd=tree, env=env, capture_output=True, text=True)
     if done.returncode != 0:
         raise SystemExit(f"{tree}: reconstruct ({way}) failed:\n{done.stderr[-2000:]}")
     peaks = json.loads(done.stdout.strip().splitlines()[-1])
-    return seconds, peaks["self_gb"], peaks["children_gb"]
+    return timer["run"], peaks["self_gb"], peaks["children_gb"]
 
 
 def compilers_done(cache: Path, limit_s: float = 600.0) -> float:
     """Wait until no compiler's folder is left in the cache (a compile a run left behind
     has ended); the seconds waited."""
-    t0 = time.perf_counter()
-    while list(cache.glob(".cpas-cg-*")) and time.perf_counter() - t0 < limit_s:
+    timer = harness.Timer()
+    while list(cache.glob(".cpas-cg-*")) and timer.elapsed() < limit_s:
         time.sleep(0.2)
-    return time.perf_counter() - t0
+    return timer.elapsed()
 
 
 def cache_size(cache: Path) -> tuple[int, float]:
@@ -101,49 +102,49 @@ def model_file(folder: Path, effects: list[str]) -> Path | None:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = harness.parser(__doc__, seed=4, seed_help="seed of the simulated drogue test")
     parser.add_argument("--baseline", default=BASELINE, help="the revision to compare with")
-    parser.add_argument("--seed", type=int, default=4)
     parser.add_argument("--effects", nargs="*", default=[],
                         help="library effects added to the baseline model")
     args = parser.parse_args()
-    with tempfile.TemporaryDirectory(prefix="cpas-ocp-compile-") as tmp:
+    results: dict[str, dict] = {}
+    with (tempfile.TemporaryDirectory(prefix="cpas-ocp-compile-") as tmp,
+          code_at(args.baseline) as old_tree):
         root = Path(tmp)
-        old_tree = root / "tree"
-        subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", str(old_tree),
-                        args.baseline], check=True, capture_output=True)
-        try:
-            test = root / "drogue"
-            subprocess.run([sys.executable, "-c", "import sys; from cpas_ocp.cli import main; "
-                            "sys.exit(main(sys.argv[1:]))", "simulate", "drogue", "--out",
-                            str(test), "--seed", str(args.seed)], check=True, cwd=ROOT,
-                           capture_output=True, env={**os.environ, "PYTHONPATH": str(ROOT)})
-            model = model_file(root, args.effects)
-            print(f"reconstruct drogue (seed {args.seed}), model: baseline "
-                  f"{' + '.join(args.effects)}".rstrip())
-            print(f"{'tree':10s} {'way':5s} {'wall (s)':>9s} {'run GB':>7s} {'cc GB':>6s} "
-                  f"{'libs':>5s} {'MB':>6s}")
-            for name, tree in (("baseline", old_tree), ("this tree", ROOT)):
-                cache = root / f"cache-{name.replace(' ', '-')}"
-                times = {}
-                for way in WAYS:
-                    seconds, run_gb, cc_gb = run(tree, test, model, cache, way,
-                                                 root / f"out-{name}-{way}")
-                    times[way] = seconds
+        test = root / "drogue"
+        subprocess.run([sys.executable, "-c", "import sys; from cpas_ocp.cli import main; "
+                        "sys.exit(main(sys.argv[1:]))", "simulate", "drogue", "--out",
+                        str(test), "--seed", str(args.seed)], check=True, cwd=ROOT,
+                       capture_output=True, env={**os.environ, "PYTHONPATH": str(ROOT)})
+        model = model_file(root, args.effects)
+        print(f"reconstruct drogue (seed {args.seed}), model: baseline "
+              f"{' + '.join(args.effects)}".rstrip())
+        print(f"{'tree':10s} {'way':5s} {'wall (s)':>9s} {'run GB':>7s} {'cc GB':>6s} "
+              f"{'libs':>5s} {'MB':>6s}")
+        for name, tree in (("baseline", old_tree), ("this tree", ROOT)):
+            cache = root / f"cache-{name.replace(' ', '-')}"
+            out = results[name] = {}
+            for way in WAYS:
+                seconds, run_gb, cc_gb = run(tree, test, model, cache, way,
+                                             root / f"out-{name}-{way}")
+                libs, mb = cache_size(cache)
+                out[way] = {"wall_s": seconds, "run_gb": run_gb, "compiler_gb": cc_gb,
+                            "libraries": libs, "mb": mb}
+                print(f"{name:10s} {way:5s} {seconds:9.1f} {run_gb:7.2f} {cc_gb:6.2f} "
+                      f"{libs:5d} {mb:6.1f}", flush=True)
+                if way == "cold":  # the warm run finds what the cold one left compiling
+                    waited = compilers_done(cache)
                     libs, mb = cache_size(cache)
-                    print(f"{name:10s} {way:5s} {seconds:9.1f} {run_gb:7.2f} {cc_gb:6.2f} "
-                          f"{libs:5d} {mb:6.1f}", flush=True)
-                    if way == "cold":  # the warm run finds what the cold one left compiling
-                        waited = compilers_done(cache)
-                        libs, mb = cache_size(cache)
-                        print(f"{name:10s} compilers still at work after the cold run: "
-                              f"{waited:.1f} s more; then {libs} libraries, {mb:.1f} MB",
-                              flush=True)
-                print(f"{name:10s} cold / warm {times['cold'] / times['warm']:.2f}, "
-                      f"cold / vm {times['cold'] / times['vm']:.2f}", flush=True)
-        finally:
-            subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force",
-                            str(old_tree)], check=False, capture_output=True)
+                    out["compilers_after_cold"] = {"waited_s": waited, "libraries": libs,
+                                                   "mb": mb}
+                    print(f"{name:10s} compilers still at work after the cold run: "
+                          f"{waited:.1f} s more; then {libs} libraries, {mb:.1f} MB",
+                          flush=True)
+            out["cold_over_warm"] = harness.ratio(out["cold"]["wall_s"], out["warm"]["wall_s"])
+            out["cold_over_vm"] = harness.ratio(out["cold"]["wall_s"], out["vm"]["wall_s"])
+            print(f"{name:10s} cold / warm {out['cold_over_warm']:.2f}, "
+                  f"cold / vm {out['cold_over_vm']:.2f}", flush=True)
+    harness.report("compile_cost", baseline=args.baseline, effects=args.effects, trees=results)
 
 
 if __name__ == "__main__":

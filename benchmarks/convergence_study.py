@@ -22,11 +22,10 @@ Draws come from `numpy.random.default_rng(--seed)`.
 
 from __future__ import annotations
 
-import argparse
 import tempfile
-import time
 from pathlib import Path
 
+import harness
 import numpy as np
 
 from cpas_ocp.errors import SolverFailure
@@ -62,33 +61,34 @@ def perturbed_start(est: Estimator, rng: np.random.Generator) -> np.ndarray:
 
 
 def study(name: str, starts: int, rng: np.random.Generator, folder: Path,
-          restarts: bool = True) -> None:
-    """Run and print the study of one problem."""
+          restarts: bool = True) -> dict:
+    """Run and print the study of one problem; its figures."""
     simulate_problem(load_problem(name), folder, 1)
     est = Estimator(load_test(folder))
     chi2, iterations, walls, failures = [], [], [], []
     restarted = 0
+    timer = harness.Timer()
     for k in range(starts):
-        t0 = time.perf_counter()
         try:
-            fit = est.solve(start=perturbed_start(est, rng))
-            if restarts:
-                fit, done = restart_start_times(est, fit)
-                restarted += bool(done)
+            with timer("start"):
+                fit = est.solve(start=perturbed_start(est, rng))
+                if restarts:
+                    fit, done = restart_start_times(est, fit)
+                    restarted += bool(done)
         except SolverFailure as exc:
-            walls.append(time.perf_counter() - t0)
+            walls.append(timer["start"])
             failures.append(f"{exc.status} after {exc.iterations}")
             print(f"  {name} start {k + 1:3d}: FAILED, {failures[-1]} iterations, "
                   f"{walls[-1]:6.1f} s", flush=True)
             continue
-        walls.append(time.perf_counter() - t0)
+        walls.append(timer["start"])
         chi2.append(fit.chi_square)
         iterations.append(fit.solver.iterations)
         print(f"  {name} start {k + 1:3d}: chi-square {fit.chi_square:12.3f}, "
               f"{fit.solver.iterations:3d} iterations, {walls[-1]:6.1f} s", flush=True)
     if not chi2:
         print(f"{name}: no start converged ({'; '.join(failures[:3])})")
-        return
+        return {"starts": starts, "converged": 0, "failures": failures}
     best = min(chi2)
     basin = sum(c - best <= BASIN_CHI2 for c in chi2)
     print(f"{name:12s} converged {len(chi2)}/{starts}, in the basin {basin}/{starts} "
@@ -96,20 +96,25 @@ def study(name: str, starts: int, rng: np.random.Generator, folder: Path,
           f"{max(chi2):.3f}, iterations median {int(np.median(iterations))} max "
           f"{max(iterations)}, wall median {np.median(walls):.1f} s, restarted {restarted}"
           + (f"; failures: {'; '.join(failures[:3])}" if failures else ""), flush=True)
+    return {"starts": starts, "converged": len(chi2), "in_basin": basin,
+            "chi_square_best": best, "chi_square_worst": max(chi2),
+            "iterations_median": int(np.median(iterations)), "iterations_max": max(iterations),
+            "wall_s_median": float(np.median(walls)), "restarted": restarted,
+            "failures": failures}
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = harness.parser(__doc__, seed=0, seed_help="seed of the starts' perturbations")
     parser.add_argument("--problems", nargs="+", default=["fbcp", "drogue", "pilot", "main2"])
     parser.add_argument("--starts", type=int, default=50)
-    parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--no-restarts", action="store_true",
                         help="the earlier path: no restarts of misfit start times")
     args = parser.parse_args()
     rng = np.random.default_rng(args.seed)
     with tempfile.TemporaryDirectory() as tmp:
-        for name in args.problems:
-            study(name, args.starts, rng, Path(tmp) / name, not args.no_restarts)
+        problems = {name: study(name, args.starts, rng, Path(tmp) / name, not args.no_restarts)
+                    for name in args.problems}
+    harness.report("convergence_study", restarts=not args.no_restarts, problems=problems)
 
 
 if __name__ == "__main__":

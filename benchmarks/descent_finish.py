@@ -18,24 +18,23 @@ Cases, each solved under each:
   (`flight_report.HELD_PROFILE_FACTORS`, each point given 100 iterations;
   its row gives the points that converged in place of iterations, and the
   least delta chi-square);
-* `--gusts N`: `rocket_gusts` seeds 1..N flown through their gusts and
+* `--gusts N`: `rocket_gusts` seeds 1..N (from `--seed` on) flown through their gusts and
   fitted from the reduction with the wind process they were drawn from.
 
 Printed per case and configuration: converged or the failure, iterations,
 wall time and chi-square; then per configuration how many converged, and
 the wall-time ratios to `before` over the cases every path finished.
 
-    python benchmarks/descent_finish.py [FOLDER ...] [--still] [--gusts 10]
+    python benchmarks/descent_finish.py [FOLDER ...] [--still] [--gusts 10] [--seed 1]
 """
 
 from __future__ import annotations
 
-import argparse
 import tempfile
-import time
 from collections.abc import Callable
 from pathlib import Path
 
+import harness
 import numpy as np
 
 from cpas_ocp.errors import SolverFailure
@@ -56,16 +55,18 @@ PATHS = {"before": {"descent_curvature": False, "descent_steps": 15},
 
 
 Outcome = tuple[bool, int, float, float]  # converged, iterations, wall s, chi-square
+OUTCOME = ("converged", "iterations", "wall_s", "chi_square")
 
 
 def timed(solve: Callable[[], Fit]) -> tuple[Outcome, Fit | None]:
     """The outcome of `solve`, and its fit where it converged."""
-    t0 = time.perf_counter()
+    timer = harness.Timer()
     try:
-        fit = solve()
-        return (True, fit.solver.iterations, time.perf_counter() - t0, fit.chi_square), fit
+        with timer("solve"):
+            fit = solve()
+        return (True, fit.solver.iterations, timer["solve"], fit.chi_square), fit
     except SolverFailure as exc:
-        return (False, exc.iterations, time.perf_counter() - t0, float("nan")), None
+        return (False, exc.iterations, timer["solve"], float("nan")), None
 
 
 def held_cases(folder: str, still: bool) -> dict[str, dict[str, Outcome]]:
@@ -82,18 +83,19 @@ def held_cases(folder: str, still: bool) -> dict[str, dict[str, Outcome]]:
         if fit is None:
             out[f"{name} held profile"][label] = (False, 0, 0.0, float("nan"))
             continue
-        t0 = time.perf_counter()
-        prof = held_profile(fit, spec, HELD, fit.parameters[HELD] * np.array(HELD_FACTORS),
-                            max_iter=HELD_MAX_ITER)
+        timer = harness.Timer()
+        with timer("profile"):
+            prof = held_profile(fit, spec, HELD, fit.parameters[HELD] * np.array(HELD_FACTORS),
+                                max_iter=HELD_MAX_ITER)
         converged = len(HELD_FACTORS) - len(prof.failures)
-        out[f"{name} held profile"][label] = (not prof.failures, converged,
-                                               time.perf_counter() - t0,
+        out[f"{name} held profile"][label] = (not prof.failures, converged, timer["profile"],
                                                float(prof.delta_chi_square.min()))
     return out
 
 
-def gust_cases(seeds: int) -> dict[str, dict[str, Outcome]]:
-    """Each rocket_gusts seed's fit with the wind process, under each path."""
+def gust_cases(seeds: int, first: int = 1) -> dict[str, dict[str, Outcome]]:
+    """Each rocket_gusts seed's (`seeds` of them from `first`) fit with the wind process,
+    under each path."""
     problem = load_problem("rocket_gusts")
     truth_block = problem.simulation["model"]
     block = {**problem.manifest["model"],
@@ -101,7 +103,7 @@ def gust_cases(seeds: int) -> dict[str, dict[str, Outcome]]:
     spec = spec_from_block(block, "descent_finish benchmark", Path())
     out: dict[str, dict[str, Outcome]] = {}
     with tempfile.TemporaryDirectory() as tmp:
-        for seed in range(1, seeds + 1):
+        for seed in range(first, first + seeds):
             folder = Path(tmp) / f"seed{seed}"
             simulate_problem(problem, folder, seed)
             test = load_test(folder)
@@ -121,7 +123,7 @@ def print_case(name: str, outcomes: dict[str, Outcome]) -> None:
 
 
 def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = harness.parser(__doc__, seed=1, seed_help="the first rocket_gusts seed of --gusts")
     parser.add_argument("folders", nargs="*")
     parser.add_argument("--still", action="store_true")
     parser.add_argument("--gusts", type=int, default=0)
@@ -133,15 +135,22 @@ def main() -> int:
             print_case(name, outcomes)
         cases.update(held)
     if args.gusts:
-        cases.update(gust_cases(args.gusts))
+        cases.update(gust_cases(args.gusts, args.seed))
     both = [c for c in cases.values() if all(o[0] for o in c.values())]
+    converged, ratios = {}, {}
     for label in PATHS:
-        print(f"{label}: {sum(c[label][0] for c in cases.values())} of {len(cases)} converged")
+        converged[label] = sum(c[label][0] for c in cases.values())
+        print(f"{label}: {converged[label]} of {len(cases)} converged")
     if both:
         for label in list(PATHS)[1:]:
-            ratio = sum(c[label][2] for c in both) / sum(c["before"][2] for c in both)
+            ratios[label] = harness.ratio(sum(c[label][2] for c in both),
+                                          sum(c["before"][2] for c in both))
             print(f"wall time {label}/before over the {len(both)} cases all finished: "
-                  f"{ratio:.2f}")
+                  f"{ratios[label]:.2f}")
+    harness.report("descent_finish", cases=len(cases), converged=converged,
+                   all_finished=len(both), wall_ratio_to_before=ratios,
+                   outcomes={name: {label: dict(zip(OUTCOME, o, strict=True))
+                                    for label, o in c.items()} for name, c in cases.items()})
     return 0
 
 

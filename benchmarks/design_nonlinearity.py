@@ -24,7 +24,7 @@ Two measurements on the plan's first candidate (the test as planned):
    changes along the parameter, the nonlinearity a nominal-point prediction cannot show),
    and the sd of the error over the seed's own Wald sigma ("own").
    The five's joint excess is tested against seeded Gaussian draws of N seeds from the
-   predicted covariance (their correlations included): the share of draws whose mean of
+   predicted covariance (their correlations included; `--seed`): the share of draws whose mean of
    ln(s^2 / sigma^2) over the five reaches the observed one.  Seeds beyond 50 were not
    seen when the five were named, so on them the test is free of the selection.
 2. The profile likelihood (`inference.profile_likelihood.profile`, what
@@ -54,6 +54,7 @@ import tempfile
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
+import harness
 import numpy as np
 from scipy.stats import chi2
 
@@ -71,7 +72,7 @@ FOCUS = ("n_p[drogue1,stage2]", "expopen[drogue1,stage2]", "t_start[drogue1,stag
 CONTROLS = ("Ck[drogue1,stage1]", "n_p[drogue1,stage1]", "t_start[drogue2,stage3]")
 EXACT_EVENT_SIGMA = 1e-6  # s: an event's timing sigma when its noise is removed
 NULL_DRAWS = 20000  # Gaussian draws of N seeds for the joint test
-NULL_SEED = 20261201
+NULL_SEED = 20261201  # the default --seed
 NULL_CHUNK = 1000  # draws made at once
 SELECTION_SEEDS = 50  # the seeds on which the five were named
 MAD_TO_SD = 1.4826  # median absolute deviation to the sd of a Gaussian
@@ -143,27 +144,31 @@ def ratio_interval(ratio: float, n: int) -> tuple[float, float]:
     return ratio * float(lo), ratio * float(hi)
 
 
-def joint_excess(est: np.ndarray, cov: np.ndarray) -> tuple[float, float]:
+def joint_excess(est: np.ndarray, cov: np.ndarray, seed: int = NULL_SEED
+                 ) -> tuple[float, float]:
     """Mean over the columns of ln(s^2 / sigma^2) of the estimates `est` (seeds x
     parameters) against the predicted covariance `cov`, and the share of NULL_DRAWS
-    seeded Gaussian draws of as many seeds from `cov` that reach it (one-sided p)."""
+    Gaussian draws (seeded by `seed`) of as many seeds from `cov` that reach it (one-sided
+    p)."""
     sigma2 = np.diag(cov)
     observed = float(np.mean(np.log(np.var(est, axis=0, ddof=1) / sigma2)))
-    rng = np.random.default_rng(NULL_SEED)
+    rng = np.random.default_rng(seed)
     draws = rng.multivariate_normal(np.zeros(len(sigma2)), cov, size=(NULL_DRAWS, len(est)))
     null = np.mean(np.log(np.var(draws, axis=1, ddof=1) / sigma2), axis=1)
     return observed, float(np.mean(null >= observed))
 
 
-def selected_excess(est: np.ndarray, cov: np.ndarray, k: int) -> tuple[float, float]:
+def selected_excess(est: np.ndarray, cov: np.ndarray, k: int, seed: int = NULL_SEED
+                    ) -> tuple[float, float]:
     """Mean of the `k` largest ln(s^2 / sigma^2) over every parameter (columns of `est`,
     seeds x parameters, against the predicted covariance `cov`), and the share of
-    NULL_DRAWS seeded Gaussian draws of as many seeds from `cov` whose own `k` largest
-    reach it: the joint test of `k` parameters named after the fact for spreading most."""
+    NULL_DRAWS Gaussian draws (seeded by `seed`) of as many seeds from `cov` whose own `k`
+    largest reach it: the joint test of `k` parameters named after the fact for spreading
+    most."""
     sigma2 = np.diag(cov)
     top = lambda s2: np.mean(np.sort(np.log(s2 / sigma2), axis=-1)[..., -k:], axis=-1)  # noqa: E731
     observed = float(top(np.var(est, axis=0, ddof=1)))
-    rng = np.random.default_rng(NULL_SEED)
+    rng = np.random.default_rng(seed)
     null = []
     for _ in range(NULL_DRAWS // NULL_CHUNK):
         draws = rng.multivariate_normal(np.zeros(len(sigma2)), cov,
@@ -237,10 +242,12 @@ def spread_table(pred: Prediction, runs: list[dict], names: tuple[str, ...]) -> 
     return ratios
 
 
-def joint_table(pred: Prediction, runs: list[dict]) -> None:
+def joint_table(pred: Prediction, runs: list[dict], seed: int = NULL_SEED) -> list[dict]:
     """The five's joint excess (`joint_excess`) per block of SELECTION_SEEDS seeds (the
-    first is the one that named them) and over all; with and without event noise."""
+    first is the one that named them) and over all; with and without event noise.  Return
+    each line's figures."""
     cov = pred.covariance
+    out = []
     idx = [cov.names.index(n) for n in FOCUS]
     block = cov.matrix[np.ix_(idx, idx)]
     print("\n## joint excess of the five: mean ln(s^2/sigma^2) -> ratio, one-sided p")
@@ -255,22 +262,30 @@ def joint_table(pred: Prediction, runs: list[dict]) -> None:
                 continue
             label = ("all seeds" if g is None else
                      f"seeds {g * SELECTION_SEEDS + 1}-{(g + 1) * SELECTION_SEEDS}")
-            obs, p = joint_excess(est, block)
+            obs, p = joint_excess(est, block, seed)
             print(f"{'with' if noise else 'without'} event noise, {label} ({len(est)}): "
                   f"{obs:+.3f} -> {np.exp(obs / 2):.3f}, p = {p:.4f}")
+            out.append({"event_noise": noise, "seeds": label, "n": len(est),
+                        "mean_log_excess": obs, "ratio": float(np.exp(obs / 2)), "p": p})
             if noise and g == 0:
                 full = np.array([[r["estimates"][n] for n in cov.names] for r in done
                                  if (r["seed"] - 1) // SELECTION_SEEDS == g])
-                top, q = selected_excess(full, cov.matrix, len(FOCUS))
+                top, q = selected_excess(full, cov.matrix, len(FOCUS), seed)
                 print(f"  the {len(FOCUS)} widest of all {len(cov.names)} on these seeds: "
                       f"{top:+.3f} -> {np.exp(top / 2):.3f}; p with the choice after the "
                       f"fact = {q:.4f}")
+                out[-1]["widest"] = {"mean_log_excess": top, "ratio": float(np.exp(top / 2)),
+                                     "p": q}
+    return out
 
 
-def profile_table(pred: Prediction, runs: list[dict], ratios: dict[str, float]) -> None:
+def profile_table(pred: Prediction, runs: list[dict], ratios: dict[str, float]
+                  ) -> dict[str, list[float]]:
     """Print per profiled parameter and seed the Wald half-width 1.96 sigma, the profile's
     half-widths below and above, and their mean over Wald; then per parameter the mean over
-    the seeds beside the empirical/predicted ratio."""
+    the seeds beside the empirical/predicted ratio.  Return those means (lower, upper, both
+    over Wald) per parameter."""
+    means = {}
     profiled = [r for r in runs if r.get("profiles")]
     failed = [r["seed"] for r in runs if "error" in r]
     print(f"\n## profiles on seeds {', '.join(str(r['seed']) for r in profiled)}"
@@ -295,10 +310,13 @@ def profile_table(pred: Prediction, runs: list[dict], ratios: dict[str, float]) 
         emp = f"{ratios[name]:8.2f}" if name in ratios else f"{'-':>8s}"
         print(f"{name:26s} {pred.sigma(name):10.4g} {emp} {m[0]:5.2f} {m[1]:5.2f} "
               f"{np.mean(m):6.2f}")
+        means[name] = [float(m[0]), float(m[1]), float(np.mean(m))]
+    return means
 
 
 def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = harness.parser(__doc__, seed=NULL_SEED,
+                            seed_help="seed of the joint test's Gaussian draws")
     parser.add_argument("plan", type=Path)
     parser.add_argument("--seeds", type=int, default=0, help="number of seeds for the spread")
     parser.add_argument("--first", type=int, default=1, help="first seed of the spread")
@@ -322,12 +340,16 @@ def main() -> int:
     for r in runs:
         if "error" in r:
             print(f"seed {r['seed']} (event noise {r['event_noise']}): {r['error']}")
-    ratios = {}
+    ratios, joint, profiles = {}, [], {}
     if any(not r.get("profiles") for r in runs):
         ratios = spread_table(pred, runs, FOCUS + CONTROLS)
-        joint_table(pred, runs)
+        joint = joint_table(pred, runs, args.seed)
     if any(r.get("profiles") for r in runs):
-        profile_table(pred, runs, ratios)
+        profiles = profile_table(pred, runs, ratios)
+    harness.report("design_nonlinearity", plan=str(args.plan),
+                   failed=[[r["seed"], r["event_noise"]] for r in runs if "error" in r],
+                   empirical_over_predicted=ratios, joint_excess=joint,
+                   profile_over_wald=profiles)
     return 0
 
 

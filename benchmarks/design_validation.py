@@ -17,26 +17,25 @@ sample standard deviation of N Gaussian draws lies within
 sqrt(chi2_{N-1}(0.025..0.975) / (N-1)) of the true one (0.80-1.20 for N = 50), so some
 of 41 parameters fall outside +-15 % by chance alone.  Then, per change, the mean
 fraction of the interest parameters' sigma it removes: predicted, and empirical with
-its bootstrap 95 % interval over the seeds (seeded); the change ranked first is
+its bootstrap 95 % interval over the seeds (seeded by `--seed`); the change ranked first is
 confirmed when its empirical reduction is the largest.
 
     python benchmarks/design_validation.py docs/plans/drogue.json --seeds 50 --workers 2 \
-        [--first 1] [--changes "LABEL" ...] [--out CSV]
+        [--first 1] [--changes "LABEL" ...] [--out CSV] [--seed 20261126]
 
 One `drogue` seed takes about 10-20 s on one core, one `fbcp` seed about 1 s.
 """
 
 from __future__ import annotations
 
-import argparse
 import csv
 import json
 import sys
 import tempfile
-import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
+import harness
 import numpy as np
 from scipy.stats import chi2
 
@@ -48,7 +47,7 @@ from cpas_ocp.io.problems import Problem
 from cpas_ocp.io.test_plan import Instrumentation, load_plan
 
 BOOTSTRAP = 2000  # resamples of the seeds for the interval of an empirical reduction
-BOOTSTRAP_SEED = 20261126
+BOOTSTRAP_SEED = 20261126  # the default --seed
 
 
 def fly(problem: Problem, instr: Instrumentation, seed: int) -> dict:
@@ -90,9 +89,9 @@ def chosen_cases(found: TestDesign, labels: list[str]) -> list[Prediction]:
     return [found.baseline] + [r.prediction for r in picked]
 
 
-def table(case: Prediction, runs: list[dict], rows: list[dict]) -> np.ndarray:
+def table(case: Prediction, runs: list[dict], rows: list[dict]) -> tuple[np.ndarray, dict]:
     """Print predicted against empirical sigma of every free parameter; the estimates
-    (seeds x parameters) of the converged seeds."""
+    (seeds x parameters) of the converged seeds, and the counts the table ends with."""
     ok = [r for r in runs if "estimates" in r]
     names = case.covariance.names
     est = np.array([[r["estimates"][n] for n in names] for r in ok])
@@ -118,19 +117,21 @@ def table(case: Prediction, runs: list[dict], rows: list[dict]) -> np.ndarray:
                      "predicted": pred, "empirical": emp, "ratio": ratio, "seeds": n})
     print(f"within 15 %: {within15} of {len(names)}; outside the {lo:.2f}-{hi:.2f} band: "
           f"{outside} of {len(names)} (about {0.05 * len(names):.1f} expected by chance)")
-    return est
+    return est, {"converged": n, "seeds": len(runs), "parameters": len(names),
+                 "within_15_percent": within15, "outside_band": outside}
 
 
 def confirm(found: TestDesign, cases: list[Prediction], estimates: dict[str, np.ndarray],
-            seeds: dict[str, list[int]]) -> None:
+            seeds: dict[str, list[int]], seed: int = BOOTSTRAP_SEED) -> dict:
     """Per change: predicted and empirical mean sigma removed from the interest parameters,
-    the empirical one with a bootstrap interval over the seeds all cases converged on."""
+    the empirical one with a bootstrap interval (draws seeded by `seed`) over the seeds all
+    cases converged on.  Return those figures and whether the top-ranked change is confirmed."""
     base = cases[0]
     idx = {c.instrumentation.name: [c.covariance.names.index(n) for n in found.interest]
            for c in cases}
     common = sorted(set.intersection(*(set(s) for s in seeds.values())))
     pick = {k: [seeds[k].index(s) for s in common] for k in seeds}
-    rng = np.random.default_rng(BOOTSTRAP_SEED)
+    rng = np.random.default_rng(seed)
     draws = rng.integers(0, len(common), (BOOTSTRAP, len(common)))
 
     def removed(name: str, rows: np.ndarray) -> float:
@@ -142,7 +143,7 @@ def confirm(found: TestDesign, cases: list[Prediction], estimates: dict[str, np.
     print(f"\n## ranking confirmed by simulation ({len(common)} seeds common to all; "
           f"interest: {', '.join(found.interest)})")
     print(f"{'change':60s} {'predicted':>9s} {'empirical':>9s}  95 % (bootstrap)")
-    best = None
+    best, changes = None, {}
     for case in cases[1:]:
         name = case.instrumentation.name
         pred = float(np.mean([1 - case.sigma(n) / base.sigma(n) for n in found.interest]))
@@ -150,14 +151,18 @@ def confirm(found: TestDesign, cases: list[Prediction], estimates: dict[str, np.
         boot = [removed(name, d) for d in draws]
         print(f"{name:60s} {pred:9.3f} {emp:9.3f}  {np.percentile(boot, 2.5):.3f}-"
               f"{np.percentile(boot, 97.5):.3f}")
+        changes[name] = {"predicted": pred, "empirical": emp,
+                         "bootstrap_95": [np.percentile(boot, 2.5), np.percentile(boot, 97.5)]}
         best = best if best is not None and best[1] >= emp else (name, emp)
     top = cases[1].instrumentation.name
     print(f"top-ranked change: {top}; largest empirical reduction: {best[0] if best else '-'}"
           f" -> {'confirmed' if best and best[0] == top else 'NOT confirmed'}")
+    return {"seeds": len(common), "removed": changes, "top_ranked": top,
+            "confirmed": bool(best and best[0] == top)}
 
 
 def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = harness.parser(__doc__, seed=BOOTSTRAP_SEED, seed_help="seed of the bootstrap draws")
     parser.add_argument("plan", type=Path)
     parser.add_argument("--seeds", type=int, default=50)
     parser.add_argument("--first", type=int, default=1, help="the first seed (1)")
@@ -165,31 +170,34 @@ def main() -> int:
     parser.add_argument("--changes", nargs="*", default=[])
     parser.add_argument("--out", type=Path)
     args = parser.parse_args()
-    t0 = time.perf_counter()
-    plan = load_plan(args.plan)
-    found = design(plan)
-    cases = chosen_cases(found, args.changes)
+    timer = harness.Timer()
+    with timer("design"):
+        plan = load_plan(args.plan)
+        found = design(plan)
+        cases = chosen_cases(found, args.changes)
     print(f"design of {plan.problem.name}: {len(found.ranking)} changes ranked in "
-          f"{time.perf_counter() - t0:.0f} s; flying: "
+          f"{timer['design']:.0f} s; flying: "
           + "; ".join(c.instrumentation.name for c in cases))
     runs = flown(plan.problem, cases, list(range(args.first, args.first + args.seeds)),
                  args.workers)
     rows: list[dict] = []
-    estimates, seeds = {}, {}
+    estimates, seeds, tables = {}, {}, {}
     for case in cases:
         name = case.instrumentation.name
-        estimates[name] = table(case, runs[name], rows)
+        estimates[name], tables[name] = table(case, runs[name], rows)
         seeds[name] = [r["seed"] for r in runs[name] if "estimates" in r]
         for r in runs[name]:
             if "error" in r:
                 print(f"seed {r['seed']}: {r['error']}")
-    confirm(found, cases, estimates, seeds)
-    print(f"\nwall time {time.perf_counter() - t0:.0f} s")
+    confirmed = confirm(found, cases, estimates, seeds, args.seed)
+    print(f"\nwall time {timer.elapsed():.0f} s")
     if args.out:
         with args.out.open("w", newline="") as f:
             writer = csv.DictWriter(f, fieldnames=list(rows[0]))
             writer.writeheader()
             writer.writerows(rows)
+    harness.report("design_validation", plan=str(args.plan), design_s=timer["design"],
+                   wall_s=timer.elapsed(), instrumentations=tables, ranking=confirmed)
     return 0
 
 

@@ -23,13 +23,13 @@ Hidden effects: added_mass (factor 1.4 on both Drogues), elastic_riser
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import functools
 import resource
 import tempfile
-import time
 from pathlib import Path
+
+import harness
 
 from cpas_ocp.discrepancy import diagnosis as diagnosis_module
 from cpas_ocp.discrepancy import score_test as score_module
@@ -70,9 +70,10 @@ def hidden_cases() -> dict[str, tuple[list[Effect], dict[str, float]]]:
 def _timed(fn, case: str, label):
     """`fn`, printing its wall time and `label(args, out)` as each call ends."""
     def wrapper(*args, **kwargs):
-        t0 = time.perf_counter()
-        out = fn(*args, **kwargs)
-        print(f"[{case}]   {time.perf_counter() - t0:7.1f} s  {label(args, out)}", flush=True)
+        timer = harness.Timer()
+        with timer("call"):
+            out = fn(*args, **kwargs)
+        print(f"[{case}]   {timer['call']:7.1f} s  {label(args, out)}", flush=True)
         return out
     return wrapper
 
@@ -85,12 +86,14 @@ def simulated_fit(effects: list[Effect], values: dict[str, float], seed: int, fo
     simulate_problem(dataclasses.replace(problem, truth={**problem.truth, **values}),
                      folder, seed, effects=effects)
     (folder / "truth.json").unlink()
-    t_start = time.perf_counter()
-    fit = solve_with_continuation(Estimator(load_test(folder), baseline_spec()))
-    return fit, time.perf_counter() - t_start
+    timer = harness.Timer()
+    with timer("fit"):
+        fit = solve_with_continuation(Estimator(load_test(folder), baseline_spec()))
+    return fit, timer["fit"]
 
 
-def run(case: str, seed: int, root: Path, null_point: str = "score") -> None:
+def run(case: str, seed: int, root: Path, null_point: str = "score") -> dict:
+    """Fit and diagnose one case, printing each step; the figures it ends with."""
     effects, values = hidden_cases()[case]
     spec = baseline_spec()
     fit, t_fit = simulated_fit(effects, values, seed, root / case)
@@ -105,10 +108,11 @@ def run(case: str, seed: int, root: Path, null_point: str = "score") -> None:
         lambda a, out: f"refit {a[1].effect:18s} {a[1].refit_note}")
     diagnosis_module.confirm = score_module.confirm
     builds_before, libraries_before = COUNTS["builds"], COUNTS["libraries"]
+    timer = harness.Timer()
     try:
-        t0 = time.perf_counter()
-        diag = diagnosis_module.diagnose(fit, spec)
-        t_diag = time.perf_counter() - t0
+        with timer("diagnosis"):
+            diag = diagnosis_module.diagnose(fit, spec)
+        t_diag = timer["diagnosis"]
     finally:
         score_module.score_test, score_module.confirm = original_test, original_confirm
         diagnosis_module.confirm = original_confirm
@@ -119,18 +123,22 @@ def run(case: str, seed: int, root: Path, null_point: str = "score") -> None:
           f"peak memory of the process so far {peak_gb:.2f} GB (largest compiler "
           f"{compiler_gb:.2f} GB); native builds {COUNTS['builds'] - builds_before} "
           f"({COUNTS['libraries'] - libraries_before} libraries compiled)", flush=True)
+    return {"fit_iterations": fit.solver.iterations, "fit_s": t_fit,
+            "chi_square": fit.chi_square, "dof": fit.dof, "verdict": diag.verdict(),
+            "diagnosis_s": t_diag, "peak_gb": peak_gb, "compiler_peak_gb": compiler_gb,
+            "native_builds": COUNTS["builds"] - builds_before,
+            "libraries_compiled": COUNTS["libraries"] - libraries_before}
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = harness.parser(__doc__, seed=1, seed_help="seed of the simulated drogue test")
     parser.add_argument("--hidden", nargs="+", default=["added_mass"],
                         choices=list(hidden_cases()))
-    parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--null-point", choices=["score", "solve"], default="score")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
-        for case in args.hidden:
-            run(case, args.seed, Path(tmp), args.null_point)
+        cases = {case: run(case, args.seed, Path(tmp), args.null_point) for case in args.hidden}
+    harness.report("diagnosis_cost", null_point=args.null_point, cases=cases)
 
 
 if __name__ == "__main__":

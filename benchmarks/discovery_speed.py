@@ -21,15 +21,15 @@ run it once before timing so neither tree pays for compiling.
 
 from __future__ import annotations
 
-import argparse
 import os
 import re
 import subprocess
 import sys
-import tempfile
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+import harness
+from revisions import ROOT, code_at
+
 BASELINE = "eaa37b4"  # docs/validation.md's figures before the speed work
 STEP = re.compile(r"^\[(?P<case>[^\]]+)\]\s+step (?P<label>.+): chi-square/dof "
                   r"(?P<per_dof>[\d.]+), (?P<seconds>[\d.]+) s$")
@@ -50,41 +50,42 @@ def run(tree: Path, case: str, seed: int) -> tuple[float, list[tuple[str, float,
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = harness.parser(__doc__, seed=1, seed_help="seed of the simulated drogue tests")
     parser.add_argument("--baseline", default=BASELINE, help="the revision to compare with")
     parser.add_argument("--cases", nargs="+", default=["wind_shear", "gps_lag+added_mass"])
-    parser.add_argument("--seed", type=int, default=1)
     args = parser.parse_args()
-    with tempfile.TemporaryDirectory(prefix="cpas-ocp-baseline-") as tmp:
-        old_tree = Path(tmp) / "tree"
-        subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", str(old_tree),
-                        args.baseline], check=True, capture_output=True)
-        try:
-            totals = [0.0, 0.0]
-            for case in args.cases:
-                (old_fit, old), (new_fit, new) = (run(old_tree, case, args.seed),
-                                                  run(ROOT, case, args.seed))
-                same = [a[0] for a in old] == [b[0] for b in new]
-                print(f"\n[{case}] baseline fit {old_fit:.1f} s -> {new_fit:.1f} s"
-                      + ("" if same else "; the chains differ"))
-                print(f"  {'step':26s} {'chi2/dof':>17s} {'wall time (s)':>17s} {'ratio':>6s}")
-                for k in range(max(len(old), len(new))):
-                    a = old[k] if k < len(old) else ("-", float("nan"), float("nan"))
-                    b = new[k] if k < len(new) else ("-", float("nan"), float("nan"))
-                    label = a[0] if a[0] == b[0] else f"{a[0]} | {b[0]}"
-                    print(f"  {label:26s} {a[1]:8.3f} {b[1]:8.3f} {a[2]:8.1f} {b[2]:8.1f} "
-                          f"{a[2] / b[2]:6.2f}")
-                t_old, t_new = sum(s[2] for s in old), sum(s[2] for s in new)
-                print(f"  {'all steps':26s} {'':17s} {t_old:8.1f} {t_new:8.1f} "
-                      f"{t_old / t_new:6.2f}; longest step {max(s[2] for s in old):.1f} -> "
-                      f"{max(s[2] for s in new):.1f} s")
-                totals[0] += t_old
-                totals[1] += t_new
-            print(f"\nall cases: {totals[0]:.0f} s -> {totals[1]:.0f} s, ratio "
-                  f"{totals[0] / totals[1]:.2f} (baseline {args.baseline})")
-        finally:
-            subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force",
-                            str(old_tree)], check=False, capture_output=True)
+    cases = {}
+    with code_at(args.baseline) as old_tree:
+        totals = [0.0, 0.0]
+        for case in args.cases:
+            (old_fit, old), (new_fit, new) = (run(old_tree, case, args.seed),
+                                              run(ROOT, case, args.seed))
+            same = [a[0] for a in old] == [b[0] for b in new]
+            print(f"\n[{case}] baseline fit {old_fit:.1f} s -> {new_fit:.1f} s"
+                  + ("" if same else "; the chains differ"))
+            print(f"  {'step':26s} {'chi2/dof':>17s} {'wall time (s)':>17s} {'ratio':>6s}")
+            steps = []
+            for k in range(max(len(old), len(new))):
+                a = old[k] if k < len(old) else ("-", float("nan"), float("nan"))
+                b = new[k] if k < len(new) else ("-", float("nan"), float("nan"))
+                label = a[0] if a[0] == b[0] else f"{a[0]} | {b[0]}"
+                steps.append({"step": label, "chi2_dof": [a[1], b[1]], "wall_s": [a[2], b[2]],
+                              "ratio": harness.ratio(a[2], b[2])})
+                print(f"  {label:26s} {a[1]:8.3f} {b[1]:8.3f} {a[2]:8.1f} {b[2]:8.1f} "
+                      f"{steps[-1]['ratio']:6.2f}")
+            t_old, t_new = sum(s[2] for s in old), sum(s[2] for s in new)
+            print(f"  {'all steps':26s} {'':17s} {t_old:8.1f} {t_new:8.1f} "
+                  f"{harness.ratio_text(t_old, t_new, '6.2f')}; longest step "
+                  f"{max(s[2] for s in old):.1f} -> {max(s[2] for s in new):.1f} s")
+            cases[case] = {"fit_s": [old_fit, new_fit], "same_chain": same, "steps": steps,
+                           "all_steps_s": [t_old, t_new], "ratio": harness.ratio(t_old, t_new)}
+            totals[0] += t_old
+            totals[1] += t_new
+        ratio = harness.ratio(totals[0], totals[1])
+        print(f"\nall cases: {totals[0]:.0f} s -> {totals[1]:.0f} s, ratio "
+              f"{ratio:.2f} (baseline {args.baseline})")
+    harness.report("discovery_speed", baseline=args.baseline, cases=cases,
+                   all_cases_s=totals, ratio=ratio)
 
 
 if __name__ == "__main__":

@@ -34,17 +34,16 @@ If the compiled-function cache is cold, the first seeds also compile.
 
 from __future__ import annotations
 
-import argparse
 import csv
 import json
 import sys
 import tempfile
-import time
 from collections import defaultdict
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import harness
 import numpy as np
 from scipy.stats import binom, chi2
 
@@ -77,7 +76,7 @@ class SeedResult:
 
 def score_seed(seed: int) -> SeedResult:
     """Simulate, reconstruct and score one seed of `drogue`."""
-    t0 = time.perf_counter()
+    timer = harness.Timer()
     with tempfile.TemporaryDirectory(prefix="cpas-coverage-") as tmp:
         folder = Path(tmp) / "test"
         simulate_problem(load_problem("drogue"), folder, seed)
@@ -86,11 +85,11 @@ def score_seed(seed: int) -> SeedResult:
         try:
             fit = est.solve()
         except SolverFailure as err:
-            return SeedResult(seed, time.perf_counter() - t0, error=f"solve: {err}")
+            return SeedResult(seed, timer.elapsed(), error=f"solve: {err}")
         try:
             cov = est.covariance(fit)
         except (ValueError, np.linalg.LinAlgError) as err:  # e.g. a singular KKT system
-            return SeedResult(seed, time.perf_counter() - t0, error=f"covariance: {err}")
+            return SeedResult(seed, timer.elapsed(), error=f"covariance: {err}")
         truth = json.loads(truth_file.read_text())["parameters"]
     std = cov.std
     rows, scored = [], []
@@ -105,7 +104,7 @@ def score_seed(seed: int) -> SeedResult:
             scored.append(name)
     m2, dof = cov.mahalanobis({n: fit.parameters[n] - truth[n] for n in fit.free})
     null_var = null_count_variance(cov, scored, np.random.default_rng(seed))
-    return SeedResult(seed, time.perf_counter() - t0, rows, m2, dof, null_var)
+    return SeedResult(seed, timer.elapsed(), rows, m2, dof, null_var)
 
 
 def null_count_variance(cov: Covariance, names: list[str], rng: np.random.Generator) -> float:
@@ -136,8 +135,10 @@ def run(seeds: list[int], workers: int) -> list[SeedResult]:
     return sorted(results, key=lambda r: r.seed)
 
 
-def report(results: list[SeedResult], elapsed_s: float) -> None:
-    """Print the coverage table, the summary, the failures and the timing."""
+def report(results: list[SeedResult], elapsed_s: float) -> dict:
+    """Print the coverage table, the summary, the failures and the timing; return the
+    figures printed."""
+    out: dict = {}
     ok = [r for r in results if not r.error]
     z_by_name: dict[str, list[float]] = defaultdict(list)
     unscored = 0
@@ -157,7 +158,8 @@ def report(results: list[SeedResult], elapsed_s: float) -> None:
             cover[name] = float(np.mean(np.abs(z) < Z95))
             print(f"{name:34s} {100 * cover[name]:10.1f} {z.size:4d} {z.mean():7.2f} "
                   f"{np.mean(z**2):8.2f}")
-        summarise(z_by_name, cover, ok, unscored)
+        out = summarise(z_by_name, cover, ok, unscored)
+        out["coverage"] = cover
     failures = [r for r in results if r.error]
     print(f"\nfailures: {len(failures)} of {len(results)} seeds")
     for r in failures:
@@ -166,11 +168,15 @@ def report(results: list[SeedResult], elapsed_s: float) -> None:
     print(f"wall time per seed (simulate, build, solve, covariance): mean {wall.mean():.1f} s, "
           f"median {np.median(wall):.1f} s, max {wall.max():.1f} s; "
           f"study {elapsed_s / 60:.1f} min")
+    return {**out, "seeds": len(results), "failures": {r.seed: r.error for r in failures},
+            "wall_s_per_seed": {"mean": wall.mean(), "median": np.median(wall),
+                                "max": wall.max()}, "study_s": elapsed_s}
 
 
 def summarise(z_by_name: dict[str, list[float]], cover: dict[str, float],
-              ok: list[SeedResult], unscored: int) -> None:
-    """Coverage against the binomial, mean z^2 against chi-square, Mahalanobis sum."""
+              ok: list[SeedResult], unscored: int) -> dict:
+    """Coverage against the binomial, mean z^2 against chi-square, Mahalanobis sum; return
+    the headline figures."""
     n = max(len(z) for z in z_by_name.values())
     lo, hi = binom.interval(0.95, n, NOMINAL)
     z2_lo, z2_hi = chi2.interval(0.95, n)
@@ -205,6 +211,11 @@ def summarise(z_by_name: dict[str, list[float]], cover: dict[str, float],
     print(f"Mahalanobis^2 summed over seeds: {m2:.1f} on {dof} dof (ratio {m2 / dof:.3f}), "
           f"P(chi2_{dof} > sum) = {chi2.sf(m2, dof):.3g}; seeds above their chi-square 95 % "
           f"quantile: {above} of {len(ok)} (expected {0.05 * len(ok):.1f})")
+    return {"reconstructed": len(ok), "intervals": int(all_z.size), "unscored": unscored,
+            "pooled_coverage": pooled, "outside_90_98": outside,
+            "outside_binomial": outside_binom, "outside_z2_range": z2_out,
+            "mahalanobis2": m2, "dof": dof, "mahalanobis2_p": chi2.sf(m2, dof),
+            "seeds_above_chi2_95": int(above)}
 
 
 def write_csv(results: list[SeedResult], path: Path) -> None:
@@ -219,17 +230,19 @@ def write_csv(results: list[SeedResult], path: Path) -> None:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = harness.parser(__doc__, seed=None, seed_help="recorded only: each seed's draws are "
+                        "seeded by that seed (--first, --seeds)")
     ap.add_argument("--seeds", type=int, default=100, help="number of seeds (default 100)")
     ap.add_argument("--first", type=int, default=1, help="first seed (default 1)")
     ap.add_argument("--workers", type=int, default=2, help="worker processes (default 2)")
     ap.add_argument("--out", type=Path, default=None, help="CSV of every seed and parameter")
     args = ap.parse_args()
-    t0 = time.perf_counter()
+    timer = harness.Timer()
     results = run(list(range(args.first, args.first + args.seeds)), args.workers)
     if args.out:
         write_csv(results, args.out)
-    report(results, time.perf_counter() - t0)
+    figures = report(results, timer.elapsed())
+    harness.report("drogue_coverage", first=args.first, **figures)
 
 
 if __name__ == "__main__":

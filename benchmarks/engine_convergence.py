@@ -21,9 +21,10 @@ agree to the stopping rule's 0.01 (plus the second-order rest of a step).
 
 from __future__ import annotations
 
-import argparse
 import tempfile
 from pathlib import Path
+
+import harness
 
 from cpas_ocp.errors import SolverFailure
 from cpas_ocp.estimation.estimator import Estimator, Settings
@@ -45,11 +46,11 @@ def solve(folder: Path, settings: Settings) -> tuple[int, float, float, str]:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = harness.parser(__doc__, seed=1, seed_help="seed of the simulated tests")
     parser.add_argument("--problems", nargs="+", default=["drogue", "drogue_full"])
-    parser.add_argument("--seed", type=int, default=1)
     args = parser.parse_args()
     print(f"{'problem':12s} {'path':7s} {'iter':>5s} {'solve s':>8s} {'chi-square':>12s}  status")
+    problems = {}
     with tempfile.TemporaryDirectory() as tmp:
         for name in args.problems:
             folder = Path(tmp) / name
@@ -61,8 +62,15 @@ def main() -> None:
                 print(f"{name:12s} {label:7s} {it:5d} {wall:8.1f} {chi2:12.3f}  {status}",
                       flush=True)
             (ib, wb, cb, _), (ia, wa, ca_, _) = runs["before"], runs["after"]
-            print(f"{name:12s} after/before: iterations {ia / ib:.2f}, solve time "
-                  f"{wa / wb:.2f}, chi-square difference {ca_ - cb:+.4f}", flush=True)
+            ratios = {"iterations": harness.ratio(ia, ib), "solve_s": harness.ratio(wa, wb)}
+            print(f"{name:12s} after/before: iterations {ratios['iterations']:.2f}, solve time "
+                  f"{ratios['solve_s']:.2f}, chi-square difference {ca_ - cb:+.4f}", flush=True)
+            problems[name] = {"runs": {label: dict(zip(("iterations", "solve_s", "chi_square",
+                                                        "status"), r, strict=True))
+                                       for label, r in runs.items()},
+                              "after_over_before": ratios,
+                              "chi_square_difference": ca_ - cb}
+    harness.report("engine_convergence", problems=problems)
 
 
 if __name__ == "__main__":

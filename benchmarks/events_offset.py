@@ -1,7 +1,8 @@
 """Events off by more than the start window: does the fit recover the truth, or say it cannot?
 
-For each seed of the `drogue` problem the events are moved off the truth and
-the phase is fitted as `reconstruct` does (`continuation.solve_checked`).
+For each seed of the `drogue` problem (`--seeds` of them, from `--seed` on) the
+events are moved off the truth and the phase is fitted as `reconstruct` does
+(`continuation.solve_checked`).
 Two cases, each beyond the 1 s window about each event:
 
 - ``late``: every event `--offset` s late (their order kept);
@@ -15,17 +16,17 @@ against the truth (s) and in sigma, and the wall time; with `--baseline`,
 also the plain fit (`continuation.solve`, no claim, no moves) in the same
 process, which is what the tool reported before.
 
-    python benchmarks/events_offset.py [--seeds 10] [--offset 1.5] [--baseline]
+    python benchmarks/events_offset.py [--seeds 10] [--offset 1.5] [--baseline] [--seed 1]
 """
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import tempfile
-import time
 from pathlib import Path
+
+import harness
 
 from cpas_ocp.errors import SolverFailure
 from cpas_ocp.estimation.estimator import Estimator, Fit
@@ -63,41 +64,53 @@ def start_errors(est: Estimator, fit: Fit, truth: dict) -> tuple[float, float]:
                                      default=float("nan"))
 
 
-def run(folder: Path, truth: dict, checked: bool) -> str:
-    t0 = time.perf_counter()
-    est = Estimator(load_test(folder))
+def run(folder: Path, truth: dict, checked: bool) -> tuple[str, dict]:
+    """One fit of `folder` (`solve_checked`, or the plain `solve`): its line and figures."""
+    timer = harness.Timer()
     try:
-        if checked:
-            est, fit, claim = solve_checked(est)
-        else:
-            fit, claim = solve(est), None
+        with timer("fit"):
+            est = Estimator(load_test(folder))
+            if checked:
+                est, fit, claim = solve_checked(est)
+            else:
+                fit, claim = solve(est), None
     except SolverFailure as exc:
         return (f"solver failure ({exc.status}, {exc.iterations} iterations)  "
-                f"{time.perf_counter() - t0:5.1f} s")
-    wall = time.perf_counter() - t0
+                f"{timer['fit']:5.1f} s"), {"ending": f"solver failure ({exc.status})",
+                                            "iterations": exc.iterations,
+                                            "wall_s": timer["fit"]}
+    wall = timer["fit"]
     err_s, err_z = start_errors(est, fit, truth)
     verdict = ("converged (reported as a result)" if claim is None else
                claim.verdict() + ("" if claim.is_result else " (exit 4)"))
     moves = len({m.parameter for m in claim.moves}) if claim else 0
     rounds = len({(m.chi_square_before) for m in claim.moves}) if claim else 0
     return (f"{verdict:32s} chi2/dof {fit.chi_square / fit.dof:7.2f}  windows moved {moves} "
-            f"in {rounds} refits  max |dt| {err_s:.3f} s ({err_z:6.1f} sigma)  {wall:5.1f} s")
+            f"in {rounds} refits  max |dt| {err_s:.3f} s ({err_z:6.1f} sigma)  {wall:5.1f} s"
+            ), {"ending": verdict, "chi2_dof": fit.chi_square / fit.dof, "windows_moved": moves,
+                "refits": rounds, "max_start_error_s": err_s, "max_start_error_sigma": err_z,
+                "wall_s": wall}
 
 
 def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = harness.parser(__doc__, seed=1, seed_help="the first drogue seed")
     parser.add_argument("--seeds", type=int, default=10)
     parser.add_argument("--offset", type=float, default=1.5)
     parser.add_argument("--baseline", action="store_true")
     args = parser.parse_args()
+    fits: dict[str, list[dict]] = {}
     with tempfile.TemporaryDirectory() as tmp:
         for case in ("late", "disreefs"):
             print(f"== {case}: events {args.offset} s off (window 1 s)", flush=True)
-            for seed in range(1, args.seeds + 1):
+            for seed in range(args.seed, args.seed + args.seeds):
                 folder, truth = shifted_folder(Path(tmp), seed, case, args.offset)
-                if args.baseline:
-                    print(f"  seed {seed:2d} before: {run(folder, truth, False)}", flush=True)
-                print(f"  seed {seed:2d} now:    {run(folder, truth, True)}", flush=True)
+                for label, checked in (("before", False), ("now", True)):
+                    if checked or args.baseline:
+                        text, figures = run(folder, truth, checked)
+                        print(f"  seed {seed:2d} {label + ':':7s} {text}", flush=True)
+                        fits.setdefault(case, []).append({"seed": seed, "path": label,
+                                                          **figures})
+    harness.report("events_offset", offset_s=args.offset, fits=fits)
     return 0
 
 

@@ -17,9 +17,9 @@ what-if's solve, its multipliers kept) and with the stall rule
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
-import time
+
+import harness
 
 import cpas_ocp.estimation.fit as estimation
 from cpas_ocp.errors import SolverFailure
@@ -32,23 +32,28 @@ MAIN = ("n[main,stage2]", "t_start[main,stage2]")
 
 
 def timed_solve(est: Estimator, **kwargs) -> tuple[str, float, object]:
-    t0 = time.perf_counter()
+    """`est.solve(**kwargs)`: its line of text, wall time (s) and fit (None where it failed)."""
+    timer = harness.Timer()
     try:
-        fit = est.solve(**kwargs)
+        with timer("solve"):
+            fit = est.solve(**kwargs)
         text = (f"{fit.solver.iterations:4d} iterations, {fit.solver.status}, chi2/dof "
                 f"{fit.chi_square / fit.dof:.3f}, "
                 + ", ".join(f"{n} {fit.parameters[n]:.4g}" for n in MAIN if n in fit.parameters))
     except SolverFailure as exc:
         fit, text = None, f"failed: {exc.status} after {exc.iterations} iterations"
-    return text, time.perf_counter() - t0, fit
+    return text, timer["solve"], fit
 
 
 def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = harness.parser(__doc__, seed=None,
+                            seed_help="recorded only: nothing here is drawn at random")
     parser.add_argument("folders", nargs="+")
     args = parser.parse_args()
     cap = estimation.MAX_LATTICE_STEP_S
+    results: dict[str, dict] = {}
     for folder in args.folders:
+        out = results[folder] = {}
         test = load_test(folder)
         walls = {}
         capped_fit = None
@@ -58,11 +63,13 @@ def main() -> int:
             text, wall, fit = timed_solve(est)
             walls[label] = wall
             print(f"{folder} {label}: {len(est.t)} nodes, {text}, {wall:.1f} s", flush=True)
+            out[label] = {"nodes": len(est.t), "fit": text, "wall_s": wall}
             if step == cap:
                 capped_fit = fit
         estimation.MAX_LATTICE_STEP_S = cap
         old, new = walls.values()
-        print(f"{folder} wall ratio sensor step / capped: {old / new:.2f}")
+        out["wall_ratio"] = harness.ratio(old, new)
+        print(f"{folder} wall ratio sensor step / capped: {out['wall_ratio']:.2f}")
         if capped_fit is None:
             continue
         spec = spec_of_test(test)
@@ -74,6 +81,8 @@ def main() -> int:
             text, wall, _ = timed_solve(held, start=start, bounds={HELD: (1.5, 1.5)},
                                         sensitivities=sensitivities)
             print(f"{folder} {HELD} held at 1.5, {label}: {text}, {wall:.1f} s", flush=True)
+            out[f"held at 1.5, {label}"] = {"fit": text, "wall_s": wall}
+    harness.report("fill_resolution", folders=results)
     return 0
 
 

@@ -14,35 +14,38 @@ Hypothesis's smallest falsifying example.  Prints the count and the wall time.
 
 from __future__ import annotations
 
-import argparse
 import os
 import subprocess
 import sys
-import time
 from pathlib import Path
+
+import harness
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = harness.parser(__doc__, seed=0, seed_help="Hypothesis's seed")
     parser.add_argument("--examples", type=int, default=2000)
-    parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
     env = {**os.environ, "CPAS_OCP_FUZZ_EXAMPLES": str(args.examples),
            "CPAS_OCP_FUZZ_SEED": str(args.seed)}
-    t0 = time.perf_counter()
-    done = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
-                           f"--hypothesis-seed={args.seed}",
-                           str(ROOT / "tests" / "test_fuzz_manifest.py"),
-                           str(ROOT / "tests" / "test_fuzz_files.py"),
-                           str(ROOT / "tests" / "test_plugin_faults.py"),
-                           str(ROOT / "tests" / "test_fuzz_logs.py")], env=env, cwd=ROOT)
+    timer = harness.Timer()
+    with timer("pytest"):
+        done = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
+                               f"--hypothesis-seed={args.seed}",
+                               str(ROOT / "tests" / "io" / "test_fuzz_manifest.py"),
+                               str(ROOT / "tests" / "io" / "test_fuzz_files.py"),
+                               str(ROOT / "tests" / "cli" / "test_plugin_faults.py"),
+                               str(ROOT / "tests" / "io" / "test_fuzz_logs.py")],
+                              env=env, cwd=ROOT)
     verdict = "contract held" if done.returncode == 0 else "FAILED"
     print(f"{args.examples} each of corrupted manifests, series, model files, flight cards, "
           f"Altus Metrum logs, column maps, CATS exports, campaign tables, scheduler "
           f"addresses and failing plug-ins (seed {args.seed}) in "
-          f"{time.perf_counter() - t0:.1f} s: {verdict}")
+          f"{timer['pytest']:.1f} s: {verdict}")
+    harness.report("fuzz_inputs", examples=args.examples, verdict=verdict,
+                   exit_code=done.returncode, wall_s=timer["pytest"])
     return done.returncode
 
 

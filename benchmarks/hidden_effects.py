@@ -28,12 +28,11 @@ implausible (`diagnosis.confirm_past_stand_ins` is skipped).
 
 from __future__ import annotations
 
-import argparse
 import resource
 import tempfile
-import time
 from pathlib import Path
 
+import harness
 import numpy as np
 from diagnosis_cost import DROGUES, hidden_cases, simulated_fit
 from scipy.stats import chi2
@@ -100,26 +99,23 @@ def run(case: str, seed: int, root: Path) -> tuple[Discovery, list[float], float
     print(f"[{case}] baseline fit {t_fit:.1f} s, chi-square/dof "
           f"{fit.chi_square / fit.dof:.3f}", flush=True)
     times: list[float] = []
-    mark = [time.perf_counter()]
+    timer = harness.Timer()
 
     def said(step: DiscoveryStep) -> None:
-        now = time.perf_counter()
-        times.append(now - mark[0])
-        mark[0] = now
+        times.append(timer.split("step"))
         print(f"[{case}]   step {step.label}: chi-square/dof "
               f"{step.fit.chi_square / step.fit.dof:.3f}, {times[-1]:.1f} s", flush=True)
 
     found = discover(fit, baseline_spec(), on_step=said)
     print(f"[{case}] ending: {found.ending()}")
     for trial in found.proposals:
-        print(f"[{case}]   {trial.text()[:300]}")
+        print(f"[{case}]   {str(trial)[:300]}")
     return found, times, t_fit
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = harness.parser(__doc__, seed=1, seed_help="seed of the simulated drogue tests")
     parser.add_argument("--cases", nargs="+", default=list(cases()), choices=list(cases()))
-    parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--stop-at-stand-ins", action="store_true",
                         help="refit only the leading score tests (the earlier diagnosis)")
     args = parser.parse_args()
@@ -128,14 +124,13 @@ def main() -> None:
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for case in args.cases:
-            t0 = time.perf_counter()
+            timer = harness.Timer()
             found, times, t_fit = run(case, args.seed, Path(tmp))
             last = found.steps[-1].fit
             rows.append((case, " > ".join(s.label for s in found.steps[1:]) or "-",
                          last.chi_square / last.dof, float(chi2.sf(last.chi_square, last.dof)),
                          found.state, ", ".join(false_effects(case, found)) or "none",
-                         t_fit, float(np.max(times)) if times else 0.0,
-                         time.perf_counter() - t0))
+                         t_fit, float(np.max(times)) if times else 0.0, timer.elapsed()))
     peak_gb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6
     print(f"\n{'case':20s} {'chain':44s} {'chi2/dof':>8s} {'tail p':>7s} {'fit':>7s} "
           f"{'longest step':>12s} {'total':>8s}  {'ending':14s} kept, not in the truth")
@@ -143,6 +138,11 @@ def main() -> None:
         print(f"{case:20s} {chain:44s} {per_dof:8.3f} {tail:7.2g} {t_fit:5.1f} s "
               f"{longest:10.1f} s {total:6.0f} s  {state:14s} {false}")
     print(f"peak memory of the process {peak_gb:.2f} GB")
+    fields = ("case", "chain", "chi2_dof", "tail_p", "state", "kept_not_in_truth", "fit_s",
+              "longest_step_s", "total_s")
+    harness.report("hidden_effects", stop_at_stand_ins=args.stop_at_stand_ins,
+                   cases=[dict(zip(fields, row, strict=True)) for row in rows],
+                   peak_gb=peak_gb)
 
 
 if __name__ == "__main__":

@@ -21,10 +21,9 @@ Ratios are against the baseline.  The target for the product is under 2 s.
 
 from __future__ import annotations
 
-import argparse
-import time
 from collections.abc import Callable
 
+import harness
 import numpy as np
 from scipy.spatial import Delaunay
 
@@ -45,12 +44,11 @@ def synthetic_points(seed: int) -> np.ndarray:
 
 def best_of(repeats: int, run: Callable[[], object]) -> tuple[float, object]:
     """Shortest wall time (s) of `repeats` runs and the last run's result."""
-    best, result = float("inf"), None
+    timer, result = harness.Timer(), None
     for _ in range(repeats):
-        start = time.perf_counter()
-        result = run()
-        best = min(best, time.perf_counter() - start)
-    return best, result
+        with timer("run"):
+            result = run()
+    return min(timer.laps.get("run", [float("inf")])), result
 
 
 def naive_contains(hull: Hull, x: np.ndarray) -> np.ndarray:
@@ -63,10 +61,9 @@ def naive_contains(hull: Hull, x: np.ndarray) -> np.ndarray:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = harness.parser(__doc__, seed=1, seed_help="seed of the draws")
     parser.add_argument("--n", type=int, default=200_000)
     parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--seed", type=int, default=1)
     args = parser.parse_args()
     n = args.n
 
@@ -77,7 +74,7 @@ def main() -> None:
     grown = hull.grow(ENGINEERING_FACTOR)
     lower, upper = grown.bounding_box()
     for d in dispersions:
-        print(d.text())
+        print(d)
     print(f"hull: {hull.vertices.shape[0]} vertices, {grown.equations.shape[0]} facets; "
           f"grown by {ENGINEERING_FACTOR:.0%}: volume x{grown.volume / hull.volume:.4f}")
 
@@ -119,9 +116,14 @@ def main() -> None:
     ]
     print(f"\n{'':74s} {'seconds':>9s} {'x baseline':>11s}")
     for label, seconds in rows:
-        print(f"{label:74s} {seconds:9.4f} {seconds / t_box:11.1f}")
+        print(f"{label:74s} {seconds:9.4f} {harness.ratio_text(seconds, t_box, '11.1f')}")
     verdict = "under" if t_hull < TARGET_S else "OVER"
     print(f"\n{n:,} hull-rejection draws: {t_hull:.3f} s, {verdict} the {TARGET_S:.0f} s target")
+    harness.report("hull_sampling", n=n, repeats=args.repeats,
+                   timings=[{"what": label, "seconds": seconds,
+                             "x_baseline": harness.ratio(seconds, t_box)}
+                            for label, seconds in rows],
+                   hull_rejection_s=t_hull, target_s=TARGET_S, under_target=t_hull < TARGET_S)
 
 
 if __name__ == "__main__":

@@ -26,12 +26,11 @@ chi-square, status, and the ratios to ``expressions``.
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import tempfile
-import time
 from pathlib import Path
 
+import harness
 from diagnosis_cost import hidden_cases
 
 from cpas_ocp.errors import SolverFailure
@@ -65,23 +64,24 @@ def run(test: FlightTest, misspecified: bool, max_iter: int, options: dict
     chi-square is NaN where the solve failed)."""
     est = Estimator(test, baseline_spec() if misspecified else None,
                     Settings(max_iter=max_iter, **options))
-    t0 = time.perf_counter()
+    timer = harness.Timer()
     try:
-        fit = est.solve()
+        with timer("solve"):
+            fit = est.solve()
     except SolverFailure as exc:  # timed all the same: the cost of not converging
-        return exc.iterations, time.perf_counter() - t0, float("nan"), exc.status
-    return fit.solver.iterations, time.perf_counter() - t0, fit.chi_square, fit.solver.status
+        return exc.iterations, timer["solve"], float("nan"), exc.status
+    return fit.solver.iterations, timer["solve"], fit.chi_square, fit.solver.status
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = harness.parser(__doc__, seed=1, seed_help="seed of the simulated tests")
     parser.add_argument("--problems", nargs="+",
                         default=["drogue", "drogue_full", "drogue+added_mass"])
-    parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--max-iter", type=int, default=150)
     args = parser.parse_args()
     print(f"{'problem':18s} {'path':11s} {'iter':>5s} {'solve s':>8s} {'s/iter':>7s} "
           f"{'chi-square':>12s}  status")
+    problems = {}
     with tempfile.TemporaryDirectory() as tmp:
         for name in args.problems:
             test = make_test(name, args.seed, Path(tmp))
@@ -92,11 +92,21 @@ def main() -> None:
                 print(f"{name:18s} {label:11s} {it:5d} {wall:8.1f} {wall / max(it, 1):7.3f} "
                       f"{chi2:12.3f}  {status}", flush=True)
             it0, wall0, chi0, _ = runs["expressions"]
+            ratios = {}
             for label in ("cached", "damped", "windowed"):
                 it, wall, chi2, _ = runs[label]
-                print(f"{name:18s} {label}/expressions: iterations {it / it0:.2f}, solve time "
-                      f"{wall / wall0:.2f}, time per iteration {(wall / it) / (wall0 / it0):.2f}"
+                r = ratios[label] = {"iterations": harness.ratio(it, it0),
+                                     "solve_s": harness.ratio(wall, wall0),
+                                     "per_iteration": harness.ratio(wall / it, wall0 / it0),
+                                     "chi_square_difference": chi2 - chi0}
+                print(f"{name:18s} {label}/expressions: iterations {r['iterations']:.2f}, solve "
+                      f"time {r['solve_s']:.2f}, time per iteration {r['per_iteration']:.2f}"
                       f", chi-square difference {chi2 - chi0:+.4f}", flush=True)
+            problems[name] = {"runs": {label: dict(zip(("iterations", "solve_s", "chi_square",
+                                                        "status"), r, strict=True))
+                                       for label, r in runs.items()},
+                              "over_expressions": ratios}
+    harness.report("iteration_cost", max_iter=args.max_iter, problems=problems)
 
 
 if __name__ == "__main__":

@@ -15,13 +15,12 @@ of a fit from the offline reduction; then the ratios earlier / one gather.
 
 from __future__ import annotations
 
-import argparse
 import os
 import statistics
 import tempfile
-import time
 from pathlib import Path
 
+import harness
 import numpy as np
 
 from cpas_ocp.estimation import sparse_rows
@@ -35,29 +34,27 @@ from cpas_ocp.io.problems import load_problem
 def measure(folder: Path, repeats: int) -> dict[str, float]:
     """The estimator's build time (s), per-evaluation times (ms) of rJ and gA at the starting
     point, and one fit's time (s) and chi-square."""
-    t0 = time.perf_counter()
-    est = Estimator(load_test(folder), baseline_spec())
-    out = {"build": time.perf_counter() - t0}
+    timer = harness.Timer()
+    with timer("build"):
+        est = Estimator(load_test(folder), baseline_spec())
+    out = {"build": timer["build"]}
     z = est.initial_point()
     for name in ("rJ", "gA"):
         buffer = est._points._buffers[name]
         buffer.nonzeros(z)
-        times = []
         for _ in range(repeats):
-            t0 = time.perf_counter()
-            buffer.nonzeros(z)
-            times.append(time.perf_counter() - t0)
-        out[name] = 1e3 * statistics.median(times)
-    t0 = time.perf_counter()
-    fit = est.solve()
-    out["fit"] = time.perf_counter() - t0
+            with timer(name):
+                buffer.nonzeros(z)
+        out[name] = 1e3 * statistics.median(timer.laps[name])
+    with timer("fit"):
+        fit = est.solve()
+    out["fit"] = timer["fit"]
     out["chi2"] = fit.chi_square
     return out
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seed", type=int, default=4)
+    parser = harness.parser(__doc__, seed=4, seed_help="seed of the simulated drogue test")
     parser.add_argument("--repeats", type=int, default=50)
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
@@ -80,12 +77,17 @@ def main() -> None:
               f"{'one gather' if one_gather else 'vertcat':12} {r['build']:9.2f} "
               f"{r['rJ']:8.1f} {r['gA']:8.1f} "
               f"{r['fit']:8.2f} {r['chi2']:10.3f}")
+    summary = {}
     for mode in ("wait", "0"):
         old, new = results[mode, False], results[mode, True]
-        ratios = "  ".join(f"{k} {old[k] / new[k]:.2f}" for k in ("build", "rJ", "gA", "fit"))
+        code = "native" if mode == "wait" else "VM"
+        ratios = {k: harness.ratio(old[k], new[k]) for k in ("build", "rJ", "gA", "fit")}
         same = np.isclose(old["chi2"], new["chi2"], rtol=1e-6)
-        print(f"{'native' if mode == 'wait' else 'VM'}: vertcat / one gather: {ratios}; "
-              f"same chi-square: {same}")
+        summary[code] = {"vertcat": old, "one_gather": new, "vertcat_over_one_gather": ratios,
+                         "same_chi_square": same}
+        print(f"{code}: vertcat / one gather: "
+              f"{'  '.join(f'{k} {v:.2f}' for k, v in ratios.items())}; same chi-square: {same}")
+    harness.report("jacobian_assembly", repeats=args.repeats, code=summary)
 
 
 if __name__ == "__main__":

@@ -31,15 +31,14 @@ mean sigma, and the spread of the estimates over seeds.
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import json
 import sys
 import tempfile
-import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
+import harness
 import numpy as np
 from scipy import stats
 
@@ -119,9 +118,10 @@ def run_seed(seed: int) -> dict:
             simulate_problem(variant(base, bool(cap)), folder, 1000 * seed + i)
             (folder / "truth.json").unlink()
             tests.append(load_test(folder))
-        began = time.perf_counter()
-        jf = joint_fit(tests, {"CdS": "type", "prf": "vehicle"})
-        wall = time.perf_counter() - began
+        timer = harness.Timer()
+        with timer("joint fit"):
+            jf = joint_fit(tests, {"CdS": "type", "prf": "vehicle"})
+        wall = timer["joint fit"]
     prf = jf.estimate("prf[fbcp]@capsule")
     cds = jf.estimate("CdS[fbcp,stage1]")
     out = {"seed": seed, "wall_s": wall, "iterations": jf.stats.iterations,
@@ -133,8 +133,10 @@ def run_seed(seed: int) -> dict:
     return out
 
 
-def summarise(rows: list[dict]) -> None:
+def summarise(rows: list[dict]) -> dict:
+    """Print the three estimates' scores over the seeds; return them."""
     n = len(rows)
+    out: dict = {"seeds": n}
     print(f"\n{n} seeds; truth PRF {PRF}, CdS {CDS} m^2")
     print("| estimate | coverage of the 95 % interval | mean sigma (log PRF) | "
           "SD of the estimates over seeds | mean error |")
@@ -146,6 +148,8 @@ def summarise(rows: list[dict]) -> None:
         cov = np.mean([r[key][2] for r in rows])
         print(f"| {label} | {100 * cov:.0f} % | {sig.mean():.5f} | {est.std(ddof=1):.5f} | "
               f"{(est - np.log(PRF)).mean():+.5f} |")
+        out[key] = {"coverage": cov, "mean_sigma": sig.mean(), "sd": est.std(ddof=1),
+                    "mean_error": (est - np.log(PRF)).mean()}
     cds = np.array([r["joint_cds"][0] for r in rows])
     print(f"joint CdS: coverage {100 * np.mean([r['joint_cds'][2] for r in rows]):.0f} %, "
           f"mean sigma {np.mean([r['joint_cds'][1] for r in rows]):.5f}, SD over seeds "
@@ -157,10 +161,19 @@ def summarise(rows: list[dict]) -> None:
     print(f"joint fit: {np.mean([r['wall_s'] for r in rows]):.1f} s and "
           f"{np.mean([r['iterations'] for r in rows]):.0f} iterations on average; chi2/dof "
           f"{min(r['chi2_dof'] for r in rows):.3f}-{max(r['chi2_dof'] for r in rows):.3f}")
+    return {**out, "joint_cds": {"coverage": np.mean([r["joint_cds"][2] for r in rows]),
+                                 "mean_sigma": np.mean([r["joint_cds"][1] for r in rows]),
+                                 "sd": cds.std(ddof=1)},
+            "sigma_ratio_population_over_joint": np.median(ratio),
+            "sigma_ratio_fixed_over_joint": np.median([r["fixed"][1] / r["joint"][1]
+                                                       for r in rows]),
+            "joint_wall_s": np.mean([r["wall_s"] for r in rows]),
+            "joint_iterations": np.mean([r["iterations"] for r in rows])}
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = harness.parser(__doc__, seed=None, seed_help="recorded only: each seed's draws are "
+                        "seeded by that seed (--first, --seeds)")
     ap.add_argument("--seeds", type=int, default=30)
     ap.add_argument("--first", type=int, default=1)
     ap.add_argument("--workers", type=int, default=2)
@@ -175,7 +188,7 @@ def main() -> None:
             if args.out is not None:
                 with args.out.open("a") as fh:
                     fh.write(json.dumps(row) + "\n")
-    summarise(rows)
+    harness.report("joint_fit_coverage", first=args.first, **summarise(rows))
     return None
 
 

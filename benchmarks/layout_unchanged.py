@@ -19,7 +19,6 @@ registered from that tree, so each side runs its own code and data.
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import re
@@ -28,11 +27,12 @@ import sys
 import tempfile
 from pathlib import Path
 
+import harness
 import matplotlib.image as mpimg
 import numpy as np
 import pandas as pd
+from revisions import ROOT, code_at
 
-ROOT = Path(__file__).resolve().parents[1]
 RUN = """
 import importlib.util, sys
 sys.meta_path = [f for f in sys.meta_path if "editable" not in repr(f).lower()]
@@ -78,19 +78,14 @@ def numbers_differ(a: object, b: object, path: str = "") -> list[str]:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = harness.parser(__doc__, seed=None,
+                            seed_help="recorded only: the demo draws with its own seed (1)")
     parser.add_argument("--rev", default="fd95edf")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        old_src = tmp / "old"
-        subprocess.run(["git", "worktree", "add", "--detach", "-f", str(old_src), args.rev],
-                       cwd=ROOT, check=True, capture_output=True)
-        try:
+        with code_at(args.rev) as old_src:
             printed = [demo(old_src, tmp / "before"), demo(ROOT, tmp / "after")]
-        finally:
-            subprocess.run(["git", "worktree", "remove", "--force", str(old_src)], cwd=ROOT,
-                           check=True, capture_output=True)
         before, after = tmp / "before" / "report", tmp / "after" / "report"
         diffs = [f"printed line {i}: {x!r} != {y!r}"
                  for i, (x, y) in enumerate(zip(*printed, strict=False)) if x != y]
@@ -120,6 +115,8 @@ def main() -> None:
               f"{len(figures)} figures ({', '.join(figures)}) of {args.rev} and the working "
               "tree")
         print("identical" if not diffs else "DIFFERENT:\n" + "\n".join(diffs))
+        harness.report("layout_unchanged", rev=args.rev, printed_lines=len(printed[1]),
+                       figures=figures, identical=not diffs, differences=diffs)
         sys.exit(1 if diffs else 0)
 
 

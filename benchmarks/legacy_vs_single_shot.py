@@ -50,17 +50,16 @@ Usage: ``python benchmarks/legacy_vs_single_shot.py --seed 1 [--step 0.005]``
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import sys
 import tempfile
-import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import casadi as ca
+import harness
 import numpy as np
 from scipy.optimize import minimize
 
@@ -201,7 +200,7 @@ class Legacy:
 
 def legacy_reconstruction(test: FlightTest, step: float, peak_iterations: int) -> Legacy:
     """The paper's sequence: reduction, curve fits, drag-scale bisection, peak matching."""
-    tic = time.perf_counter()
+    timer = harness.Timer()  # each step's time runs from the end of the one before
     timings: dict[str, float] = {}
     n_sims = 0
 
@@ -219,10 +218,9 @@ def legacy_reconstruction(test: FlightTest, step: float, peak_iterations: int) -
     stages = list(dict.fromkeys(s for c in chutes for s in c.stages))
     log("[legacy] a. reduction: stage scale factors "
         + ", ".join(f"{s} {red.stage_scale[s]:.4f}" for s in stages))
-    timings["a. reduction"] = time.perf_counter() - tic
+    timings["a. reduction"] = timer.split("a. reduction")
 
     # b. Nelder-Mead fit of every canopy stage's drag-area curve.
-    t_b = time.perf_counter()
     curve_fn = _curve_function()
     params: dict[str, float] = {p.name: p.default for p in model.parameters}
     params.update({param_name("t_start", c, s): t for (c, s), t in starts.items()})
@@ -250,10 +248,9 @@ def legacy_reconstruction(test: FlightTest, step: float, peak_iterations: int) -
                 f"{fit.evaluations} evaluations, rms {fit.rms_m2:.3f} m^2: "
                 + ", ".join(f"{b} {fit.values[param_name(b, chute.name, stage)]:.4g}"
                             for b in INFLATION_PARAMETERS))
-    timings["b. curve fits"] = time.perf_counter() - t_b
+    timings["b. curve fits"] = timer.split("b. curve fits")
 
     # c. per-stage drag scale by bisection on the end-of-stage altitude.
-    t_c = time.perf_counter()
     x0 = initial_state(test, model)
     gps = test.sensors_of("gps")[0]
     t_sim0 = test.t_start
@@ -285,10 +282,9 @@ def legacy_reconstruction(test: FlightTest, step: float, peak_iterations: int) -
         params[param_name("drag_scale", stage)] = red.stage_scale[stage] * m_star
         log(f"[legacy] c. {stage}: multiplier {m_star:.5f} after {n_iter} simulations to "
             f"t = {t_end:.2f} s (GPS altitude {h_gps:.1f} m)")
-    timings["c. drag-scale bisection"] = time.perf_counter() - t_c
+    timings["c. drag-scale bisection"] = timer.split("c. drag-scale bisection")
 
     # d. iterative Ck / n_p peak-load matching, all canopies and stages at once.
-    t_d = time.perf_counter()
     windows: dict[tuple[str, str], tuple[float, float]] = {}
     targets: dict[tuple[str, str], tuple[float, float]] = {}
     for chute in chutes:
@@ -336,9 +332,9 @@ def legacy_reconstruction(test: FlightTest, step: float, peak_iterations: int) -
         if worst < PEAK_TOLERANCE or it == peak_iterations:
             break
         params.update(updates)
-    timings["d. peak matching"] = time.perf_counter() - t_d
+    timings["d. peak matching"] = timer.split("d. peak matching")
 
-    wall = time.perf_counter() - tic
+    wall = timer.elapsed()
     return Legacy(params, wall, timings, multipliers, n_sims)
 
 
@@ -376,7 +372,8 @@ def relative_error(estimate: float, truth: float) -> float:
 
 
 def report(truth: dict[str, float], single: dict[str, float], free: list[str],
-           legacy: Legacy, single_wall: float, step: float) -> None:
+           legacy: Legacy, single_wall: float, step: float) -> dict:
+    """Print the parameter table and the summary; return the summary's figures."""
     legacy_names = {n for n in legacy.parameters
                     if n.split("[")[0] in (*INFLATION_PARAMETERS, "drag_scale")}
     common = [n for n in free if n in legacy_names]
@@ -407,17 +404,23 @@ def report(truth: dict[str, float], single: dict[str, float], free: list[str],
           f"({legacy.simulations} simulations at step {step:g} s)")
     for k, v in legacy.timings.items():
         print(f"    {k:<30} {v:8.1f} s")
-    print(f"  ratio legacy / single-shot       {legacy.wall_s / single_wall:8.3f}")
+    print(f"  ratio legacy / single-shot       "
+          f"{harness.ratio_text(legacy.wall_s, single_wall, '8.3f')}")
     print(f"  RMS relative error, single-shot  {100 * rms_s:8.2f} %")
     print(f"  RMS relative error, legacy       {100 * rms_l:8.2f} %")
     print(f"  max |start-time error|, single   {1000 * dt_single:8.1f} ms")
     print(f"  max |start-time error|, legacy   {1000 * dt_legacy:8.1f} ms   "
           "(observed event times)")
+    return {"common_parameters": len(common), "single_shot_s": single_wall,
+            "legacy_s": legacy.wall_s, "legacy_steps_s": legacy.timings,
+            "legacy_simulations": legacy.simulations,
+            "legacy_over_single_shot": harness.ratio(legacy.wall_s, single_wall),
+            "rms_relative_error": {"single_shot": rms_s, "legacy": rms_l},
+            "max_start_time_error_s": {"single_shot": dt_single, "legacy": dt_legacy}}
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--seed", type=int, default=1, help="noise seed of the simulated test")
+    ap = harness.parser(__doc__, seed=1, seed_help="noise seed of the simulated test")
     ap.add_argument("--step", type=float, default=0.005,
                     help="legacy simulation step (s); the test itself is simulated at 1 ms")
     ap.add_argument("--peak-iterations", type=int, default=5,
@@ -430,9 +433,10 @@ def main(argv: list[str] | None = None) -> int:
         test = simulate_problem(load_problem("drogue"), folder, args.seed)
 
         log("single-shot: building and solving the NLP ...")
-        tic = time.perf_counter()
-        fit = Estimator(test).solve()
-        single_wall = time.perf_counter() - tic
+        timer = harness.Timer()
+        with timer("single-shot"):
+            fit = Estimator(test).solve()
+        single_wall = timer["single-shot"]
         log(f"single-shot: {fit.solver.status} after {fit.solver.iterations} iterations, "
             f"{single_wall:.1f} s")
 
@@ -442,7 +446,8 @@ def main(argv: list[str] | None = None) -> int:
 
         # The truth is read only now, to score both methods.
         truth = json.loads((folder / "truth.json").read_text())["parameters"]
-    report(truth, fit.parameters, fit.free, legacy, single_wall, args.step)
+    summary = report(truth, fit.parameters, fit.free, legacy, single_wall, args.step)
+    harness.report("legacy_vs_single_shot", step_s=args.step, **summary)
     return 0
 
 

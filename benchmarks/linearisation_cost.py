@@ -4,7 +4,8 @@
 constraints with theirs at a point; the statistical stopping test, every
 covariance, profile step and score test start from it.  Both ways of getting
 the values into NumPy/SciPy are timed in this process on the same estimator
-and point (the reduction's start), best of `--repeat`:
+and point (the reduction's start; each problem simulated with seed 1 unless
+`--seed`), best of `--repeat`:
 
 * ``dm``: the function called with a vector, its DM outputs copied out of
   Python lists (the earlier path, `via_dm` below);
@@ -12,16 +13,16 @@ and point (the reduction's start), best of `--repeat`:
   a pattern converted once (`nlp_functions.FunctionBuffer`, the default).
 
     python benchmarks/linearisation_cost.py [--problems drogue drogue_full ...] [--repeat 5]
+                                            [--seed 1]
 """
 
 from __future__ import annotations
 
-import argparse
 import tempfile
-import time
 from pathlib import Path
 
 import casadi as ca
+import harness
 import numpy as np
 import scipy.sparse as sp
 
@@ -42,25 +43,25 @@ def via_dm(fn: ca.Function, z: np.ndarray) -> list[np.ndarray | sp.csc_matrix]:
 
 def best(evaluations: list, z: np.ndarray, repeat: int) -> float:
     """Fastest of `repeat` calls of every evaluation in `evaluations` at `z` (s)."""
-    times = []
+    timer = harness.Timer()
     for _ in range(repeat):
-        t0 = time.perf_counter()
-        for evaluation in evaluations:
-            evaluation(z)
-        times.append(time.perf_counter() - t0)
-    return min(times)
+        with timer("all"):
+            for evaluation in evaluations:
+                evaluation(z)
+    return min(timer.laps["all"])
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = harness.parser(__doc__, seed=1, seed_help="seed of the simulated tests")
     parser.add_argument("--problems", nargs="+", default=["drogue", "drogue_full"])
     parser.add_argument("--repeat", type=int, default=5)
     args = parser.parse_args()
     print(f"{'problem':12s} {'Jacobian nonzeros':>18s} {'dm s':>8s} {'buffer s':>9s} {'ratio':>6s}")
+    problems = {}
     with tempfile.TemporaryDirectory() as tmp:
         for name in args.problems:
             folder = Path(tmp) / name
-            simulate_problem(load_problem(name), folder, 1)
+            simulate_problem(load_problem(name), folder, args.seed)
             est = Estimator(load_test(folder))
             z = est.initial_point()
             functions = (est._residual_jacobian, est._constraints)
@@ -73,8 +74,11 @@ def main() -> None:
             nnz = sum(out[1].nnz for out in new)
             t_dm = best(dm, z, args.repeat)
             t_buf = best(buffers, z, args.repeat)
-            print(f"{name:12s} {nnz:18,d} {t_dm:8.3f} {t_buf:9.3f} {t_buf / t_dm:6.2f}",
-                  flush=True)
+            problems[name] = {"jacobian_nonzeros": nnz, "dm_s": t_dm, "buffer_s": t_buf,
+                              "buffer_over_dm": harness.ratio(t_buf, t_dm)}
+            print(f"{name:12s} {nnz:18,d} {t_dm:8.3f} {t_buf:9.3f} "
+                  f"{problems[name]['buffer_over_dm']:6.2f}", flush=True)
+    harness.report("linearisation_cost", repeat=args.repeat, problems=problems)
 
 
 if __name__ == "__main__":

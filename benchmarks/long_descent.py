@@ -34,7 +34,6 @@ iteration.
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from pathlib import Path
@@ -42,6 +41,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from benchmarks import harness  # noqa: E402
 from benchmarks.revisions import PRELUDE, code_at  # noqa: E402
 from tests.io.test_rocket_log_import import (  # noqa: E402
     CARD,
@@ -171,13 +171,12 @@ def run_tree(code: Path, folder: Path, timeout: float, thin: bool = False
     return (outs[0] or {}).get("build_s", float("nan")), outs[1]
 
 
-def per_iteration(folder: Path, iterations: int = 20, repeats: int = 2) -> None:
+def per_iteration(folder: Path, iterations: int = 20, repeats: int = 2) -> dict:
     """Seconds per solver iteration on the imported folder's NLP with this tree's grid and
     with the grid's intervals capped at one RK4 step (`shooting_grid.MAX_INTERVAL_S` =
     MAX_STEP_S, the earlier grid), alternating in one process so that both meet the
-    same load: `iterations` iterations from the reduction, `repeats` times each."""
-    import time
-
+    same load: `iterations` iterations from the reduction, `repeats` times each.  Return
+    the figures printed."""
     import cpas_ocp.estimation.shooting_grid as grid
     from cpas_ocp.errors import SolverFailure
     from cpas_ocp.estimation.estimator import Estimator
@@ -191,18 +190,23 @@ def per_iteration(folder: Path, iterations: int = 20, repeats: int = 2) -> None:
         finally:
             grid.MAX_INTERVAL_S = saved
     seconds: dict[str, list[float]] = {label: [] for label in estimators}
+    timer = harness.Timer()
     for _ in range(repeats):
         for label, est in estimators.items():
-            t0 = time.perf_counter()
             try:
-                done = est.solve(max_iter=iterations).solver.iterations
+                with timer(label):
+                    done = est.solve(max_iter=iterations).solver.iterations
             except SolverFailure as exc:
                 done = exc.iterations
-            seconds[label].append((time.perf_counter() - t0) / max(done, 1))
+            seconds[label].append(timer[label] / max(done, 1))
     for label, est in estimators.items():
         print(f"{label}: {len(est.t)} nodes, {min(seconds[label]):.3f} s per iteration "
               f"(best of {repeats})")
-    print(f"per iteration: ratio {min(seconds['one-step grid']) / min(seconds['this grid']):.2f}")
+    ratio = harness.ratio(min(seconds["one-step grid"]), min(seconds["this grid"]))
+    print(f"per iteration: ratio {ratio:.2f}")
+    return {"nodes": {label: len(est.t) for label, est in estimators.items()},
+            "s_per_iteration": {label: min(s) for label, s in seconds.items()},
+            "one_step_over_this_grid": ratio}
 
 
 def summary(label: str, run: dict) -> str:
@@ -228,14 +232,25 @@ def summary(label: str, run: dict) -> str:
     return "\n".join(lines)
 
 
+def summary_figures(run: dict) -> dict:
+    """What `summary` prints of a run, as numbers."""
+    res = run["result"]
+    params = res["parameters"]
+    return {"import_s": run["import_s"], "reconstruct_s": run["reconstruct_s"],
+            "grid": run["grid"], "status": res["solver"]["status"],
+            "iterations": res["solver"]["iterations"],
+            "chi2_dof": res["fit"]["chi_square_per_dof"],
+            "cds": {key: {"value": params[key]["value"], "std": params[key].get("std")}
+                    for key in ("CdS[drogue,stage1]", "CdS[main,stage2]")}}
+
+
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = harness.parser(__doc__, seed=1, seed_help="seed of the log's sensor noise")
     parser.add_argument("--baseline", default=BASELINE, help="the revision to compare with")
     parser.add_argument("--no-baseline", action="store_true", help="time this tree only")
     parser.add_argument("--normal-points", action="store_true",
                         help="also time this tree with the imported samples made normal "
                              "points outside the openings (`normal_points`)")
-    parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--thrust", type=float, default=THRUST_N, help="boost thrust (N)")
     parser.add_argument("--timeout", type=float, default=1800.0,
                         help="stop a tree's run after this many seconds")
@@ -246,12 +261,12 @@ def main() -> None:
                              "against the one-step grid (`per_iteration`)")
     args = parser.parse_args()
     if args.per_iteration is not None:
-        per_iteration(args.per_iteration)
+        harness.report("long_descent", per_iteration=per_iteration(args.per_iteration))
         return
     import tempfile
     with tempfile.TemporaryDirectory(prefix="cpas-ocp-long-descent-") as tmp:
         base = args.folder or Path(tmp)
-        runs = {}
+        runs, builds, ratios = {}, {}, {}
         trees = [("this tree", None, False)]
         trees += [("this tree, normal points", None, True)] if args.normal_points else []
         trees += [] if args.no_baseline else [(f"baseline {args.baseline}", args.baseline,
@@ -261,7 +276,7 @@ def main() -> None:
             events = write_long_log(folder, args.seed, args.thrust)
             with code_at(revision) as code:
                 build_s, run = run_tree(code, folder, args.timeout, thin)
-            runs[label] = run
+            runs[label], builds[label] = run, build_s
             print(f"{label}: first build, compiling into an empty cache: {build_s:.1f} s")
             if run is None:
                 print(f"{label}: stopped after {args.timeout:.0f} s", flush=True)
@@ -279,10 +294,19 @@ def main() -> None:
             for part in ("import_s", "reconstruct_s"):
                 if run is None:
                     total = this["import_s"] + this["reconstruct_s"]
-                    print(f"  import + reconstruct: ratio > {args.timeout / total:.1f}")
+                    ratios[label] = {"import_and_reconstruct_above": harness.ratio(
+                        args.timeout, total)}
+                    print(f"  import + reconstruct: ratio > "
+                          f"{ratios[label]['import_and_reconstruct_above']:.1f}")
                     break
-                print(f"  {part[:-2]}: ratio {run[part] / this[part]:.2f} "
+                ratios.setdefault(label, {})[part] = harness.ratio(run[part], this[part])
+                print(f"  {part[:-2]}: ratio {ratios[label][part]:.2f} "
                       f"({run[part]:.1f} s / {this[part]:.1f} s)")
+    harness.report("long_descent", baseline=None if args.no_baseline else args.baseline,
+                   events_s=events, first_build_s=builds,
+                   runs={label: None if r is None else summary_figures(r)
+                         for label, r in runs.items()},
+                   baseline_over_tree=ratios)
 
 
 if __name__ == "__main__":

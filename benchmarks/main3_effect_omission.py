@@ -20,13 +20,12 @@ and the likelihood-ratio statistic against the full set with the chi-square
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import json
 import tempfile
-import time
 from pathlib import Path
 
+import harness
 from scipy.stats import chi2
 
 from cpas_ocp.errors import SolverFailure
@@ -47,27 +46,28 @@ def variant(spec: ModelSpec, replace: str, by: object | None) -> ModelSpec:
     return dataclasses.replace(spec, effects=tuple(e for e in effects if e is not None))
 
 
-def run(label: str, test: FlightTest, spec: ModelSpec,
-        guess: dict[str, float]) -> tuple[Estimator, Fit | None]:
+def run(label: str, test: FlightTest, spec: ModelSpec, guess: dict[str, float],
+        timer: harness.Timer) -> tuple[Estimator, Fit | None]:
+    """Fit `spec` from `guess`, its solve timed under `label` in `timer`, and print it."""
     free = spec.free_names(spec.model(test))
     est = Estimator(test, spec, Settings(max_iter=MAX_ITERATIONS,
                                          guess={k: v for k, v in guess.items() if k in free}))
-    t0 = time.perf_counter()
     try:
-        fit = est.solve(progress=True)
+        with timer(label):
+            fit = est.solve(progress=True)
     except SolverFailure as exc:
-        print(f"{label:34s} FAILED: {exc} ({time.perf_counter() - t0:.0f} s)", flush=True)
+        print(f"{label:34s} FAILED: {exc} ({timer[label]:.0f} s)", flush=True)
         return est, None
     print(f"{label:34s} {fit.solver.status}, {fit.solver.iterations} iterations, "
-          f"{time.perf_counter() - t0:.0f} s, chi2/dof {fit.chi_square:.0f}/{fit.dof} = "
+          f"{timer[label]:.0f} s, chi2/dof {fit.chi_square:.0f}/{fit.dof} = "
           f"{fit.chi_square / fit.dof:.3f}", flush=True)
     return est, fit
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--seed", type=int, default=1)
+    ap = harness.parser(__doc__, seed=1, seed_help="seed of the simulated main3_full test")
     args = ap.parse_args()
+    timer = harness.Timer()
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp) / "test"
         simulate_problem(load_problem("main3_full"), folder, args.seed)
@@ -75,17 +75,21 @@ def main() -> None:
         test = load_test(folder)
         full_spec = spec_of_test(test)
         _, rigid = run("rigid risers + added mass", test,
-                       variant(full_spec, "elastic_riser", RigidRiser()), {})
+                       variant(full_spec, "elastic_riser", RigidRiser()), {}, timer)
         est, full = run("full set (from the rigid fit)", test, full_spec,
-                        rigid.parameters if rigid else {})
+                        rigid.parameters if rigid else {}, timer)
+        fits = {"rigid risers + added mass": rigid, "full set (from the rigid fit)": full}
         if full is None:
+            harness.report("main3_effect_omission", fits=fit_figures(fits, timer))
             return
         std = est.covariance(full).std
         worst = max(full.free, key=lambda n: abs(full.parameters[n] - truth[n]) / std[n])
         z = abs(full.parameters[worst] - truth[worst]) / std[worst]
         print(f"  full set: largest |estimate - truth| {z:.2f} sigma ({worst})")
         _, no_am = run("elastic risers, no added mass", test,
-                       variant(full_spec, "added_mass", None), full.parameters)
+                       variant(full_spec, "added_mass", None), full.parameters, timer)
+        fits["elastic risers, no added mass"] = no_am
+        tests = {}
         for label, reduced in (("rigid risers + added mass", rigid),
                                ("elastic risers, no added mass", no_am)):
             if reduced is None:
@@ -93,6 +97,17 @@ def main() -> None:
             dropped = len(full.free) - len(reduced.free)
             print(f"  {label}: delta chi2 {reduced.chi_square - full.chi_square:.0f} for "
                   f"{dropped} parameters (chi2 0.999 quantile {chi2.ppf(0.999, dropped):.1f})")
+            tests[label] = {"delta_chi2": reduced.chi_square - full.chi_square,
+                            "dropped": dropped, "chi2_0999": chi2.ppf(0.999, dropped)}
+    harness.report("main3_effect_omission", fits=fit_figures(fits, timer),
+                   full_set_largest_z={"parameter": worst, "z": z}, omissions=tests)
+
+
+def fit_figures(fits: dict[str, Fit | None], timer: harness.Timer) -> dict:
+    """Solve time, and status, iterations and chi-square, of each fit, by `run`'s label."""
+    return {label: {"wall_s": timer[label]} | ({"status": "FAILED"} if fit is None else {
+        "status": fit.solver.status, "iterations": fit.solver.iterations,
+        "chi_square": fit.chi_square, "dof": fit.dof}) for label, fit in fits.items()}
 
 
 if __name__ == "__main__":

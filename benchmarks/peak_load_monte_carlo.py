@@ -7,11 +7,10 @@ Prints the seconds of each, the ratio, the per-case cost and the peak-load quant
 
 from __future__ import annotations
 
-import argparse
 import tempfile
-import time
 from pathlib import Path
 
+import harness
 import numpy as np
 import pandas as pd
 
@@ -26,9 +25,8 @@ SHAPE = ("CdS", "Ck", "n_p", "expopen", "t_k")
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = harness.parser(__doc__, seed=1, seed_help="seed of the test and of the cases")
     ap.add_argument("--cases", type=int, default=10_000)
-    ap.add_argument("--seed", type=int, default=1)
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         simulate_problem(load_problem("drogue"), Path(tmp) / "test", args.seed)
@@ -37,16 +35,20 @@ def main() -> None:
     rng = np.random.default_rng(args.seed)
     cases = pd.DataFrame({b: v * (1 + 0.05 * rng.standard_normal(args.cases))
                           for b, v in fitted.items()})
-    t0 = time.perf_counter()
-    stage_peak_loads(fit, "drogue1", "stage2", cases.iloc[:1])
-    one = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    result = stage_peak_loads(fit, "drogue1", "stage2", cases)
-    many = time.perf_counter() - t0
-    print(f"1 case: {one:.2f} s; {args.cases} cases: {many:.1f} s; ratio {many / one:.1f} "
-          f"({1e3 * many / args.cases:.2f} ms per case)")
+    timer = harness.Timer()
+    with timer("one"):
+        stage_peak_loads(fit, "drogue1", "stage2", cases.iloc[:1])
+    with timer("many"):
+        result = stage_peak_loads(fit, "drogue1", "stage2", cases)
+    one, many = timer["one"], timer["many"]
+    print(f"1 case: {one:.2f} s; {args.cases} cases: {many:.1f} s; ratio "
+          f"{harness.ratio_text(many, one, '.1f')} ({1e3 * many / args.cases:.2f} ms per case)")
+    quantiles = {q: v / 4.4482216 for q, v in result.quantiles().items()}
     print("peak tension quantiles (lbf):",
-          ", ".join(f"{q:g}: {v / 4.4482216:,.0f}" for q, v in result.quantiles().items()))
+          ", ".join(f"{q:g}: {v:,.0f}" for q, v in quantiles.items()))
+    harness.report("peak_load_monte_carlo", cases=args.cases, one_case_s=one, all_cases_s=many,
+                   ratio=harness.ratio(many, one), ms_per_case=1e3 * many / args.cases,
+                   peak_tension_lbf=quantiles)
 
 
 if __name__ == "__main__":

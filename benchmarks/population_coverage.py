@@ -41,24 +41,24 @@ seeds are reconstructed four at a time in one campaign.
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import json
 import shutil
 import sys
 import tempfile
-import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
+import harness
 import numpy as np
 from scipy import stats
 
-from cpas_ocp.campaign.campaign import run_campaign, write_campaign
+from cpas_ocp.campaign.campaign import run_campaign
 from cpas_ocp.campaign.dispersion_study import read_parameter_table
 from cpas_ocp.campaign.population_study import population_groups, read_covariance_table
 from cpas_ocp.estimation.simulate import simulate_problem
 from cpas_ocp.io.problems import Problem, load_problem
+from cpas_ocp.reports.study_reports import write_campaign
 
 NAMES = ("CdS", "Ck", "n_p", "expopen", "t_k")
 MEDIAN = np.array([2.0, 1.55, 9.5, 1.7, 0.135])  # SI (CdS in m^2, t_k in s)
@@ -185,9 +185,11 @@ def score_seed(seed: int, folder: Path, full_omega: bool) -> dict:
     return out
 
 
-def summarise(scores: list[dict]) -> None:
-    """Print the coverage table, the grouping rates and the point-estimate bias."""
+def summarise(scores: list[dict]) -> dict:
+    """Print the coverage table, the grouping rates and the point-estimate bias; return
+    them."""
     n = len(scores)
+    table, separated = [], {}
     lo, hi = stats.binom.ppf([0.025, 0.975], n, 0.95) / n
     print(f"\n{n} seeds; a 95 % interval covers in {100 * lo:.0f}-{100 * hi:.0f} % of them "
           "if it is right (binomial 95 % range)\n")
@@ -206,13 +208,21 @@ def summarise(scores: list[dict]) -> None:
             print(f"{kind:8s} {name:10s} {rate('mu'):6.0f} {rate('effect'):7.0f} "
                   f"{rate('tau'):6.0f}  {TAU[k]:8.3f} {mean('tau_hat'):9.4f} "
                   f"{mean('spread'):13.4f}")
+            table.append({"type": kind, "parameter": name, "mu_cover_percent": rate("mu"),
+                          "effect_cover_percent": rate("effect"),
+                          "tau_cover_percent": rate("tau"), "tau_true": TAU[k],
+                          "mean_tau_hat": mean("tau_hat"), "mean_point_sd": mean("spread")})
     for scenario in ("same", "differ"):
         rate = 100.0 * np.mean([s[f"separate_{scenario}"] for s in scores])
         print(f"grouping by type, {scenario}: separated in {rate:.0f} % of seeds")
+        separated[scenario] = rate
+    return {"seeds_scored": n, "binomial_95_percent": [100 * lo, 100 * hi],
+            "coverage": table, "separated_percent": separated}
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = harness.parser(__doc__, seed=None, seed_help="recorded only: each seed's draws are "
+                        "seeded by that seed (--first, --seeds)")
     ap.add_argument("--seeds", type=int, default=50)
     ap.add_argument("--first", type=int, default=1)
     ap.add_argument("--workers", type=int, default=2)
@@ -221,23 +231,25 @@ def main() -> None:
     ap.add_argument("--diagonal", action="store_true", help="a diagonal Omega")
     args = ap.parse_args()
     keep = args.keep or Path(tempfile.mkdtemp(prefix="population-"))
-    t0 = time.perf_counter()
+    timer = harness.Timer()
     seeds = list(range(args.first, args.first + args.seeds))
     if not args.analyse_only:
         for b in range(0, len(seeds), BATCH):
             reconstruct_seeds(seeds[b:b + BATCH], keep, args.workers)
             print(f"seeds {seeds[b]}-{seeds[min(b + BATCH, len(seeds)) - 1]} reconstructed, "
-                  f"{time.perf_counter() - t0:.0f} s so far", file=sys.stderr, flush=True)
+                  f"{timer.elapsed():.0f} s so far", file=sys.stderr, flush=True)
     done = [s for s in seeds if (keep / f"seed{s}" / "truth.json").is_file()]
     failed = sum(len(read_failures(keep / f"seed{s}" / c)) for s in done
                  for c in ("same", "differ"))
     with ProcessPoolExecutor(args.workers) as pool:
         scores = list(pool.map(score_seed, done, [keep / f"seed{s}" for s in done],
                                [not args.diagonal] * len(done)))
-    summarise(scores)
+    figures = summarise(scores)
     print(f"reconstructions that were not a result: {failed}")
     if args.keep is None:
         shutil.rmtree(keep)
+    harness.report("population_coverage", first=args.first, diagonal=args.diagonal,
+                   not_a_result=failed, **figures)
 
 
 def read_failures(folder: Path) -> list[str]:

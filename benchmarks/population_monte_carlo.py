@@ -15,11 +15,10 @@ montecarlo` does) and prints the peak-tension quantiles both ways with their rat
 
 from __future__ import annotations
 
-import argparse
 import tempfile
-import time
 from pathlib import Path
 
+import harness
 import numpy as np
 import pandas as pd
 
@@ -41,23 +40,23 @@ def spreads(folder: Path) -> pd.DataFrame:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = harness.parser(__doc__, seed=1, seed_help="seed of the cases' draws")
     ap.add_argument("campaign", type=Path)
     ap.add_argument("test_dir", type=Path)
     ap.add_argument("--cases", type=int, default=200_000)
     ap.add_argument("--fly", type=int, default=20_000)
-    ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--workers", type=int, default=2)
     args = ap.parse_args()
+    timer = harness.Timer()
     with tempfile.TemporaryDirectory() as tmp:
         folders = {}
         for label, from_population in (("point estimates", False), ("population", True)):
-            t0 = time.perf_counter()
-            done = dispersions(args.campaign, Path(tmp) / label.replace(" ", "_"), args.cases,
-                               args.seed, from_population)
+            with timer(f"draw {label}"):
+                done = dispersions(args.campaign, Path(tmp) / label.replace(" ", "_"),
+                                   args.cases, args.seed, from_population)
             folders[label] = done.out
             print(f"{label}: {args.cases:,} cases per type and stage in "
-                  f"{time.perf_counter() - t0:.1f} s")
+                  f"{timer[f'draw {label}']:.1f} s")
         table = spreads(folders["point estimates"]).merge(
             spreads(folders["population"]), on=["cases", "parameter"],
             suffixes=("_point", "_population"))
@@ -69,18 +68,25 @@ def main() -> None:
         quantiles = {}
         for label, folder in folders.items():
             stages = match_cases(test, folder, args.fly)
-            t0 = time.perf_counter()
-            for result in run_monte_carlo(rec.fit, stages, args.workers):
-                q = result.quantiles()
-                quantiles[(result.cases.label, label)] = q.set_index("quantile").peak_tension_lbf
-            print(f"{label}: flown in {time.perf_counter() - t0:.0f} s")
+            with timer(f"fly {label}"):
+                for result in run_monte_carlo(rec.fit, stages, args.workers):
+                    q = result.quantiles()
+                    quantiles[(result.cases.label, label)] = q.set_index(
+                        "quantile").peak_tension_lbf
+            print(f"{label}: flown in {timer[f'fly {label}']:.0f} s")
     print(f"\npeak tension (lbf), the first {args.fly:,} cases of each:")
+    peaks = []
     for stage in sorted({s for s, _ in quantiles}):
         point, pop = quantiles[(stage, "point estimates")], quantiles[(stage, "population")]
         print(f"{stage}: {'quantile':>8s} {'point':>10s} {'population':>10s} {'ratio':>6s}")
         for q in point.index:
+            peaks.append({"stage": stage, "quantile": q, "point": point[q], "population": pop[q],
+                          "ratio": harness.ratio(pop[q], point[q])})
             print(f"{'':{len(stage)}s}  {q:8.3f} {point[q]:10,.0f} {pop[q]:10,.0f} "
-                  f"{pop[q] / point[q]:6.3f}")
+                  f"{peaks[-1]['ratio']:6.3f}")
+    harness.report("population_monte_carlo", cases=args.cases, fly=args.fly,
+                   seconds=timer.seconds(), spread=table.to_dict("records"),
+                   peak_tension_lbf=peaks)
 
 
 if __name__ == "__main__":

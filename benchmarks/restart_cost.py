@@ -20,11 +20,10 @@ after, and wall time, then the ratio screened / solved.
 
 from __future__ import annotations
 
-import argparse
 import tempfile
-import time
 from pathlib import Path
 
+import harness
 from iteration_cost import make_test
 
 from cpas_ocp.estimation.estimator import Estimator, Fit
@@ -49,31 +48,40 @@ def pilot_late(root: Path, seed: int) -> tuple[Estimator, Fit]:
 
 def drogue_added_mass(root: Path, seed: int) -> tuple[Estimator, Fit]:
     est = Estimator(make_test("drogue+added_mass", seed, root), baseline_spec())
-    t0 = time.perf_counter()
-    fit = est.solve()
+    timer = harness.Timer()
+    with timer("fit"):
+        fit = est.solve()
     print(f"[drogue+added_mass] fit from the reduction: chi-square {fit.chi_square:.2f}, "
-          f"{time.perf_counter() - t0:.1f} s", flush=True)
+          f"{timer['fit']:.1f} s", flush=True)
     return est, fit
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--seed", type=int, default=1)
+    parser = harness.parser(__doc__, seed=1, seed_help="seed of the simulated tests")
     args = parser.parse_args()
+    cases = {}
     with tempfile.TemporaryDirectory() as tmp:
         for label, make in (("pilot-late", pilot_late), ("drogue+added_mass", drogue_added_mass)):
             est, fit = make(Path(tmp), args.seed)
-            print(f"[{label}] misfit start times: {', '.join(misfit_start_times(fit)) or 'none'}")
-            walls = {}
+            misfit = misfit_start_times(fit)
+            print(f"[{label}] misfit start times: {', '.join(misfit) or 'none'}")
+            timer, paths = harness.Timer(), {}
             for path, screen in (("screened", True), ("solved", False)):
-                t0 = time.perf_counter()
-                out, done = restart_start_times(est, fit, screen=screen)
-                walls[path] = time.perf_counter() - t0
+                with timer(path):
+                    out, done = restart_start_times(est, fit, screen=screen)
+                walls = timer.seconds()
+                paths[path] = {"wall_s": walls[path], "chi_square": out.chi_square,
+                               "restarts": [str(r) for r in done]}
                 print(f"[{label}] {path:8s} {walls[path]:7.1f} s, chi-square {fit.chi_square:.2f}"
                       f" -> {out.chi_square:.2f}; "
-                      + ("; ".join(r.text() for r in done) or "no restart replaced the fit"),
+                      + ("; ".join(str(r) for r in done) or "no restart replaced the fit"),
                       flush=True)
-            print(f"[{label}] wall screened / solved: {walls['screened'] / walls['solved']:.3f}")
+            ratio = harness.ratio(walls["screened"], walls["solved"])
+            print(f"[{label}] wall screened / solved: {ratio:.3f}")
+            cases[label] = {"misfit_start_times": misfit,
+                            "chi_square_before": fit.chi_square, "paths": paths,
+                            "screened_over_solved": ratio}
+    harness.report("restart_cost", cases=cases)
 
 
 if __name__ == "__main__":

@@ -15,11 +15,11 @@ chi-square; then the median ratios (this tree / the revision).
 
 from __future__ import annotations
 
-import argparse
 import statistics
 import tempfile
 from pathlib import Path
 
+import harness
 from iteration_cost import make_test
 from revisions import ROOT, code_at, run_child
 
@@ -60,14 +60,14 @@ def _medians(runs: list[dict]) -> dict[str, float]:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = harness.parser(__doc__, seed=1, seed_help="seed of the simulated tests")
     parser.add_argument("revision", help="git revision to compare against (e.g. HEAD~1)")
     parser.add_argument("--cases", nargs="+",
                         default=["drogue", "drogue_full", "drogue+added_mass"])
-    parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--repeat", type=int, default=2)
     parser.add_argument("--max-iter", type=int, default=150)
     args = parser.parse_args()
+    cases = {}
     with (tempfile.TemporaryDirectory() as tmp, code_at(args.revision) as baseline):
         trees = {"this tree": ROOT, args.revision: baseline}
         caches = {label: Path(tmp) / f"cache-{i}" for i, label in enumerate(trees)}
@@ -85,11 +85,17 @@ def main() -> None:
                           f"({r['solve_s'] / max(r['iterations'], 1):.3f} s/it), "
                           f"chi-square {r['chi2']:.3f}, {r['status']}", flush=True)
             new, old = (_medians(r) for r in runs.values())
+            ratios = {k: harness.ratio(new[k], old[k])
+                      for k in ("build_s", "solve_s", "per_iteration")}
             print(f"{name:18s} this tree / {args.revision}: build "
-                  f"{new['build_s'] / old['build_s']:.2f}, solve "
-                  f"{new['solve_s'] / old['solve_s']:.2f}, time per iteration "
-                  f"{new['per_iteration'] / old['per_iteration']:.2f}, chi-square difference "
+                  f"{ratios['build_s']:.2f}, solve "
+                  f"{ratios['solve_s']:.2f}, time per iteration "
+                  f"{ratios['per_iteration']:.2f}, chi-square difference "
                   f"{new['chi2'] - old['chi2']:+.4f}", flush=True)
+            cases[name] = {"runs": runs, "medians": {"this tree": new, args.revision: old},
+                           "this_tree_over_revision": ratios,
+                           "chi_square_difference": new["chi2"] - old["chi2"]}
+    harness.report("revision_cost", revision=args.revision, repeat=args.repeat, cases=cases)
 
 
 if __name__ == "__main__":

@@ -17,13 +17,13 @@ iterations, chi-square per degree of freedom and the wall time.
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from benchmarks import harness  # noqa: E402
 from benchmarks.revisions import code_at, run_child  # noqa: E402
 
 BASELINE = "bac75cc"
@@ -76,7 +76,8 @@ print(json.dumps(out))
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = harness.parser(__doc__, seed=None, seed_help="recorded only: each case names its "
+                            "seed (NAME:SEED)")
     parser.add_argument("--baseline", default=BASELINE, help="the revision to compare with")
     parser.add_argument("--cases", nargs="+", default=CASES)
     parser.add_argument("--trees", nargs="+", default=["this", "baseline"],
@@ -87,16 +88,18 @@ def main() -> None:
              if not c.startswith("prometheus") or (PROMETHEUS / c.split(":")[1]).is_file()]
     trees = {"this": ("this tree", None), "baseline": (f"baseline {args.baseline}",
                                                       args.baseline)}
+    results: dict[str, dict] = {}
     for label, revision in (trees[name] for name in args.trees):
         with code_at(revision) as code, tempfile.TemporaryDirectory() as tmp:
             for case in cases:
                 work = Path(tmp) / case.replace(":", "_")
-                r = run_child(CHILD, code, case, str(work), str(ROOT),
-                              cache=Path(tmp) / "cache")
+                r = results.setdefault(label, {})[case] = run_child(
+                    CHILD, code, case, str(work), str(ROOT), cache=Path(tmp) / "cache")
                 starts = ", ".join(f"{k} {v:.3g}" for k, v in r["start"].items())
                 print(f"{label:18s} {case:52s} {r['status']:42s} {r['iterations']:4d} it, "
                       f"chi2/dof {r['chi2_dof']:.3f}, {r['seconds']:.0f} s; starts: {starts}"
                       + (f"; {r['how']}" if "restarted" in r["how"] else ""), flush=True)
+    harness.report("rocket_starts", trees=results)
 
 
 if __name__ == "__main__":

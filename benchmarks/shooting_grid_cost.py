@@ -18,10 +18,10 @@ the largest parameter difference in the uniform fit's standard deviations.
 
 from __future__ import annotations
 
-import argparse
 import tempfile
-import time
 from pathlib import Path
+
+import harness
 
 from cpas_ocp.errors import SolverFailure
 from cpas_ocp.estimation.estimator import Estimator, Fit, Settings, default_grid_step
@@ -55,25 +55,26 @@ def cases(names: list[str], seed: int, data: Path, root: Path) -> dict[str, Flig
 
 def run(test: FlightTest, settings: Settings) -> tuple[Estimator, Fit | None, float, float]:
     """(estimator, fit or None where the solve failed, build s, solve s)."""
-    t0 = time.perf_counter()
-    est = Estimator(test, settings=settings)
-    t1 = time.perf_counter()
+    timer = harness.Timer()
+    with timer("build"):
+        est = Estimator(test, settings=settings)
     try:
-        fit = est.solve()
+        with timer("solve"):
+            fit = est.solve()
     except SolverFailure as exc:
         print(f"  solve failed: {exc}")
         fit = None
-    return est, fit, t1 - t0, time.perf_counter() - t1
+    return est, fit, timer["build"], timer["solve"]
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = harness.parser(__doc__, seed=1, seed_help="seed of the simulated tests")
     parser.add_argument("--cases", nargs="+", default=["drogue", "main2", "fbcp", "prometheus"])
-    parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--data", type=Path, default=Path("../shared/data/prometheus-2022"))
     args = parser.parse_args()
     print(f"{'case':36s} {'grid':9s} {'nodes':>6s} {'build s':>8s} {'solve s':>8s} "
           f"{'iter':>5s} {'chi-square':>12s}")
+    results = {}
     with tempfile.TemporaryDirectory() as tmp:
         for name, test in cases(args.cases, args.seed, args.data, Path(tmp)).items():
             runs = {}
@@ -85,15 +86,27 @@ def main() -> None:
                 print(f"{name:36s} {label:9s} {len(est.t):6d} {build:8.1f} {solve:8.1f} "
                       f"{iters:5d} {chi2}", flush=True)
             (est_u, fit_u, build_u, solve_u), (est_d, fit_d, build_d, solve_d) = runs.values()
-            line = (f"{name:36s} dynamics/uniform: nodes {len(est_d.t) / len(est_u.t):.2f}, "
-                    f"build {build_d / build_u:.2f}, solve {solve_d / solve_u:.2f}")
+            out = results[name] = {
+                "grids": {label: {"nodes": len(e.t), "build_s": b, "solve_s": s,
+                                  "iterations": f.solver.iterations if f else None,
+                                  "chi_square": f.chi_square if f else None}
+                          for label, (e, f, b, s) in runs.items()},
+                "dynamics_over_uniform": {"nodes": harness.ratio(len(est_d.t), len(est_u.t)),
+                                          "build": harness.ratio(build_d, build_u),
+                                          "solve": harness.ratio(solve_d, solve_u)}}
+            r = out["dynamics_over_uniform"]
+            line = (f"{name:36s} dynamics/uniform: nodes {r['nodes']:.2f}, "
+                    f"build {r['build']:.2f}, solve {r['solve']:.2f}")
             if fit_u is not None and fit_d is not None:
                 std = est_u.covariance(fit_u).std
                 shift = max(abs(fit_d.parameters[n] - fit_u.parameters[n]) / std[n]
                             for n in fit_u.free if std.get(n, 0.0) > 0.0)
+                out["chi_square_difference"] = fit_d.chi_square - fit_u.chi_square
+                out["largest_parameter_difference_sigma"] = shift
                 line += (f", chi-square difference {fit_d.chi_square - fit_u.chi_square:+.4f}, "
                          f"largest parameter difference {shift:.3f} sigma")
             print(line, flush=True)
+    harness.report("shooting_grid_cost", cases=results)
 
 
 if __name__ == "__main__":

@@ -18,12 +18,11 @@ z, mean z^2 with its range, and the wall time per seed.
 
 from __future__ import annotations
 
-import argparse
 import json
 import tempfile
-import time
 from pathlib import Path
 
+import harness
 import numpy as np
 from scipy.stats import binom, chi2, norm
 
@@ -38,7 +37,7 @@ PROBLEM = "rocket_steady"
 
 def score_seed(seed: int) -> tuple[dict[str, float], float, str]:
     """(drag area -> z, wall time (s), error text or '') of one seed."""
-    t0 = time.perf_counter()
+    timer = harness.Timer()
     with tempfile.TemporaryDirectory(prefix="cpas-steady-") as tmp:
         folder = Path(tmp) / "test"
         simulate_problem(load_problem(PROBLEM), folder, seed)
@@ -47,16 +46,17 @@ def score_seed(seed: int) -> tuple[dict[str, float], float, str]:
         try:
             fit = est.solve()
         except SolverFailure as err:
-            return {}, time.perf_counter() - t0, f"solve: {err}"
+            return {}, timer.elapsed(), f"solve: {err}"
         cov = est.covariance(fit)
         truth = json.loads(truth_file.read_text())["parameters"]
     z = {n: (fit.parameters[n] - truth[n]) / cov.std[n] for n in fit.free
          if n.startswith("CdS[") and n not in cov.at_bound}
-    return z, time.perf_counter() - t0, ""
+    return z, timer.elapsed(), ""
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser = harness.parser(__doc__, seed=None, seed_help="recorded only: each seed's draws "
+                            "are seeded by that seed (--first, --seeds)")
     parser.add_argument("--seeds", type=int, default=20)
     parser.add_argument("--first", type=int, default=1)
     args = parser.parse_args()
@@ -73,11 +73,15 @@ def main() -> None:
     print(f"{PROBLEM}: {args.seeds} seeds from {args.first}")
     print(f"{'drag area':22s} {'n':>3s} {'1σ cover %':>10s} {'2σ cover %':>10s} "
           f"{'mean z':>7s} {'mean z²':>8s} {'max |z|':>8s}")
+    areas = {}
     for name, values in zs.items():
         z = np.array(values)
-        print(f"{name:22s} {z.size:3d} {100 * np.mean(np.abs(z) < 1):10.1f} "
-              f"{100 * np.mean(np.abs(z) < 2):10.1f} {z.mean():7.2f} {np.mean(z**2):8.2f} "
-              f"{np.abs(z).max():8.2f}")
+        areas[name] = {"n": z.size, "cover_1_sigma_percent": 100 * np.mean(np.abs(z) < 1),
+                       "cover_2_sigma_percent": 100 * np.mean(np.abs(z) < 2),
+                       "mean_z": z.mean(), "mean_z2": np.mean(z**2), "max_abs_z": np.abs(z).max()}
+        print(f"{name:22s} {z.size:3d} {areas[name]['cover_1_sigma_percent']:10.1f} "
+              f"{areas[name]['cover_2_sigma_percent']:10.1f} {z.mean():7.2f} "
+              f"{np.mean(z**2):8.2f} {np.abs(z).max():8.2f}")
     n = max((len(v) for v in zs.values()), default=0)
     if n:
         for k in (1, 2):
@@ -91,6 +95,9 @@ def main() -> None:
     print(f"failures: {len(failures)}" + "".join(f"\n  {f}" for f in failures))
     print(f"wall time per seed (simulate, build, solve, covariance): mean "
           f"{np.mean(walls):.1f} s, max {np.max(walls):.1f} s")
+    harness.report("steady_descent_coverage", seeds=args.seeds, first=args.first,
+                   drag_areas=areas, failures=failures,
+                   wall_s_per_seed={"mean": np.mean(walls), "max": np.max(walls)})
 
 
 if __name__ == "__main__":

@@ -1,6 +1,7 @@
 """Air motion: the reconstruction in still air against the one with the wind process.
 
-For each seed, `drogue` is flown through gusts drawn from the wind process
+For each seed (`--seeds` of them, from `--seed` on), `drogue` is flown through gusts
+drawn from the wind process
 (`--sigma-vertical`, horizontal twice that, tau 5 s, knots every second), or
 `--problem rocket_gusts` through its own (vertical 1 m/s, tau 10 s, knots
 every 2 s), and reconstructed twice: with the still-air model (the
@@ -19,7 +20,7 @@ from the manifest.
 
     python benchmarks/wind_process.py [--problem drogue|rocket_gusts] [--seeds 10]
                                       [--sigma-vertical 0.5] [--still]
-                                      [--flight DIR ...]
+                                      [--flight DIR ...] [--seed 1]
 """
 
 from __future__ import annotations
@@ -29,9 +30,9 @@ import dataclasses
 import json
 import sys
 import tempfile
-import time
 from pathlib import Path
 
+import harness
 import numpy as np
 
 from cpas_ocp.errors import SolverFailure
@@ -47,9 +48,12 @@ Z95 = 1.959964
 
 
 def fitted(test, spec: ModelSpec | None) -> tuple:
-    t0 = time.perf_counter()
-    est, fit, _ = solve_checked(Estimator(test, spec))
-    return fit, est.covariance(fit), time.perf_counter() - t0
+    """The fit of `test` with `spec` (`solve_checked`), its covariance and its wall time."""
+    timer = harness.Timer()
+    with timer("fit"):
+        est, fit, _ = solve_checked(Estimator(test, spec))
+        cov = est.covariance(fit)
+    return fit, cov, timer["fit"]
 
 
 def coverage_rows(fit, cov, truth: dict) -> list[tuple[str, float]]:
@@ -59,7 +63,8 @@ def coverage_rows(fit, cov, truth: dict) -> list[tuple[str, float]]:
             if n.split("[")[0] in ("CdS", "t_start") and std.get(n)]
 
 
-def simulated(args: argparse.Namespace) -> None:
+def simulated(args: argparse.Namespace) -> dict:
+    """Fly and fit the seeds; print each and the pooled coverage, and return it."""
     problem = load_problem(args.problem)
     if args.problem == "drogue":  # the gusts are added to the built-in Drogue test
         sigma = args.sigma_vertical
@@ -80,7 +85,7 @@ def simulated(args: argparse.Namespace) -> None:
     pooled: dict[str, list[float]] = {"still air": [], "wind process": []}
     print(f"{args.problem} {'in still air' if args.still else 'through gusts'}", flush=True)
     with tempfile.TemporaryDirectory() as tmp:
-        for seed in range(1, args.seeds + 1):
+        for seed in range(args.seed, args.seed + args.seeds):
             folder = Path(tmp) / f"seed{seed}"
             simulate_problem(problem, folder, seed)
             truth = json.loads((folder / "truth.json").read_text())["parameters"]
@@ -97,15 +102,22 @@ def simulated(args: argparse.Namespace) -> None:
                 line.append(f"{label}: chi2/dof {fit.chi_square / fit.dof:5.2f}, max |z| "
                             f"{max(z for _, z in rows):5.1f}, {wall:5.1f} s")
             print("  ".join(line), flush=True)
+    coverage = {}
     for label, zs in pooled.items():
         z = np.array(zs)
         if z.size:
+            coverage[label] = {"cover_95_percent": 100.0 * np.mean(z <= Z95),
+                               "intervals": z.size, "mean_z2": np.mean(z**2)}
             print(f"{label}: 95 % intervals of drag areas and start times cover the truth "
                   f"{100.0 * np.mean(z <= Z95):.1f} % ({z.size} intervals); "
                   f"mean z^2 {np.mean(z**2):.2f}")
+    return coverage
 
 
-def flights(args: argparse.Namespace) -> None:
+def flights(args: argparse.Namespace) -> dict:
+    """Fit each flight folder with and without the vertical wind process; print and return
+    each fit's figures."""
+    out: dict[str, dict] = {}
     for folder in args.flight:
         test = load_test(folder)
         base = spec_of_test(test)
@@ -119,15 +131,22 @@ def flights(args: argparse.Namespace) -> None:
                 fit, cov, wall = fitted(test, spec)
             except SolverFailure as exc:
                 print(f"{folder} {label}: failed ({exc.status}, {exc.iterations} iterations)")
+                out.setdefault(folder, {})[label] = {"failed": exc.status}
                 continue
             cds = ", ".join(f"{n} {fit.parameters[n]:.4g} ± {cov.std.get(n, np.nan):.2g}"
                             for n in fit.free if n.startswith("CdS"))
             print(f"{folder} {label}: chi2/dof {fit.chi_square / fit.dof:.2f}, {cds}, "
                   f"{wall:.1f} s, {fit.solver.status}", flush=True)
+            out.setdefault(folder, {})[label] = {
+                "chi2_dof": fit.chi_square / fit.dof, "wall_s": wall,
+                "status": fit.solver.status,
+                "cds": {n: [fit.parameters[n], cov.std.get(n)] for n in fit.free
+                        if n.startswith("CdS")}}
+    return out
 
 
 def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = harness.parser(__doc__, seed=1, seed_help="the first seed")
     parser.add_argument("--problem", default="drogue", choices=["drogue", "rocket_gusts"])
     parser.add_argument("--seeds", type=int, default=10)
     parser.add_argument("--sigma-vertical", type=float, default=0.5)
@@ -137,10 +156,13 @@ def main() -> int:
     parser.add_argument("--tau-s", type=float, default=20.0)
     parser.add_argument("--flight-sigma", type=float, default=1.0)
     args = parser.parse_args()
+    results = {}
     if args.seeds:
-        simulated(args)
+        results["coverage"] = simulated(args)
     if args.flight:
-        flights(args)
+        results["flights"] = flights(args)
+    harness.report("wind_process", problem=args.problem, seeds=args.seeds, still=args.still,
+                   **results)
     return 0
 
 

@@ -1,0 +1,135 @@
+"""What every benchmark script shares: its command line, timer, ratios and last line.
+
+    args = harness.parser(__doc__, seed=1).parse_args()
+    timer = harness.Timer()
+    with timer("solve"):
+        fit = est.solve()
+    harness.report("NAME", solve_s=timer["solve"], speed_up=harness.ratio(old_s, new_s))
+
+Scripts run as ``python benchmarks/NAME.py`` and import this file as a sibling.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import math
+import os
+import time
+from collections.abc import Iterator, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+_RUN: dict[str, Any] = {"seed": None, "json": None}  # what the last parse_args read
+
+
+class _Parser(argparse.ArgumentParser):
+    """An ArgumentParser that keeps --seed and --json for `report`."""
+
+    def parse_known_args(self, args: Sequence[str] | None = None,  # type: ignore[override]
+                         namespace: argparse.Namespace | None = None
+                         ) -> tuple[argparse.Namespace, list[str]]:
+        ns, rest = super().parse_known_args(args, namespace)
+        _RUN.update(seed=getattr(ns, "seed", None), json=getattr(ns, "json", None))
+        return ns, rest
+
+
+def parser(doc: str | None, seed: int | None, seed_help: str = "seed of the random draws"
+           ) -> argparse.ArgumentParser:
+    """The script's parser: `doc`'s first paragraph as description, ``--seed`` (default
+    `seed`; None where the script draws nothing of its own, or its draws are seeded by its
+    other options, and the seed is only recorded) and ``--json PATH``."""
+    ap = _Parser(description=(doc or "").strip().split("\n\n")[0])
+    ap.add_argument("--seed", type=int, default=seed,
+                    help=seed_help if seed is None else f"{seed_help} (default {seed})")
+    ap.add_argument("--json", type=Path, default=None, metavar="PATH",
+                    help="also append the result line (JSON) to this file")
+    return ap
+
+
+class Timer:
+    """Wall-clock seconds (`time.perf_counter`) per label.
+
+    ``with timer("build"): ...`` times a block (a block that raises is timed too);
+    ``timer["build"]`` is its last time, ``timer.laps["build"]`` every time in order;
+    ``timer.elapsed()`` the seconds since the timer was made; ``timer.split("step")``
+    records the seconds since the previous split (or since the timer was made).
+    """
+
+    def __init__(self) -> None:
+        self.laps: dict[str, list[float]] = {}
+        self._start = self._mark = time.perf_counter()
+
+    @contextlib.contextmanager
+    def __call__(self, label: str) -> Iterator[None]:
+        t0 = time.perf_counter()
+        try:
+            yield
+        finally:
+            self.laps.setdefault(label, []).append(time.perf_counter() - t0)
+
+    def __getitem__(self, label: str) -> float:
+        return self.laps[label][-1]
+
+    def seconds(self) -> dict[str, float]:
+        """Each label's last time."""
+        return {label: laps[-1] for label, laps in self.laps.items()}
+
+    def elapsed(self) -> float:
+        """Seconds since the timer was made."""
+        return time.perf_counter() - self._start
+
+    def split(self, label: str) -> float:
+        """Record and return the seconds since the previous split (or the timer's start)."""
+        now = time.perf_counter()
+        self.laps.setdefault(label, []).append(now - self._mark)
+        self._mark = now
+        return self.laps[label][-1]
+
+
+def ratio(new: float, old: float) -> float:
+    """``new / old``: two figures of one run, the first over the second (a new path's time
+    over the old one's; a speed-up is old time over new); NaN where `old` is zero or either
+    is not finite."""
+    new, old = float(new), float(old)
+    if old == 0.0 or not (math.isfinite(new) and math.isfinite(old)):
+        return math.nan
+    return new / old
+
+
+def ratio_text(new: float, old: float, spec: str = ".2f") -> str:
+    """`ratio` formatted with the format `spec` (``nan`` where it is undefined)."""
+    return format(ratio(new, old), spec)
+
+
+def _plain(value: Any) -> Any:
+    """`value` as JSON: numbers, strings, lists and objects; NaN and inf as None."""
+    if hasattr(value, "tolist") and not isinstance(value, str):  # numpy arrays and scalars
+        value = value.tolist()
+    if isinstance(value, bool) or value is None or isinstance(value, str | int):
+        return value
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, Mapping):  # keys as text; a tuple's items joined by commas
+        return {",".join(map(str, k)) if isinstance(k, tuple) else str(k): _plain(v)
+                for k, v in value.items()}
+    if isinstance(value, list | tuple | set | frozenset):
+        return [_plain(v) for v in value]
+    return str(value)
+
+
+def report(name: str, **results: Any) -> dict[str, Any]:
+    """Print the benchmark's result line, ``JSON: {...}``, and append it to --json where
+    given: the benchmark's `name`, its seed, the load average and CPU count, and `results`.
+    Call it last; it returns what it wrote."""
+    line = {"benchmark": name, "seed": _RUN["seed"], "load_average": list(os.getloadavg()),
+            "cpus": os.cpu_count(), "results": _plain(results)}
+    text = json.dumps(line, allow_nan=False)
+    print(f"JSON: {text}", flush=True)
+    if _RUN["json"] is not None:
+        path = Path(_RUN["json"])
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with path.open("a") as fh:
+            fh.write(text + "\n")
+    return line
