@@ -34,7 +34,7 @@ from cpas_ocp.discrepancy.residual_diagnosis import Finding, diagnose_residuals,
 from cpas_ocp.discrepancy.score_test import ScoreTest, confirm, confirmed_ranking, score_tests
 from cpas_ocp.discrepancy.wind_evidence import WindEvidence, wind_evidence
 from cpas_ocp.estimation.estimator import Fit
-from cpas_ocp.estimation.uncertainty import NonFiniteCurvature
+from cpas_ocp.estimation.kkt_system import NonFiniteCurvature
 from cpas_ocp.inference.diagnostics import (
     MIN_TESTED_SAMPLES,
     WindowStatistic,

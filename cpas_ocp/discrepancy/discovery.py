@@ -64,7 +64,7 @@ from cpas_ocp.discrepancy.diagnosis import ALPHA, CONFIRM_TOP, Diagnosis, diagno
 from cpas_ocp.discrepancy.score_test import CONFIRM_MAX_ITER, ScoreTest, confirm, score_test
 from cpas_ocp.errors import InputError, SolverFailure
 from cpas_ocp.estimation.estimator import Estimator, Fit, Settings
-from cpas_ocp.estimation.uncertainty import NonFiniteCurvature
+from cpas_ocp.estimation.kkt_system import NonFiniteCurvature
 from cpas_ocp.inference.continuation import solve as solve_with_continuation
 from cpas_ocp.inference.diagnostics import (
     WindowStatistic,

@@ -61,7 +61,7 @@ import numpy as np
 
 from cpas_ocp.errors import InputError, PluginError, SolverFailure
 from cpas_ocp.estimation.estimator import POLISH_CONSTRAINT_TOL, STOP_CONSTRAINT_TOL, Estimator, Fit
-from cpas_ocp.estimation.uncertainty import NonFiniteCurvature
+from cpas_ocp.estimation.kkt_system import NonFiniteCurvature
 from cpas_ocp.inference.hypothesis_tests import chi_bar_square_sf, cone_statistic
 from cpas_ocp.inference.model_comparison import LikelihoodRatio, nested_start, nested_values
 from cpas_ocp.io.model_spec import RISER_MODELS, ModelSpec

@@ -35,15 +35,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from cpas_ocp.estimation.gauss_newton import GaussNewtonStep, gauss_newton, measured_decrement
+from cpas_ocp.estimation.kkt_system import Linearisation, ReducedProblem, reduce_linearisation
 from cpas_ocp.estimation.structured_secant import StructuredSecant
-from cpas_ocp.estimation.uncertainty import (
-    GaussNewtonStep,
-    Linearisation,
-    ReducedProblem,
-    gauss_newton,
-    measured_decrement,
-    reduce_linearisation,
-)
 
 # Halvings of a step whose feasible end is not lower before the descent gives up.
 HALVINGS = 4
@@ -85,7 +79,7 @@ def bounded_step(lin: Linearisation, problem: DescentProblem,
     """The Gauss-Newton step at `lin` with each free parameter that sits on a bound held
     there where the unconstrained step would carry it outside (and every parameter
     whose bounds coincide held); with `curvature` (columns, S), S added to the
-    Gauss-Newton Hessian over those columns (`uncertainty.gauss_newton`).  `red`: `lin`
+    Gauss-Newton Hessian over those columns (`gauss_newton.gauss_newton`).  `red`: `lin`
     already reduced with only its states held (`free_reduction`)."""
     idx = problem.param_index
     states_held = np.setdiff1d(lin.held, idx)

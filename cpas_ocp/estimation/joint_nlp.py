@@ -41,14 +41,10 @@ from cpas_ocp.errors import SolverFailure
 from cpas_ocp.estimation.action_windows import ActionWindows
 from cpas_ocp.estimation.estimator import Estimator
 from cpas_ocp.estimation.fit import Fit, SolverStats
+from cpas_ocp.estimation.gauss_newton import gauss_newton_decrement
+from cpas_ocp.estimation.kkt_system import Linearisation, linearise
 from cpas_ocp.estimation.nlp_functions import bound_violations, ipopt_functions, worst_violation
-from cpas_ocp.estimation.uncertainty import (
-    Covariance,
-    Linearisation,
-    gauss_newton_decrement,
-    kkt_covariance,
-    linearise,
-)
+from cpas_ocp.estimation.uncertainty import Covariance, kkt_covariance
 
 
 @dataclass(frozen=True)

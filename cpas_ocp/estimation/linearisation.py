@@ -13,13 +13,12 @@ import numpy as np
 from cpas_ocp.estimation.fit import (
     Fit,
 )
+from cpas_ocp.estimation.gauss_newton import gauss_newton_step
+from cpas_ocp.estimation.kkt_system import Linearisation, linearise
 from cpas_ocp.estimation.uncertainty import (
     HESSIANS,
     Covariance,
-    Linearisation,
-    gauss_newton_step,
     kkt_covariance,
-    linearise,
     log_det_information,
 )
 

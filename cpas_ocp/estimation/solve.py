@@ -24,17 +24,17 @@ from cpas_ocp.estimation.fit import (
     Fit,
     SolverStats,
 )
+from cpas_ocp.estimation.gauss_newton import (
+    DECREMENT_FLOOR,
+    GaussNewtonStep,
+    gauss_newton,
+    measured_decrement,
+)
+from cpas_ocp.estimation.kkt_system import Linearisation
 from cpas_ocp.estimation.nlp_functions import (
     MarquardtDamping,
     ipopt_functions,
     worst_violation,
-)
-from cpas_ocp.estimation.uncertainty import (
-    DECREMENT_FLOOR,
-    GaussNewtonStep,
-    Linearisation,
-    gauss_newton,
-    measured_decrement,
 )
 
 # Status of a run ended by the statistical test (`Settings.chi2_step_tol`).

@@ -13,7 +13,7 @@ Fisher information
 
 the Cramer-Rao bound of an unbiased estimate, in the units of the parameters
 (SI).  A parameter in a direction of F whose curvature is below
-`uncertainty.SINGULAR_RATIO` of the largest is not determined by the planned
+`kkt_system.SINGULAR_RATIO` of the largest is not determined by the planned
 data at all; it is named, with the combination, and given no sigma.
 
 Summaries of a candidate, over the free parameters off their bounds, in units
@@ -381,7 +381,7 @@ def recorded_only(entry: dict, phases: tuple[str, ...] | None, problem: Problem)
     """The manifest entry of a sensor that records only in `phases` (None: all): outside
     them its noise sigma is ABSENT_FACTOR times its own (`sigma_after`), so its samples
     there carry 1 / ABSENT_FACTOR^2 of their information, below what the covariance
-    tells from none (`uncertainty.SINGULAR_RATIO`).  The samples stay, because every
+    tells from none (`kkt_system.SINGULAR_RATIO`).  The samples stay, because every
     sensor must span the phase the estimator reconstructs."""
     if phases is None:
         return entry

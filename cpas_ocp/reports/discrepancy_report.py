@@ -29,7 +29,8 @@ import pandas as pd
 
 from cpas_ocp.discrepancy.diagnosis import Diagnosis
 from cpas_ocp.discrepancy.discovery import Discovery
-from cpas_ocp.estimation.uncertainty import Covariance, NonFiniteCurvature
+from cpas_ocp.estimation.kkt_system import NonFiniteCurvature
+from cpas_ocp.estimation.uncertainty import Covariance
 from cpas_ocp.inference.diagnostics import WindowStatistic, window_statistics
 from cpas_ocp.inference.model_comparison import Comparison
 from cpas_ocp.inference.phase_windows import PhaseWindow, phase_windows

@@ -11,8 +11,8 @@ from scipy.optimize import minimize_scalar
 
 from cpas_ocp.estimation.estimator import STALL_ITERATIONS, STALL_SHARE, _Monitor
 from cpas_ocp.estimation.feasible_descent import DescentProblem, bounded_step, descend
+from cpas_ocp.estimation.kkt_system import linearise
 from cpas_ocp.estimation.structured_secant import StructuredSecant
-from cpas_ocp.estimation.uncertainty import linearise
 
 
 def _rosenbrock(z: np.ndarray) -> tuple[np.ndarray, sp.csc_matrix]:

@@ -9,14 +9,13 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
+from cpas_ocp.estimation.gauss_newton import gauss_newton, gauss_newton_decrement
+from cpas_ocp.estimation.kkt_system import Linearisation
 from cpas_ocp.estimation.uncertainty import (
     POORLY_DETERMINED,
-    Linearisation,
     _by_weight,
     _leading_rows,
     _oriented,
-    gauss_newton,
-    gauss_newton_decrement,
     kkt_covariance,
 )
 from cpas_ocp.reports.report import identifiability_text

@@ -12,7 +12,7 @@ from cpas_ocp.estimation.estimator import (
     Estimator,
     Settings,
 )
-from cpas_ocp.estimation.uncertainty import gauss_newton
+from cpas_ocp.estimation.gauss_newton import gauss_newton
 from cpas_ocp.io.flight_test import load_test
 
 pytestmark = pytest.mark.slow
