@@ -61,11 +61,11 @@ from scipy.stats import chi2
 from cpas_ocp.errors import SolverFailure
 from cpas_ocp.estimation.estimator import Estimator
 from cpas_ocp.estimation.simulate import simulate_problem
+from cpas_ocp.inference.flight_test_design import Planner, Prediction, planned_problem
 from cpas_ocp.inference.profile_likelihood import THRESHOLD, profile
-from cpas_ocp.inference.test_design import Planner, Prediction, planned_problem
 from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.io.flight_test_plan import Instrumentation, load_plan
 from cpas_ocp.io.problems import Problem
-from cpas_ocp.io.test_plan import Instrumentation, load_plan
 
 FOCUS = ("n_p[drogue1,stage2]", "expopen[drogue1,stage2]", "t_start[drogue1,stage2]",
          "Ck[drogue2,stage2]", "t_k[drogue2,stage2]")

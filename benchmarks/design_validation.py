@@ -1,7 +1,7 @@
 """Benchmark: the sigma `cpas-ocp design` predicts against the spread of estimates over seeds.
 
 For a plan file (`docs/plans/drogue.json`, `docs/plans/fbcp.json`), the design is made
-(`inference.test_design.design`): each candidate's predicted covariance, and the
+(`inference.flight_test_design.design`): each candidate's predicted covariance, and the
 single changes ranked by the sigma they remove from the plan's parameters of interest.
 Then the first candidate, the top-ranked change and the runner-up (or the changes named
 with --changes) are each flown over seeds 1..N (from --first): the planned test
@@ -41,10 +41,10 @@ from scipy.stats import chi2
 
 from cpas_ocp.errors import SolverFailure
 from cpas_ocp.estimation.estimator import Estimator
-from cpas_ocp.inference.test_design import Prediction, TestDesign, design, simulate_planned
+from cpas_ocp.inference.flight_test_design import Prediction, TestDesign, design, simulate_planned
 from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.io.flight_test_plan import Instrumentation, load_plan
 from cpas_ocp.io.problems import Problem
-from cpas_ocp.io.test_plan import Instrumentation, load_plan
 
 BOOTSTRAP = 2000  # resamples of the seeds for the interval of an empirical reduction
 BOOTSTRAP_SEED = 20261126  # the default --seed

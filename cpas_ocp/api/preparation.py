@@ -9,12 +9,12 @@ from pathlib import Path
 
 from cpas_ocp.api.reconstruction import model_of, units_of
 from cpas_ocp.estimation.simulate import simulate_problem
-from cpas_ocp.inference.test_design import TestDesign
-from cpas_ocp.inference.test_design import design as design_test
+from cpas_ocp.inference.flight_test_design import TestDesign
+from cpas_ocp.inference.flight_test_design import design as design_test
 from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.io.flight_test_plan import load_plan
 from cpas_ocp.io.model_spec import ModelSpec, load_model_file
 from cpas_ocp.io.problems import load_problem
-from cpas_ocp.io.test_plan import load_plan
 from cpas_ocp.physics.effects.base import Effect
 from cpas_ocp.physics.effects.registry import load_plugins
 from cpas_ocp.physics.flight_test import FlightTest
@@ -37,7 +37,7 @@ def simulate(problem: str, out: str | Path, seed: int, effects: Sequence[Effect]
 
 
 def design(plan: str | Path, out: str | Path | None = None) -> TestDesign:
-    """The design of the next test from the plan file `plan` (`inference.test_design`): each
+    """The design of the next test from the plan file `plan` (`inference.flight_test_design`): each
     candidate instrumentation's predicted sigma, the single changes ranked by the sigma they
     remove from the plan's parameters of interest, the failure table; the folder
     `cpas-ocp design` writes is written to `out` where given."""

@@ -15,7 +15,7 @@ from pathlib import Path
 import pandas as pd
 import plotly.graph_objects as go
 
-from cpas_ocp.inference.test_design import Prediction, RankedChange, TestDesign
+from cpas_ocp.inference.flight_test_design import Prediction, RankedChange, TestDesign
 from cpas_ocp.io.output_folder import atomic_folder
 from cpas_ocp.io.strict_json import json_text
 from cpas_ocp.reports.html_page import Page

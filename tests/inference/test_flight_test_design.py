@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from cpas_ocp.estimation.uncertainty import Covariance
-from cpas_ocp.inference.test_design import (
+from cpas_ocp.inference.flight_test_design import (
     ABSENT_FACTOR,
     Planner,
     Prediction,
@@ -20,7 +20,13 @@ from cpas_ocp.inference.test_design import (
     recorded_only,
     sigma_removed,
 )
-from cpas_ocp.io.test_plan import Change, Instrumentation, PlannedSensor, default_changes, load_plan
+from cpas_ocp.io.flight_test_plan import (
+    Change,
+    Instrumentation,
+    PlannedSensor,
+    default_changes,
+    load_plan,
+)
 
 PLANS = Path(__file__).parents[2] / "docs" / "plans"
 # Agreement of two linearisations that must be equal but for rounding in the KKT solve.

@@ -52,10 +52,7 @@ from cpas_ocp.errors import InputError
 from cpas_ocp.estimation.estimator import Estimator, Settings
 from cpas_ocp.estimation.simulate import initial_state, simulate, simulate_problem
 from cpas_ocp.estimation.uncertainty import Covariance
-from cpas_ocp.io.model_spec import spec_of_test
-from cpas_ocp.io.problems import Problem
-from cpas_ocp.io.series_files import si_value
-from cpas_ocp.io.test_plan import (
+from cpas_ocp.io.flight_test_plan import (
     TIMED_EVENTS,
     Change,
     Instrumentation,
@@ -63,6 +60,9 @@ from cpas_ocp.io.test_plan import (
     TestPlan,
     problem_phases,
 )
+from cpas_ocp.io.model_spec import spec_of_test
+from cpas_ocp.io.problems import Problem
+from cpas_ocp.io.series_files import si_value
 from cpas_ocp.physics.flight_test import SIGMA_GROUPS, FlightTest
 from cpas_ocp.physics.parameters import split_name
 from cpas_ocp.physics.units import FACTORS
