@@ -40,3 +40,13 @@ def test_no_function_of_the_engine_is_longer_than_80_lines() -> None:
                 if lines > LONGEST:
                     long.append(f"{path.name}:{node.lineno} {node.name} ({lines} lines)")
     assert not long, long
+
+
+def test_every_subpackage_is_installed() -> None:
+    """A wheel carries the packages pyproject.toml lists: every folder of the package with
+    an __init__.py must be among them."""
+    listed = set(tomllib.loads((PACKAGE.parent / "pyproject.toml").read_text())
+                 ["tool"]["setuptools"]["packages"])
+    found = {".".join(p.parent.relative_to(PACKAGE.parent).parts)
+             for p in PACKAGE.rglob("__init__.py")}
+    assert found <= listed, sorted(found - listed)
