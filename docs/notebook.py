@@ -33,12 +33,11 @@ matplotlib.use("Agg")  # figures to files; drop this line in Jupyter
 import matplotlib.pyplot as plt
 
 import cpas_ocp as co
-from cpas_ocp.physics.effects import AddedMass, baseline_effects
 
 work = Path(tempfile.mkdtemp(prefix="cpas-notebook-"))
 truth = {"added_mass_factor[fbcp1]": 1.4, "added_mass_factor[fbcp2]": 1.4}
 test = co.simulate("fbcp", work / "fbcp", seed=1,
-                   effects=[*baseline_effects(), AddedMass()], truth=truth)
+                   effects=[*co.baseline_effects(), co.effect("added_mass")], truth=truth)
 
 # %% [markdown]
 # ## 1. Reconstruct with the baseline model

@@ -41,7 +41,14 @@ from cpas_ocp.api.campaigns import (
 from cpas_ocp.api.discrepancy import compare, diagnose, discover
 from cpas_ocp.api.flights import Flight, flight, import_log
 from cpas_ocp.api.kept_discovery import resume_discovery
-from cpas_ocp.api.preparation import InitialGuess, design, load_model, reduce, simulate
+from cpas_ocp.api.preparation import (
+    InitialGuess,
+    design,
+    effect,
+    load_model,
+    reduce,
+    simulate,
+)
 from cpas_ocp.api.reconstruction import (
     FitOptions,
     Reconstruction,
@@ -52,12 +59,13 @@ from cpas_ocp.api.reconstruction import (
     what_if,
 )
 from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.physics.effects import baseline_effects
 from cpas_ocp.progress import Narration, terminal
 from cpas_ocp.reports.summaries import summary
 
 __all__ = ["Campaign", "Dispersions", "FitOptions", "Flight", "InitialGuess", "Joint",
-           "MonteCarlo", "Narration", "Population", "Reconstruction", "build", "compare", "demo",
-           "design", "diagnose", "discover", "dispersions", "fit_estimator", "flight",
-           "import_log", "joint", "load_model", "load_test", "monte_carlo", "population",
-           "reconstruct", "reconstruct_campaign", "reduce", "resume_discovery", "simulate",
-           "summary", "terminal", "what_if"]
+           "MonteCarlo", "Narration", "Population", "Reconstruction", "baseline_effects", "build",
+           "compare", "demo", "design", "diagnose", "discover", "dispersions", "effect",
+           "fit_estimator", "flight", "import_log", "joint", "load_model", "load_test",
+           "monte_carlo", "population", "reconstruct", "reconstruct_campaign", "reduce",
+           "resume_discovery", "simulate", "summary", "terminal", "what_if"]

@@ -8,6 +8,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from cpas_ocp.api.reconstruction import model_of, units_of
+from cpas_ocp.errors import InputError
 from cpas_ocp.estimation.simulate import simulate_problem
 from cpas_ocp.inference.flight_test_design import TestDesign
 from cpas_ocp.inference.flight_test_design import design as design_test
@@ -16,7 +17,7 @@ from cpas_ocp.io.flight_test_plan import load_plan
 from cpas_ocp.io.model_spec import ModelSpec, load_model_file
 from cpas_ocp.io.problems import load_problem
 from cpas_ocp.physics.effects.base import Effect
-from cpas_ocp.physics.effects.registry import load_plugins
+from cpas_ocp.physics.effects.registry import BUILTIN, load_plugins
 from cpas_ocp.physics.flight_test import FlightTest
 from cpas_ocp.physics.model import Model
 from cpas_ocp.reports.design_report import write_design
@@ -24,12 +25,24 @@ from cpas_ocp.reports.display_units import DisplayUnits
 from cpas_ocp.reports.reduction_report import guess_table, write_reduction
 
 
+def effect(name: str, plugins: Sequence[str | Path] = (), **options: object) -> Effect:
+    """The library's (or the plug-in files' `plugins`) effect `name`, as a model block
+    names it (`cpas-ocp effects` lists them), with `options` over its preset; for a
+    simulation with an effect the test folder's model lacks (`simulate(..., effects=)`)."""
+    registry = {**BUILTIN, **load_plugins(plugins)}
+    if name not in registry:
+        raise InputError("(effect)", "name", f"one of {', '.join(sorted(registry))}; got "
+                         f"{name!r}")
+    return registry[name].build(dict(options), "(effect)", name)
+
+
 def simulate(problem: str, out: str | Path, seed: int, effects: Sequence[Effect] | None = None,
              truth: Mapping[str, float] | None = None) -> FlightTest:
     """Simulate the built-in problem `problem` (drogue, fbcp, main2, ...) with sensor noise
     drawn from `seed` into the test folder `out`, and load it.  `effects` is the model
-    that makes the data (default: the problem's); `truth` overrides or adds true
-    parameter values (SI), such as those of an effect hidden from the fit."""
+    that makes the data (default: the problem's), e.g. ``[*co.baseline_effects(),
+    co.effect("added_mass")]`` for an effect the test folder's model lacks; `truth`
+    overrides or adds true parameter values (SI), such as those of that effect."""
     base = load_problem(problem)
     if truth:
         base = dataclasses.replace(base, truth={**base.truth, **truth})

@@ -118,11 +118,3 @@ def test_a_reconstruction_discovers_with_the_commands_options(drogue_folder, tmp
     assert found.steps[0].fit.chi_square == rec.fit.chi_square  # it starts from this fit
     written = json.loads((tmp_path / "chain" / "discovery.json").read_text())
     assert len(written["steps"]) == len(found.steps)
-
-
-def test_the_package_gives_every_name_of_the_interface() -> None:
-    import cpas_ocp
-    from cpas_ocp import api
-    assert cpas_ocp.__all__ == api.__all__
-    assert all(getattr(cpas_ocp, name) is getattr(api, name) for name in api.__all__)
-    assert not hasattr(cpas_ocp, "no_such_workflow")
