@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from cpas_ocp.api.reconstruction import fit_estimator
+from cpas_ocp.api.reconstruction import as_test, fit_estimator
 from cpas_ocp.campaign.campaign import (
     TestOutcome,
     find_tests,
@@ -43,7 +43,7 @@ from cpas_ocp.io.flight_test import load_test
 from cpas_ocp.io.model_spec import spec_of_test
 from cpas_ocp.io.output_folder import atomic_folder
 from cpas_ocp.physics.flight_test import FlightTest
-from cpas_ocp.progress import Narration
+from cpas_ocp.progress import SILENT, Narration, terminal
 from cpas_ocp.reports.campaign_text import campaign_text, monte_carlo_text
 from cpas_ocp.reports.joint_report import joint_frame, joint_text, write_joint
 from cpas_ocp.reports.population_report import (
@@ -208,22 +208,28 @@ def monte_carlo(test: FlightTest | str | Path, cases: str | Path, out: str | Pat
     The cases are matched to the test's canopies and their columns checked against its
     model before the NLP is built; a fit that is not a result flies no case
     (NotAResult)."""
-    test = test if isinstance(test, FlightTest) else load_test(test)
+    test = as_test(test)
     stages = match_cases(test, cases, limit)
     spec = spec_of_test(test)
     check_columns(spec.model(test), stages)
-    say = (lambda line: print(line, flush=True)) if progress else (lambda _: None)
+    tell = _steps(progress)
     with atomic_folder(out, MONTE_CARLO_MARKER) as tmp:
         est = Estimator(test, spec)
-        say(f"reconstructing {test.name}: {est.size_text()} ...")
-        rec = fit_estimator(est, tell=Narration(progress=progress))
+        tell.say(f"reconstructing {test.name}: {est.size_text()} ...")
+        rec = fit_estimator(est, tell=tell)
         if not rec.is_result:  # no cases are flown through a fit that is not a result
             raise NotAResult(f"the fit of {test.name} is not a result: {rec.problems[0]}")
-        say(f"flying {sum(len(s.cases) for s in stages):,} cases of "
-            f"{', '.join(s.label for s in stages)} on {_where(workers, scheduler)} ...")
+        tell.say(f"flying {sum(len(s.cases) for s in stages):,} cases of "
+                 f"{', '.join(s.label for s in stages)} on {_where(workers, scheduler)} ...")
         results = run_monte_carlo(rec.fit, stages, workers, scheduler, progress=progress)
         write_monte_carlo(rec.fit, results, tmp)
     return MonteCarlo(rec.fit, results, Path(out))
+
+
+def _steps(progress: bool) -> Narration:
+    """With `progress`, the steps said on the terminal and progress lines drawn; never the
+    fit's warnings (a fit that is not a result ends the run in one line)."""
+    return Narration(terminal().say, progress=True) if progress else SILENT
 
 
 def _where(workers: int, scheduler: str | None) -> str:
@@ -250,12 +256,11 @@ class Campaign:
 
 
 def reconstruct_campaign(tests_dir: str | Path, out: str | Path, workers: int = 2,
-             scheduler: str | None = None, progress: bool = False) -> Campaign:
+                         scheduler: str | None = None, progress: bool = False) -> Campaign:
     """Reconstruct every test folder under `tests_dir` on `workers` local processes or the
     Dask `scheduler`, and write the campaign's tables to `out` (`cpas-ocp campaign`)."""
     folders = find_tests(tests_dir)
-    if progress:
-        print(f"reconstructing {len(folders)} test folders on {_where(workers, scheduler)} "
-              "...", flush=True)
+    _steps(progress).say(f"reconstructing {len(folders)} test folders on "
+                         f"{_where(workers, scheduler)} ...")
     outcomes = run_campaign(folders, workers, scheduler, progress=progress)
     return Campaign(outcomes, write_campaign(outcomes, out))

@@ -9,10 +9,11 @@ from pathlib import Path
 
 from cpas_ocp.api.reconstruction import (
     FitOptions,
-    Reconstruction,
+    as_test,
     build,
     fit_estimator,
     model_of,
+    reconstruct,
     units_of,
 )
 from cpas_ocp.discrepancy.diagnosis import ALPHA, CONFIRM_TOP, Diagnosis
@@ -21,20 +22,10 @@ from cpas_ocp.errors import InputError
 from cpas_ocp.inference.model_comparison import Comparison
 from cpas_ocp.io.flight_test import load_test
 from cpas_ocp.io.model_spec import ModelSpec
-from cpas_ocp.physics.effects.registry import EffectType, load_plugins
+from cpas_ocp.physics.effects.registry import load_plugins
 from cpas_ocp.physics.flight_test import FlightTest
 from cpas_ocp.progress import SILENT, Narration
 from cpas_ocp.reports.display_units import DisplayUnits
-
-
-def first_fit(test: FlightTest, model: ModelSpec | str | Path | None,
-              plugins: dict[str, EffectType], options: FitOptions | None,
-              allow_external_plugins: bool, tell: Narration) -> Reconstruction:
-    """The fit a diagnosis, a discovery or a comparison starts from, said as it goes."""
-    est = build(test, model_of(test, model, plugins, allow_external_plugins),
-                None if options is None else options.settings, tell)
-    tell.say(f"solving: {est.size_text()} ...")
-    return fit_estimator(est, options, plugins, tell)
 
 
 def diagnose(test: FlightTest | str | Path, out: str | Path | None = None,
@@ -45,9 +36,9 @@ def diagnose(test: FlightTest | str | Path, out: str | Path | None = None,
     """Fit `test`, then test every library effect and every effect of the plug-in files
     `plugins` the model leaves out (`Reconstruction.diagnose`; `cpas-ocp diagnose`); the
     folder written to `out` where given."""
-    test = test if isinstance(test, FlightTest) else load_test(test)
-    effects = load_plugins(plugins)
-    rec = first_fit(test, model, effects, options, allow_external_plugins, tell)
+    test = as_test(test)
+    rec = reconstruct(test, model, load_plugins(plugins), options,
+                      allow_external_plugins=allow_external_plugins, tell=tell)
     tell.say("testing the effects the model does not use ...")
     return rec.diagnose(out, confirm, alpha, tell.progress, units_of(test, units))
 
@@ -63,8 +54,8 @@ def discover(test_dir: str | Path, out: str | Path, model: ModelSpec | str | Pat
     wherever the chain is whole so that `resume_discovery(out)` goes on from a stopped
     run; `units`: "si", "us" or None for the manifest's, kept for a resumed run."""
     test = load_test(test_dir)
-    effects = load_plugins(plugins)
-    rec = first_fit(test, model, effects, options, allow_external_plugins, tell)
+    rec = reconstruct(test, model, load_plugins(plugins), options,
+                      allow_external_plugins=allow_external_plugins, tell=tell)
     tell.say("diagnosing, step by step ...")
     return rec.discover(out, max_steps, alpha, confirm, tell.progress, on_step,
                         units_of(test, units), plugins)
@@ -81,7 +72,7 @@ def compare(test: FlightTest | str | Path, models: Sequence[ModelSpec | str | Pa
     if len(models) != 2:
         raise InputError("(command line)", "--model",
                          f"exactly two models (--model A --model B); got {len(models)}")
-    test = test if isinstance(test, FlightTest) else load_test(test)
+    test = as_test(test)
     effects = load_plugins(plugins)
     specs = [model_of(test, None if m == "manifest" else m, effects, allow_external_plugins)
              for m in models]

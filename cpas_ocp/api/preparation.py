@@ -7,12 +7,11 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from cpas_ocp.api.reconstruction import model_of, units_of
+from cpas_ocp.api.reconstruction import as_test, model_of, units_of
 from cpas_ocp.errors import InputError
 from cpas_ocp.estimation.simulate import simulate_problem
 from cpas_ocp.inference.flight_test_design import TestDesign
 from cpas_ocp.inference.flight_test_design import design as design_test
-from cpas_ocp.io.flight_test import load_test
 from cpas_ocp.io.flight_test_plan import load_plan
 from cpas_ocp.io.model_spec import ModelSpec, load_model_file
 from cpas_ocp.io.problems import load_problem
@@ -88,7 +87,7 @@ def reduce(test: FlightTest | str | Path, out: str | Path,
     """Reduce `test` offline and write its reduction and the initial guess of `model` (a
     spec, a model file whose effects may be those of the plug-in files `plugins`, or None
     for the manifest's) to `out` (`cpas-ocp reduce`)."""
-    test = test if isinstance(test, FlightTest) else load_test(test)
+    test = as_test(test)
     spec = model_of(test, model, load_plugins(plugins), allow_external_plugins)
     shown = units_of(test, units)
     written, built, guess = write_reduction(test, out, spec, shown)

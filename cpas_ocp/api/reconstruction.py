@@ -81,6 +81,11 @@ class FitOptions:
     wind_intensities: tuple[float, ...] = ()
 
 
+def as_test(test: FlightTest | str | Path) -> FlightTest:
+    """A loaded test as given, else the test in the folder `test`."""
+    return test if isinstance(test, FlightTest) else load_test(test)
+
+
 def model_of(test: FlightTest, model: ModelSpec | str | Path | None = None,
              plugins: Mapping[str, EffectType] | None = None,
              allow_external_plugins: bool = False) -> ModelSpec:
@@ -157,8 +162,7 @@ def reconstruct(test: FlightTest | str | Path, model: ModelSpec | str | Path | N
     `units` (display units, "si", "us", or None for the test's own); a fit that does not
     converge writes its failure report there instead.  Raises SolverFailure where no fit
     converges."""
-    if not isinstance(test, FlightTest):
-        test = load_test(test)
+    test = as_test(test)
     effects = plugins if isinstance(plugins, Mapping) else load_plugins(plugins)
     est = build(test, model_of(test, model, effects, allow_external_plugins),
                 None if options is None else options.settings, tell)
@@ -214,7 +218,7 @@ def what_if(test: FlightTest | str | Path, constraints: Sequence[str],
     whatif`): the constraints are read and their contradictions refused before any fit,
     and a first fit that is not a result is refused (NotAResult), since a what-if from it
     means nothing."""
-    test = test if isinstance(test, FlightTest) else load_test(test)
+    test = as_test(test)
     effects = load_plugins(plugins)
     est = build(test, model_of(test, model, effects, allow_external_plugins),
                 None if options is None else options.settings, tell)
