@@ -45,7 +45,7 @@ BASIN_CHI2 = 1.0
 def perturbed_start(est: Estimator, rng: np.random.Generator) -> np.ndarray:
     """The reduction's decision vector with the free inflation parameters perturbed."""
     z = est.initial_point()
-    offset = est._nz[0]
+    offset = est.transcription.sizes[0]
     for i, name in enumerate(est.free):
         prm = est.model.parameter(name)
         base = split_name(name)[0]

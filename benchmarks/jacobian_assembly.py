@@ -40,7 +40,7 @@ def measure(folder: Path, repeats: int) -> dict[str, float]:
     out = {"build": timer["build"]}
     z = est.initial_point()
     for name in ("rJ", "gA"):
-        buffer = est._points._buffers[name]
+        buffer = est.transcription.points._buffers[name]
         buffer.nonzeros(z)
         for _ in range(repeats):
             with timer(name):

@@ -64,7 +64,8 @@ def main() -> None:
             simulate_problem(load_problem(name), folder, args.seed)
             est = Estimator(load_test(folder))
             z = est.initial_point()
-            functions = (est._residual_jacobian, est._constraints)
+            own = est.transcription.functions
+            functions = (own.residual_jacobian, own.constraints)
             dm = [lambda z, f=f: via_dm(f, z) for f in functions]
             buffers = [FunctionBuffer(f) for f in functions]
             old = [evaluation(z) for evaluation in dm]

@@ -50,7 +50,8 @@ def run_one(folder: Path, grid_step: float | None, exact: bool = False) -> dict:
     if exact:
         with timer("exact"):
             est.covariance(fit, hessian="exact")
-    return {"samples": fit.n_samples, "variables": int(est._z.numel()), "build_s": timer["build"],
+    return {"samples": fit.n_samples, "variables": int(est.transcription.z.numel()),
+            "build_s": timer["build"],
             "solve_s": fit.solver.wall_s, "covariance_s": timer["covariance"],
             "exact_s": timer["exact"] if exact else None,
             "iterations": fit.solver.iterations, "status": fit.solver.status,

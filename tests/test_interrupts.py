@@ -16,16 +16,16 @@ import pytest
 # that the signal surely arrives inside the solver whatever the machine's load.
 RUN = """
 import sys, time
-import cpas_ocp.estimation.estimator as estimation
+import cpas_ocp.estimation.solve as estimation
 from cpas_ocp.cli import main
 
-iterate = estimation._Monitor.eval
+iterate = estimation.IterationMonitor.eval
 def announced(self, arg):
     if self._k == 0:
         print("iterating", flush=True)
         time.sleep(2.0)
     return iterate(self, arg)
-estimation._Monitor.eval = announced
+estimation.IterationMonitor.eval = announced
 sys.exit(main(sys.argv[1:]))
 """
 

@@ -100,7 +100,7 @@ def read_checkpoint(folder: Path, test: FlightTest,
         spec = load_model_file(folder / f"step_{k}.json", registry, allow_external=True)
         stored = np.load(folder / fit_file(k))
         est = Estimator(test, spec, _settings(item["settings"]))
-        fit = est._fit(stored["z"], SolverStats(**item["solver"]))
+        fit = est.fit_at(stored["z"], SolverStats(**item["solver"]))
         fit.multipliers = stored["multipliers"]
         fit.guess = dict(item["guess"])
         out.steps.append(DiscoveryStep(

@@ -41,7 +41,7 @@ class Settings:
     and again while a full step would do: on `drogue_full` from the reduction
     a trigger of 3 ends in 31 iterations, 10 in 41, at the same chi-square.
     polish: let the statistical test finish a nearly feasible run with one
-    Gauss-Newton step of its own (`Estimator._stop_test`; False: the earlier
+    Gauss-Newton step of its own (`Solver._stop_test`; False: the earlier
     path, for benchmarks).
     point_cache: give Ipopt functions that share one native evaluation of the
     residuals, constraints and their Jacobians per point (`nlp_functions`;
@@ -233,6 +233,6 @@ STOP_CONSTRAINT_TOL = 1e-6
 
 
 # Largest scaled violation from which the test tries one Gauss-Newton step of its own to
-# finish the run (`Estimator._stop_test`): Ipopt's Gauss-Newton iterations close the last
+# finish the run (`Solver._stop_test`): Ipopt's Gauss-Newton iterations close the last
 # shooting gaps only as fast as the steps shrink, linearly.
 POLISH_CONSTRAINT_TOL = 1e-3

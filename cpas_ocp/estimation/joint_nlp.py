@@ -105,7 +105,7 @@ class JointNlp:
     def __init__(self, estimators: Sequence[Estimator], links: Sequence[Link]) -> None:
         self.estimators = list(estimators)
         self.links = list(links)
-        sizes = [est._z.numel() for est in self.estimators]
+        sizes = [est.transcription.z.numel() for est in self.estimators]
         self.offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(int)
         self.nz = int(self.offsets[-1])
         self._order_constraints()
@@ -121,9 +121,9 @@ class JointNlp:
         first = 0
         self._small_counts = []
         for est in self.estimators:
-            n_g = est._lbg.size
-            gaps = est._nz[0] - est.model.nx
-            s = est._small_rows
+            n_g = est.transcription.lbg.size
+            gaps = est.transcription.sizes[0] - est.model.nx
+            s = est.transcription.small_rows
             chain.append(first + np.arange(gaps))
             small.append(first + np.arange(s.start, s.stop))
             rest.append(first + np.setdiff1d(np.arange(gaps, n_g), np.arange(s.start, s.stop)))
@@ -138,7 +138,7 @@ class JointNlp:
     def column(self, test: int, name: str) -> int:
         """The joint column of free parameter `name` of test `test`."""
         est = self.estimators[test]
-        return int(self.offsets[test] + est._param_index[est.free.index(name)])
+        return int(self.offsets[test] + est.transcription.param_index[est.free.index(name)])
 
     def scale(self, test: int, name: str) -> float:
         """The scale (SI per scaled unit) of free parameter `name` of test `test`."""
@@ -166,7 +166,7 @@ class JointNlp:
         J_blocks, A_blocks = [], []
         J_row = A_row = 0
         for i, est in enumerate(ests):
-            J, A = est._points.patterns()
+            J, A = est.transcription.points.patterns()
             J_blocks.append((J, J_row, int(self.offsets[i])))
             A_blocks.append((A, A_row, int(self.offsets[i])))
             J_row += J.shape[0]
@@ -178,21 +178,22 @@ class JointNlp:
         self._J = _Gather(J_blocks, (self.n_residuals, self.nz))
         self._A = _Gather(A_blocks, (self._n_test_rows + n_links, self.nz), rows)
         self._g_rows = rows
-        self.lbg = np.concatenate([np.concatenate([e._lbg for e in ests])[self._rows],
+        self.lbg = np.concatenate([np.concatenate([e.transcription.lbg for e in ests])[self._rows],
                                    np.zeros(n_links)])
-        self.ubg = np.concatenate([np.concatenate([e._ubg for e in ests])[self._rows],
+        self.ubg = np.concatenate([np.concatenate([e.transcription.ubg for e in ests])[self._rows],
                                    np.zeros(n_links)])
-        self.lbz = np.concatenate([e._lbz for e in ests])
-        self.ubz = np.concatenate([e._ubz for e in ests])
-        self.param_index = np.concatenate([self.offsets[i] + e._param_index
-                                           for i, e in enumerate(ests)]).astype(int)
+        nlps = [e.transcription for e in ests]
+        self.lbz = np.concatenate([n.lbz for n in nlps])
+        self.ubz = np.concatenate([n.ubz for n in nlps])
+        self.param_index = np.concatenate([self.offsets[i] + n.param_index
+                                           for i, n in enumerate(nlps)]).astype(int)
         self.pscale = np.concatenate([e.pscale for e in ests])
         self.names = [f"{i}:{f}" for i, e in enumerate(ests) for f in e.free]
-        self.dependent = np.concatenate([self.offsets[i] + np.arange(e.model.nx, e._nz[0])
-                                         for i, e in enumerate(ests)]).astype(int)
+        self.dependent = np.concatenate([self.offsets[i] + np.arange(n.model.nx, n.sizes[0])
+                                         for i, n in enumerate(nlps)]).astype(int)
         self.pinned = np.concatenate([
-            self.offsets[i] + np.flatnonzero(e._lbz[:e.model.nx] == e._ubz[:e.model.nx])
-            for i, e in enumerate(ests)]).astype(int)
+            self.offsets[i] + np.flatnonzero(n.lbz[:n.model.nx] == n.ubz[:n.model.nx])
+            for i, n in enumerate(nlps)]).astype(int)
 
     def _slices(self, z: np.ndarray) -> list[np.ndarray]:
         return [z[self.offsets[i]:self.offsets[i + 1]] for i in range(len(self.estimators))]
@@ -201,24 +202,24 @@ class JointNlp:
 
     def residual_value(self, z: np.ndarray) -> np.ndarray:
         """Every test's weighted residuals at `z`, one test after another."""
-        return np.concatenate([e._points.residual_value(zi)
+        return np.concatenate([e.transcription.points.residual_value(zi)
                                for e, zi in zip(self.estimators, self._slices(z), strict=True)])
 
     def residual_jacobian(self, z: np.ndarray) -> tuple[np.ndarray, sp.csc_matrix]:
         """The residuals and their Jacobian (CSC on the joint pattern)."""
-        parts = [e._points.residual_jacobian(zi)
+        parts = [e.transcription.points.residual_jacobian(zi)
                  for e, zi in zip(self.estimators, self._slices(z), strict=True)]
         return np.concatenate([r for r, _ in parts]), self._J([J.data for _, J in parts])
 
     def constraint_value(self, z: np.ndarray) -> np.ndarray:
         """The joint constraints at `z` (the tests' in the joint order, then the links)."""
-        g = np.concatenate([e._points.constraint_value(zi)
+        g = np.concatenate([e.transcription.points.constraint_value(zi)
                             for e, zi in zip(self.estimators, self._slices(z), strict=True)])
         return np.concatenate([g[self._rows], self.links_matrix @ z])
 
     def constraints(self, z: np.ndarray) -> tuple[np.ndarray, sp.csc_matrix]:
         """The joint constraints and their Jacobian (CSC on the joint pattern)."""
-        parts = [e._points.constraints(zi)
+        parts = [e.transcription.points.constraints(zi)
                  for e, zi in zip(self.estimators, self._slices(z), strict=True)]
         g = np.concatenate([gi for gi, _ in parts])
         A = self._A([*(Ai.data for _, Ai in parts), self.links_matrix.data])
@@ -236,8 +237,8 @@ class JointNlp:
         blocks, first = [], 0
         for i, est in enumerate(self.estimators):
             n = self._small_counts[i]
-            blocks.append(est._curvature()(z[int(self.offsets[i]):int(self.offsets[i + 1])],
-                                           lam[first:first + n]))
+            own = z[int(self.offsets[i]):int(self.offsets[i + 1])]
+            blocks.append(est.transcription.curvature()(own, lam[first:first + n]))
             first += n
         return ca.Function("joint_curvature", [z, lam], [ca.diagcat(*blocks)])
 
@@ -259,7 +260,7 @@ class JointNlp:
         Ipopt's status and iteration count) where the run did not converge."""
         functions = ipopt_functions(self, self._curvature(), self.small_rows, self._windows(),
                                     lambda z, outside: None)
-        options = {**self.estimators[0]._options, **functions.options,
+        options = {**self.estimators[0].solver.options, **functions.options,
                    "ipopt.max_iter": max_iter, "ipopt.print_level": 5 if verbose else 0}
         solver = ca.nlpsol("joint_reconstruction", "ipopt", functions.nlp, options)
         began = time.perf_counter()
@@ -299,5 +300,5 @@ class JointNlp:
 
     def fits(self, z: np.ndarray, stats: SolverStats) -> list[Fit]:
         """Each test's Fit at the joint solution `z`."""
-        return [est._fit(zi, stats) for est, zi in zip(self.estimators, self._slices(z),
+        return [est.fit_at(zi, stats) for est, zi in zip(self.estimators, self._slices(z),
                                                       strict=True)]

@@ -26,6 +26,7 @@ from cpas_ocp.errors import InputError
 from cpas_ocp.io.flight_test import MANIFEST
 from cpas_ocp.physics.atmosphere import geometric_altitude
 from cpas_ocp.physics.flight_test import FlightTest
+from cpas_ocp.physics.model import Model
 
 SMOOTH_S = 5.0  # Savitzky-Golay window of the vertical track (s)
 RESAMPLE_S = 0.05  # uniform grid the altitude is resampled to before smoothing (s)
@@ -84,3 +85,31 @@ def _vertical_track(test: FlightTest, t: np.ndarray) -> Track:
     return Track(t, np.column_stack([zeros, zeros, np.interp(t, grid, smooth)]),
                  np.column_stack([zeros, zeros, np.interp(t, grid, rate)]),
                  np.column_stack([zeros, zeros, np.interp(t, grid, accel)]))
+
+
+def guessed_states(test: FlightTest, model: Model, values: dict[str, float], t: np.ndarray
+                   ) -> tuple[np.ndarray, set[str]]:
+    """States at times `t` (s; nx x len(t), SI) from the kinematic track and the effects' own
+    guesses from the data (`Effect.state_guess`, at the parameter `values`), pinned states
+    at their start values, and the names of the states so guessed (the others are zero)."""
+    track = kinematic_track(test, t)
+    x0 = np.zeros((model.nx, len(t)))
+    x0[model.state_slice("position")] = track.position.T
+    x0[model.state_slice("velocity")] = track.velocity.T
+    guessed = {"position", "velocity"}
+    for name, value in effect_state_guesses(test, model, values, t).items():
+        x0[model.state_slice(name)] = value
+        guessed.add(name)
+    for st in model.states:
+        if st.pinned:
+            x0[model.state_slice(st.name), 0] = st.initial
+    return x0, guessed
+
+
+def effect_state_guesses(test: FlightTest, model: Model, values: dict[str, float],
+                         t: np.ndarray) -> dict[str, np.ndarray]:
+    """The effects' own guesses of their states at times `t` (`Effect.state_guess`)."""
+    out: dict[str, np.ndarray] = {}
+    for effect in model.effects:
+        out.update(effect.state_guess(test, t, values))
+    return out

@@ -1,6 +1,6 @@
 """The linearisation at a point and what it gives (`Estimator`'s third part): the
-covariance of the free parameters, Gauss-Newton estimates and steps, and the
-information's log-determinant.
+covariance of the free parameters, Gauss-Newton estimates and steps, the
+information's log-determinant, and chi-square with the constraints' violation.
 """
 
 from __future__ import annotations
@@ -10,11 +10,11 @@ from collections.abc import Callable, Sequence
 import casadi as ca
 import numpy as np
 
-from cpas_ocp.estimation.fit import (
-    Fit,
-)
+from cpas_ocp.estimation import kkt_system
+from cpas_ocp.estimation.fit import Fit
 from cpas_ocp.estimation.gauss_newton import gauss_newton_step
-from cpas_ocp.estimation.kkt_system import Linearisation, linearise
+from cpas_ocp.estimation.kkt_system import Linearisation
+from cpas_ocp.estimation.transcription import Transcription
 from cpas_ocp.estimation.uncertainty import (
     HESSIANS,
     Covariance,
@@ -23,8 +23,12 @@ from cpas_ocp.estimation.uncertainty import (
 )
 
 
-class Linearising:
-    """Linearisations of the NLP and the statistics they give."""
+class Linearisations:
+    """Linearisations of one transcribed NLP and the statistics they give."""
+
+    def __init__(self, nlp: Transcription) -> None:
+        self.nlp = nlp
+        self._hessian_product: ca.Function | None = None  # built on first use
 
     def covariance(self, fit: Fit, scale_by_residual: bool = False,
                    hessian: str = "gauss-newton") -> Covariance:
@@ -39,7 +43,7 @@ class Linearising:
             raise ValueError(f"hessian must be one of {HESSIANS}; got {hessian!r}")
         product = None
         if hessian == "exact":
-            fn = self._lagrangian_hessian_product()
+            fn = self.lagrangian_hessian_product()
             product = lambda Z: np.asarray(  # noqa: E731
                 fn.map(Z.shape[1], "serial")(fit.z, fit.multipliers, Z))
         return self.covariance_at(fit.z, scale_by_residual, product)
@@ -50,64 +54,63 @@ class Linearising:
         """Covariance of the free parameters at the decision vector `z` (a fit's, or the
         nominal point of a planned test, where with noise-free data it is the inverse
         Fisher information); `hessian_product` as in `kkt_covariance`."""
-        return kkt_covariance(self._linearise(z), self._param_index, self.pscale,
-                              self.free, scale_by_residual, hessian_product)
+        return kkt_covariance(self.linearise(z), self.nlp.param_index, self.nlp.pscale,
+                              self.nlp.free, scale_by_residual, hessian_product)
 
     def gauss_newton_estimate(self, z: np.ndarray, release: Sequence[str] = ()
                               ) -> tuple[dict[str, float], Covariance]:
         """The free parameters after one Gauss-Newton step from `z` (SI), and their covariance
-        there; parameters in `release` are treated as unbounded (see `_linearise`).
+        there; parameters in `release` are treated as unbounded (see `linearise`).
 
         At the optimum of a model with some parameters held at null values, the
         step's components along them are their linearised estimates (`score_test`).
         """
-        lin = self._linearise(z, release)
-        cov = kkt_covariance(lin, self._param_index, self.pscale, self.free)
-        return self.free_values(z + gauss_newton_step(lin)), cov
+        lin = self.linearise(z, release)
+        cov = kkt_covariance(lin, self.nlp.param_index, self.nlp.pscale, self.nlp.free)
+        return self.nlp.free_values(z + gauss_newton_step(lin)), cov
 
     def information_log_det(self, fit: Fit) -> float:
         """log det of the Gauss-Newton information of every free coordinate at `fit`, in the
         scaled decision vector (`uncertainty.log_det_information`): the volume term of a
         Laplace approximation (`process_intensity`)."""
-        return log_det_information(self._linearise(fit.z))
+        return log_det_information(self.linearise(fit.z))
 
     def gauss_newton_point(self, z: np.ndarray) -> tuple[np.ndarray, float]:
         """The end of one full Gauss-Newton step from the decision vector `z` (the linearised
         constraints met there), clipped into the variables' bounds, and the chi-square
         at `z`: both from one linearisation."""
-        lin = self._linearise(z)
-        step_end = np.clip(z + gauss_newton_step(lin), self._lbz, self._ubz)
+        lin = self.linearise(z)
+        step_end = np.clip(z + gauss_newton_step(lin), self.nlp.lbz, self.nlp.ubz)
         return step_end, float(lin.r @ lin.r)
 
-    def _lagrangian_hessian_product(self) -> ca.Function:
+    def lagrangian_hessian_product(self) -> ca.Function:
         """(z, lambda, v) -> H v, H the Hessian of 0.5 |r|^2 + lambda' g in the scaled z
         (forward over reverse mode on the NLP's expression graph; built on first use)."""
         if self._hessian_product is None:
-            lam = ca.MX.sym("lam", self._g.numel())
-            v = ca.MX.sym("v", self._z.numel())
-            grad = ca.gradient(self._obj + ca.dot(lam, self._g), self._z)
-            self._hessian_product = ca.Function("hessian_product", [self._z, lam, v],
-                                                [ca.jtimes(grad, self._z, v)])
+            z, g = self.nlp.z, self.nlp.g
+            lam, v = ca.MX.sym("lam", g.numel()), ca.MX.sym("v", z.numel())
+            grad = ca.gradient(self.nlp.objective + ca.dot(lam, g), z)
+            self._hessian_product = ca.Function("hessian_product", [z, lam, v],
+                                                [ca.jtimes(grad, z, v)])
         return self._hessian_product
 
-    def _linearise(self, z: np.ndarray, release: Sequence[str] = ()) -> Linearisation:
+    def linearise(self, z: np.ndarray, release: Sequence[str] = ()) -> Linearisation:
         """The problem linearised at `z`; the free parameters named in `release` are treated
         as unbounded (a score test's parameters sit on a bound at their null values)."""
-        idx = self._param_index
-        nx = self.model.nx
-        n_states = self._nz[0]
-        pinned = np.flatnonzero(self._lbz[:nx] == self._ubz[:nx])
-        lower, upper = self._lbz[idx].copy(), self._ubz[idx].copy()
+        nlp = self.nlp
+        idx, nx, n_states = nlp.param_index, nlp.model.nx, nlp.sizes[0]
+        pinned = np.flatnonzero(nlp.lbz[:nx] == nlp.ubz[:nx])
+        lower, upper = nlp.lbz[idx].copy(), nlp.ubz[idx].copy()
         for name in release:
-            i = self.free.index(name)
+            i = nlp.free.index(name)
             lower[i], upper[i] = -np.inf, np.inf
-        points = self._points
-        return linearise(points.residual_jacobian, points.constraints, z, self._lbg, self._ubg,
-                         idx, lower, upper, chain_rows=n_states - nx,
-                         dependent=np.arange(nx, n_states), pinned=pinned)
+        return kkt_system.linearise(nlp.points.residual_jacobian, nlp.points.constraints, z,
+                                    nlp.lbg, nlp.ubg, idx, lower, upper,
+                                    chain_rows=n_states - nx, dependent=np.arange(nx, n_states),
+                                    pinned=pinned)
 
     def evaluate(self, z: np.ndarray) -> tuple[float, float]:
         """Chi-square at the decision vector `z` and its largest scaled constraint violation
         (the shooting gaps in units of the state scales)."""
-        lin = self._linearise(z)
+        lin = self.linearise(z)
         return float(lin.r @ lin.r), lin.violation

@@ -2,7 +2,7 @@
 
 Ipopt asks for the objective, the constraints, the objective's gradient,
 the constraints' Jacobian and the Hessian of the Lagrangian in separate
-calls, and the statistical stopping test (`Estimator._stop_test`)
+calls, and the statistical stopping test (`Solver._stop_test`)
 linearises the same point once more.  All of them are functions of four
 model evaluations at the decision vector z:
 

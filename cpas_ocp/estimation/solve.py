@@ -1,4 +1,4 @@
-"""The solve and its stopping rule (`Estimator`'s second part).
+"""The solve and its stopping rule (`Estimator`'s Ipopt part).
 
 Ipopt on the transcribed NLP, with the statistical test that ends a run once the
 Gauss-Newton step would lower chi-square by less than `Settings.chi2_step_tol`, the
@@ -31,11 +31,14 @@ from cpas_ocp.estimation.gauss_newton import (
     measured_decrement,
 )
 from cpas_ocp.estimation.kkt_system import Linearisation
+from cpas_ocp.estimation.linearisation import Linearisations
 from cpas_ocp.estimation.nlp_functions import (
     MarquardtDamping,
     ipopt_functions,
     worst_violation,
 )
+from cpas_ocp.estimation.starting_points import StartingPoints
+from cpas_ocp.estimation.transcription import Transcription
 
 # Status of a run ended by the statistical test (`Settings.chi2_step_tol`).
 STATISTICALLY_CONVERGED = "Solved_Gauss_Newton_Step_Below_Tolerance"
@@ -53,11 +56,11 @@ DESCENT_CONVERGED = "Solved_Feasible_Descent_After_Stall"
 
 
 # Gauss-Newton steps the statistical test may take of its own from an iterate before
-# it has a point to end the run at (`Estimator._finishing_steps`); one more polishes it.
+# it has a point to end the run at (`Solver._finishing_steps`); one more polishes it.
 FINISHING_STEPS = 3
 
 
-class _Monitor(ca.Callback):
+class IterationMonitor(ca.Callback):
     """Ipopt iteration callback: progress line on stderr, and the statistical stopping test.
 
     Gauss-Newton converges linearly, so Ipopt's optimality tests keep it
@@ -78,9 +81,9 @@ class _Monitor(ca.Callback):
                  stall: int | None = None) -> None:
         ca.Callback.__init__(self)
         self._stall = stall  # iterations without progress that stop a run (None: never)
-        self._violations = violations  # how far each constraint value lies outside its bounds
+        self.violations = violations  # how far each constraint value lies outside its bounds
         self._nx, self._ng, self._test, self._tol = nx, ng, test, tol
-        self._damping = damping
+        self.damping = damping
         self.reset(False, (np.full(nx, -np.inf), np.full(nx, np.inf)))
         self.construct("monitor", {})
 
@@ -104,8 +107,8 @@ class _Monitor(ca.Callback):
         self.progress = progress and sys.stderr.isatty()
         if done:
             return  # a widening restart goes on with what the run had gathered
-        if self._damping is not None:
-            self._damping.reset()
+        if self.damping is not None:
+            self.damping.reset()
         self._first_chi2: float | None = None  # the run's first iterate's (divergence)
         # The nearly feasible iterate with the lowest chi-square so far (constraints
         # within POLISH_CONSTRAINT_TOL): an unconverged run's best witness.
@@ -175,7 +178,7 @@ class _Monitor(ca.Callback):
             self.diverged = True
             return [1]
         g = np.asarray(arg[2]).ravel()
-        if np.max(self._violations(g), initial=0.0) <= POLISH_CONSTRAINT_TOL:  # not NaN
+        if np.max(self.violations(g), initial=0.0) <= POLISH_CONSTRAINT_TOL:  # not NaN
             if chi2 < self._best_chi2:
                 self.best, self._best_chi2 = np.asarray(arg[0]).ravel().copy(), chi2
             if self._best_chi2 <= self._progress[0] - max(STALL_GAIN, STALL_SHARE * self.promised):
@@ -184,8 +187,8 @@ class _Monitor(ca.Callback):
                 and self._done + self._k - self._progress[1] >= self._stall:
             self.stalled = True
             return [1]
-        if self._damping is not None:
-            self._damping.observe(np.asarray(arg[0]).ravel())
+        if self.damping is not None:
+            self.damping.observe(np.asarray(arg[0]).ravel())
         if self.progress:
             sys.stderr.write(f"\r  iteration {self._done + self._k:4d}   "
                              f"chi-square {chi2:14.6g}")
@@ -246,19 +249,24 @@ class _Run:
     descended: DescentEnd | None = None
 
 
-class Solving:
-    """Ipopt's runs on the NLP, and when a run is done."""
+class Solver:
+    """Ipopt's runs on one transcribed NLP, and when a run is done."""
 
-    def _setup_solver(self) -> None:
-        """Ipopt's options, the iteration monitor that carries the stopping rule, and the
-        solver on the transcribed NLP."""
-        s = self.settings
+    def __init__(self, nlp: Transcription, linearisations: Linearisations,
+                 starts: StartingPoints) -> None:
+        """Ipopt's options and the iteration monitor that carries the stopping rule, for the
+        NLP `nlp` (its settings are the solver's); `linearisations` give the stopping
+        rule's Gauss-Newton steps, `starts` the reduction's start and feasible points."""
+        self.nlp = nlp
+        self.settings = s = nlp.settings
+        self._linearisations = linearisations
+        self._starts = starts
         # Gauss-Newton converges linearly, so Ipopt's dual infeasibility plateaus near
         # 1e-4 (scaled) long after the estimate has stopped moving; accept a point where
         # the objective no longer changes (relative 1e-9, i.e. ~1e-5 in chi-square, over
         # 5 iterations; a change of 1 in chi-square is the statistical scale) and the
         # constraints hold to 1e-8.  `solve` reports which criterion ended the run.
-        self._options = {
+        self.options = {
             "ipopt.max_iter": s.max_iter, "ipopt.tol": s.tol,
             "ipopt.acceptable_tol": 1e-1, "ipopt.acceptable_iter": 5,
             "ipopt.acceptable_obj_change_tol": 1e-9,
@@ -273,11 +281,10 @@ class Solving:
             # and its analysis phase went from 0.6-1.8 s to 0.1 s without it.
             "ipopt.mumps_permuting_scaling": 0, "ipopt.mumps_scaling": 0,
         }
-        self._hessian_product: ca.Function | None = None
         # the solver keeps only a reference to its callbacks
-        self._monitor = _Monitor(self._z.numel(), self._g.numel(), self._violations,
-                                 self._stop_test, s.chi2_step_tol, self._damping,
-                                 STALL_ITERATIONS if s.descent_steps > 0 else None)
+        self._monitor = IterationMonitor(nlp.z.numel(), nlp.g.numel(), nlp.violations,
+                                         self._stop_test, s.chi2_step_tol, nlp.damping,
+                                         STALL_ITERATIONS if s.descent_steps > 0 else None)
         # Ipopt itself is made by the first solve (`solve`, on the pattern the windows
         # fitted at its start keep): an estimator that is only linearised (a score
         # test's) never needs it.
@@ -288,48 +295,50 @@ class Solving:
     def ipopt(self) -> ca.Function:
         """Ipopt on this NLP (the one the last solve used; made here where none was)."""
         if self._solver is None:
-            self._make_solver()
+            self.make_solver()
         return self._solver
 
-    def _make_solver(self, barrier: float | None = None) -> None:
-        """Ipopt on the NLP, its derivatives on the pattern `self._windows` keeps; with
+    def make_solver(self, barrier: float | None = None) -> None:
+        """Ipopt on the NLP, its derivatives on the pattern `self.nlp.windows` keeps; with
         `barrier`, warm-started (the caller passes the multipliers) at that barrier
         parameter, the bounds not pushed."""
+        own = self.nlp
         if self.settings.point_cache:
-            self._ipopt = ipopt_functions(self._points, self._curvature(), self._small_rows,
-                                          self._windows, self._monitor.window_check,
-                                          self._damping, self._levenberg())
-            nlp, derivatives = self._ipopt.nlp, self._ipopt.options
+            self._functions = ipopt_functions(own.points, own.curvature(), own.small_rows,
+                                              own.windows, self._monitor.window_check,
+                                              own.damping, self._levenberg())
+            nlp, derivatives = self._functions.nlp, self._functions.options
         else:
-            nlp, derivatives = self._expressions
+            nlp, derivatives = own.expressions
         self._warm = barrier is not None
         warm = {} if barrier is None else {
             "ipopt.warm_start_init_point": "yes", "ipopt.mu_init": barrier,
             "ipopt.warm_start_bound_push": 1e-9, "ipopt.warm_start_mult_bound_push": 1e-9}
         self._solver = ca.nlpsol("reconstruction", "ipopt", nlp, {
-            **self._options, **warm, **derivatives, "iteration_callback": self._monitor})
+            **self.options, **warm, **derivatives, "iteration_callback": self._monitor})
 
     def _levenberg(self) -> tuple[np.ndarray, float] | None:
         """The Levenberg term's columns of z (the free parameters) and size, or None."""
         delta = self.settings.levenberg
-        return None if not delta else (self._param_index, float(delta))
+        return None if not delta else (self.nlp.param_index, float(delta))
 
     def _jacobian_values(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The stored values of the residual and constraint Jacobians at `z`."""
-        return self._points.residual_jacobian(z)[1].data, self._points.constraints(z)[1].data
+        points = self.nlp.points
+        return points.residual_jacobian(z)[1].data, points.constraints(z)[1].data
 
-    def _fit_windows(self, *points: np.ndarray, widen: bool = False,
-                     barrier: float | None = None) -> None:
+    def fit_windows(self, *points: np.ndarray, widen: bool = False,
+                    barrier: float | None = None) -> None:
         """Fit the parameters' windows of action to their Jacobians' nonzeros at a point (or
         widen them over several), and rebuild the solver on the pattern they keep; with
         `barrier`, one that goes on from a run that ended at that barrier parameter."""
-        if not self._windows.active:
+        if not self.nlp.windows.active:
             return
         if widen:
-            self._windows.widen(*map(self._jacobian_values, points))
+            self.nlp.windows.widen(*map(self._jacobian_values, points))
         else:
-            self._windows.fit(self._jacobian_values(points[0]))
-        self._make_solver(barrier)
+            self.nlp.windows.fit(self._jacobian_values(points[0]))
+        self.make_solver(barrier)
 
     def solve(self, progress: bool = False, start: Fit | np.ndarray | None = None,
               bounds: dict[str, tuple[float, float]] | None = None,
@@ -354,22 +363,22 @@ class Solving:
         the descent learnt the curvature, `Settings.descent_curvature`).
         """
         lbz, ubz = self._solve_bounds(bounds)
-        z0 = (self.initial_point() if start is None
+        z0 = (self._starts.initial_point() if start is None
               else start.z if isinstance(start, Fit) else np.asarray(start, dtype=float))
         z0 = np.clip(z0, lbz, ubz)
         t0 = time.perf_counter()
         cap = min(max_iter or self.settings.max_iter, self.settings.max_iter)
-        self._fit_windows(z0)
+        self.fit_windows(z0)
         # No solver yet, or an earlier solve's restart left its warm-started one behind.
         if self._solver is None or self._warm:
-            self._make_solver()
+            self.make_solver()
         # A what-if's sensitivities need Ipopt's own multipliers at its own solution.
         run = self._runs(z0, (lbz, ubz), cap, progress, not bounds or not sensitivities)
         z, stats, multipliers = self._outcome(run, time.perf_counter() - t0, start)
         if not stats.success:
             raise SolverFailure(stats.status, stats.iterations, stats.worst_constraint,
                                 2.0 * stats.objective, self._last_iterate(z, stats))
-        fit = self._fit(z, stats)
+        fit = self.nlp.fit_at(z, stats)
         fit.multipliers = multipliers
         if bounds and sensitivities:
             fit.sensitivities = self._bound_sensitivities(z, multipliers, list(bounds))
@@ -379,11 +388,11 @@ class Solving:
                       ) -> tuple[np.ndarray, np.ndarray]:
         """The scaled variables' bounds, with `bounds` (SI) replacing those of the free
         parameters it names."""
-        lbz, ubz = self._lbz.copy(), self._ubz.copy()
-        n_states = self._nz[0]
+        lbz, ubz = self.nlp.lbz.copy(), self.nlp.ubz.copy()
+        n_states = self.nlp.sizes[0]
         for name, (lo, hi) in (bounds or {}).items():
-            i = self.free.index(name)
-            lbz[n_states + i], ubz[n_states + i] = lo / self.pscale[i], hi / self.pscale[i]
+            i = self.nlp.free.index(name)
+            lbz[n_states + i], ubz[n_states + i] = lo / self.nlp.pscale[i], hi / self.nlp.pscale[i]
         return lbz, ubz
 
     def _runs(self, z0: np.ndarray, box: tuple[np.ndarray, np.ndarray], cap: int,
@@ -397,8 +406,8 @@ class Solving:
         while True:
             self._monitor.reset(progress, box, cap - run.iterations, run.iterations, stall)
             with interrupts.deferred():  # a signal stops Ipopt at its next iteration
-                run.sol = self._solver(x0=z0, lbx=box[0], ubx=box[1], lbg=self._lbg,
-                                       ubg=self._ubg, **multipliers)
+                run.sol = self._solver(x0=z0, lbx=box[0], ubx=box[1], lbg=self.nlp.lbg,
+                                       ubg=self.nlp.ubg, **multipliers)
             run.stats = self._solver.stats()
             run.iterations += int(run.stats["iter_count"])
             z0 = np.asarray(run.sol["x"]).ravel()
@@ -418,10 +427,10 @@ class Solving:
                 if run.descended is not None and run.descended.steps:
                     self._monitor.offer(run.descended.z, run.descended.chi2)
                 stall = False
-                self._make_solver(barrier)
+                self.make_solver(barrier)
                 continue
-            if run.left is None and run.stats["success"] and self._windows.active \
-                    and self._windows.outside_at(self._jacobian_values(z0)):
+            if run.left is None and run.stats["success"] and self.nlp.windows.active \
+                    and self.nlp.windows.outside_at(self._jacobian_values(z0)):
                 # What Ipopt converged on must hold with every entry: a parameter that
                 # acts outside its window at the end sends the run on.
                 run.left = z0
@@ -432,7 +441,7 @@ class Solving:
             # with its multipliers and barrier parameter (from the default barrier and
             # least-squares multipliers, the first steps of the new run were regularised
             # and cut: on `drogue_full` 35 iterations in all against 30).
-            self._fit_windows(run.left, z0, widen=True, barrier=barrier)
+            self.fit_windows(run.left, z0, widen=True, barrier=barrier)
         self._monitor.finish()
         return run
 
@@ -456,12 +465,12 @@ class Solving:
         if own_point or not success:
             # Evaluated here: Ipopt's values describe its last iterate, and after a failure
             # can be placeholders (zeros after an invalid number).
-            r = self._points.residual_value(z)
+            r = self.nlp.points.residual_value(z)
             objective = 0.5 * float(r @ r)
-            g = self._points.constraint_value(z)
+            g = self.nlp.points.constraint_value(z)
         else:
             g, objective = np.asarray(sol["g"]).ravel(), float(sol["f"])
-        worst = worst_violation(self._violations(g))
+        worst = worst_violation(self.nlp.violations(g))
         stats = SolverStats(status, success, run.iterations, wall, objective, worst, decrement,
                             "the offline reduction" if start is None else
                             "a fit" if isinstance(start, Fit) else "a given point")
@@ -500,17 +509,17 @@ class Solving:
         one, which may be the start: it moves through infeasible points.
         """
         tol = self.settings.chi2_step_tol
-        if self.settings.descent_steps <= 0 or not tol or self._has_inequalities:
+        if self.settings.descent_steps <= 0 or not tol or self.nlp.has_inequalities:
             return None
-        points = [self.feasible_point(x) for x in (z, self._monitor.best) if x is not None]
+        points = [self._starts.feasible_point(x) for x in (z, self._monitor.best) if x is not None]
         points = [p for p in points if p is not None]
         if not points:
             return None
         start = min(points, key=lambda p: p[1])
-        idx = self._param_index
+        idx = self.nlp.param_index
         lower, upper = bounds
-        problem = DescentProblem(self._linearise, self.feasible_point,
-                                 self._points.residual_value, idx, lower[idx], upper[idx])
+        problem = DescentProblem(self._linearisations.linearise, self._starts.feasible_point,
+                                 self.nlp.points.residual_value, idx, lower[idx], upper[idx])
         learn = self.settings.descent_curvature
         return descend(*start, problem, tol, min(self.settings.descent_steps, left), learn)
 
@@ -528,7 +537,7 @@ class Solving:
         if not np.all(np.isfinite(z)):
             return None
         try:
-            return self._fit(z, stats)
+            return self.nlp.fit_at(z, stats)
         except (RuntimeError, ValueError):
             return None
 
@@ -536,12 +545,12 @@ class Solving:
                              names: list[str]) -> dict[str, float]:
         """d(chi^2)/d(value) of each bounded parameter at a solution: twice the gradient of
         the Lagrangian of the other constraints in that parameter (SI units)."""
-        r, jac = self._points.residual_jacobian(z)
-        _, jac_g = self._points.constraints(z)
+        r, jac = self.nlp.points.residual_jacobian(z)
+        _, jac_g = self.nlp.points.constraints(z)
         grad = jac.T @ r + jac_g.T @ lam_g
-        n_states = self._nz[0]
-        return {n: float(2.0 * grad[n_states + self.free.index(n)]
-                         / self.pscale[self.free.index(n)]) for n in names}
+        n_states = self.nlp.sizes[0]
+        return {n: float(2.0 * grad[n_states + self.nlp.free.index(n)]
+                         / self.nlp.pscale[self.nlp.free.index(n)]) for n in names}
 
     def _stop_test(self, z: np.ndarray) -> tuple[float, np.ndarray] | None:
         """The point at which the statistical test may end the run, near the Ipopt iterate
@@ -563,12 +572,12 @@ class Solving:
         iterations for what one step does.
         """
         tol = self.settings.chi2_step_tol or 0.0
-        lin = self._linearise(z)
+        lin = self._linearisations.linearise(z)
         violation = lin.violation
         # An inequality (a what-if limit) inactive at z might be crossed by the finishing
         # step unseen: the linearisation holds only the active ones.
         may_polish = (self.settings.polish and violation <= POLISH_CONSTRAINT_TOL
-                      and not self._has_inequalities)
+                      and not self.nlp.has_inequalities)
         if violation > STOP_CONSTRAINT_TOL and not may_polish:
             return None  # no Gauss-Newton solve for an iterate that cannot end the run
         gn = gauss_newton(lin)
@@ -666,12 +675,12 @@ class Solving:
         lies within the bounds and its scaled constraints within `limit` (judged on their
         values first: 3 ms on `drogue`, where a linearisation takes 70)."""
         if np.any(z < lower) or np.any(z > upper) \
-                or not self._value_violation(z) <= limit:  # NaN too
+                or not self.nlp.value_violation(z) <= limit:  # NaN too
             return None
-        lin = self._linearise(z)
+        lin = self._linearisations.linearise(z)
         return lin, gauss_newton(lin)
 
     def _measured_decrement(self, lin: Linearisation, gn: GaussNewtonStep) -> float:
         """The chi-square decrease still to be had along `gn` from `lin.z`, its curvature
         measured (`uncertainty.measured_decrement`)."""
-        return measured_decrement(self._points.residual_value, lin, gn)
+        return measured_decrement(self.nlp.points.residual_value, lin, gn)

@@ -2,8 +2,8 @@
 
 The grid, the decision variables and their scaling and bounds, the continuity gaps,
 the sensors' weighted residuals, the captures, the effects' constraints, what-if
-limits, priors and pseudo-observations, the functions Ipopt and the linearisation
-evaluate, and the points built from a guess or from another fit.
+limits, priors and pseudo-observations, and the functions Ipopt and the linearisation
+evaluate (the points a solve starts from are `starting_points`').
 """
 
 from __future__ import annotations
@@ -11,6 +11,7 @@ from __future__ import annotations
 import itertools
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
+from typing import NamedTuple
 
 import casadi as ca
 import numpy as np
@@ -21,14 +22,13 @@ from cpas_ocp.estimation.compiled import in_background, native_build
 from cpas_ocp.estimation.fit import (
     EVENTS,
     PRIORS,
-    STOP_CONSTRAINT_TOL,
     Fit,
     SensorResidual,
     Settings,
     SolverStats,
     default_grid_step,
 )
-from cpas_ocp.estimation.kinematic_track import kinematic_track
+from cpas_ocp.estimation.kinematic_track import guessed_states
 from cpas_ocp.estimation.nlp_functions import MarquardtDamping, PointEvaluations, bound_violations
 from cpas_ocp.estimation.reduction import initial_guess
 from cpas_ocp.estimation.shooting_grid import (
@@ -38,21 +38,17 @@ from cpas_ocp.estimation.shooting_grid import (
     stable_refinement,
     substeps_of,
 )
-from cpas_ocp.estimation.simulate import rk4_step, simulate
+from cpas_ocp.estimation.simulate import rk4_step
 from cpas_ocp.estimation.sparse_rows import Rows, stacked_parts
 from cpas_ocp.io.model_spec import ModelSpec, spec_from_effects, spec_of_test, unfitted_sensors
 from cpas_ocp.physics.effects import Effect
 from cpas_ocp.physics.flight_test import FlightTest
 from cpas_ocp.physics.model import CORE_STATES, timing_label
 
-# Alternations of integrating the trajectory and meeting the other constraints that
-# `Estimator.feasible_point` makes (each correction moves the trajectory only slightly).
-FEASIBILITY_SWEEPS = 5
-
 
 @dataclass
 class _Nlp:
-    """The NLP while it is transcribed (`NlpTranscription._build`): the decision
+    """The NLP while it is transcribed (`Transcription._build`): the decision
     variables X (node states), P (free parameters) and C (captured values), all scaled;
     their physical values Xp, Cp and pfull (every parameter, the fixed ones as constants);
     the whole decision vector z; the scales; the SX symbols of one instance (x, x1, t, dt,
@@ -162,6 +158,16 @@ def _stack_times(pieces: Sequence[_Piece]) -> np.ndarray:
     return np.concatenate([p.times for p in pieces]) if pieces else np.zeros(0)
 
 
+class PointFunctions(NamedTuple):
+    """The four functions of the scaled decision vector z that `PointEvaluations` evaluates
+    (VM graphs, or chains of native pieces once they are compiled)."""
+
+    residual_value: ca.Function  # z -> r, the weighted residuals
+    residual_jacobian: ca.Function  # z -> (r, dr/dz)
+    constraint_value: ca.Function  # z -> g
+    constraints: ca.Function  # z -> (g, dg/dz)
+
+
 def cubic_bspline(u: ca.MX) -> ca.MX:
     """Cubic B-spline kernel (support |u| < 2, C2, a partition of unity on integer nodes)."""
     a = ca.fabs(u)
@@ -169,8 +175,9 @@ def cubic_bspline(u: ca.MX) -> ca.MX:
                       ca.if_else(a < 2.0, (2.0 - a) ** 3 / 6.0, 0.0))
 
 
-class NlpTranscription:
-    """The NLP of one test phase, built once (`Estimator`'s first part)."""
+class Transcription:
+    """The NLP of one test phase, built once (`Estimator`'s first part): its variables,
+    constraints, residuals and bounds, and the functions evaluated on it."""
 
     def __init__(self, test: FlightTest, effects: Sequence[Effect] | ModelSpec | None = None,
                  settings: Settings | None = None) -> None:
@@ -244,10 +251,11 @@ class NlpTranscription:
                              test.t_end, fine_step, windows)
 
     def _first_state(self, fine_step: float) -> np.ndarray:
-        """The guessed state at the phase's start (`_guessed_states`; the effects' guesses
-        take a rate from the first two lattice points)."""
+        """The guessed state at the phase's start (`kinematic_track.guessed_states`; the
+        effects' guesses take a rate from the first two lattice points)."""
         t0 = self.test.t_start
-        return self._guessed_states(np.array([t0, t0 + fine_step]))[0][:, 0]
+        return guessed_states(self.test, self.model, self.values,
+                              np.array([t0, t0 + fine_step]))[0][:, 0]
 
     # ------------------------------------------------------------------ transcription
     def _build(self, n: int, h: float) -> None:
@@ -281,13 +289,12 @@ class NlpTranscription:
         pfull = ca.vertcat(*[
             P[free_index[p.name]] * self.pscale[free_index[p.name]] if p.name in free_index
             else ca.MX(self.values.get(p.name, p.default)) for p in m.parameters])
-        self._step = rk4_step(m)
+        self.step = rk4_step(m)
         syms = {"x": ca.SX.sym("x", nx), "x1": ca.SX.sym("x1", nx), "t": ca.SX.sym("t"),
                 "dt": ca.SX.sym("dt"), "p": ca.SX.sym("p", len(m.parameters)),
                 "c": ca.SX.sym("c", ncap)}
         xe = self._interval_end(syms["x"], syms["t"], syms["dt"], syms["p"], syms["c"], 1)
         self._ctx = (X, Xp, pfull, Cp, xscale, cscale)
-        self._sweeps: dict[tuple[int, ...], ca.Function] = {}  # `_sweep`'s, by rows
         return _Nlp(X, P, C, Xp, Cp, pfull, ca.vertcat(ca.vec(X), P, C), free_index, xscale,
                     cscale, syms, xe)
 
@@ -297,7 +304,7 @@ class NlpTranscription:
         (the interval's, `shooting_grid.substeps_of`) times `settings.substeps` RK4 steps."""
         m = substeps * self.settings.substeps
         for j in range(m):
-            x = self._step(x, t + j * dt / m, dt / m, p, c)
+            x = self.step(x, t + j * dt / m, dt / m, p, c)
         return x
 
     def _gaps_and_sensors(self, nlp: _Nlp, n: int, h: float) -> None:
@@ -326,7 +333,7 @@ class NlpTranscription:
             gap_rows.append((ks[:, None] * self.model.nx
                              + np.arange(self.model.nx)[None, :]).ravel())
         n_gap_blocks = len(blocks)
-        sensor_blocks, destinations, offsets = self._sensor_blocks(self._step, n, h, pieces)
+        sensor_blocks, destinations, offsets = self._sensor_blocks(self.step, n, h, pieces)
         blocks += sensor_blocks
         # Each block's values (the line search's trial points) and its values with the
         # Jacobian (accepted points) are chains of the model's few pieces, which run as
@@ -343,7 +350,7 @@ class NlpTranscription:
                 pieces.adopt(native)
                 build = None
         layout = (blocks, n_gap_blocks, destinations, offsets, gap_rows, n)
-        self._native = (build, pieces, layout, nlp) if build is not None else None
+        self.compiling = (build, pieces, layout, nlp) if build is not None else None
         nlp.residuals, nlp.g = self._block_pieces(pieces, *layout)
         nlp.lbg = [np.zeros(self.model.nx * n)]
         nlp.ubg = [np.zeros(self.model.nx * n)]
@@ -362,26 +369,24 @@ class NlpTranscription:
                 _gathered(mapped[:n_gap_blocks], gap_rows, [0, self.model.nx * n]))
         return residuals, gaps
 
-    def _switch_to_native(self) -> tuple[ca.Function, ...] | None:
+    def _switch_to_native(self) -> PointFunctions | None:
         """Once the model's pieces compiled in the background are ready: the point functions
         (`_point_functions`) rebuilt on them, for `PointEvaluations.switch`; None before."""
-        if self._native is None:
+        if self.compiling is None:
             return None
-        build, pieces, layout, nlp = self._native
+        build, pieces, layout, nlp = self.compiling
         native = build.ready()
         if native is None:
             if build.failed:
-                self._native = None
+                self.compiling = None
             return None
-        self._native = None
+        self.compiling = None
         pieces.adopt(native)
         residuals, gaps = self._block_pieces(pieces, *layout)
         nlp.residuals[:len(residuals)] = residuals
         nlp.g[:len(gaps)] = gaps
-        functions = self._point_functions(nlp)
-        (self._residual_value, self._residual_jacobian, self._constraint_value,
-         self._constraints) = functions
-        return functions
+        self.functions = self._point_functions(nlp)
+        return self.functions
 
     def _captures(self, nlp: _Nlp, h: float) -> None:
         """Captured quantities at free event times: cubic B-spline weights of node values,
@@ -464,20 +469,20 @@ class NlpTranscription:
         for j, (timing, event) in enumerate(m.timings):
             r = (event.time - predicted[j]) / event.sigma
             nlp.residuals.append(_Piece.of(r, nlp.z))
-            self._samples.append((EVENTS, (timing_label(timing),), np.array([event.time]),
+            self.samples.append((EVENTS, (timing_label(timing),), np.array([event.time]),
                                   np.array([[event.time]]), np.array([[event.sigma]])))
         for name, (value, sigma) in self.spec.prior_values(m).items():
             if name not in nlp.free_index:
                 raise ValueError(f"a prior on {name}, which this estimator holds fixed")
             r = (value - nlp.pfull[m.parameter_names.index(name)]) / sigma
             nlp.residuals.append(_Piece.of(r, nlp.z))
-            self._samples.append((PRIORS, (name,), np.array([self.t[0]]),
+            self.samples.append((PRIORS, (name,), np.array([self.t[0]]),
                                   np.array([[value]]), np.array([[sigma]])))
         p_sx = ca.vertcat(ca.SX(0, 1), *[m.ctx.p[p.name] for p in m.parameters])
         for effect, channel, times, expr in m.penalties:
             fn = ca.Function("penalty", [p_sx], [expr])
             nlp.residuals.append(_Piece.of(fn(nlp.pfull), nlp.z))
-            self._samples.append((effect, (channel,), times, np.zeros((1, times.size)),
+            self.samples.append((effect, (channel,), times, np.zeros((1, times.size)),
                                   np.ones((1, times.size))))
 
     def _assemble(self, nlp: _Nlp, n: int) -> None:
@@ -486,15 +491,13 @@ class NlpTranscription:
         objective, the curvature of the few capture and effect constraints, the action
         windows, and the unpacking of a decision vector."""
         s, z_all, pieces, g = self.settings, nlp.z, nlp.residuals, nlp.g
-        self._z = z_all
+        self.z = z_all
         residual = _stack(pieces, "symbolic")
         jac = _stack(pieces, "jacobian")
-        self._g = _stack(g, "symbolic")
+        self.g = _stack(g, "symbolic")
         constraint_jac = _stack(g, "jacobian")
-        functions = self._point_functions(nlp)
-        (self._residual_value, self._residual_jacobian, self._constraint_value,
-         self._constraints) = functions
-        self._points = PointEvaluations(*functions, switch=self._switch_to_native)
+        self.functions = self._point_functions(nlp)
+        self.points = PointEvaluations(*self.functions, switch=self._switch_to_native)
         # The exact curvature of the few capture and effect constraints (a capture at a
         # free time bends in that time; without it a Pilot's bag-strip constraint made the
         # steps cycle); the curvature of the continuity constraints is neglected.
@@ -503,36 +506,36 @@ class NlpTranscription:
         self._curvature_fn: tuple[ca.Function, ca.Function] | None = None
         nx = self.model.nx
         small_rows = slice(nx * n, nx * n + small.numel())
-        self._lbg = np.concatenate([np.ravel(a) for a in nlp.lbg])
-        self._ubg = np.concatenate([np.ravel(a) for a in nlp.ubg])
-        self._damping = (MarquardtDamping(self._points, self._lbg, self._ubg)
+        self.lbg = np.concatenate([np.ravel(a) for a in nlp.lbg])
+        self.ubg = np.concatenate([np.ravel(a) for a in nlp.ubg])
+        self.damping = (MarquardtDamping(self.points, self.lbg, self.ubg)
                          if s.point_cache and s.damping else None)
-        self._windows = ActionWindows(
-            self._points.patterns(),
+        self.windows = ActionWindows(
+            self.points.patterns(),
             (_stack_times(pieces), _stack_times(g)), nlp.X.numel(),
             s.window_margin if s.point_cache else None)
-        self._small_rows = small_rows
+        self.small_rows = small_rows
         if not s.point_cache:
-            self._expressions = self._plain_nlp(residual, jac, constraint_jac, small_rows)
-        self._unpack = ca.Function("unpack", [z_all], [nlp.Xp, nlp.pfull, nlp.Cp])
+            self.expressions = self._plain_nlp(residual, jac, constraint_jac, small_rows)
+        self.unpack = ca.Function("unpack", [z_all], [nlp.Xp, nlp.pfull, nlp.Cp])
         self._residuals = ca.Function("residuals", [z_all], [p.value for p in pieces])
-        self._has_inequalities = bool(np.any(self._lbg != self._ubg))  # what-if limits
-        self._obj = 0.5 * ca.sumsqr(residual)
-        self._nz = (nlp.X.numel(), nlp.P.numel(), nlp.C.numel())
-        self._xscale = nlp.xscale
-        self._cscale = nlp.cscale
+        self.has_inequalities = bool(np.any(self.lbg != self.ubg))  # what-if limits
+        self.objective = 0.5 * ca.sumsqr(residual)
+        self.sizes = (nlp.X.numel(), nlp.P.numel(), nlp.C.numel())
+        self.xscale = nlp.xscale
+        self.cscale = nlp.cscale
 
     @staticmethod
-    def _point_functions(nlp: _Nlp) -> tuple[ca.Function, ...]:
+    def _point_functions(nlp: _Nlp) -> PointFunctions:
         """The residuals r(z), r with its Jacobian, the constraints g(z), g with its
         Jacobian: the functions `PointEvaluations` evaluates."""
         z, pieces, g = nlp.z, nlp.residuals, nlp.g
-        return (ca.Function("residual_value", [z], [_stack(pieces, "value")]),
-                ca.Function("residual_jacobian", [z], [_stack(pieces, "with_jacobian"),
-                                                       _stacked_jacobian(pieces)]),
-                ca.Function("constraint_value", [z], [_stack(g, "value")]),
-                ca.Function("constraints", [z], [_stack(g, "with_jacobian"),
-                                                 _stacked_jacobian(g)]))
+        return PointFunctions(
+            ca.Function("residual_value", [z], [_stack(pieces, "value")]),
+            ca.Function("residual_jacobian", [z], [_stack(pieces, "with_jacobian"),
+                                                   _stacked_jacobian(pieces)]),
+            ca.Function("constraint_value", [z], [_stack(g, "value")]),
+            ca.Function("constraints", [z], [_stack(g, "with_jacobian"), _stacked_jacobian(g)]))
 
     def _variable_bounds(self, nlp: _Nlp) -> None:
         """Bounds of the scaled decision variables: the free parameters' own, captured
@@ -542,23 +545,23 @@ class NlpTranscription:
         X = nlp.X
         pb = [m.parameter(f) for f in self.free]
         inf = np.inf
-        self._lbz = np.concatenate([np.full(X.numel(), -inf), [p.lower / sc for p, sc in
+        self.lbz = np.concatenate([np.full(X.numel(), -inf), [p.lower / sc for p, sc in
                                     zip(pb, self.pscale, strict=True)],
                                     [c.lower / cscale for c in m.captures]])
-        self._ubz = np.concatenate([np.full(X.numel(), inf), [p.upper / sc for p, sc in
+        self.ubz = np.concatenate([np.full(X.numel(), inf), [p.upper / sc for p, sc in
                                     zip(pb, self.pscale, strict=True)], np.full(ncap, inf)])
         for st in m.states:  # states known at the start of the phase: first node held
             if st.pinned:
                 first_node = m.state_slice(st.name)
-                self._lbz[first_node] = self._ubz[first_node] = st.initial / st.scale
+                self.lbz[first_node] = self.ubz[first_node] = st.initial / st.scale
         if not self.test.sensors_of("gps"):
             # Nothing observes the horizontal plane (an altimeter-only log): the phase
             # starts without horizontal motion, which then only the wind can give.
             for name in ("position", "velocity"):
                 first = m.state_slice(name).start
-                self._lbz[first:first + 2] = self._ubz[first:first + 2] = 0.0
+                self.lbz[first:first + 2] = self.ubz[first:first + 2] = 0.0
 
-    def _curvature(self, upper: bool = True) -> ca.Function:
+    def curvature(self, upper: bool = True) -> ca.Function:
         """The curvature of the few capture and effect constraints, (z, lam_small) -> the
         Hessian of lam_small' g_small in z; its upper triangle (as Ipopt takes it) with
         `upper`.
@@ -587,14 +590,14 @@ class NlpTranscription:
         Gradient J'r and the Gauss-Newton Hessian J'J from the (compiled)
         residual Jacobian blocks, plus the small constraints' curvature.
         """
-        z, empty = self._z, ca.MX.sym("p", 0, 1)
+        z, empty = self.z, ca.MX.sym("p", 0, 1)
         obj = 0.5 * ca.sumsqr(residual)
         sigma_f = ca.MX.sym("sigma_f")
-        lam_g = ca.MX.sym("lam_g", self._g.numel())
-        hessian = sigma_f * ca.mtimes(jac.T, jac) + self._curvature(upper=False)(
+        lam_g = ca.MX.sym("lam_g", self.g.numel())
+        hessian = sigma_f * ca.mtimes(jac.T, jac) + self.curvature(upper=False)(
             z, lam_g[small_rows])
-        return {"x": z, "f": obj, "g": self._g}, {
-            "jac_g": ca.Function("jac_g", [z, empty], [self._g, constraint_jac],
+        return {"x": z, "f": obj, "g": self.g}, {
+            "jac_g": ca.Function("jac_g", [z, empty], [self.g, constraint_jac],
                                  ["x", "p"], ["g", "jac_g_x"]),
             # dense, as Ipopt's interface copies it
             "grad_f": ca.Function("grad_f", [z, empty], [obj, ca.densify(ca.mtimes(jac.T,
@@ -607,7 +610,7 @@ class NlpTranscription:
     def _sensor_blocks(self, step: ca.Function, n: int, h: float, pieces: ModelPieces
                        ) -> tuple[list[_Block], list[np.ndarray], list[int]]:
         """The per-sample residual functions of every sensor the model observes, and where
-        each block's rows go; records `self._samples`, one entry per sensor.
+        each block's rows go; records `self.samples`, one entry per sensor.
 
         A sample at a node is predicted from that node's state; a sample between
         nodes one partial RK4 step after the node before it, or, inside an interval
@@ -619,12 +622,12 @@ class NlpTranscription:
         are instance-major (every channel of one sample, then the next sample);
         `destinations[b]` gives, per row of block b, its row in the sensors' part of
         the residual vector, where sensor j's rows are offsets[j]..offsets[j+1]-1,
-        instance-major, in the order of `self._samples`; each set of times adds a piece.
+        instance-major, in the order of `self.samples`; each set of times adds a piece.
         """
         m = self.model
         xs, ts, dts = ca.SX.sym("x", m.nx), ca.SX.sym("t"), ca.SX.sym("dt")
         ps, cs = ca.SX.sym("p", len(m.parameters)), ca.SX.sym("c", len(m.captures))
-        self._samples = []
+        self.samples = []
         groups: list[tuple[np.ndarray, list[int]]] = []  # (sample times, sensor numbers)
         offsets = [0]
         for sensor in self.test.sensors:
@@ -635,8 +638,8 @@ class NlpTranscription:
             channels = m.sensor_channels[sensor.name]
             meas = np.vstack([sensor.data[c].to_numpy()[keep] for c in channels])
             sig = np.vstack([sensor.weighting_sigma(c)[keep] for c in channels])
-            number = len(self._samples)
-            self._samples.append((sensor.name, channels, tsamp, meas, sig))
+            number = len(self.samples)
+            self.samples.append((sensor.name, channels, tsamp, meas, sig))
             offsets.append(offsets[-1] + meas.size)
             same = next((members for times, members in groups
                          if np.array_equal(times, tsamp)), None)
@@ -653,13 +656,13 @@ class NlpTranscription:
             dt = tsamp - self.t[k]
             between = np.abs(dt) >= 1e-7
             kinds = (~between, between & ~long[k], between & long[k])
-            names = [self._samples[i][0] for i in members]
+            names = [self.samples[i][0] for i in members]
             observe = pieces.add_observation(names)
             for kind, samples in enumerate(np.flatnonzero(c) for c in kinds):
                 if samples.size == 0:
                     continue
-                meas = np.vstack([self._samples[i][3][:, samples] for i in members])
-                sig = np.vstack([self._samples[i][4][:, samples] for i in members])
+                meas = np.vstack([self.samples[i][3][:, samples] for i in members])
+                sig = np.vstack([self.samples[i][4][:, samples] for i in members])
                 ym, sg = ca.SX.sym("ym", meas.shape[0]), ca.SX.sym("sg", meas.shape[0])
                 nodes, states = [k[samples]], [xs]
                 if kind == 0:
@@ -680,8 +683,8 @@ class NlpTranscription:
                     observe, kind)))
                 # Row (sample j, channel c) of sensor i lies at offsets[i] + j n_i + c.
                 destinations.append(np.concatenate([
-                    offsets[i] + samples[:, None] * len(self._samples[i][1])
-                    + np.arange(len(self._samples[i][1]))[None, :]
+                    offsets[i] + samples[:, None] * len(self.samples[i][1])
+                    + np.arange(len(self.samples[i][1]))[None, :]
                     for i in members], axis=1).ravel())
         return blocks, destinations, offsets
 
@@ -759,283 +762,54 @@ class NlpTranscription:
         return _Piece(mapped(block.fn)[0], mapped(value_fn)[0], with_jacobian,
                       ca.MX(sp, nz[order.tolist()]), np.repeat(block.times, mrows))
 
-    def initial_point(self) -> np.ndarray:
-        """Shooting nodes from the kinematic track (GPS, or the altimeter's vertical track) and
-        the effects' own state guesses, parameters from the reduction, captures from the
-        track's speed."""
-        m = self.model
-        x0, guessed = self._guessed_states(self.t)
-        vel = x0[m.state_slice("velocity")].T
-        unguessed = [st for st in m.states if st.name not in guessed]
-        if unguessed:
-            # States no effect guesses from the data (a Pilot's separation): a forward
-            # simulation from the first node with the initial parameter values.
-            traj = simulate(m, self.values, x0[:, 0], self.t[0], self.t[-1],
-                            step=self.fine_step)
-            for st in unguessed:
-                rows = m.state_slice(st.name)
-                x0[rows] = np.array([np.interp(self.t, traj.t, col) for col in traj.x[:, rows].T])
-        p0 = np.array([self.values[f] for f in self.free]) / self.pscale
-        # Captured values: each capture's quantity at the guessed state nearest its time
-        # (the start airspeeds the captures themselves feed in at the GPS speed).
-        speed = np.linalg.norm(vel, axis=1)
-        times = [c.at_time if c.at_time is not None else self.values[c.time_parameter]
-                 for c in m.captures]
-        c_speed = np.interp(times, self.t, speed)
-        pvec = m.parameter_vector(self.values)
-        c0 = np.empty(len(m.captures))
-        for i, (cap, tc) in enumerate(zip(m.captures, times, strict=True)):
-            k = int(np.argmin(np.abs(self.t - tc)))
-            c0[i] = float(m.capture_function(cap.name)(x0[:, k], self.t[k], pvec, c_speed))
-        c0 = np.maximum(c0, [c.lower for c in m.captures]) / self._cscale
-        return np.concatenate([(x0 / self._xscale[:, None]).ravel(order="F"), p0, c0])
-
-    def _guessed_states(self, t: np.ndarray) -> tuple[np.ndarray, set[str]]:
-        """States at times `t` (nx x len(t)) from the kinematic track (GPS, or the altimeter's
-        vertical track) and the effects' own guesses, pinned states at their start values,
-        and the names of the states so guessed (the others are zero)."""
-        m = self.model
-        track = kinematic_track(self.test, t)
-        x0 = np.zeros((m.nx, len(t)))
-        x0[m.state_slice("position")] = track.position.T
-        x0[m.state_slice("velocity")] = track.velocity.T
-        guessed = {"position", "velocity"}
-        for name, value in self._state_guesses(self.values, t).items():
-            x0[m.state_slice(name)] = value
-            guessed.add(name)
-        for st in m.states:
-            if st.pinned:
-                x0[m.state_slice(st.name), 0] = st.initial
-        return x0, guessed
-
-    def point_from(self, fit: Fit, values: dict[str, float] | None = None) -> np.ndarray:
-        """This NLP's decision vector at `fit`, a fit of another model of the same test on
-        this grid or a coarser one within it (`_fit_states`): states, parameters and
-        captured values by name.
-
-        States the fit's model lacks come from this model's effects' guesses
-        (`Effect.state_guess`), else zero; parameters it lacks take this
-        estimator's values; `values` (SI) override both.
-        """
-        fit_x = self._fit_states(fit)
-        m = self.model
-        known = {**self.values, **{k: v for k, v in fit.parameters.items()
-                                   if k in m.parameter_names}, **(values or {})}
-        x0 = np.zeros((m.nx, len(self.t)))
-        theirs = {st.name for st in fit.model.states}
-        for name, guess in self._state_guesses(known, self.t).items():
-            if name not in theirs:
-                x0[m.state_slice(name)] = guess
-        for st in m.states:
-            if st.name in theirs:
-                x0[m.state_slice(st.name)] = fit_x[:, fit.model.state_slice(st.name)].T
-            elif st.pinned:
-                x0[m.state_slice(st.name), 0] = st.initial
-        return self.decision_vector(x0, known, fit.captures)
-
-    def decision_vector(self, states: np.ndarray, values: dict[str, float],
-                        captures: dict[str, float]) -> np.ndarray:
-        """The scaled decision vector of the node `states` (nx x nodes, SI), the free
-        parameters' `values` (SI) and the captured values by name (SI)."""
-        p0 = np.array([values[f] for f in self.free]) / self.pscale
-        c0 = np.array([captures[c.name] for c in self.model.captures]) / self._cscale
-        return np.concatenate([(states / self._xscale[:, None]).ravel(order="F"), p0, c0])
-
-    def extension_start(self, fit: Fit, values: dict[str, float] | None = None
-                        ) -> tuple[np.ndarray, tuple[float, float]]:
-        """This NLP's start at `fit`, a fit of a model this one extends, with its chi-square
-        and largest scaled gap (`evaluate`): `point_from(fit, values)`, with the states
-        the fit's model lacks guessed from the data or, where that is nearer feasible,
-        integrated through the fitted motion (`swept`).
-
-        On `drogue` flown with added mass and fitted without it, an elastic
-        riser's stretch guessed from the measured tension left shooting gaps of
-        0.45 (scaled) and chi-square 87,477; integrated, 1.3e-5 and 8,553
-        against the fit's 8,518.
-        """
-        z = self.point_from(fit, values)
-        theirs = {st.name for st in fit.model.states}
-        new = [st.name for st in self.model.states if st.name not in theirs]
-        guessed = self.evaluate(z)
-        if not new:
-            return z, guessed
-        swept = self.swept(z, new)
-        integrated = self.evaluate(swept)
-        return (swept, integrated) if integrated[1] < guessed[1] else (z, guessed)
-
-    def _fit_states(self, fit: Fit) -> np.ndarray:
-        """The fit's states at this grid's nodes (len(t) x the fit's nx): its own nodes, and
-        between them (this grid refined, `_stable_grid`) RK4 steps of the fit's model
-        from the node before (one, or as many as the fit's longest interval there has
-        sub-steps), as its shooting intervals predict."""
-        if fit.t.shape == self.t.shape and np.allclose(fit.t, self.t):
-            return fit.x
-        k = np.clip(np.searchsorted(fit.t, self.t + 1e-9, side="right") - 1, 0, len(fit.t) - 1)
-        dt = self.t - fit.t[k]
-        inside = np.isin(np.round(fit.t, 6), np.round(self.t, 6))
-        if not (np.all(inside) and abs(fit.t[-1] - self.t[-1]) < 1e-6):
-            raise ValueError("the fit was made on a shooting grid this one does not refine")
-        between = dt > 1e-9
-        x = fit.x[k].copy()
-        if np.any(between):
-            step = rk4_step(fit.model).map(int(between.sum()))
-            # Within a long interval of the fit, in its sub-steps' length at the most.
-            count = int(np.max(substeps_of(fit.t)[k[between]]))
-            xb, tb = fit.x[k[between]].T, fit.t[k[between]]
-            for j in range(count):
-                xb = step(xb, tb + j * dt[between] / count, dt[between] / count,
-                          fit.model.parameter_vector(fit.parameters),
-                          fit.model.capture_vector(fit.captures))
-            x[between] = np.asarray(xb).T
-        return x
-
-    def swept(self, z: np.ndarray, states: Sequence[str]) -> np.ndarray:
-        """`z` with the named states integrated forward along the grid from their first node,
-        every other state held at its node values: the named states' shooting gaps close.
-
-        A fit extended by an effect with states of its own starts those states
-        from the effect's guesses from the data (`Effect.state_guess`), which
-        the fitted trajectory does not carry: with a riser's stretch guessed
-        from the measured tension, the null point of the elastic riser on a
-        misspecified `drogue` fit opened gaps no solve closed in 500
-        iterations.  Integrated through the fitted motion, the states follow it.
-        """
-        m = self.model
-        nx, n = m.nx, len(self.t) - 1
-        X = z[:nx * (n + 1)].reshape(n + 1, nx).T * self._xscale[:, None]
-        _, pfull, Cp = self._unpack(z)
-        rows = np.concatenate([np.arange(nx)[m.state_slice(name)] for name in states])
-        ends = np.asarray(self._sweep(tuple(int(r) for r in rows))(
-            X[:, 0], X[:, :n], self.t[:n], np.diff(self.t), substeps_of(self.t), pfull, Cp))
-        X[rows, 1:] = ends[rows]
-        out = z.copy()
-        out[:nx * (n + 1)] = (X / self._xscale[:, None]).ravel(order="F")
-        return out
-
-    def _sweep(self, rows: tuple[int, ...]) -> ca.Function:
-        """(x0, node states, interval starts, lengths, sub-steps, p, c) -> the state at every
-        interval's end, integrated over the grid from x0 in `rows` and restarted at each
-        interval's node values in the other states (its sub-steps times
-        `settings.substeps` RK4 steps, as its gap; steps past an interval's count have
-        zero length): `swept`'s loop as one CasADi call (`mapaccum`), made once per set
-        of rows.
-
-        Called from Python interval by interval, the RK4 steps took 26 s of a 350 s
-        discovery on `drogue` (130 ms a sweep over 1,000 intervals)."""
-        cached = self._sweeps.get(rows)
-        if cached is not None:
-            return cached
-        m, sub = self.model, self.settings.substeps
-        carried, node = ca.SX.sym("carried", m.nx), ca.SX.sym("node", m.nx)
-        t, h, count = ca.SX.sym("t"), ca.SX.sym("h"), ca.SX.sym("count")
-        p, c = ca.SX.sym("p", len(m.parameters)), ca.SX.sym("c", len(m.captures))
-        kept = set(rows)
-        x = ca.vertcat(*[carried[i] if i in kept else node[i] for i in range(m.nx)])
-        steps = sub * count
-        for j in range(sub * int(np.max(substeps_of(self.t), initial=1))):
-            x = self._step(x, t + j * h / steps, ca.if_else(j < steps, h / steps, 0.0), p, c)
-        interval = ca.Function("sweep_interval", [carried, node, t, h, count, p, c], [x])
-        self._sweeps[rows] = interval.mapaccum("sweep", len(self.t) - 1)
-        return self._sweeps[rows]
-
-    def feasible_point(self, z: np.ndarray) -> tuple[np.ndarray, float] | None:
-        """A feasible point near `z` and its chi-square; None where none is found.
-
-        Every state is integrated forward from the first node with the
-        parameters at `z` (`swept`), which closes the shooting gaps.  The other
-        constraints are then met by alternating with that integration: each
-        captured value is set to what the trajectory gives at its event, and
-        the parameters take the least-norm (scaled) step that meets the
-        effects' own constraints to first order.  None where, after
-        FEASIBILITY_SWEEPS, a constraint is still violated by more than
-        STOP_CONSTRAINT_TOL: a what-if limit, a trajectory that left the
-        model's domain, or a constraint on a captured state (a Pilot's riser
-        gap at its start time), which only a change of the trajectory would meet.
-
-        Any feasible point bounds the optimum from above: an unconverged solve's
-        last iterate, made feasible this way, gives a lower bound on the
-        chi-square a richer model removes (`score_test.confirm`).
-        """
-        all_states = [st.name for st in self.model.states]
-        n_gaps = self.model.nx * (len(self.t) - 1)
-        n_states, n_free, ncap = self._nz
-        captures = slice(n_states + n_free, n_states + n_free + ncap)
-        effect_rows = slice(n_gaps + ncap, n_gaps + ncap + len(self.model.constraints))
-        params = self._param_index
-        point = self.swept(z, all_states)
-        for _ in range(FEASIBILITY_SWEEPS):
-            g, A = self._points.constraints(point)
-            excess = g - np.clip(g, self._lbg, self._ubg)
-            if not np.all(np.isfinite(excess)) \
-                    or np.max(np.abs(excess[n_gaps:]), initial=0.0) <= STOP_CONSTRAINT_TOL:
-                break
-            point = point.copy()
-            # Capture rows read C_i - (the trajectory's value at the event) / cscale.
-            point[captures] -= excess[n_gaps:n_gaps + ncap]
-            if effect_rows.stop > effect_rows.start:
-                rows = A[effect_rows][:, params].toarray()
-                point[params] -= np.linalg.lstsq(rows, excess[effect_rows], rcond=None)[0]
-            point[params] = np.clip(point[params], self._lbz[params], self._ubz[params])
-            point = self.swept(point, all_states)
-        chi2, violation = self.evaluate(point)
-        if not (np.isfinite(chi2) and violation <= STOP_CONSTRAINT_TOL):
-            return None
-        return point, chi2
-
-    def _state_guesses(self, values: dict[str, float], t: np.ndarray
-                       ) -> dict[str, np.ndarray]:
-        """The effects' own guesses of their states at times `t` (`Effect.state_guess`)."""
-        out: dict[str, np.ndarray] = {}
-        for effect in self.model.effects:
-            out.update(effect.state_guess(self.test, t, values))
-        return out
-
-    # ------------------------------------------------------------------ solve
     def size_text(self) -> str:
         """One line describing the NLP's size."""
-        nX, nP, nC = self._nz
+        nX, nP, nC = self.sizes
         return (f"{nX + nP + nC} variables ({nX} shooting states on {len(self.t)} nodes, "
-                f"{nP} parameters, {nC} captured speeds), {self._g.numel()} constraints, "
-                f"{sum(len(s_[2]) * len(s_[1]) for s_ in self._samples)} residuals")
+                f"{nP} parameters, {nC} captured speeds), {self.g.numel()} constraints, "
+                f"{sum(len(s_[2]) * len(s_[1]) for s_ in self.samples)} residuals")
 
-    def _violations(self, g: np.ndarray) -> np.ndarray:
+    def violations(self, g: np.ndarray) -> np.ndarray:
         """How far each constraint value in `g` lies outside its bounds (scaled)."""
-        return bound_violations(g, self._lbg, self._ubg)
+        return bound_violations(g, self.lbg, self.ubg)
 
-    def _value_violation(self, z: np.ndarray) -> float:
+    def value_violation(self, z: np.ndarray) -> float:
         """Largest scaled constraint violation at `z`, from the constraint values alone (the
         same figure as `Linearisation.violation` there; NaN where not finite)."""
-        g = self._points.constraint_value(z)
+        g = self.points.constraint_value(z)
         if not np.all(np.isfinite(g)):
             return np.nan
-        return float(np.max(self._violations(g), initial=0.0))
+        return float(np.max(self.violations(g), initial=0.0))
 
     def with_value(self, z: np.ndarray, name: str, value: float) -> np.ndarray:
         """A copy of the decision vector `z` with the free parameter `name` at `value` (SI)."""
         i = self.free.index(name)
         out = z.copy()
-        out[self._param_index[i]] = value / self.pscale[i]
+        out[self.param_index[i]] = value / self.pscale[i]
         return out
 
     def free_values(self, z: np.ndarray) -> dict[str, float]:
         """The free parameters at the decision vector `z` (SI)."""
-        values = z[self._param_index] * self.pscale
+        values = z[self.param_index] * self.pscale
         return dict(zip(self.free, map(float, values), strict=True))
 
     @property
-    def _param_index(self) -> np.ndarray:
-        nX, nP, _ = self._nz
+    def param_index(self) -> np.ndarray:
+        """Where the free parameters sit in the decision vector."""
+        nX, nP, _ = self.sizes
         return np.arange(nX, nX + nP)
 
-    def _fit(self, z: np.ndarray, stats: SolverStats) -> Fit:
+    def fit_at(self, z: np.ndarray, stats: SolverStats) -> Fit:
+        """The Fit at the decision vector `z`: trajectory, parameters, captured values and
+        every sensor's residuals, with the solve's `stats`."""
         m = self.model
-        Xp, pfull, Cp = (np.asarray(a) for a in self._unpack(z))
+        Xp, pfull, Cp = (np.asarray(a) for a in self.unpack(z))
         params = {p.name: float(v) for p, v in zip(m.parameters, pfull.ravel(), strict=True)}
         caps = {c.name: float(v) for c, v in zip(m.captures, Cp.ravel(), strict=True)}
         blocks = self._residuals(z)
         blocks = blocks if isinstance(blocks, tuple | list) else [blocks]
         residuals = []
-        for (sensor, channels, tsamp, meas, sig), r in zip(self._samples, blocks, strict=True):
+        for (sensor, channels, tsamp, meas, sig), r in zip(self.samples, blocks, strict=True):
             # Residual blocks are instance-major: (meas - model) / sigma per sample.
             r = np.asarray(r).reshape(len(tsamp), len(channels)).T
             y = meas - r * sig

@@ -4,7 +4,7 @@ instrumentation, and which single sensor change buys the most.
 The planned test is simulated without sensor noise at its nominal parameters
 theta_0, and the estimator of the test as it would be flown is built on those
 data and linearised at theta_0 (its trajectory, its captured speeds).  The
-covariance it gives is that of `Linearising.covariance`, the parameter block of
+covariance it gives is that of `Linearisations.covariance`, the parameter block of
 the Gauss-Newton KKT system; with noise-free data it is the inverse of the
 Fisher information
 

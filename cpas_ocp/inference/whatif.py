@@ -243,7 +243,7 @@ def what_if(est: Estimator, fit: Fit, cov: Covariance | None,
     for con in constraints:
         if con.quantity is not None:
             v = float(np.max(peaks[con.quantity]))
-            rows, qscale = solver.limit_rows[con.quantity]
+            rows, qscale = solver.transcription.limit_rows[con.quantity]
             constrained.sensitivities[con.name] = float(
                 -2.0 * np.sum(constrained.multipliers[rows]) / qscale)
             if v >= con.value - PEAK_ACTIVE_TOL * abs(con.value):

@@ -31,9 +31,9 @@ def test_compiled_and_interpreted_estimators_agree(drogue_folder, tmp_path,
 
     z = vm.initial_point()
     z = z * (1.0 + 1e-3 * np.random.default_rng(7).standard_normal(z.size))  # off the guess
-    for name in ("_residual_jacobian", "_constraints", "_residual_value",
-                 "_constraint_value"):
-        a, b = getattr(vm, name)(z), getattr(native, name)(z)
+    for name in ("residual_jacobian", "constraints", "residual_value", "constraint_value"):
+        a = getattr(vm.transcription.functions, name)(z)
+        b = getattr(native.transcription.functions, name)(z)
         a, b = (out if isinstance(out, tuple) else (out,) for out in (a, b))
         for x, y in zip(a, b, strict=True):
             assert x.sparsity() == y.sparsity()
@@ -41,14 +41,15 @@ def test_compiled_and_interpreted_estimators_agree(drogue_folder, tmp_path,
     # The Jacobian itself, against central differences of the residuals.
     v = np.random.default_rng(8).standard_normal(z.size)
     eps = 1e-6
-    r_plus = np.asarray(native._residual_jacobian(z + eps * v)[0]).ravel()
-    r_minus = np.asarray(native._residual_jacobian(z - eps * v)[0]).ravel()
-    jv = np.asarray(ca.mtimes(native._residual_jacobian(z)[1], ca.DM(v))).ravel()
+    residual_jacobian = native.transcription.functions.residual_jacobian
+    r_plus = np.asarray(residual_jacobian(z + eps * v)[0]).ravel()
+    r_minus = np.asarray(residual_jacobian(z - eps * v)[0]).ravel()
+    jv = np.asarray(ca.mtimes(residual_jacobian(z)[1], ca.DM(v))).ravel()
     np.testing.assert_allclose((r_plus - r_minus) / (2 * eps), jv, rtol=1e-4,
                                atol=1e-6 * np.max(np.abs(jv)))
     # The objective gradient handed to Ipopt is dense J'r.
     grad = native.ipopt.get_function("nlp_grad_f")(z, [])[1]
-    r, J = native._residual_jacobian(z)
+    r, J = residual_jacobian(z)
     assert grad.is_dense()
     np.testing.assert_allclose(np.asarray(grad).ravel(), np.asarray(ca.mtimes(J.T, r)).ravel(),
                                rtol=1e-12, atol=1e-9)
@@ -70,10 +71,10 @@ def test_a_model_runs_in_the_vm_until_its_native_code_is_ready(drogue_folder, tm
     vm = Estimator(test, settings=Settings(compile=False))
     est = Estimator(test, settings=Settings(compile=True))
     z = vm.initial_point()
-    points, reference = est._points, vm._points
+    points, reference = est.transcription.points, vm.transcription.points
     np.testing.assert_array_equal(points.residual_value(z), reference.residual_value(z))
-    assert est._native is not None and points.switched_at is None  # still compiling
-    est._native[0].wait()
+    assert est.transcription.compiling is not None and points.switched_at is None  # still compiling
+    est.transcription.compiling[0].wait()
     z2 = z * (1.0 + 1e-3 * np.random.default_rng(7).standard_normal(z.size))
     for name in ("residual_jacobian", "constraints"):
         if name == "constraints":  # a short run stays in the VM; a longer one switches

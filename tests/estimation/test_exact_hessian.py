@@ -30,13 +30,15 @@ def test_hessian_product_matches_finite_differences_of_the_lagrangian_gradient(
         pilot_estimate) -> None:
     est, fit = pilot_estimate
     lam = ca.MX.sym("lam", fit.multipliers.size)
-    lagrangian = est._obj + ca.dot(lam, est._g)
-    gradient = ca.Function("gradient", [est._z, lam], [ca.gradient(lagrangian, est._z)])
+    nlp = est.transcription
+    lagrangian = nlp.objective + ca.dot(lam, nlp.g)
+    gradient = ca.Function("gradient", [nlp.z, lam], [ca.gradient(lagrangian, nlp.z)])
     v = np.random.default_rng(7).standard_normal(fit.z.size)
     eps = 1e-6
     fd = (np.asarray(gradient(fit.z + eps * v, fit.multipliers))
           - np.asarray(gradient(fit.z - eps * v, fit.multipliers))).ravel() / (2 * eps)
-    hv = np.asarray(est._lagrangian_hessian_product()(fit.z, fit.multipliers, v)).ravel()
+    product = est.linearisations.lagrangian_hessian_product()
+    hv = np.asarray(product(fit.z, fit.multipliers, v)).ravel()
     assert np.max(np.abs(hv - fd)) < 1e-5 * np.max(np.abs(hv))
 
 

@@ -1,5 +1,5 @@
 """Gauss-Newton descent through feasible points (`estimation.feasible_descent`) and the stall
-rule that hands a creeping Ipopt run to it (`estimation._Monitor`)."""
+rule that hands a creeping Ipopt run to it (`estimation.IterationMonitor`)."""
 
 from __future__ import annotations
 
@@ -9,9 +9,9 @@ import pytest
 import scipy.sparse as sp
 from scipy.optimize import minimize_scalar
 
-from cpas_ocp.estimation.estimator import STALL_ITERATIONS, STALL_SHARE, _Monitor
 from cpas_ocp.estimation.feasible_descent import DescentProblem, bounded_step, descend
 from cpas_ocp.estimation.kkt_system import linearise
+from cpas_ocp.estimation.solve import STALL_ITERATIONS, STALL_SHARE, IterationMonitor
 from cpas_ocp.estimation.structured_secant import StructuredSecant
 
 
@@ -82,13 +82,13 @@ def test_a_descent_that_cannot_fall_says_so() -> None:
     np.testing.assert_array_equal(end.z, z0)
 
 
-def _iterate(monitor: _Monitor, chi2: float, violation: float = 0.0) -> int:
+def _iterate(monitor: IterationMonitor, chi2: float, violation: float = 0.0) -> int:
     return int(monitor.eval([ca.DM(0.0), ca.DM(chi2 / 2.0), ca.DM(violation), ca.DM(0.0),
                              ca.DM(0.0), ca.DM(0, 1)])[0])
 
 
 def test_a_run_that_stops_falling_stalls_and_a_falling_one_does_not() -> None:
-    monitor = _Monitor(1, 1, np.abs, lambda z: None, None, stall=STALL_ITERATIONS)
+    monitor = IterationMonitor(1, 1, np.abs, lambda z: None, None, stall=STALL_ITERATIONS)
     monitor.reset(False, (np.full(1, -np.inf), np.full(1, np.inf)))
     chi2 = 1000.0
     for _ in range(3 * STALL_ITERATIONS):  # falls by 2 per iteration: progress
@@ -122,7 +122,7 @@ def test_a_solve_never_inherits_an_earlier_solves_warm_start(problem_folder) -> 
 
     est = Estimator(load_test(problem_folder("fbcp", 1)), settings=Settings(window_margin=None))
     cold = est.solve()
-    est._make_solver(barrier=1e-9)  # what a restart leaves behind
+    est.solver.make_solver(barrier=1e-9)  # what a restart leaves behind
     again = est.solve()
     assert again.solver.iterations == cold.solver.iterations
     assert again.chi_square == cold.chi_square

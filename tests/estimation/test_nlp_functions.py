@@ -11,9 +11,10 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from cpas_ocp.estimation.estimator import STATISTICALLY_CONVERGED, Estimator, Settings, _Monitor
+from cpas_ocp.estimation.estimator import STATISTICALLY_CONVERGED, Estimator, Settings
 from cpas_ocp.estimation.nlp_functions import MarquardtDamping
 from cpas_ocp.estimation.simulate import simulate_problem
+from cpas_ocp.estimation.solve import IterationMonitor
 from cpas_ocp.io.flight_test import load_test
 from cpas_ocp.io.model_spec import baseline_spec
 from cpas_ocp.io.problems import load_problem
@@ -42,7 +43,7 @@ def test_cached_functions_equal_the_expressions(estimators) -> None:
     old, new = estimators
     z = new.initial_point()
     z = z * (1.0 + 1e-3 * np.random.default_rng(3).standard_normal(z.size))  # off the guess
-    lam = np.random.default_rng(4).standard_normal(new._g.numel())
+    lam = np.random.default_rng(4).standard_normal(new.transcription.g.numel())
     for name in FUNCTIONS:
         expected, got = _outputs(old, name, z, lam), _outputs(new, name, z, lam)
         for a, b in zip(expected, got, strict=True):
@@ -58,33 +59,33 @@ def test_levenberg_term_is_on_the_parameters_diagonal_only(estimators) -> None:
     columns and nothing anywhere else."""
     _, est = estimators
     z = est.initial_point()
-    lam = np.zeros(est._g.numel())
+    lam = np.zeros(est.transcription.g.numel())
     plain = ca.DM(est.ipopt.get_function("nlp_hess_l")(z, np.zeros(0), 0.7, lam))
     est.settings.levenberg = 2.0
     try:
-        est._make_solver()
+        est.solver.make_solver()
         damped = ca.DM(est.ipopt.get_function("nlp_hess_l")(z, np.zeros(0), 0.7, lam))
     finally:
         est.settings.levenberg = None
-        est._make_solver()
+        est.solver.make_solver()
     difference = damped - plain
     rows, cols = (np.asarray(i) for i in difference.sparsity().get_triplet())
     values = np.asarray(difference.nonzeros())
     changed = np.abs(values) > 1e-9 * np.abs(np.asarray(plain.nonzeros())).max()
     assert np.array_equal(rows[changed], cols[changed])
-    assert set(rows[changed]) == set(est._param_index)
+    assert set(rows[changed]) == set(est.transcription.param_index)
     np.testing.assert_allclose(values[changed], 0.7 * 2.0)
 
 
 def test_each_point_is_evaluated_once(estimators) -> None:
     _, est = estimators
     z = est.initial_point() + 1e-4
-    before = dict(est._points.evaluations)
-    lam = np.zeros(est._g.numel())
+    before = dict(est.transcription.points.evaluations)
+    lam = np.zeros(est.transcription.g.numel())
     for name in FUNCTIONS:
         _outputs(est, name, z, lam)
     est.evaluate(z)  # the statistical test's linearisation of the same point
-    made = {k: est._points.evaluations[k] - before[k] for k in before}
+    made = {k: est.transcription.points.evaluations[k] - before[k] for k in before}
     # Values come from the Jacobian evaluation once one exists; nlp_f and nlp_g ran first.
     assert made == {"r": 1, "rJ": 1, "g": 1, "gA": 1}
 
@@ -98,9 +99,9 @@ def test_windows_leave_out_only_zeros_and_keep_their_promise(drogue_folder) -> N
     whole = Estimator(test, settings=Settings(window_margin=None))
     est = Estimator(test, settings=Settings(nodes=whole.settings.nodes))
     z = whole.initial_point()
-    est._fit_windows(z)
-    lam = np.random.default_rng(4).standard_normal(est._g.numel())
-    kept = est._windows.keep
+    est.solver.fit_windows(z)
+    lam = np.random.default_rng(4).standard_normal(est.transcription.g.numel())
+    kept = est.transcription.windows.keep
     assert 0.1 < kept[0].mean() < 0.5 and 0.1 < kept[1].mean() < 0.5  # most are left out
     for name in ("nlp_jac_g", "nlp_hess_l"):
         expected, got = (_outputs(e, name, z, lam)[-1].sparse() for e in (whole, est))
@@ -114,7 +115,7 @@ def test_windows_leave_out_only_zeros_and_keep_their_promise(drogue_folder) -> N
     for name in starts:
         z0 = est.with_value(z0, name, est.free_values(z0)[name] - 0.8)
     fit, reference = est.solve(start=z0), whole.solve(start=z0)
-    assert est._windows.widenings >= 1
+    assert est.transcription.windows.widenings >= 1
     assert fit.chi_square == pytest.approx(reference.chi_square, abs=0.05)
     for name in starts:
         assert fit.parameters[name] == pytest.approx(reference.parameters[name], abs=2e-3)
@@ -123,7 +124,7 @@ def test_windows_leave_out_only_zeros_and_keep_their_promise(drogue_folder) -> N
 def test_windows_are_widened_only_where_leaving_them_persists() -> None:
     """A watchdog's trial steps (at most 3) may leave the windows and come back: only a
     fourth successive iterate outside them stops the run, at that iterate."""
-    monitor = _Monitor(2, 1, np.abs, lambda z: None, 0.01)
+    monitor = IterationMonitor(2, 1, np.abs, lambda z: None, 0.01)
     monitor.reset(False, (np.full(2, -np.inf), np.full(2, np.inf)))
     for k, outside in enumerate((True, True, True, False, True, True, True)):
         monitor.window_check(np.full(2, float(k)), outside)
@@ -138,7 +139,7 @@ def test_an_unconverged_run_keeps_its_lowest_nearly_feasible_iterate() -> None:
     """The witness for an unconverged refit's likelihood-ratio bound: the iterate with
     the lowest chi-square among those whose constraints hold within
     POLISH_CONSTRAINT_TOL, kept through a widening restart, forgotten by a new solve."""
-    monitor = _Monitor(1, 1, np.abs, lambda z: None, None)  # one constraint, held at 0
+    monitor = IterationMonitor(1, 1, np.abs, lambda z: None, None)  # one constraint, held at 0
 
     def iterate(z: float, chi2: float, gap: float) -> None:
         monitor.eval([ca.DM(z), ca.DM(chi2 / 2.0), ca.DM(gap), ca.DM(0.0), ca.DM(0.0),
@@ -198,14 +199,14 @@ def test_damping_rises_on_failed_steps_and_falls_on_good_ones() -> None:
 def test_damping_adds_to_the_hessians_diagonal(estimators) -> None:
     _, est = estimators
     z = est.initial_point()
-    lam = np.zeros(est._g.numel())
+    lam = np.zeros(est.transcription.g.numel())
     plain = _outputs(est, "nlp_hess_l", z, lam)[0].sparse()
-    est._damping.mu = 0.5
+    est.transcription.damping.mu = 0.5
     try:
         damped = _outputs(est, "nlp_hess_l", z, lam)[0].sparse()
     finally:
-        est._damping.reset()
-    _, J = est._points.residual_jacobian(z)
+        est.transcription.damping.reset()
+    _, J = est.transcription.points.residual_jacobian(z)
     column_squares = np.asarray(J.multiply(J).sum(axis=0)).ravel()
     added = (damped - plain).tocsr()
     np.testing.assert_allclose(added.diagonal(), 0.7 * 0.5 * column_squares,
@@ -234,7 +235,7 @@ def test_a_run_whose_chi_square_explodes_stops_as_diverged() -> None:
     """A watchdog's trial step may leave the physics (chi-square 1e40): the run ends there,
     measured against its first iterate, and a new solve starts the count afresh."""
     from cpas_ocp.estimation.estimator import DIVERGED_FACTOR
-    monitor = _Monitor(1, 1, np.abs, lambda z: None, None)
+    monitor = IterationMonitor(1, 1, np.abs, lambda z: None, None)
 
     def iterate(chi2: float) -> int:
         return int(monitor.eval([ca.DM(0.0), ca.DM(chi2 / 2.0), ca.DM(0.0), ca.DM(0.0),

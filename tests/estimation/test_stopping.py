@@ -51,7 +51,7 @@ def test_the_stop_counts_what_closing_the_gaps_costs(problem_folder) -> None:
     est = Estimator(test, settings=Settings())
     fit = est.solve()
     assert fit.solver.status == STATISTICALLY_CONVERGED
-    step = gauss_newton(est._linearise(fit.z))
+    step = gauss_newton(est.linearisations.linearise(fit.z))
     assert abs(step.restoration) <= est.settings.chi2_step_tol
     # Both are at the optimum to within the stop's tolerance (0.01) and the solver's own
     # (objective changes below 1e-9 relative over 5 iterations, ~1e-5 here).

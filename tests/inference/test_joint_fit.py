@@ -92,7 +92,7 @@ def test_joint_jacobians_match_differences_of_the_joint_functions(folders):
     assert g[-1] == pytest.approx(z[c0] - z[c1] * nlp.scale(1, "CdS[fbcp1,stage1]")
                                   / nlp.scale(0, "CdS[fbcp1,stage1]"))
     # every test's shooting gaps first, as the linearisation's elimination needs them
-    assert nlp.chain_rows == sum(e._nz[0] - e.model.nx for e in ests)
+    assert nlp.chain_rows == sum(e.transcription.sizes[0] - e.model.nx for e in ests)
 
 
 def test_shared_keys_replace_canopies_by_type_and_add_the_vehicle(folders):

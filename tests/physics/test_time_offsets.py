@@ -63,9 +63,10 @@ def test_chained_residuals_of_nested_offsets_match_the_model(drogue_folder, lag)
     for name, value in (("lag[riser_drogue1]", lag), ("friction_loss[drogue1]", 0.1)):
         z = est.with_value(z, name, value)
     z = z * (1.0 + 1e-3 * np.random.default_rng(3).standard_normal(z.size))
-    r, jac = est._points.residual_jacobian(z)
-    r_model = float(ca.Function("r", [est._z], [ca.sqrt(2 * est._obj)])(z))
-    gradient = np.asarray(ca.Function("g", [est._z], [ca.gradient(est._obj, est._z)])(z))
+    nlp = est.transcription
+    r, jac = nlp.points.residual_jacobian(z)
+    r_model = float(ca.Function("r", [nlp.z], [ca.sqrt(2 * nlp.objective)])(z))
+    gradient = np.asarray(ca.Function("g", [nlp.z], [ca.gradient(nlp.objective, nlp.z)])(z))
     assert np.linalg.norm(r) == pytest.approx(r_model, rel=1e-12)
     np.testing.assert_allclose(jac.T @ r, gradient.ravel(), rtol=0,
                                atol=1e-12 * np.abs(gradient).max())

@@ -90,7 +90,7 @@ def test_statistical_stop_is_no_worse_than_ipopt_convergence(drogue_fit) -> None
     before Ipopt's own tests would, at a chi-square no higher than where Ipopt ends.
 
     On seed 1 the statistical stop comes within a few iterations (the test's own
-    Gauss-Newton steps finish the run, `Estimator._finishing_steps`).  Ipopt alone
+    Gauss-Newton steps finish the run, `Solver._finishing_steps`).  Ipopt alone
     creeps after the optimum, held off it by its bounds' barrier, for many more; its
     last iterate, converged or not at its iteration limit, is the reference.
     """

@@ -165,7 +165,7 @@ def test_an_effects_states_integrated_through_the_fit_close_their_gaps(hidden) -
     swept = est.swept(z, names)
     nx, n = est.model.nx, len(est.t) - 1
     rows = np.concatenate([np.arange(nx)[est.model.state_slice(s)] for s in names])
-    gaps = est._points.constraint_value(swept)[:nx * n].reshape(n, nx)[:, rows]
+    gaps = est.transcription.points.constraint_value(swept)[:nx * n].reshape(n, nx)[:, rows]
     assert np.max(np.abs(gaps)) < 1e-9
     assert est.evaluate(swept)[1] < 0.1 * est.evaluate(z)[1]
 
