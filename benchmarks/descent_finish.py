@@ -1,10 +1,11 @@
 """The finish of a stalled run: Gauss-Newton steps halved (the earlier path) against steps
-that learn the curvature Gauss-Newton leaves out, in the same process.
+that learn the curvature Gauss-Newton leaves out, in one script.
 
-Three configurations of `Settings`:
+Three configurations:
 
-* ``before``: `descent_curvature=False, descent_steps=15`: each failed trial
-  halved, at most 15 steps;
+* ``before``: `Settings(descent_curvature=False, descent_steps=15)` at
+  `revisions.SWITCHES`, the last revision with that switch: each failed
+  trial halved, at most 15 steps;
 * ``learnt, 15``: a failed trial's parabola along the feasible curve sets
   the next trial and can end the descent, and the residuals' curvature is
   learnt from the steps (`structured_secant`), at most 15 steps;
@@ -23,7 +24,9 @@ Cases, each solved under each:
 
 Printed per case and configuration: converged or the failure, iterations,
 wall time and chi-square; then per configuration how many converged, and
-the wall-time ratios to `before` over the cases every path finished.
+the wall-time ratios to `before` over the cases every path finished.  Each
+case and configuration runs in a process of its own (`revisions.call_at`),
+its models compiled before they run into a cache all share.
 
     python benchmarks/descent_finish.py [FOLDER ...] [--still] [--gusts 10] [--seed 1]
 """
@@ -36,6 +39,7 @@ from pathlib import Path
 
 import harness
 import numpy as np
+from revisions import SWITCHES, call_at, code_at
 
 from cpas_ocp.errors import SolverFailure
 from cpas_ocp.estimation.estimator import Estimator, Fit, Settings
@@ -49,9 +53,10 @@ from cpas_ocp.reports.flight_report import HELD_PROFILE_FACTORS as HELD_FACTORS
 from cpas_ocp.reports.flight_report import HELD_PROFILE_MAX_ITER as HELD_MAX_ITER
 
 HELD = "expopen[main,stage2]"
-PATHS = {"before": {"descent_curvature": False, "descent_steps": 15},
-         "learnt, 15": {"descent_curvature": True, "descent_steps": 15},
-         "after": {"descent_curvature": True, "descent_steps": 30}}
+# Per path: the revision (None: this tree) and its Settings.
+PATHS = {"before": (SWITCHES, {"descent_curvature": False, "descent_steps": 15}),
+         "learnt, 15": (None, {"descent_steps": 15}),
+         "after": (None, {"descent_steps": 30})}
 
 
 Outcome = tuple[bool, int, float, float]  # converged, iterations, wall s, chi-square
@@ -69,47 +74,61 @@ def timed(solve: Callable[[], Fit]) -> tuple[Outcome, Fit | None]:
         return (False, exc.iterations, timer["solve"], float("nan")), None
 
 
-def held_cases(folder: str, still: bool) -> dict[str, dict[str, Outcome]]:
-    """Under each path: the card model's fit and its main's held-expopen profile (as
-    `flight` makes it: walking out from the fit, each point from its neighbour)."""
+def held_case(folder: str, still: bool, options: dict) -> tuple[Outcome, Outcome]:
+    """With `Settings(**options)`: the card model's fit and its main's held-expopen profile
+    (as `flight` makes it: walking out from the fit, each point from its neighbour)."""
     test = load_test(folder)
     spec = spec_of_test(test)
     spec = without_wind(spec, test) if still else spec
+    fitted, fit = timed(Estimator(test, spec, Settings(**options)).solve)
+    if fit is None:
+        return fitted, (False, 0, 0.0, float("nan"))
+    timer = harness.Timer()
+    with timer("profile"):
+        prof = held_profile(fit, spec, HELD, fit.parameters[HELD] * np.array(HELD_FACTORS),
+                            max_iter=HELD_MAX_ITER)
+    converged = len(HELD_FACTORS) - len(prof.failures)
+    return fitted, (not prof.failures, converged, timer["profile"],
+                    float(prof.delta_chi_square.min()))
+
+
+def held_cases(folder: str, still: bool, cache: Path) -> dict[str, dict[str, Outcome]]:
+    """`held_case` under each path."""
     name = str(folder)
     out: dict[str, dict[str, Outcome]] = {f"{name} fit": {}, f"{name} held profile": {}}
-    for label, path in PATHS.items():
-        est = Estimator(test, spec, Settings(**path))
-        out[f"{name} fit"][label], fit = timed(est.solve)
-        if fit is None:
-            out[f"{name} held profile"][label] = (False, 0, 0.0, float("nan"))
-            continue
-        timer = harness.Timer()
-        with timer("profile"):
-            prof = held_profile(fit, spec, HELD, fit.parameters[HELD] * np.array(HELD_FACTORS),
-                                max_iter=HELD_MAX_ITER)
-        converged = len(HELD_FACTORS) - len(prof.failures)
-        out[f"{name} held profile"][label] = (not prof.failures, converged, timer["profile"],
-                                               float(prof.delta_chi_square.min()))
+    for label, (revision, options) in PATHS.items():
+        with code_at(revision) as code:
+            fitted, profile = call_at(code, "descent_finish", "held_case", str(folder), still,
+                                      options, cache=cache)
+        out[f"{name} fit"][label] = tuple(fitted)
+        out[f"{name} held profile"][label] = tuple(profile)
     return out
 
 
-def gust_cases(seeds: int, first: int = 1) -> dict[str, dict[str, Outcome]]:
-    """Each rocket_gusts seed's (`seeds` of them from `first`) fit with the wind process,
-    under each path."""
+def gust_case(folder: str, options: dict) -> Outcome:
+    """A rocket_gusts test's fit with the wind process it was drawn from, with
+    `Settings(**options)`."""
     problem = load_problem("rocket_gusts")
     truth_block = problem.simulation["model"]
     block = {**problem.manifest["model"],
              "effects": [truth_block["effects"][0], *problem.manifest["model"]["effects"]]}
     spec = spec_from_block(block, "descent_finish benchmark", Path())
+    return timed(Estimator(load_test(folder), spec, Settings(**options)).solve)[0]
+
+
+def gust_cases(seeds: int, first: int, cache: Path) -> dict[str, dict[str, Outcome]]:
+    """Each rocket_gusts seed's (`seeds` of them from `first`) fit with the wind process,
+    under each path."""
+    problem = load_problem("rocket_gusts")
     out: dict[str, dict[str, Outcome]] = {}
     with tempfile.TemporaryDirectory() as tmp:
         for seed in range(first, first + seeds):
             folder = Path(tmp) / f"seed{seed}"
             simulate_problem(problem, folder, seed)
-            test = load_test(folder)
-            for label, path in PATHS.items():
-                est = Estimator(test, spec, Settings(**path))
-                out.setdefault(f"rocket_gusts seed {seed}", {})[label] = timed(est.solve)[0]
+            for label, (revision, options) in PATHS.items():
+                with code_at(revision) as code:
+                    out.setdefault(f"rocket_gusts seed {seed}", {})[label] = tuple(call_at(
+                        code, "descent_finish", "gust_case", str(folder), options, cache=cache))
             print_case(f"rocket_gusts seed {seed}", out[f"rocket_gusts seed {seed}"])
     return out
 
@@ -129,13 +148,14 @@ def main() -> int:
     parser.add_argument("--gusts", type=int, default=0)
     args = parser.parse_args()
     cases: dict[str, dict[str, Outcome]] = {}
-    for folder in args.folders:
-        held = held_cases(folder, args.still)
-        for name, outcomes in held.items():
-            print_case(name, outcomes)
-        cases.update(held)
-    if args.gusts:
-        cases.update(gust_cases(args.gusts, args.seed))
+    with tempfile.TemporaryDirectory() as cache:
+        for folder in args.folders:
+            held = held_cases(folder, args.still, Path(cache))
+            for name, outcomes in held.items():
+                print_case(name, outcomes)
+            cases.update(held)
+        if args.gusts:
+            cases.update(gust_cases(args.gusts, args.seed, Path(cache)))
     both = [c for c in cases.values() if all(o[0] for o in c.values())]
     converged, ratios = {}, {}
     for label in PATHS:

@@ -1,5 +1,5 @@
 """Benchmark: iterations, wall time and chi-square of a fit from the reduction, old path
-against new, in the same process.
+against new, in one script.
 
 Each built-in problem named is simulated (seed 1 unless `--seed`) and
 reconstructed from the offline reduction twice per configuration, on the
@@ -7,14 +7,16 @@ same Estimator settings but for the solver path:
 
 * ``before``: Ipopt's default watchdog (a full step tried on trust after 10
   shortened line searches) and the statistical stop only at an iterate that
-  is itself feasible (`Settings(watchdog_trigger=10, polish=False)`);
+  is itself feasible (`Settings(watchdog_trigger=10, polish=False)` at
+  `revisions.SWITCHES`, the last revision with that switch);
 * ``after``: the defaults (watchdog after 3, and the statistical stop may end
   a nearly feasible run with one Gauss-Newton step of its own).
 
-Each NLP is built once per configuration before timing (compiled functions
-cached); the solve alone is timed.  Printed per problem: iterations, solve
-wall time, chi-square of each, and the ratios after/before.  Chi-square must
-agree to the stopping rule's 0.01 (plus the second-order rest of a step).
+Each fit runs in a process of its own (`revisions.call_at`), its model
+compiled before it runs into a cache both share; the solve alone is timed.
+Printed per problem: iterations, solve wall time, chi-square of each, and the
+ratios after/before.  Chi-square must agree to the stopping rule's 0.01 (plus
+the second-order rest of a step).
 
     python benchmarks/engine_convergence.py [--problems drogue drogue_full ...] [--seed N]
 """
@@ -25,6 +27,7 @@ import tempfile
 from pathlib import Path
 
 import harness
+from revisions import SWITCHES, call_at, code_at
 
 from cpas_ocp.errors import SolverFailure
 from cpas_ocp.estimation.estimator import Estimator, Settings
@@ -32,12 +35,14 @@ from cpas_ocp.estimation.simulate import simulate_problem
 from cpas_ocp.io.flight_test import load_test
 from cpas_ocp.io.problems import load_problem
 
-PATHS = {"before": Settings(watchdog_trigger=10, polish=False), "after": Settings()}
+# Per path: the revision (None: this tree) and its Settings.
+PATHS = {"before": (SWITCHES, {"watchdog_trigger": 10, "polish": False}), "after": (None, {})}
 
 
-def solve(folder: Path, settings: Settings) -> tuple[int, float, float, str]:
-    """(iterations, solve wall s, chi-square, status) of one fit from the reduction."""
-    est = Estimator(load_test(folder), settings=settings)
+def solve(folder: str, options: dict) -> tuple[int, float, float, str]:
+    """(iterations, solve wall s, chi-square, status) of one fit from the reduction, with
+    `Settings(**options)`."""
+    est = Estimator(load_test(folder), settings=Settings(**options))
     try:
         fit = est.solve()
     except SolverFailure as exc:
@@ -56,8 +61,10 @@ def main() -> None:
             folder = Path(tmp) / name
             simulate_problem(load_problem(name), folder, args.seed)
             runs = {}
-            for label, settings in PATHS.items():
-                runs[label] = solve(folder, settings)
+            for label, (revision, options) in PATHS.items():
+                with code_at(revision) as code:
+                    runs[label] = tuple(call_at(code, "engine_convergence", "solve",
+                                                str(folder), options, cache=Path(tmp) / "cache"))
                 it, wall, chi2, status = runs[label]
                 print(f"{name:12s} {label:7s} {it:5d} {wall:8.1f} {chi2:12.3f}  {status}",
                       flush=True)

@@ -1,5 +1,5 @@
 """Benchmark: Ipopt's functions as CasADi expressions against one evaluation per point, and
-Gauss-Newton against Marquardt-damped Gauss-Newton, in the same process.
+Gauss-Newton against Marquardt-damped Gauss-Newton, in one script.
 
 Per problem (simulated with seed 1 unless `--seed`) the fit from the offline
 reduction is solved three ways:
@@ -9,6 +9,7 @@ reduction is solved three ways:
   the residuals or the Jacobians it needs (`Settings(point_cache=False)`);
 * ``cached``: the same iterations, every model evaluation made once per
   point in native code and shared (`Settings(damping=False)`);
+  both at `revisions.SWITCHES`, the last revision with the `damping` switch;
 * ``damped``: the cached functions with Levenberg-Marquardt damping where
   Gauss-Newton steps fail to deliver;
 * ``windowed``: the defaults, the damped path with Ipopt given each
@@ -19,7 +20,9 @@ reduction is solved three ways:
 (factor 1.4 on both Drogues) and fitted without it: a misspecified model, the
 case of every diagnosis and comparison.  Runs are capped at `--max-iter`
 (150) iterations.  Printed: iterations, solve wall time, time per iteration,
-chi-square, status, and the ratios to ``expressions``.
+chi-square, status, and the ratios to ``expressions``.  Each fit runs in a
+process of its own (`revisions.call_at`), its model compiled before it runs
+into a cache all share; the solve alone is timed.
 
     python benchmarks/iteration_cost.py [--problems drogue drogue_full drogue+added_mass]
 """
@@ -32,6 +35,7 @@ from pathlib import Path
 
 import harness
 from diagnosis_cost import hidden_cases
+from revisions import SWITCHES, call_at, code_at
 
 from cpas_ocp.errors import SolverFailure
 from cpas_ocp.estimation.estimator import Estimator, Settings
@@ -39,14 +43,14 @@ from cpas_ocp.estimation.simulate import simulate_problem
 from cpas_ocp.io.flight_test import load_test
 from cpas_ocp.io.model_spec import baseline_spec
 from cpas_ocp.io.problems import load_problem
-from cpas_ocp.physics.flight_test import FlightTest
 
-PATHS = {"expressions": {"point_cache": False, "damping": False},
-         "cached": {"damping": False, "window_margin": None},
-         "damped": {"window_margin": None}, "windowed": {}}
+# Per path: the revision (None: this tree) and its Settings.
+PATHS = {"expressions": (SWITCHES, {"point_cache": False, "damping": False}),
+         "cached": (SWITCHES, {"damping": False, "window_margin": None}),
+         "damped": (None, {"window_margin": None}), "windowed": (None, {})}
 
 
-def make_test(name: str, seed: int, root: Path) -> FlightTest:
+def make_test(name: str, seed: int, root: Path) -> str:
     """The test folder of a built-in problem, or of `drogue` with an effect hidden."""
     problem_name, _, hidden = name.partition("+")
     problem = load_problem(problem_name)
@@ -55,14 +59,14 @@ def make_test(name: str, seed: int, root: Path) -> FlightTest:
         effects, values = hidden_cases()[hidden]
         problem = dataclasses.replace(problem, truth={**problem.truth, **values})
     simulate_problem(problem, root / name, seed, effects=effects)
-    return load_test(root / name)
+    return str(root / name)
 
 
-def run(test: FlightTest, misspecified: bool, max_iter: int, options: dict
+def run(folder: str, misspecified: bool, max_iter: int, options: dict
         ) -> tuple[int, float, float, str]:
     """(iterations, solve wall s, chi-square, status) of one fit from the reduction (the
-    chi-square is NaN where the solve failed)."""
-    est = Estimator(test, baseline_spec() if misspecified else None,
+    chi-square is NaN where the solve failed), with `Settings(**options)`."""
+    est = Estimator(load_test(folder), baseline_spec() if misspecified else None,
                     Settings(max_iter=max_iter, **options))
     timer = harness.Timer()
     try:
@@ -84,11 +88,13 @@ def main() -> None:
     problems = {}
     with tempfile.TemporaryDirectory() as tmp:
         for name in args.problems:
-            test = make_test(name, args.seed, Path(tmp))
+            folder = make_test(name, args.seed, Path(tmp))
             runs = {}
-            for label, options in PATHS.items():
-                it, wall, chi2, status = runs[label] = run(test, "+" in name, args.max_iter,
-                                                           options)
+            for label, (revision, options) in PATHS.items():
+                with code_at(revision) as code:
+                    it, wall, chi2, status = runs[label] = tuple(call_at(
+                        code, "iteration_cost", "run", folder, "+" in name, args.max_iter,
+                        options, cache=Path(tmp) / "cache"))
                 print(f"{name:18s} {label:11s} {it:5d} {wall:8.1f} {wall / max(it, 1):7.3f} "
                       f"{chi2:12.3f}  {status}", flush=True)
             it0, wall0, chi0, _ = runs["expressions"]

@@ -4,7 +4,13 @@ Speed-ups are measured as ratios against the code they replace, run by the
 same script on the same machine.  `code_at` checks a revision out in a
 temporary worktree; `run_child` runs a script in a fresh Python process whose
 ``import cpas_ocp`` resolves to a given code tree (this tree's or a
-worktree's), and returns the JSON object the script prints last.
+worktree's), and returns the JSON object the script prints last; `call_at`
+calls a function of a benchmark module so, with this tree's benchmark code
+and the given tree's package.
+
+Paths the package no longer offers as switches are measured at the last
+revision that had them: `SWITCHES` (Settings' `polish`, `damping` and
+`descent_curvature`).
 """
 
 from __future__ import annotations
@@ -19,6 +25,12 @@ from collections.abc import Iterator
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+BENCHMARKS = ROOT / "benchmarks"
+
+# The last revision whose Settings has the `polish`, `damping` and `descent_curvature`
+# switches (each False: the path before the finishing steps, the Marquardt damping and
+# the curvature-learning descent).
+SWITCHES = "f73876d"
 
 # Prepended to every child script: the project is installed in development mode,
 # so its import mapping is pointed at the code tree given as the first argument.
@@ -53,13 +65,36 @@ def code_at(revision: str | None) -> Iterator[Path]:
                             str(worktree)], check=False, capture_output=True)
 
 
-def run_child(script: str, code: Path, *args: str, cache: Path | None = None) -> dict:
+def run_child(script: str, code: Path, *args: str, cache: Path | None = None,
+              compile_first: bool = False) -> dict:
     """Run `script` in a fresh process importing cpas_ocp from `code`; its last printed
-    line, parsed as JSON.  `cache` is its compile cache (a new empty one when None)."""
+    line, parsed as JSON.  `cache` is its compile cache (a new empty one when None);
+    with `compile_first`, models compile before they run (CPAS_OCP_COMPILE=wait)."""
     with tempfile.TemporaryDirectory() as scratch:
         env = {**os.environ, "CPAS_OCP_CACHE": str(cache or scratch)}
+        if compile_first:
+            env["CPAS_OCP_COMPILE"] = "wait"
         out = subprocess.run([sys.executable, "-c", PRELUDE + script, str(code), *args],
                              env=env, cwd=scratch, capture_output=True, text=True, check=False)
     if out.returncode:
         raise RuntimeError(f"{' '.join(args)} with the code in {code} failed:\n{out.stderr}")
     return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+# Calls benchmarks/<module>.<function>(*args) and prints its JSON result.
+CALL = r"""
+import importlib, json, sys
+sys.path.insert(0, sys.argv[1])
+result = getattr(importlib.import_module(sys.argv[2]), sys.argv[3])(*json.loads(sys.argv[4]))
+print(json.dumps(result))
+"""
+
+
+def call_at(code: Path, module: str, function: str, *args: object, cache: Path | None = None
+            ) -> object:
+    """`function(*args)` of the benchmark `module`, run in a fresh process with this tree's
+    benchmark code and the package from `code` (JSON arguments and result); its models
+    compiled before they run (CPAS_OCP_COMPILE=wait), into `cache` where given, so that
+    what is timed is native code on both sides."""
+    return run_child(CALL, code, str(BENCHMARKS), module, function, json.dumps(args),
+                     cache=cache, compile_first=True)

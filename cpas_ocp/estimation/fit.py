@@ -16,6 +16,11 @@ from cpas_ocp.physics.model import Model
 class Settings:
     """Transcription and solver settings.
 
+    The transcription (`transcription.Transcription`) reads grid_step, nodes,
+    substeps, compile, free, fixed, guess, limits, point_cache and
+    window_margin; the solver (`solve.Solver`) reads max_iter, tol,
+    chi2_step_tol, verbose, watchdog_trigger, levenberg and descent_steps.
+
     grid_step (s): a uniform shooting interval, forced (None: a grid chosen
     from the dynamics, `shooting_grid`, on the lattice of the finest sampling
     interval of the test's sensors, `default_grid_step`);
@@ -40,15 +45,11 @@ class Settings:
     shooting gaps' curvature, so far from the optimum its steps are cut again
     and again while a full step would do: on `drogue_full` from the reduction
     a trigger of 3 ends in 31 iterations, 10 in 41, at the same chi-square.
-    polish: let the statistical test finish a nearly feasible run with one
-    Gauss-Newton step of its own (`Solver._stop_test`; False: the earlier
-    path, for benchmarks).
     point_cache: give Ipopt functions that share one native evaluation of the
     residuals, constraints and their Jacobians per point (`nlp_functions`;
     False: CasADi expressions, each evaluating what it needs in turn, the
-    earlier path, for benchmarks).
-    damping: Levenberg-Marquardt damping of the Gauss-Newton Hessian where its
-    steps fail to deliver (`nlp_functions.MarquardtDamping`; needs point_cache).
+    independent reference the suite checks these functions against,
+    `tests/estimation/test_nlp_functions.py`).
     levenberg: a Levenberg term on the free parameters' diagonal of the Hessian
     Ipopt is given (per scaled unit squared; `nlp_functions.ipopt_functions`,
     needs point_cache; None: the earlier path).  It bounds the steps along
@@ -58,8 +59,8 @@ class Settings:
     window_margin (s): Ipopt gets each parameter's Jacobian entries only within
     its window of action at the start, widened by this much on each side
     (`action_windows`; a solve restarts with wider windows when a parameter
-    acts outside them); None gives Ipopt every structural entry (the earlier
-    path; needs point_cache).
+    acts outside them); None gives Ipopt every structural entry (the reference
+    the suite checks the windows against; needs point_cache).
     descent_steps: a run whose chi-square has stopped falling (STALL_ITERATIONS)
     is stopped, and at most this many Gauss-Newton steps through feasible
     points from its iterate may finish the fit at the statistical test
@@ -68,14 +69,17 @@ class Settings:
     misspecified refits it served, 8-11 steps ended the run, and a descent
     that needed 29 had ended in a worse minimum than Ipopt's.  0: Ipopt runs
     on to its limit (the earlier path, for benchmarks).
-    descent_curvature: the descent learns what the Gauss-Newton model leaves out,
-    the curvature of chi-square along the feasible curve (each failed trial's
-    parabola sets the next trial, and two trials on one parabola whose least
-    value lies within the tolerance end it: `feasible_descent`) and the
-    residuals' own curvature, from the steps taken (`structured_secant`; it
-    shapes the steps, while the test that ends the descent stays Gauss-Newton's).
-    False: Gauss-Newton steps halved where they fail, and at most 15 of them
-    (the earlier path, for benchmarks; `benchmarks/descent_finish.py`).
+
+    The statistical test may finish a nearly feasible run with Gauss-Newton
+    steps of its own (`Solver._stop_test`); Ipopt's Gauss-Newton Hessian is
+    Levenberg-Marquardt damped where its steps fail to deliver
+    (`nlp_functions.MarquardtDamping`, with point_cache); and the descent
+    after a stall learns what the Gauss-Newton model leaves out, the curvature
+    of chi-square along the feasible curve and the residuals' own
+    (`feasible_descent`, `structured_secant`).  The paths before these
+    (Settings' `polish`, `damping` and `descent_curvature` switches) are kept
+    by revision f73876d, which the benchmarks that compare with them run
+    (`benchmarks/revisions.py`).
     """
 
     grid_step: float | None = None
@@ -91,13 +95,10 @@ class Settings:
     verbose: bool = False
     limits: dict[str, tuple[float, float]] = field(default_factory=dict)
     watchdog_trigger: int = 3
-    polish: bool = True
     point_cache: bool = True
-    damping: bool = True
     levenberg: float | None = 1.0
     window_margin: float | None = 0.5
     descent_steps: int = 30
-    descent_curvature: bool = True
 
 
 MIN_GRID_STEP_S = 0.001
@@ -129,7 +130,7 @@ def default_grid_step(test: FlightTest) -> float:
     (1,295 nodes to 1,387).  On `rocket_gusts` with the wind process 45 of 50
     seeds converged against 49 at 0.1 s, the five others wandering along the
     drogue's opening near apogee, which the data barely determine; since the
-    stalled runs' descent learns the curvature (`Settings.descent_curvature`)
+    stalled runs' descent learns the curvature (`feasible_descent`)
     all 50 converge.
     """
     dt = min(float(np.median(np.diff(s.time))) for s in test.sensors if len(s.time) > 1)

@@ -360,7 +360,7 @@ class Solver:
         log with the wind process took 26 iterations (8.9 s) that way, against 500 iterations
         (135 s) of Ipopt cycling within 1.2 of its chi-square without
         (`benchmarks/fill_resolution.py`; on the TeleMetrum log neither converged until
-        the descent learnt the curvature, `Settings.descent_curvature`).
+        the descent learnt the curvature, `feasible_descent`).
         """
         lbz, ubz = self._solve_bounds(bounds)
         z0 = (self._starts.initial_point() if start is None
@@ -520,8 +520,7 @@ class Solver:
         lower, upper = bounds
         problem = DescentProblem(self._linearisations.linearise, self._starts.feasible_point,
                                  self.nlp.points.residual_value, idx, lower[idx], upper[idx])
-        learn = self.settings.descent_curvature
-        return descend(*start, problem, tol, min(self.settings.descent_steps, left), learn)
+        return descend(*start, problem, tol, min(self.settings.descent_steps, left))
 
     @property
     def best_iterate(self) -> np.ndarray | None:
@@ -576,8 +575,7 @@ class Solver:
         violation = lin.violation
         # An inequality (a what-if limit) inactive at z might be crossed by the finishing
         # step unseen: the linearisation holds only the active ones.
-        may_polish = (self.settings.polish and violation <= POLISH_CONSTRAINT_TOL
-                      and not self.nlp.has_inequalities)
+        may_polish = violation <= POLISH_CONSTRAINT_TOL and not self.nlp.has_inequalities
         if violation > STOP_CONSTRAINT_TOL and not may_polish:
             return None  # no Gauss-Newton solve for an iterate that cannot end the run
         gn = gauss_newton(lin)

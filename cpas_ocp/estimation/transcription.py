@@ -509,7 +509,7 @@ class Transcription:
         self.lbg = np.concatenate([np.ravel(a) for a in nlp.lbg])
         self.ubg = np.concatenate([np.ravel(a) for a in nlp.ubg])
         self.damping = (MarquardtDamping(self.points, self.lbg, self.ubg)
-                         if s.point_cache and s.damping else None)
+                        if s.point_cache else None)
         self.windows = ActionWindows(
             self.points.patterns(),
             (_stack_times(pieces), _stack_times(g)), nlp.X.numel(),

@@ -352,7 +352,7 @@ def held_opening_profiles(fit: Fit, spec: ModelSpec, progress: bool = False
     bounds; none for a parameter held at 0), each point given HELD_PROFILE_MAX_ITER
     iterations, then reported as not converged.  With the wind process every point of
     both Prometheus logs converges since stalled runs' descent learns the curvature
-    (`Settings.descent_curvature`; 87 s for the TeleMetrum log's seven points); before,
+    (`feasible_descent`; 87 s for the TeleMetrum log's seven points); before,
     every TeleMetrum point ran the full 500 iterations (110 s each), Ipopt cycling
     within about one of chi-square where the opening's start and fill trade."""
     out = {}
