@@ -4,51 +4,28 @@ value out of range is argparse's one-line error and exit code 2)."""
 from __future__ import annotations
 
 import argparse
-import math
-from collections.abc import Callable
 from pathlib import Path
 
 from cpas_ocp.cli import commands
+from cpas_ocp.cli.argument_types import (
+    COUNT,
+    SEED,
+    OneLineParser,
+    pooled,
+    ranged,
+    scheduler,
+    shared,
+    wind_factors,
+)
 
 DESCRIPTION = "The `cpas-ocp` command line."
-
-
-class _Parser(argparse.ArgumentParser):
-    """argparse with its errors as one line (no usage block) and exit code 2."""
-
-    def error(self, message: str) -> None:  # type: ignore[override]
-        self.exit(2, "; ".join(f"error: {self.prog}: {message}".splitlines()) + "\n")
-
-
-def _ranged(kind: type, low: float, high: float = math.inf, low_open: bool = False,
-            high_open: bool = False) -> Callable[[str], float]:
-    """An argparse type: a finite number of `kind` within [low, high] (ends open as asked)."""
-    what = (f"a{'n integer' if kind is int else ' number'} "
-            f"{'>' if low_open else '>='} {low:g}"
-            + (f" and {'<' if high_open else '<='} {high:g}" if high < math.inf else ""))
-
-    def parse(text: str) -> float:
-        try:
-            value = kind(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{what}; got {text!r}") from None
-        if not (math.isfinite(value) and (value > low if low_open else value >= low)
-                and (value < high if high_open else value <= high)):
-            raise argparse.ArgumentTypeError(f"{what}; got {text!r}")
-        return value
-
-    return parse
-
-
-SEED = _ranged(int, 0)
-COUNT = _ranged(int, 1)
 # The test table's columns a population's mean may depend on (population_study).
 COVARIATES = ("type", "forebody", "cluster_size", "line_length", "line_length_ratio")
 
 
 def parser() -> argparse.ArgumentParser:
     """The command line's parser: each command's arguments, and its handler as `run`."""
-    p = _Parser(prog="cpas-ocp", description=DESCRIPTION)
+    p = OneLineParser(prog="cpas-ocp", description=DESCRIPTION)
     sub = p.add_subparsers(required=True, metavar="COMMAND")
 
     s = sub.add_parser("problems", help="list the built-in test phases")
@@ -76,10 +53,10 @@ def parser() -> argparse.ArgumentParser:
     s.add_argument("--out", required=True, type=Path)
     s.add_argument("--profile", action="append", default=[], metavar="NAME",
                    help="also profile the likelihood of this free parameter (repeatable)")
-    s.add_argument("--profile-span", type=_ranged(float, 0.0, low_open=True), default=3.0,
+    s.add_argument("--profile-span", type=ranged(float, 0.0, low_open=True), default=3.0,
                    metavar="SIGMAS",
                    help="profile over the estimate -+ this many sigma (default 3)")
-    s.add_argument("--profile-points", type=_ranged(int, 2), default=13, metavar="N",
+    s.add_argument("--profile-points", type=ranged(int, 2), default=13, metavar="N",
                    help="values per profile (default 13)")
     _model_option(s)
     _solver_options(s)
@@ -106,7 +83,7 @@ def parser() -> argparse.ArgumentParser:
                                         "again, until the residuals are noise or nothing "
                                         "left is significant")
     _diagnosis_options(s, resumable=True)
-    s.add_argument("--max-steps", type=_ranged(int, 1), default=4, metavar="K",
+    s.add_argument("--max-steps", type=ranged(int, 1), default=4, metavar="K",
                    help="add at most K effects (default 4)")
     s.add_argument("--resume", type=Path, default=None, metavar="DIR",
                    help="go on from the finished steps of a discovery folder (one that was "
@@ -145,7 +122,7 @@ def parser() -> argparse.ArgumentParser:
     s.add_argument("--covariate", action="append", dest="covariates", default=[],
                    choices=COVARIATES, help="a column of the test table the mean depends on "
                                             "(repeatable)")
-    s.add_argument("--pool", action="append", default=[], type=_pooled,
+    s.add_argument("--pool", action="append", default=[], type=pooled,
                    help="canopy types and stages fitted as one population, e.g. "
                         "fbcp/stage1+drogue/stage1 (repeatable)")
     s.add_argument("--diagonal", action="store_true",
@@ -159,7 +136,7 @@ def parser() -> argparse.ArgumentParser:
     s = sub.add_parser("joint", help="several tests that share hardware reconstructed in one "
                                      "NLP, the shared parameters held equal across them")
     s.add_argument("tests", nargs="+", type=Path, help="two or more test folders")
-    s.add_argument("--share", action="append", required=True, type=_shared,
+    s.add_argument("--share", action="append", required=True, type=shared,
                    help="a parameter shared across the tests: its base name, one per canopy "
                         "type and stage (CdS), or BASE:vehicle, one per test vehicle "
                         "(prf:vehicle) (repeatable)")
@@ -256,15 +233,6 @@ def _parallel_options(s: argparse.ArgumentParser) -> None:
                    help="run on this Dask scheduler (e.g. tcp://host:8786) instead")
 
 
-def scheduler(text: str) -> str:
-    """An argparse type: a Dask scheduler address (`scheduler_address`)."""
-    from cpas_ocp.campaign.parallel import scheduler_address
-    try:
-        return scheduler_address(text)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
-
-
 def _model_option(s: argparse.ArgumentParser, model: bool = True, plugin: bool = True
                   ) -> None:
     """--model FILE (where `model`), with --plugin FILE for the effects it names (where
@@ -284,7 +252,7 @@ def _model_option(s: argparse.ArgumentParser, model: bool = True, plugin: bool =
 def _solver_options(s: argparse.ArgumentParser) -> None:
     from cpas_ocp.estimation.estimator import MIN_GRID_STEP_S
     from cpas_ocp.estimation.uncertainty import HESSIANS
-    s.add_argument("--grid-step", type=_ranged(float, MIN_GRID_STEP_S), default=None,
+    s.add_argument("--grid-step", type=ranged(float, MIN_GRID_STEP_S), default=None,
                    help="force a uniform shooting interval [s] (default: chosen from the "
                         "dynamics, the fastest sensor's sampling interval where the motion "
                         "changes fast)")
@@ -297,29 +265,10 @@ def _solver_options(s: argparse.ArgumentParser) -> None:
     s.add_argument("--rescale-sigmas", action="store_true",
                    help="the sensor sigmas are not trusted: scale the covariance and the "
                         "what-if test by chi^2/dof")
-    s.add_argument("--wind-intensity", type=_factors, default=None, metavar="F,F,...",
+    s.add_argument("--wind-intensity", type=wind_factors, default=None, metavar="F,F,...",
                    help="choose the model's wind_process intensity by the marginal "
                         "likelihood among these multiples of its sigmas (e.g. "
                         "0.25,0.5,1,2,4): one fit each")
-
-
-# The multiples of the wind process's sigmas (m/s, about 1) --wind-intensity may try: six
-# decades about them, from still air to winds beyond any a parachute flies in, so that
-# no multiple reaches the solver as a sigma of 1e-300 or 1e300 m/s.
-WIND_FACTORS = (1e-3, 1e3)
-
-
-def _factors(text: str) -> tuple[float, ...]:
-    """An argparse type: comma-separated distinct multiples within WIND_FACTORS."""
-    parse = _ranged(float, *WIND_FACTORS)
-    try:
-        values = tuple(parse(part) for part in text.split(","))
-    except argparse.ArgumentTypeError as exc:
-        raise argparse.ArgumentTypeError(f"multiples of the wind process's sigmas, each {exc}"
-                                         ) from None
-    if len(set(values)) != len(values):
-        raise argparse.ArgumentTypeError(f"distinct multiples; got {text!r}")
-    return values
 
 
 def _diagnosis_options(s: argparse.ArgumentParser, resumable: bool = False) -> None:
@@ -329,10 +278,10 @@ def _diagnosis_options(s: argparse.ArgumentParser, resumable: bool = False) -> N
     s.add_argument("test_dir", type=Path, nargs="?" if resumable else None)
     s.add_argument("--out", required=not resumable, type=Path)
     _plugin_option(s, "also test the effects this Python file defines (repeatable)")
-    s.add_argument("--confirm", type=_ranged(int, 0), default=3, metavar="N",
+    s.add_argument("--confirm", type=ranged(int, 0), default=3, metavar="N",
                    help="refit the N leading significant effects to confirm them, and more "
                         "where the best confirmed is implausible (default 3)")
-    s.add_argument("--alpha", type=_ranged(float, 0.0, 1.0, low_open=True, high_open=True),
+    s.add_argument("--alpha", type=ranged(float, 0.0, 1.0, low_open=True, high_open=True),
                    default=0.01,
                    help="family-wise significance level (default 0.01)")
     _model_option(s, plugin=False)
@@ -348,21 +297,3 @@ def _card_options(s: argparse.ArgumentParser) -> None:
                         "vertical motion (wind_process)")
 
 
-def _pooled(text: str) -> list[tuple[str, str]]:
-    """`type/stage+type/stage...` as (type, stage) pairs; argparse's error (exit 2) where
-    malformed."""
-    members = [tuple(m.split("/")) for m in text.split("+")]
-    if len(members) < 2 or any(len(m) != 2 or not all(m) for m in members):
-        raise argparse.ArgumentTypeError(f"two or more TYPE/STAGE joined by '+'; got {text!r}")
-    return [(str(t), str(s)) for t, s in members]
-
-
-def _shared(text: str) -> tuple[str, str]:
-    """`BASE` or `BASE:type|vehicle` as (base, over); argparse's error (exit 2) where
-    malformed."""
-    base, _, over = text.partition(":")
-    over = over or "type"
-    if not base or over not in ("type", "vehicle"):
-        raise argparse.ArgumentTypeError(f"a parameter's base name, optionally followed by "
-                                         f":type or :vehicle; got {text!r}")
-    return base, over
