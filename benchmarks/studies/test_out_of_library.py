@@ -16,7 +16,7 @@ noise: chi-square within 4 standard deviations, sqrt(2 dof), of its dof.  The
 library effects that fit part of a signal on the way are reported as
 partial, and the ones the model no longer needs are dropped: the chain ends
 with no effect the truth lacks.  (The periodic
-case, canopy breathing, is `tests/studies/test_breathing_plugin.py`.)
+case, canopy breathing, is `benchmarks/studies/test_breathing_plugin.py`.)
 """
 
 from __future__ import annotations

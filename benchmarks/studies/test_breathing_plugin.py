@@ -27,7 +27,7 @@ from cpas_ocp.physics.effects.registry import BASELINE, load_plugin
 
 pytestmark = pytest.mark.slow
 
-PLUGIN = Path(__file__).parents[1] / "plugins" / "breathing.py"
+PLUGIN = Path(__file__).parents[2] / "tests" / "plugins" / "breathing.py"
 FREQUENCY_HZ = 3.0
 AMPLITUDES = {"breathing_cos[fbcp1]": 0.04, "breathing_sin[fbcp1]": 0.02,
               "breathing_cos[fbcp2]": 0.03, "breathing_sin[fbcp2]": -0.03}

@@ -360,7 +360,7 @@ def test_an_effect_the_library_lacks_is_not_named_for_one_that_partly_fits(
 
     from cpas_ocp.physics.effects.registry import load_plugin
 
-    plugin = Path(__file__).parents[1] / "plugins" / "tension_loss.py"
+    plugin = Path(__file__).parents[2] / "tests" / "plugins" / "tension_loss.py"
     loss = load_plugin(plugin)["tension_loss"].build({}, str(plugin), "test")
     problem = load_problem("fbcp")
     truth = {**problem.truth, **{f"tension_loss[{c}]": 8e-6 for c in ("fbcp1", "fbcp2")}}
