@@ -91,6 +91,7 @@ def fbcp_with_added_mass(tmp_path_factory):
     return truth, fit, with_it.covariance(fit), without
 
 
+@pytest.mark.slow  # a whole phase fitted
 def test_added_mass_recovered_from_the_reduction(fbcp_with_added_mass) -> None:
     """Every parameter, the two added-mass factors included, within the noise of the truth.
 
@@ -109,6 +110,7 @@ def test_added_mass_recovered_from_the_reduction(fbcp_with_added_mass) -> None:
     assert all(cov.std[n] < 0.1 for n in fit.free if n.startswith("added_mass_factor"))
 
 
+@pytest.mark.slow  # a whole phase fitted
 def test_fit_without_added_mass_is_rejected(fbcp_with_added_mass) -> None:
     """Leaving added mass out of the model costs far more than its two parameters buy.
 

@@ -63,6 +63,7 @@ def friction_fits(tmp_path_factory):
     return truth, fit, est.covariance(fit), without
 
 
+@pytest.mark.slow  # a whole phase fitted
 def test_friction_recovered_and_needed(friction_fits) -> None:
     truth, fit, cov, without = friction_fits
     assert fit.solver.success

@@ -41,6 +41,7 @@ def _simulated(folder, extra: list[Effect], values: dict[str, float]) -> FlightT
     return load_test(folder)
 
 
+@pytest.mark.slow  # a whole phase fitted
 @pytest.mark.parametrize("case", list(CASES))
 def test_sensor_effect_recovered_and_needed(case: str, tmp_path) -> None:
     extra, values = CASES[case]
@@ -81,6 +82,7 @@ def test_time_offset_matches_the_trajectory(tmp_path) -> None:
     assert np.max(np.abs(traj.x[now, :3] - earlier[:3])) > 10.0
 
 
+@pytest.mark.slow  # a whole phase fitted
 def test_a_lag_is_refused_on_elastic_risers(problem_fit) -> None:
     """Integrated backwards, a damped riser mode grows as exp(zeta omega tau): a lag on a
     model with elastic risers is refused when the model is composed, and the diagnosis's

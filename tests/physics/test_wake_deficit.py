@@ -40,6 +40,7 @@ def in_the_wake(tmp_path_factory):
     return truth, (told_fit, told.covariance(told_fit)), (untold_fit, untold.covariance(untold_fit))
 
 
+@pytest.mark.slow  # a whole phase fitted
 def test_given_prf_recovers_free_stream_drag_areas(in_the_wake) -> None:
     truth, (fit, cov), _ = in_the_wake
     assert fit.parameters["prf[fbcp1]"] == PRF and "prf[fbcp1]" not in fit.free
@@ -48,6 +49,7 @@ def test_given_prf_recovers_free_stream_drag_areas(in_the_wake) -> None:
         assert abs(fit.parameters[name] - truth[name]) < 4 * cov.std[name], name
 
 
+@pytest.mark.slow  # a whole phase fitted
 def test_without_prf_the_product_is_recovered_at_the_same_chi_square(in_the_wake) -> None:
     truth, (told, _), (fit, cov) = in_the_wake
     for chute in ("fbcp1", "fbcp2"):
