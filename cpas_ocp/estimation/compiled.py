@@ -211,7 +211,65 @@ class NativeBuild:
 # A compiler's command: the library is compiled beside its source, moved into the cache in
 # one rename (a library in the cache is always complete) and the source's folder removed,
 # by the job itself, so that one still running when the process ends finishes on its own.
-_JOB = 'cc=$1; shift; "$cc" "$@" && mv -f "$PARTIAL" "$LIBRARY" && rm -rf "$FOLDER"'
+_JOB = ('cc=$1; shift; "$cc" "$@" && mv -f "$PARTIAL" "$LIBRARY" && rm -rf "$FOLDER"; '
+        'status=$?; rm -f "$CLAIM"; exit $status')
+
+
+def _claim_file(library: Path) -> Path:
+    """Where a process that compiles `library` says so (`_claim`)."""
+    return library.with_name(library.name + ".claim")
+
+
+def _claim(library: Path) -> bool:
+    """Claim the compiling of `library` for this process, across processes that share the
+    cache: False where another live process holds the claim (its compiler will put the
+    library in place, so this process waits for it instead of compiling it too).
+
+    A claim is a file beside the library holding the compiling process's id, made in one
+    step (O_EXCL); its compiler's shell removes it as it ends, and a claim whose process
+    has ended or that is older than STALE_FOLDER_S is taken over.  Only the work is
+    shared: a library goes into the cache in one rename whoever compiles it, so a claim
+    lost or taken over costs time, never a wrong library.  Two suite workers, or two
+    campaign workers, that meet the same model compiled each of its libraries twice.
+    """
+    claim = _claim_file(library)
+    for _ in range(2):
+        try:
+            fd = os.open(claim, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
+        except FileExistsError:
+            if _claim_live(claim):
+                return False
+            with suppress(OSError):
+                claim.unlink()
+            continue
+        except OSError:  # a cache that cannot hold the claim: compile here
+            return True
+        with os.fdopen(fd, "w") as out:
+            out.write(str(os.getpid()))
+        return True
+    return False
+
+
+def _claim_live(claim: Path) -> bool:
+    """Whether the process that made `claim` still runs and the claim is not stale."""
+    try:
+        pid = int(claim.read_text() or "0")
+        if time.time() - claim.stat().st_mtime > STALE_FOLDER_S:
+            return False
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's live process
+        return True
+    except (OSError, ValueError):  # gone meanwhile, or half written: look again later
+        return True
+    return pid > 0
+
+
+def _release(library: Path) -> None:
+    """Remove this process's claim on `library` (a compiler killed or failed to start)."""
+    with suppress(OSError):
+        _claim_file(library).unlink()
 
 
 class _Queue:
@@ -250,24 +308,37 @@ class _Queue:
                 job.error = f"compiling {job.library.name} failed: {err[-500:]}"
             _remove(job.source.parent)
         limit = max(_cores() - 1, 1) if in_background() else _cores()
-        while self.started and self.waiting and len(self.running) < limit:
-            job, cc = self.waiting.pop()  # the newest first: the model in use now
+        i = len(self.waiting)  # the newest first: the model in use now
+        while self.started and i > 0 and len(self.running) < limit:
+            i -= 1
+            job, cc = self.waiting[i]
             if job.done:
+                del self.waiting[i]
                 _remove(job.source.parent)
                 continue
+            if not _claim(job.library):  # another process compiles it: wait for it
+                continue
+            del self.waiting[i]
             # A signal waits until the compiler is on the list of those to kill (one
             # raised inside Popen would leave it running, unlisted).  Each runs in a
             # process group of its own (the shell with the driver, its cc1 and as),
             # killed whole, since killing the driver alone leaves its cc1 running.
             env = {**os.environ, "PARTIAL": str(job.partial), "LIBRARY": str(job.library),
-                   "FOLDER": str(job.source.parent)}
+                   "FOLDER": str(job.source.parent), "CLAIM": str(_claim_file(job.library))}
             with open(job.source.parent / "stderr", "wb") as err, interrupts.deferred():
-                job.process = subprocess.Popen(
-                    ["sh", "-c", _JOB, "sh", cc, optimisation(job.source), *FLAGS, "-o",
-                     str(job.partial), str(job.source), "-lm"], env=env,
-                    stdout=subprocess.DEVNULL, stderr=err, start_new_session=True,
-                    preexec_fn=_lowest_priority if in_background() else None)
+                try:
+                    job.process = subprocess.Popen(
+                        ["sh", "-c", _JOB, "sh", cc, optimisation(job.source), *FLAGS, "-o",
+                         str(job.partial), str(job.source), "-lm"], env=env,
+                        stdout=subprocess.DEVNULL, stderr=err, start_new_session=True,
+                        preexec_fn=_lowest_priority if in_background() else None)
+                except BaseException:
+                    _release(job.library)
+                    raise
                 self.running.append(job)
+                # The claim is the compiler's from now on: it outlives this process.
+                with suppress(OSError):
+                    _claim_file(job.library).write_text(str(job.process.pid))
                 COUNTS["libraries"] += 1
 
     def cancel(self, jobs: list[_Job]) -> None:
@@ -277,6 +348,7 @@ class _Queue:
             if job in self.running and job.process is not None:
                 self.running.remove(job)
                 _kill_group(job.process)
+                _release(job.library)
             if not job.library.exists():
                 job.error = "cancelled"
             _remove(job.source.parent)
@@ -330,6 +402,7 @@ def abandon() -> None:
     for job in _QUEUE.running:
         if job.process is not None:
             _kill_group(job.process)
+            _release(job.library)
     _QUEUE.waiting.clear()
     _QUEUE.running.clear()
     for folder in _FOLDERS:
