@@ -6,8 +6,8 @@ every population fit, in the same process.
 every call; the current one finds them once (`population_model._blas`).  A
 grouping test of three parameters with a full Omega on 24 openings, Bartlett-
 adjusted by 40 bootstrap campaigns, makes 124 such fits.  The campaign is
-drawn (seed 1 unless `--seed`) from a known population as in
-`tests/campaign/test_population.py`; the package is imported whole first, so
+drawn (seed 1 unless `--seed`) by `tests/campaign/test_population.py`'s own
+generator, as its Bartlett-factor test draws it; the package is imported whole first, so
 the process holds the libraries a command's does.  Both paths run `--repeats`
 times, alternating; printed: the median wall time of each and their ratio, and
 that both give the same statistic and Bartlett factor.
@@ -18,38 +18,27 @@ that both give the same statistic and Bartlett factor.
 from __future__ import annotations
 
 import statistics
+import sys
 
 import harness
 import numpy as np
+from revisions import ROOT
 from threadpoolctl import ThreadpoolController
 
 import cpas_ocp.api  # noqa: F401  (the libraries a command's process holds)
 from cpas_ocp.campaign import population_model
-from cpas_ocp.campaign.population_model import PopulationData, grouping_test
+from cpas_ocp.campaign.population_model import grouping_test
 
-TAU = np.array([0.10, 0.15, 0.08])
-RHO = np.array([[1.0, -0.5, 0.2], [-0.5, 1.0, 0.0], [0.2, 0.0, 1.0]])
-MEAN = np.array([np.log(2.0), np.log(9.0), np.log(1.5)])
-
-
-def draw(seed: int, n: int = 24, k: int = 3, noise: float = 0.03) -> PopulationData:
-    """`n` openings of a k-parameter population, each estimate's standard deviations `noise`
-    times a factor in [0.5, 2], correlated 0.4 within a test."""
-    rng = np.random.default_rng(seed)
-    omega = RHO[:k, :k] * np.outer(TAU[:k], TAU[:k])
-    sd = noise * rng.uniform(0.5, 2.0, (n, 1)) * np.ones(k)
-    V = (0.6 * np.eye(k) + 0.4)[None] * sd[:, :, None] * sd[:, None, :]
-    theta = MEAN[:k] + rng.multivariate_normal(np.zeros(k), omega, n)
-    y = theta + np.array([rng.multivariate_normal(np.zeros(k), v) for v in V])
-    return PopulationData(tuple("abc"[:k]), tuple(f"t{i} c1" for i in range(n)), y, V,
-                          np.ones((n, 1)), ("intercept",), (True,) * k)
+sys.path.insert(0, str(ROOT))
+from tests.campaign.test_population import draw
 
 
 def main() -> None:
     parser = harness.parser(__doc__, seed=1, seed_help="seed of the drawn campaign")
     parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args()
-    data = draw(args.seed)
+    data = draw(seed=args.seed, n=24, k=3, effect=False).subset(np.arange(24),
+                                                                 keep_columns=[0])
     labels = ["A"] * 12 + ["B"] * 12
     found_once = population_model._blas
     paths = {"every fit": ThreadpoolController, "once": found_once}

@@ -23,6 +23,7 @@ import sys
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
 BENCHMARKS = ROOT / "benchmarks"
@@ -66,7 +67,7 @@ def code_at(revision: str | None) -> Iterator[Path]:
 
 
 def run_child(script: str, code: Path, *args: str, cache: Path | None = None,
-              compile_first: bool = False) -> dict:
+              compile_first: bool = False) -> Any:
     """Run `script` in a fresh process importing cpas_ocp from `code`; its last printed
     line, parsed as JSON.  `cache` is its compile cache (a new empty one when None);
     with `compile_first`, models compile before they run (CPAS_OCP_COMPILE=wait)."""
@@ -91,7 +92,7 @@ print(json.dumps(result))
 
 
 def call_at(code: Path, module: str, function: str, *args: object, cache: Path | None = None
-            ) -> object:
+            ) -> Any:
     """`function(*args)` of the benchmark `module`, run in a fresh process with this tree's
     benchmark code and the package from `code` (JSON arguments and result); its models
     compiled before they run (CPAS_OCP_COMPILE=wait), into `cache` where given, so that

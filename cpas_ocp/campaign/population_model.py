@@ -464,8 +464,8 @@ def fit_population(data: PopulationData, full_omega: bool = True, reml: bool = T
 @cache
 def _blas() -> ThreadpoolController:
     """The process's BLAS and OpenMP pools, found once: `threadpool_limits` looks them up
-    at every call, which took 45 % of a grouping test's 124 fits of a small campaign
-    (0.71 s against 0.40 s, `benchmarks/population_cost.py`)."""
+    at every call, a third of a grouping test's 124 fits of a small campaign (1.10 s
+    against 0.73 s, `benchmarks/population_cost.py`)."""
     return ThreadpoolController()
 
 

@@ -253,17 +253,23 @@ def _claim(library: Path) -> bool:
 def _claim_live(claim: Path) -> bool:
     """Whether the process that made `claim` still runs and the claim is not stale."""
     try:
-        pid = int(claim.read_text() or "0")
-        if time.time() - claim.stat().st_mtime > STALE_FOLDER_S:
-            return False
-        os.kill(pid, 0)
+        owner = claim.read_text()
+        age = time.time() - claim.stat().st_mtime
+    except OSError:  # gone meanwhile: look again at the next advance
+        return True
+    if age > STALE_FOLDER_S:
+        return False
+    if not owner:  # just made, its process id not yet written
+        return True
+    try:
+        os.kill(int(owner), 0)
     except ProcessLookupError:
         return False
     except PermissionError:  # another user's live process
         return True
-    except (OSError, ValueError):  # gone meanwhile, or half written: look again later
-        return True
-    return pid > 0
+    except (OSError, ValueError):  # not a process id: not a claim of ours
+        return False
+    return True
 
 
 def _release(library: Path) -> None:
