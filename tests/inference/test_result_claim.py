@@ -126,16 +126,49 @@ def test_events_later_than_the_window_are_recovered_by_moving_the_windows(
     assert "window moved" in fit.solver.start
 
 
+def test_a_first_move_that_does_not_lower_chi_square_leaves_the_fit_to_its_restarts(
+        drogue_fit, monkeypatch) -> None:
+    """The window move tried before any restart is kept only where it lowers chi-square;
+    otherwise the first fit is restarted and judged as if no move had been tried (the
+    fits are stand-ins: what is tested is the order of the steps)."""
+    from cpas_ocp.inference import continuation
+
+    fit, _, _ = drogue_fit(1)
+    est = Estimator(fit.test)
+    steps: list[str] = []
+
+    def step(name, value):
+        steps.append(name)
+        return value
+
+    monkeypatch.setattr(continuation, "_solve_from_reduction",
+                        lambda e, p: step("first fit", fit))
+    monkeypatch.setattr(continuation, "moved_windows", lambda c, e, f: step(
+        "windows at edges?", e.spec if steps.count("windows at edges?") == 0 else None))
+    monkeypatch.setattr(continuation, "Estimator", lambda test, spec, settings: est)
+    monkeypatch.setattr(continuation, "solve", lambda e, p: step("moved refit", fit))
+    monkeypatch.setattr(continuation, "_restarted",
+                        lambda e, first, p: step("restarts", first()))
+    _, kept, claim = continuation.solve_checked(est)
+    assert steps == ["first fit", "windows at edges?", "moved refit", "restarts",
+                     "windows at edges?"]
+    assert kept is fit and claim.moves == []
+
+
 @pytest.fixture(scope="module")
 def pressed(drogue_folder, tmp_path_factory):
     """The late events fitted without window moves, which leaves the start times on their
     windows: the folder and its `Reconstruction`, fitted once.  The commands tested with it
     are given this fit where theirs would be made (`given`): the same estimator on the same
-    folder, so what they are tested for, what they say of it, is unchanged."""
+    folder, so what they are tested for, what they say of it, is unchanged.  The restarts
+    are left out too: from the same windows they end at the same edges, at a chi-square no
+    lower (measured in `continuation.solve_checked`'s docstring)."""
     folder = late_events(drogue_folder(1), tmp_path_factory.mktemp("pressed") / "late",
                          LATE_S)
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr("cpas_ocp.inference.continuation.MAX_WINDOW_MOVES", 0)
+        patch.setattr("cpas_ocp.inference.continuation._restarted",
+                      lambda _est, first, _progress: first())
         return folder, co.reconstruct(folder)
 
 
