@@ -16,7 +16,13 @@ against the truth (s) and in sigma, and the wall time; with `--baseline`,
 also the plain fit (`continuation.solve`, no claim, no moves) in the same
 process, which is what the tool reported before.
 
+With `--against REV`, each checked fit is also made with the package of git revision
+REV, each side in a process of its own (`revisions.call_at`, models compiled first
+into one cache), and the wall-time ratio now/REV is printed: `--against 4d88856`
+measures the window moves made before the restarts against the restarts first.
+
     python benchmarks/events_offset.py [--seeds 10] [--offset 1.5] [--baseline] [--seed 1]
+                                       [--against REV]
 """
 
 from __future__ import annotations
@@ -27,6 +33,7 @@ import tempfile
 from pathlib import Path
 
 import harness
+from revisions import ROOT, call_at, code_at
 
 from cpas_ocp.errors import SolverFailure
 from cpas_ocp.estimation.estimator import Estimator, Fit
@@ -92,14 +99,43 @@ def run(folder: Path, truth: dict, checked: bool) -> tuple[str, dict]:
                 "wall_s": wall}
 
 
+def checked_fit(folder: str, truth: dict) -> dict:
+    """The figures of `solve_checked` on `folder` (for `call_at`)."""
+    return run(Path(folder), truth, checked=True)[1]
+
+
+def against(folder: Path, truth: dict, revision: str, cache: Path) -> str:
+    """The checked fit with REV's package and with this tree's, each in its own process:
+    both endings, chi-square/dof and the wall-time ratio."""
+    sides = {}
+    for label, rev in ((revision, revision), ("now", None)):
+        with code_at(rev) as code:
+            sides[label] = call_at(code if rev else ROOT, "events_offset", "checked_fit",
+                                   str(folder), truth, cache=cache)
+    old, new = sides[revision], sides["now"]
+    return (f"{revision}: {old['ending']}, chi2/dof {old.get('chi2_dof', float('nan')):.4f}, "
+            f"{old['wall_s']:.1f} s; now: {new['ending']}, chi2/dof "
+            f"{new.get('chi2_dof', float('nan')):.4f}, {new['wall_s']:.1f} s; "
+            f"ratio {new['wall_s'] / old['wall_s']:.2f}")
+
+
 def main() -> int:
     parser = harness.parser(__doc__, seed=1, seed_help="the first drogue seed")
     parser.add_argument("--seeds", type=int, default=10)
     parser.add_argument("--offset", type=float, default=1.5)
     parser.add_argument("--baseline", action="store_true")
+    parser.add_argument("--against", metavar="REV", default=None)
     args = parser.parse_args()
     fits: dict[str, list[dict]] = {}
     with tempfile.TemporaryDirectory() as tmp:
+        if args.against:
+            for seed in range(args.seed, args.seed + args.seeds):
+                for case in ("late", "disreefs"):
+                    folder, truth = shifted_folder(Path(tmp), seed, case, args.offset)
+                    print(f"  {case} seed {seed:2d} "
+                          f"{against(folder, truth, args.against, Path(tmp) / 'cache')}",
+                          flush=True)
+            return 0
         for case in ("late", "disreefs"):
             print(f"== {case}: events {args.offset} s off (window 1 s)", flush=True)
             for seed in range(args.seed, args.seed + args.seeds):
