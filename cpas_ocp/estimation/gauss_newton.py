@@ -4,6 +4,7 @@ the linear algebra of the statistical stopping rule (`solve`) and of the score t
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -74,6 +75,39 @@ def gauss_newton(lin: Linearisation, red: ReducedProblem | None = None,
                                                               red.JZ.T @ red.JZ + extra)
     return GaussNewtonStep(dz, max(decrement, 0.0),
                            float(projected @ projected - lin.r @ lin.r), to_projection)
+
+
+def within_bounds(lin: Linearisation, gn: GaussNewtonStep, lower: np.ndarray,
+                  upper: np.ndarray, tol: float) -> tuple[Linearisation, GaussNewtonStep]:
+    """`lin` and its step `gn`, or, where the step carries free coordinates (of the scaled
+    decision vector, within `lower`/`upper`) through bounds so near that less than `tol`
+    of chi-square is to be had before them, both with those coordinates held.
+
+    Along the step chi-square falls by D a (2 - a) to the fraction a of it (the
+    Gauss-Newton model, D the decrement), so a coordinate that meets its bound at a
+    fraction a of the step gives at most that much by moving to it.  Ipopt keeps such a
+    coordinate a little inside its bound (its barrier), where the step, which knows no
+    bounds, promises the decrease beyond it: on a rocket log whose drogue shape exponent
+    sat 5e-5 above its guessed lower bound, the decrement stayed at 0.044 and Ipopt
+    crept towards the bound by 1e-4 of chi-square an iteration for 200 iterations.
+    Held, the coordinates take no step, and the decrement is what the data offer within
+    the bounds (to within `tol` for each coordinate held)."""
+    free = np.ones(lin.z.size, dtype=bool)
+    free[lin.dependent] = False
+    free[lin.held] = False
+    while True:
+        dz = gn.step
+        with np.errstate(divide="ignore", invalid="ignore"):
+            room = np.where(dz < 0.0, (lower - lin.z) / dz,
+                            np.where(dz > 0.0, (upper - lin.z) / dz, np.inf))
+        room = np.where(free, np.maximum(np.nan_to_num(room, nan=np.inf), 0.0), np.inf)
+        a = np.minimum(room, 1.0)
+        hold = (room < 1.0) & (gn.decrement * a * (2.0 - a) < tol)
+        if not hold.any():
+            return lin, gn
+        free[hold] = False
+        lin = dataclasses.replace(lin, held=np.union1d(lin.held, np.flatnonzero(hold)))
+        gn = gauss_newton(lin)
 
 
 DECREMENT_FLOOR = 1e-4  # chi-square: below it the decrement is taken as the model gives it

@@ -29,6 +29,7 @@ from cpas_ocp.estimation.gauss_newton import (
     GaussNewtonStep,
     gauss_newton,
     measured_decrement,
+    within_bounds,
 )
 from cpas_ocp.estimation.kkt_system import Linearisation
 from cpas_ocp.estimation.linearisation import Linearisations
@@ -578,7 +579,7 @@ class Solver:
         may_polish = violation <= POLISH_CONSTRAINT_TOL and not self.nlp.has_inequalities
         if violation > STOP_CONSTRAINT_TOL and not may_polish:
             return None  # no Gauss-Newton solve for an iterate that cannot end the run
-        gn = gauss_newton(lin)
+        lin, gn = within_bounds(lin, gauss_newton(lin), *self._monitor.bounds, tol)
         self._monitor.promised = gn.decrement
         found = None  # (decrement, point) that sets the tests' back-off
         if violation <= STOP_CONSTRAINT_TOL and abs(gn.restoration) <= tol:
@@ -676,7 +677,8 @@ class Solver:
                 or not self.nlp.value_violation(z) <= limit:  # NaN too
             return None
         lin = self._linearisations.linearise(z)
-        return lin, gauss_newton(lin)
+        return within_bounds(lin, gauss_newton(lin), lower, upper,
+                             self.settings.chi2_step_tol or 0.0)
 
     def _measured_decrement(self, lin: Linearisation, gn: GaussNewtonStep) -> float:
         """The chi-square decrease still to be had along `gn` from `lin.z`, its curvature
