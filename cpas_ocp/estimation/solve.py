@@ -683,4 +683,4 @@ class Solver:
     def _measured_decrement(self, lin: Linearisation, gn: GaussNewtonStep) -> float:
         """The chi-square decrease still to be had along `gn` from `lin.z`, its curvature
         measured (`uncertainty.measured_decrement`)."""
-        return measured_decrement(self.nlp.points.residual_value, lin, gn)
+        return measured_decrement(self.nlp.points.residual_value, lin, gn, self._monitor.bounds)
