@@ -125,13 +125,18 @@ def solve_checked(est: Estimator, progress: bool = False
         first: Fit | SolverFailure = _solve_from_reduction(est, progress)
     except SolverFailure as exc:
         first = exc
-    claim = None
+    claim, tried = None, False
     if isinstance(first, Fit):
         claim = check_claim(est, first)
-        moved = _moved(est, first, claim, None, progress)
-        if moved[3]:
-            return _with_moves(*moved)
-    return _with_moves(*_moved(est, *_restarted_claim(est, first, claim, progress), progress))
+        tried = moved_windows(claim, est, first) is not None
+        if tried:
+            moved = _moved(est, first, claim, None, progress)
+            if moved[3]:
+                return _with_moves(*moved)
+    fit, claim, failure = _restarted_claim(est, first, claim, progress)
+    if tried and fit is first:  # the same move from the same fit: tried already
+        return _with_moves(est, fit, claim, [], None)
+    return _with_moves(*_moved(est, fit, claim, failure, progress))
 
 
 def _restarted_claim(est: Estimator, first: Fit | SolverFailure, claim: Claim | None,
