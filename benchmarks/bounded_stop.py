@@ -1,5 +1,5 @@
-"""The statistical stop with the Gauss-Newton step held at the bounds it would cross, against
-the step that knows no bounds (`gauss_newton.within_bounds`).
+"""The statistical stop made from a bound the Gauss-Newton step would cross at once, against
+the step that knows no bounds (`gauss_newton.bound_reached`, `measured_decrement`).
 
 Ipopt keeps a parameter a little inside a bound the data push it against (its
 barrier); a Gauss-Newton step that knows no bounds promises the decrease beyond it,

@@ -27,9 +27,9 @@ from cpas_ocp.estimation.fit import (
 from cpas_ocp.estimation.gauss_newton import (
     DECREMENT_FLOOR,
     GaussNewtonStep,
+    bound_reached,
     gauss_newton,
     measured_decrement,
-    within_bounds,
 )
 from cpas_ocp.estimation.kkt_system import Linearisation
 from cpas_ocp.estimation.linearisation import Linearisations
@@ -570,6 +570,11 @@ class Solver:
         its feasible projection or the iterate's may be.  Near the optimum Ipopt
         shrinks the gaps only linearly, by the same factor as its steps, several
         iterations for what one step does.
+
+        Where the step carries a parameter through a bound it lies so near that less than
+        the tolerance is to be had before it (`gauss_newton.bound_reached`), the test is
+        made from the iterate with that parameter on its bound, where it is held: the
+        point the run ends at then has it there, as the claim's bound tests expect.
         """
         tol = self.settings.chi2_step_tol or 0.0
         lin = self._linearisations.linearise(z)
@@ -579,7 +584,17 @@ class Solver:
         may_polish = violation <= POLISH_CONSTRAINT_TOL and not self.nlp.has_inequalities
         if violation > STOP_CONSTRAINT_TOL and not may_polish:
             return None  # no Gauss-Newton solve for an iterate that cannot end the run
-        lin, gn = within_bounds(lin, gauss_newton(lin), *self._monitor.bounds, tol)
+        gn = gauss_newton(lin)
+        reached = bound_reached(lin, gn, *self._monitor.bounds, tol)
+        if reached is not None:  # the test is made on that face, from the bound
+            z = z.copy()
+            z[reached[0]] = reached[1]
+            lin = self._linearisations.linearise(z)
+            violation = lin.violation
+            may_polish = violation <= POLISH_CONSTRAINT_TOL and not self.nlp.has_inequalities
+            if violation > STOP_CONSTRAINT_TOL and not may_polish:
+                return None
+            gn = gauss_newton(lin)
         self._monitor.promised = gn.decrement
         found = None  # (decrement, point) that sets the tests' back-off
         if violation <= STOP_CONSTRAINT_TOL and abs(gn.restoration) <= tol:
@@ -677,8 +692,7 @@ class Solver:
                 or not self.nlp.value_violation(z) <= limit:  # NaN too
             return None
         lin = self._linearisations.linearise(z)
-        return within_bounds(lin, gauss_newton(lin), lower, upper,
-                             self.settings.chi2_step_tol or 0.0)
+        return lin, gauss_newton(lin)
 
     def _measured_decrement(self, lin: Linearisation, gn: GaussNewtonStep) -> float:
         """The chi-square decrease still to be had along `gn` from `lin.z`, its curvature
