@@ -232,13 +232,13 @@ def _interrupted_while_compiling(command: list[str], sig: int, tmp_path: Path,
 @pytest.mark.slow
 @pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads /proc")
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
-def test_an_interrupt_while_compiling_leaves_no_compiler_and_no_folder(sig, drogue_folder,
+def test_an_interrupt_while_compiling_leaves_no_compiler_and_no_folder(sig, problem_folder,
                                                                        tmp_path) -> None:
     """Interrupted while the model compiles in the background (a fresh cache; a diagnosis,
     whose second estimator starts the compilers), the command kills each compiler with the
     passes it started (gcc's cc1 and as; here a stand-in's `sleep`), and leaves no temporary
-    folder."""
-    _interrupted_while_compiling(["diagnose", str(drogue_folder(1)), "--out",
+    folder.  On `fbcp`, whose first fit in the VM is the shortest of the problems'."""
+    _interrupted_while_compiling(["diagnose", str(problem_folder("fbcp", 1)), "--out",
                                   str(tmp_path / "diagnosis")], sig, tmp_path)
     assert not (tmp_path / "diagnosis").exists()
 
