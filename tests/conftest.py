@@ -20,11 +20,26 @@ START_GUESS_OFFSET_S = 0.3
 
 
 
+def pytest_configure(config: pytest.Config) -> None:
+    """With whole files handed to the workers (`--dist loadfile`), xdist would start the
+    files with the most tests first, which puts the long files of a few slow tests last;
+    the order `pytest_collection_modifyitems` gives is kept instead."""
+    if hasattr(config.option, "loadscopereorder"):
+        config.option.loadscopereorder = False
+
+
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """The files with slow tests first (in their own order), then the rest: with two
-    workers each taking whole files, the quick files fill in beside the long ones at the
-    end."""
-    items.sort(key=lambda item: item.get_closest_marker("slow") is None)
+    """The files with the most slow tests first, then those with the most tests, each
+    file's tests in their own order: with two workers each taking whole files, the long
+    files start early and the quick ones fill in beside them at the end."""
+    slow: dict[str, int] = {}
+    count: dict[str, int] = {}
+    for item in items:
+        path = item.nodeid.split("::")[0]
+        count[path] = count.get(path, 0) + 1
+        slow[path] = slow.get(path, 0) + (item.get_closest_marker("slow") is not None)
+    items.sort(key=lambda item: (-slow[item.nodeid.split("::")[0]],
+                                 -count[item.nodeid.split("::")[0]]))
 
 @pytest.fixture(scope="session")
 def problem_folder(tmp_path_factory: pytest.TempPathFactory):
