@@ -28,6 +28,7 @@ def pytest_configure(config: pytest.Config) -> None:
         config.option.loadscopereorder = False
 
 
+@pytest.hookimpl(trylast=True)  # after `-m` has deselected: the tests that will run
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     """The files with the most slow tests first, then those with the most tests, each
     file's tests in their own order: with two workers each taking whole files, the long
