@@ -77,10 +77,12 @@ def gauss_newton(lin: Linearisation, red: ReducedProblem | None = None,
 
 
 def bound_reached(lin: Linearisation, gn: GaussNewtonStep, lower: np.ndarray,
-                  upper: np.ndarray, tol: float) -> tuple[int, float] | None:
-    """The free coordinate of the scaled decision vector (and the bound, within
-    `lower`/`upper`, it would cross) that the step `gn` carries soonest through a bound so
-    near that less than `tol` of chi-square is to be had before it; None if there is none.
+                  upper: np.ndarray, tol: float, coordinates: np.ndarray
+                  ) -> tuple[int, float] | None:
+    """The coordinate among `coordinates` of the scaled decision vector (those the
+    linearisation holds on a bound: the free parameters) that the step `gn` carries
+    soonest through a bound (within `lower`/`upper`) so near that less than `tol` of
+    chi-square is to be had before it, and that bound; None if there is none.
 
     Along the step chi-square falls by D a (2 - a) to the fraction a of it (the
     Gauss-Newton model, D the decrement), so a coordinate that meets its bound at a
@@ -93,8 +95,8 @@ def bound_reached(lin: Linearisation, gn: GaussNewtonStep, lower: np.ndarray,
     One coordinate only: with two correlated coordinates held at once, the optimum on
     the box can move one of them inward (the multiplier's sign is then wrong), and the
     decrement on the face can miss a fall of any size."""
-    free = np.ones(lin.z.size, dtype=bool)
-    free[lin.dependent] = False
+    free = np.zeros(lin.z.size, dtype=bool)
+    free[coordinates] = True
     free[lin.held] = False
     room = np.where(free, _rooms(lin.z, gn.step, lower, upper), np.inf)
     i = int(np.argmin(room))

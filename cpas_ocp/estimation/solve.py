@@ -585,7 +585,7 @@ class Solver:
         if violation > STOP_CONSTRAINT_TOL and not may_polish:
             return None  # no Gauss-Newton solve for an iterate that cannot end the run
         gn = gauss_newton(lin)
-        reached = bound_reached(lin, gn, *self._monitor.bounds, tol)
+        reached = bound_reached(lin, gn, *self._monitor.bounds, tol, self.nlp.param_index)
         if reached is not None:  # the test is made on that face, from the bound
             z = z.copy()
             z[reached[0]] = reached[1]

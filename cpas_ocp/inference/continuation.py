@@ -151,7 +151,8 @@ def _restarted_claim(est: Estimator, first: Fit | SolverFailure, claim: Claim | 
 
     try:
         fit = _restarted(est, given, progress)
-        return fit, claim if fit is first and claim else check_claim(est, fit), None
+        return (fit, claim if fit is first and claim is not None else check_claim(est, fit),
+                None)
     except SolverFailure as exc:
         if not isinstance(exc.last_iterate, Fit):
             raise

@@ -15,6 +15,7 @@ from cpas_ocp.estimation.kkt_system import Linearisation
 # r(z) = z - target, unconstrained: the Gauss-Newton step goes to the target, and the
 # decrement is |z - target|^2 (chi-square falls by D a (2 - a) to the fraction a of it).
 TARGET = np.array([1.0, -2.0])
+ALL = np.arange(2)  # both coordinates are free parameters
 
 
 def linearised(z: np.ndarray, held: tuple[int, ...] = ()) -> Linearisation:
@@ -35,7 +36,7 @@ def test_a_parameter_the_step_carries_at_once_through_its_bound_is_reached() -> 
     lin = linearised(z)
     gn = gauss_newton(lin)
     assert gn.decrement == pytest.approx(0.5**2 + 1.0**2)
-    assert bound_reached(lin, gn, lower, upper, tol=0.01) == (0, 0.5)
+    assert bound_reached(lin, gn, lower, upper, tol=0.01, coordinates=ALL) == (0, 0.5)
     # Held there, the decrement is what the other coordinate offers.
     on_face = gauss_newton(linearised(np.array([0.5, -1.0]), held=(0,)))
     assert on_face.decrement == pytest.approx(1.0)
@@ -47,14 +48,19 @@ def test_a_bound_with_more_than_the_tolerance_before_it_is_not_reached() -> None
     z = np.array([0.4, -2.0])
     lin = linearised(z)
     gn = gauss_newton(lin)
-    assert bound_reached(lin, gn, np.full(2, -5.0), np.array([0.5, 5.0]), tol=0.01) is None
+    assert bound_reached(lin, gn, np.full(2, -5.0), np.array([0.5, 5.0]), tol=0.01,
+                         coordinates=ALL) is None
+    # Nor one that is not among the coordinates offered (a state, a captured speed).
+    near = linearised(np.array([0.5 - 1e-6, -1.0]))
+    assert bound_reached(near, gauss_newton(near), np.full(2, -5.0), np.array([0.5, 5.0]),
+                         tol=0.01, coordinates=np.array([1])) is None
     # A held coordinate is never reached, nor one whose step points away from its bound.
     held = linearised(np.array([0.5 - 1e-6, -1.0]), held=(0,))
     assert bound_reached(held, gauss_newton(held), np.full(2, -5.0), np.array([0.5, 5.0]),
-                         tol=0.01) is None
+                         tol=0.01, coordinates=ALL) is None
     away = linearised(np.array([0.5 - 1e-6, -1.0]))
     assert bound_reached(away, gauss_newton(away), np.array([0.5 - 2e-6, -5.0]),
-                         np.array([5.0, 5.0]), tol=0.01) is None
+                         np.array([5.0, 5.0]), tol=0.01, coordinates=ALL) is None
 
 
 def test_the_measured_decrease_stops_at_the_bounds() -> None:
