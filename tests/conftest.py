@@ -33,14 +33,12 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     """The files with the most slow tests first, then those with the most tests, each
     file's tests in their own order: with two workers each taking whole files, the long
     files start early and the quick ones fill in beside them at the end."""
-    slow: dict[str, int] = {}
-    count: dict[str, int] = {}
+    slow: dict[Path, int] = {}
+    count: dict[Path, int] = {}
     for item in items:
-        path = item.nodeid.split("::")[0]
-        count[path] = count.get(path, 0) + 1
-        slow[path] = slow.get(path, 0) + (item.get_closest_marker("slow") is not None)
-    items.sort(key=lambda item: (-slow[item.nodeid.split("::")[0]],
-                                 -count[item.nodeid.split("::")[0]]))
+        count[item.path] = count.get(item.path, 0) + 1
+        slow[item.path] = slow.get(item.path, 0) + (item.get_closest_marker("slow") is not None)
+    items.sort(key=lambda item: (-slow[item.path], -count[item.path]))
 
 @pytest.fixture(scope="session")
 def problem_folder(tmp_path_factory: pytest.TempPathFactory):

@@ -353,8 +353,7 @@ class _Queue:
             self.waiting = [(j, cc) for j, cc in self.waiting if j is not job]
             if job in self.running and job.process is not None:
                 self.running.remove(job)
-                _kill_group(job.process)
-                _release(job.library)
+                _kill(job.process, job.library)
             if not job.library.exists():
                 job.error = "cancelled"
             _remove(job.source.parent)
@@ -407,8 +406,7 @@ def abandon() -> None:
     at the end of a process a signal stopped."""
     for job in _QUEUE.running:
         if job.process is not None:
-            _kill_group(job.process)
-            _release(job.library)
+            _kill(job.process, job.library)
     _QUEUE.waiting.clear()
     _QUEUE.running.clear()
     for folder in _FOLDERS:
@@ -463,12 +461,14 @@ atexit.register(_at_exit)
 os.register_at_fork(after_in_child=_forget_the_parents)
 
 
-def _kill_group(proc: subprocess.Popen) -> None:
+def _kill(proc: subprocess.Popen, library: Path) -> None:
     """Kill the process group `proc` leads (a compiler driver and the passes it started),
-    and wait for the driver; the group's other members, orphaned, are reaped by init."""
+    wait for the driver, and release the claim on the `library` it was making (its shell,
+    killed, cannot); the group's other members, orphaned, are reaped by init."""
     with suppress(ProcessLookupError):  # the whole group has already ended
         os.killpg(proc.pid, signal.SIGKILL)
     proc.wait()
+    _release(library)
 
 
 def _cores() -> int:

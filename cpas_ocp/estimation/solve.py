@@ -577,24 +577,21 @@ class Solver:
         point the run ends at then has it there, as the claim's bound tests expect.
         """
         tol = self.settings.chi2_step_tol or 0.0
-        lin = self._linearisations.linearise(z)
-        violation = lin.violation
-        # An inequality (a what-if limit) inactive at z might be crossed by the finishing
-        # step unseen: the linearisation holds only the active ones.
-        may_polish = violation <= POLISH_CONSTRAINT_TOL and not self.nlp.has_inequalities
-        if violation > STOP_CONSTRAINT_TOL and not may_polish:
-            return None  # no Gauss-Newton solve for an iterate that cannot end the run
+        point = self._stop_linearisation(z)
+        if point is None:
+            return None
+        lin, may_polish = point
         gn = gauss_newton(lin)
         reached = bound_reached(lin, gn, *self._monitor.bounds, tol, self.nlp.param_index)
         if reached is not None:  # the test is made on that face, from the bound
             z = z.copy()
             z[reached[0]] = reached[1]
-            lin = self._linearisations.linearise(z)
-            violation = lin.violation
-            may_polish = violation <= POLISH_CONSTRAINT_TOL and not self.nlp.has_inequalities
-            if violation > STOP_CONSTRAINT_TOL and not may_polish:
+            point = self._stop_linearisation(z)
+            if point is None:
                 return None
+            lin, may_polish = point
             gn = gauss_newton(lin)
+        violation = lin.violation
         self._monitor.promised = gn.decrement
         found = None  # (decrement, point) that sets the tests' back-off
         if violation <= STOP_CONSTRAINT_TOL and abs(gn.restoration) <= tol:
@@ -616,6 +613,18 @@ class Solver:
                 if decrement < tol:
                     return decrement, projection[0].z
         return found
+
+    def _stop_linearisation(self, z: np.ndarray) -> tuple[Linearisation, bool] | None:
+        """The problem linearised at `z` and whether finishing steps may start there; None
+        where `z` can neither end the run nor be finished (its scaled constraints beyond
+        POLISH_CONSTRAINT_TOL), which is told before any Gauss-Newton solve."""
+        lin = self._linearisations.linearise(z)
+        # An inequality (a what-if limit) inactive at z might be crossed by the finishing
+        # step unseen: the linearisation holds only the active ones.
+        may_polish = lin.violation <= POLISH_CONSTRAINT_TOL and not self.nlp.has_inequalities
+        if lin.violation > STOP_CONSTRAINT_TOL and not may_polish:
+            return None
+        return lin, may_polish
 
     def _finishing_steps(self, lin: Linearisation, gn: GaussNewtonStep, tol: float
                          ) -> tuple[tuple[float, np.ndarray] | None,
