@@ -68,10 +68,22 @@ def test_the_measured_decrease_stops_at_the_bounds() -> None:
     lin = linearised(z)
     gn = gauss_newton(lin)  # D = 1, and chi-square is exactly quadratic: c = D
     assert measured_decrement(residual, lin, gn) == pytest.approx(1.0)
-    # A bound halfway: the minimum along the step (a = 1) lies beyond it, so the
-    # decrement is not measured down.
     box = (np.array([-5.0, -5.0]), np.array([0.5, 5.0]))
-    assert measured_decrement(residual, lin, gn, box) == pytest.approx(1.0)
+
+    # A residual with no slope at z whose square falls along the step, 1 - a^2 + a^4 / 4:
+    # chi-square is flatter than Gauss-Newton's model, -2a + a^4 / 4 from z.  Measured at
+    # the step's end, c = 1/4 and D^2 / c = 4; at the bound halfway, c = 1/16 puts the
+    # minimum at a = 16, beyond the bound, and the decrement D = 1 stands.
+    def flat(x: np.ndarray) -> np.ndarray:
+        return np.append(x - TARGET, 1.0 - 0.5 * (x[0] - z[0]) ** 2)
+
+    lin_f = Linearisation(z, flat(z), sp.vstack([sp.identity(2), sp.csr_matrix((1, 2))],
+                                                format="csc"),
+                          sp.csc_matrix((0, 2)), np.zeros(0), np.zeros(0, dtype=bool))
+    gn_f = gauss_newton(lin_f)
+    assert gn_f.decrement == pytest.approx(1.0)
+    assert measured_decrement(flat, lin_f, gn_f) == pytest.approx(4.0)
+    assert measured_decrement(flat, lin_f, gn_f, box) == pytest.approx(1.0)
 
     # A residual whose chi-square rises steeply past a quarter of the step: measured
     # there (within the bounds), the minimum lies inside them and is D^2 / c.
