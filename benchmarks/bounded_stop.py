@@ -57,9 +57,20 @@ def fitted(folder: str) -> dict:
 
 def cases(root: Path, seed: int) -> dict[str, Path]:
     """The folders fitted, by name."""
-    from cpas_ocp.cli import main
     from cpas_ocp.estimation.simulate import simulate_problem
     from cpas_ocp.io.problems import load_problem
+
+    out = imported_logs(root)
+    for problem in ("drogue", "fbcp"):
+        simulate_problem(load_problem(problem), root / problem, seed)
+        out[f"{problem} seed {seed}"] = root / problem
+    return out
+
+
+def imported_logs(root: Path) -> dict[str, Path]:
+    """The synthetic rocket flight imported from each of its three recorder layouts, and the
+    public rocket logs present, each imported into a folder under `root`, by name."""
+    from cpas_ocp.cli import main
 
     sys.path.insert(0, str(ROOT))
     from tests.io import test_rocket_log_import as flights
@@ -75,9 +86,6 @@ def cases(root: Path, seed: int) -> dict[str, Path]:
                 assert main(["import", str(SHARED / log), "--card", card, "--out",
                              str(root / card)]) == 0
                 out[card] = root / card
-    for problem in ("drogue", "fbcp"):
-        simulate_problem(load_problem(problem), root / problem, seed)
-        out[f"{problem} seed {seed}"] = root / problem
     return out
 
 

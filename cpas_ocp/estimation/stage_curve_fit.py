@@ -20,7 +20,10 @@ force (or acceleration) divided by q, so its noise grows as 1/q: a rocket's
 drogue opening at apogee, near zero airspeed, gives drag areas that are
 noise alone until the vehicle has fallen fast enough, and weighted equally
 they drove the fill constant and the shape exponent onto their 0.3 lower
-bounds.  Weighted by q they count as little as they say.
+bounds.  Weighted by q they count as little as they say.  The Jacobian is
+CasADi's exact one, evaluated with the residual: forward differences cost one
+more evaluation per parameter, and the reduction took twice as long
+(`benchmarks/reduction_speed.py`).
 
 Every value returned lies inside its bounds by BOUND_MARGIN: a start on a
 bound is a start an interior-point solver leaves only slowly.  A stage whose
@@ -32,6 +35,7 @@ defaults was tried: on the `drogue` deployment-load fit it started a basin
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import casadi as ca
@@ -100,7 +104,6 @@ def fit_stage_curve(data: StageData) -> dict[str, float] | None:
         return None
     t_cross = float(data.t[above[0]])
     i_peak = int(np.argmax(smooth))
-    curve = curve_function(data)
     free = np.array([n not in data.fixed for n in names])
     held = np.array([data.fixed.get(n, np.nan) for n in names])
     lower = np.array([data.bounds[n][0] for n in names])[free]
@@ -113,11 +116,7 @@ def fit_stage_curve(data: StageData) -> dict[str, float] | None:
 
     q = np.ones_like(data.t) if data.dynamic_pressure is None else data.dynamic_pressure
     weight = q / max(float(np.max(q)), 1e-12)  # drag force per unit of the largest q
-
-    def residual(theta: np.ndarray) -> np.ndarray:
-        values = full(theta)
-        v_i = float(np.interp(values[0], data.t, data.airspeed))
-        return weight * (np.asarray(curve(data.t[None, :], *values, v_i)).ravel() - data.cds)
+    residual = _WeightedResidual(curve_and_jacobian(data), data, weight, full, free)
 
     if not free.any():
         return dict(zip(names, (float(v) for v in held), strict=True))
@@ -127,7 +126,8 @@ def fit_stage_curve(data: StageData) -> dict[str, float] | None:
     for expopen in starting:
         theta0 = _starting_point(data, t_cross, i_peak, expopen)[free]
         theta0 = np.clip(theta0, lower + 1e-9 * (upper - lower), upper - 1e-9 * (upper - lower))
-        sol = least_squares(residual, theta0, bounds=(lower, upper), x_scale="jac")
+        sol = least_squares(residual, theta0, jac=residual.jacobian, bounds=(lower, upper),
+                            x_scale="jac")
         if best is None or sol.cost < best.cost:
             best = sol
     fitted = dict(zip(names, (float(v) for v in full(best.x)), strict=True))
@@ -170,6 +170,72 @@ def curve_function(data: StageData) -> ca.Function:
     t = ca.SX.sym("t")
     v_i = ca.SX.sym("V_i")
     theta = [ca.SX.sym(n) for n in fitted_names(data.chute, data.stage)]
+    fn = ca.Function("stage_curve", [t, *theta, v_i], [_curve(data, t, theta, v_i)])
+    return fn.map(data.t.size)
+
+
+def curve_and_jacobian(data: StageData) -> ca.Function:
+    """The stage's curve and its exact derivatives over a vector of times: (t, theta, V_i)
+    -> (CdS (m^2), dCdS/d(theta, V_i)), theta the `fitted_names` in their order; the
+    derivatives of each time's CdS are consecutive."""
+    t = ca.SX.sym("t")
+    v_i = ca.SX.sym("V_i")
+    theta = ca.SX.sym("theta", len(fitted_names(data.chute, data.stage)))
+    cds = _curve(data, t, ca.vertsplit(theta), v_i)
+    fn = ca.Function("stage_curve_jacobian", [t, theta, v_i],
+                     [cds, ca.jacobian(cds, ca.vertcat(theta, v_i))])
+    return fn.map(data.t.size)
+
+
+class _WeightedResidual:
+    """The curve fit's residual, the weighted drag-area misfit weight (CdS - data), and its
+    Jacobian in the free parameters, both from one evaluation per parameter vector
+    (least_squares asks for the Jacobian where it has just asked for the residual).
+
+    The airspeed at the start time, V_i, is the reduction's, interpolated linearly: its
+    slope there carries the start time's effect on the fill time into the Jacobian."""
+
+    def __init__(self, fn: ca.Function, data: StageData, weight: np.ndarray,
+                 full: Callable[[np.ndarray], np.ndarray], free: np.ndarray) -> None:
+        self._fn, self._data, self._weight, self._full, self._free = fn, data, weight, full, free
+        self._at: bytes | None = None
+        self._r = self._J = np.empty(0)
+
+    def __call__(self, theta: np.ndarray) -> np.ndarray:
+        self._evaluate(theta)
+        return self._r
+
+    def jacobian(self, theta: np.ndarray) -> np.ndarray:
+        self._evaluate(theta)
+        return self._J
+
+    def _evaluate(self, theta: np.ndarray) -> None:
+        if self._at == theta.tobytes():
+            return
+        data = self._data
+        values = self._full(theta)
+        v_i, dv_dt = _interpolated(values[0], data.t, data.airspeed)
+        cds, jac = self._fn(data.t[None, :], values, v_i)
+        jac = np.asarray(jac).reshape(data.t.size, values.size + 1)
+        d_values = jac[:, :-1].copy()
+        d_values[:, 0] += jac[:, -1] * dv_dt
+        self._r = self._weight * (np.asarray(cds).ravel() - data.cds)
+        self._J = self._weight[:, None] * d_values[:, self._free]
+        self._at = theta.tobytes()
+
+
+def _interpolated(x: float, t: np.ndarray, y: np.ndarray) -> tuple[float, float]:
+    """y linearly interpolated at x (held at its ends, as np.interp) and its slope there."""
+    if not t[0] <= x < t[-1]:
+        return float(np.interp(x, t, y)), 0.0
+    i = int(np.searchsorted(t, x, side="right")) - 1
+    slope = (y[i + 1] - y[i]) / (t[i + 1] - t[i])
+    return float(y[i] + slope * (x - t[i])), float(slope)
+
+
+def _curve(data: StageData, t: ca.SX, theta: list[ca.SX], v_i: ca.SX) -> ca.SX:
+    """The stage's drag area (m^2) at time t (s) for the fitted parameters `theta` (in
+    `fitted_names` order) and the airspeed V_i (m/s) at its start."""
     length = fill_length(data.chute.fill_length, data.chute.diameter, data.cds_prev,
                          data.cds_steady, data.cds_full_open)
     if data.chute.inflation == "infinite_mass":
@@ -180,6 +246,4 @@ def curve_function(data: StageData) -> ca.Function:
         n_fill, expopen = theta[1:]
         rise = finite_mass_cds(t, theta[0], data.cds_prev, data.cds_steady, n_fill, expopen,
                                length, v_i)
-    cds = ca.if_else(stage_started(t, theta[0]), rise, data.cds_prev)
-    fn = ca.Function("stage_curve", [t, *theta, v_i], [cds])
-    return fn.map(data.t.size)
+    return ca.if_else(stage_started(t, theta[0]), rise, data.cds_prev)
