@@ -99,7 +99,10 @@ def read_checkpoint(folder: Path, test: FlightTest,
     for k, item in enumerate(data["steps"]):
         spec = load_model_file(folder / f"step_{k}.json", registry, allow_external=True)
         stored = np.load(folder / fit_file(k))
-        est = Estimator(test, spec, _settings(item["settings"]))
+        # The step's own starting values: no reduction to repeat (they are its result).
+        settings = _settings(item["settings"])
+        est = Estimator(test, spec, dataclasses.replace(
+            settings, guess={**item["guess"], **settings.guess}))
         fit = est.fit_at(stored["z"], SolverStats(**item["solver"]))
         fit.multipliers = stored["multipliers"]
         fit.guess = dict(item["guess"])
