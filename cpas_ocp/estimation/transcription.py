@@ -755,10 +755,12 @@ class Transcription:
         rows = (np.arange(n_inst)[:, None] * mrows + np.arange(mrows)[None, :])
         r_full = np.repeat(rows[:, None, :], ncols, axis=1).reshape(-1)
         c_full = np.repeat(zcols[:, :, None], mrows, axis=2).reshape(-1)
-        order = np.lexsort((r_full, c_full))
+        # Column-major order.  Each instance holds a column once, with its rows in order,
+        # and the instances' rows increase: a stable sort by column orders the rows too.
+        order = np.argsort(c_full, kind="stable")
         n_z = self._ctx[0].numel() + len(self.free) + len(self.model.captures)
-        sp = ca.Sparsity.triplet(n_inst * mrows, n_z, r_full[order].tolist(),
-                                 c_full[order].tolist())
+        colind = np.searchsorted(c_full[order], np.arange(n_z + 1))
+        sp = ca.Sparsity(n_inst * mrows, n_z, colind.tolist(), r_full[order].tolist())
         return _Piece(mapped(block.fn)[0], mapped(value_fn)[0], with_jacobian,
                       ca.MX(sp, nz[order.tolist()]), np.repeat(block.times, mrows))
 
