@@ -72,7 +72,7 @@ def main() -> None:
         trees = {"this tree": ROOT, args.revision: baseline}
         caches = {label: Path(tmp) / f"cache-{i}" for i, label in enumerate(trees)}
         for name in args.cases:
-            folder = make_test(name, args.seed, Path(tmp)).path
+            folder = make_test(name, args.seed, Path(tmp))
             runs: dict[str, list[dict]] = {label: [] for label in trees}
             for _ in range(args.repeat):
                 for label, code in trees.items():
