@@ -48,7 +48,7 @@ from cpas_ocp.inference.noise_test import NoiseTest, noise_test
 from cpas_ocp.inference.phase_windows import PhaseWindow, phase_windows
 from cpas_ocp.io.model_spec import ModelSpec
 from cpas_ocp.physics.effects.registry import EffectType
-from cpas_ocp.process_memory import release_freed_memory
+from cpas_ocp.process_memory import new_objects_only, release_freed_memory
 
 ALPHA = 0.01  # family-wise level of the diagnosis's tests
 CONFIRM_TOP = 3  # significant score tests confirmed by a refit
@@ -287,19 +287,21 @@ def diagnose(fit: Fit, spec: ModelSpec, candidates: Mapping[str, EffectType] | N
              progress: bool = False, exclude: frozenset[str] = frozenset()) -> Diagnosis:
     """Diagnose `fit` (made with `spec`): see the module docstring.  The effects named in
     `exclude` are not tested (ones a chain of models has already dropped)."""
-    windows = phase_windows(fit)
-    tests = score_tests(fit, spec, candidates, progress, exclude)
-    m = max(sum(t.tested for t in tests), 1)
-    leading = [t for t in tests if t.significant(alpha, m)][:confirm_top]
-    for t in leading:
-        confirm(fit, t, progress)
+    with new_objects_only():
+        windows = phase_windows(fit)
+        tests = score_tests(fit, spec, candidates, progress, exclude)
+        m = max(sum(t.tested for t in tests), 1)
+        leading = [t for t in tests if t.significant(alpha, m)][:confirm_top]
+        for t in leading:
+            confirm(fit, t, progress)
+            release_freed_memory()
+        air = wind_evidence(fit, spec, alpha, progress)
         release_freed_memory()
-    air = wind_evidence(fit, spec, alpha, progress)
-    release_freed_memory()
-    diag = Diagnosis(fit, windows, window_statistics(fit, windows), confirmed_ranking(tests),
-                     diagnose_residuals(fit, windows, alpha), alpha, air=air)
-    if confirm_top > 0:
-        confirm_past_stand_ins(diag, tests, progress)
+        diag = Diagnosis(fit, windows, window_statistics(fit, windows),
+                         confirmed_ranking(tests), diagnose_residuals(fit, windows, alpha),
+                         alpha, air=air)
+        if confirm_top > 0:
+            confirm_past_stand_ins(diag, tests, progress)
     return diag
 
 

@@ -67,7 +67,7 @@ from cpas_ocp.inference.model_comparison import LikelihoodRatio, nested_start, n
 from cpas_ocp.io.model_spec import RISER_MODELS, ModelSpec
 from cpas_ocp.physics.effects.base import Effect
 from cpas_ocp.physics.effects.registry import BUILTIN, EffectType
-from cpas_ocp.process_memory import release_freed_memory
+from cpas_ocp.process_memory import new_objects_only, release_freed_memory
 from cpas_ocp.progress import progress_line
 
 if TYPE_CHECKING:
@@ -179,7 +179,7 @@ def score_tests(fit: Fit, spec: ModelSpec,
     entries = {n: e for n, e in candidate_effects(candidates).items()
                if n not in spec.effect_names and n not in exclude}
     out = []
-    with progress_line("score tests", len(entries), progress) as advance:
+    with new_objects_only(), progress_line("score tests", len(entries), progress) as advance:
         for name, entry in entries.items():
             advance(name, done=0)
             out.append(score_test(fit, spec, entry))
