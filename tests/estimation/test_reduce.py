@@ -81,6 +81,30 @@ def test_curve_fit_recovers_a_noise_free_stage() -> None:
         assert fitted[name] == pytest.approx(value, rel=1e-4, abs=1e-4), name
 
 
+def test_curve_fit_jacobian_is_the_residual_s_derivative() -> None:
+    """The curve fit's Jacobian, exact from CasADi, matches central differences of its
+    residual, the start time's column included: through the fill time, the airspeed
+    interpolated at the start carries it (a speed falling 30 m/s per second here)."""
+    from cpas_ocp.estimation.stage_curve_fit import _WeightedResidual, curve_and_jacobian
+
+    chute = Parachute("drogue1", "drogue", 23 * FT, 36.0, "infinite_mass", "diameter",
+                      ("stage1", "stage2"))
+    t = np.arange(6.2, 10.0, 0.01)
+    airspeed = 150.0 - 30.0 * (t - 6.2)
+    data = StageData(chute, "stage2", t, np.full_like(t, 9.0), airspeed, 7.45, 12.6, 21.0,
+                     {})
+    weight = np.linspace(0.5, 1.0, t.size)
+    free = np.ones(5, dtype=bool)
+    residual = _WeightedResidual(curve_and_jacobian(data), data, weight, lambda x: x, free)
+    theta = np.array([7.0037, 1.22, 5.0, 1.5, 0.25])
+    jacobian = residual.jacobian(theta).copy()
+    for j in range(theta.size):
+        h = np.zeros_like(theta)
+        h[j] = 1e-6
+        central = (residual(theta + h) - residual(theta - h)) / 2e-6
+        assert np.allclose(jacobian[:, j], central, rtol=1e-5, atol=1e-6), j
+
+
 def test_curve_fit_corrects_event_times_that_are_far_off(drogue_folder, tmp_path) -> None:
     """From events 0.3 s off, every stage's start guess lands within 0.1 s of the truth.
 
