@@ -165,15 +165,6 @@ def _starting_point(data: StageData, t_cross: float, i_peak: int, expopen: float
     return np.array([t_i, n_fill, expopen])
 
 
-def curve_function(data: StageData) -> ca.Function:
-    """CasADi curve of the stage over a vector of times: (t, *fitted, V_i) -> CdS (m^2)."""
-    t = ca.SX.sym("t")
-    v_i = ca.SX.sym("V_i")
-    theta = [ca.SX.sym(n) for n in fitted_names(data.chute, data.stage)]
-    fn = ca.Function("stage_curve", [t, *theta, v_i], [_curve(data, t, theta, v_i)])
-    return fn.map(data.t.size)
-
-
 def curve_and_jacobian(data: StageData) -> ca.Function:
     """The stage's curve and its exact derivatives over a vector of times: (t, theta, V_i)
     -> (CdS (m^2), dCdS/d(theta, V_i)), theta the `fitted_names` in their order; the

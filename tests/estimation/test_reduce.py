@@ -12,7 +12,7 @@ from cpas_ocp.cli import main
 from cpas_ocp.estimation.reduction import reduce_and_guess
 from cpas_ocp.estimation.stage_curve_fit import (
     StageData,
-    curve_function,
+    curve_and_jacobian,
     fit_stage_curve,
     fitted_names,
 )
@@ -73,7 +73,8 @@ def test_curve_fit_recovers_a_noise_free_stage() -> None:
     airspeed = 90.0 - 2.0 * (t - 6.2)
     blank = StageData(chute, "stage2", t, np.zeros_like(t), airspeed, 7.45, 12.6, 21.0, bounds)
     v_i = float(np.interp(true["t_start[drogue1,stage2]"], t, airspeed))
-    history = np.asarray(curve_function(blank)(t[None, :], *true.values(), v_i)).ravel()
+    cds, _ = curve_and_jacobian(blank)(t[None, :], np.array(list(true.values())), v_i)
+    history = np.asarray(cds).ravel()
     fitted = fit_stage_curve(StageData(chute, "stage2", t, history, airspeed, 7.45, 12.6, 21.0,
                                        bounds))
     assert fitted is not None
@@ -85,7 +86,7 @@ def test_curve_fit_jacobian_is_the_residual_s_derivative() -> None:
     """The curve fit's Jacobian, exact from CasADi, matches central differences of its
     residual, the start time's column included: through the fill time, the airspeed
     interpolated at the start carries it (a speed falling 30 m/s per second here)."""
-    from cpas_ocp.estimation.stage_curve_fit import _WeightedResidual, curve_and_jacobian
+    from cpas_ocp.estimation.stage_curve_fit import _WeightedResidual
 
     chute = Parachute("drogue1", "drogue", 23 * FT, 36.0, "infinite_mass", "diameter",
                       ("stage1", "stage2"))
