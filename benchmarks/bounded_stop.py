@@ -24,11 +24,10 @@ from __future__ import annotations
 import contextlib
 import io
 import sys
-import tempfile
 from pathlib import Path
 
 import harness
-from revisions import ROOT, call_at, code_at
+from revisions import ROOT, compare_cases
 
 BEFORE = "3392e82"
 SHARED = ROOT.parent / "shared" / "data" / "rocketpy-logs"
@@ -93,20 +92,9 @@ def main() -> int:
     parser = harness.parser(__doc__, seed=1, seed_help="seed of the simulated problems")
     parser.add_argument("--against", metavar="REV", default=BEFORE)
     args = parser.parse_args()
-    rows = {}
-    with tempfile.TemporaryDirectory() as tmp, code_at(args.against) as before:
-        for name, folder in cases(Path(tmp), args.seed).items():
-            # A first, untimed fit compiles the models both sides use.
-            old, new = [call_at(code, "bounded_stop", "fitted", str(folder),
-                                cache=Path(tmp) / "cache") for code in (ROOT, before, ROOT)][1:]
-            rows[name] = {"before": old, "now": new,
-                          "wall_ratio": harness.ratio(new["wall_s"], old["wall_s"])}
-            print(f"{name:20s} {args.against}: {old['iterations']:4d} it, chi2 "
-                  f"{old['chi_square']:12.4f}, {old['status']}, {old['wall_s']:5.1f} s | now: "
-                  f"{new['iterations']:4d} it, chi2 {new['chi_square']:12.4f}, "
-                  f"{new['status']}, {new['wall_s']:5.1f} s | ratio "
-                  f"{harness.ratio_text(new['wall_s'], old['wall_s'])}", flush=True)
-    harness.report("bounded_stop", against=args.against, cases=rows)
+    compare_cases("bounded_stop", "fitted", lambda root: cases(root, args.seed), args.against,
+                  lambda r: f"{r['iterations']:4d} it, chi2 {r['chi_square']:12.4f}, "
+                            f"{r['status']}, {r['wall_s']:5.1f} s")
     return 0
 
 

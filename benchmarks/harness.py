@@ -98,6 +98,12 @@ def ratio(new: float, old: float) -> float:
     return new / old
 
 
+def paired(old: dict[str, Any], new: dict[str, Any]) -> dict[str, Any]:
+    """One case's results at two revisions, each with its ``wall_s``: both, and the ratio of
+    wall times new/old."""
+    return {"before": old, "now": new, "wall_ratio": ratio(new["wall_s"], old["wall_s"])}
+
+
 def ratio_text(new: float, old: float, spec: str = ".2f") -> str:
     """`ratio` formatted with the format `spec` (``nan`` where it is undefined)."""
     return format(ratio(new, old), spec)

@@ -21,7 +21,7 @@ import os
 import subprocess
 import sys
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -99,3 +99,31 @@ def call_at(code: Path, module: str, function: str, *args: object, cache: Path |
     what is timed is native code on both sides."""
     return run_child(CALL, code, str(BENCHMARKS), module, function, json.dumps(args),
                      cache=cache, compile_first=True)
+
+
+def call_both(before: Path, module: str, function: str, *args: object, cache: Path
+              ) -> tuple[Any, Any]:
+    """`call_at` with the package from `before`, then from this tree, after an untimed call
+    with this tree's that compiles the models both sides use into `cache`: (before, now)."""
+    call_at(ROOT, module, function, *args, cache=cache)
+    return (call_at(before, module, function, *args, cache=cache),
+            call_at(ROOT, module, function, *args, cache=cache))
+
+
+def compare_cases(benchmark: str, function: str, cases: Callable[[Path], dict[str, Path]],
+                  against: str, describe: Callable[[dict[str, Any]], str]) -> None:
+    """Each case folder `cases` makes (in a temporary folder) given to `function` of the
+    module `benchmark` with the package of `against` and with this tree's (`call_both`):
+    a line per case, its name, what `describe` says of each side and the ratio of wall
+    times now/`against`; then the benchmark's report (`harness.report`)."""
+    import harness
+
+    rows = {}
+    with tempfile.TemporaryDirectory() as tmp, code_at(against) as before:
+        for name, folder in cases(Path(tmp)).items():
+            old, new = call_both(before, benchmark, function, str(folder),
+                                 cache=Path(tmp) / "cache")
+            rows[name] = harness.paired(old, new)
+            print(f"{name:20s} {against}: {describe(old)} | now: {describe(new)} | ratio "
+                  f"{harness.ratio_text(new['wall_s'], old['wall_s'])}", flush=True)
+    harness.report(benchmark, against=against, cases=rows)

@@ -64,6 +64,7 @@ from cpas_ocp.discrepancy.diagnosis import ALPHA, CONFIRM_TOP, Diagnosis, diagno
 from cpas_ocp.discrepancy.score_test import CONFIRM_MAX_ITER, ScoreTest, confirm, score_test
 from cpas_ocp.errors import InputError, SolverFailure
 from cpas_ocp.estimation.estimator import Estimator, Fit, Settings
+from cpas_ocp.estimation.fit import FROM_REDUCTION
 from cpas_ocp.estimation.kkt_system import NonFiniteCurvature
 from cpas_ocp.inference.continuation import solve as solve_with_continuation
 from cpas_ocp.inference.diagnostics import (
@@ -396,7 +397,7 @@ def best_start(est: Estimator, fit: Fit, max_iter: int, progress: bool = False
         tried.append((est, moved, "; ".join(str(r) for r in restarts)))
     fresh = fresh_fit(fit.test, est.spec, fit.settings, max_iter, progress)
     if fresh is not None:
-        tried.append((*fresh, "the offline reduction"))
+        tried.append((*fresh, FROM_REDUCTION))
     best = min(tried, key=lambda t: t[1].chi_square, default=None)
     if best is None or best[1].chi_square >= fit.chi_square - IMPROVEMENT_CHI2:
         return None

@@ -166,6 +166,10 @@ PRIORS = "priors"
 PSEUDO_SENSORS = (EVENTS, PRIORS)
 
 
+# `SolverStats.start` of a solve from the offline reduction's initial point.
+FROM_REDUCTION = "the offline reduction"
+
+
 @dataclass
 class SolverStats:
     status: str
@@ -175,7 +179,7 @@ class SolverStats:
     objective: float
     worst_constraint: str = ""
     chi2_decrement: float | None = None
-    start: str = "the offline reduction"  # where the solve started from
+    start: str = FROM_REDUCTION  # where the solve started from
 
 
 @dataclass

@@ -19,6 +19,7 @@ from cpas_ocp import interrupts
 from cpas_ocp.errors import SolverFailure
 from cpas_ocp.estimation.feasible_descent import DescentEnd, DescentProblem, descend
 from cpas_ocp.estimation.fit import (
+    FROM_REDUCTION,
     POLISH_CONSTRAINT_TOL,
     STOP_CONSTRAINT_TOL,
     Fit,
@@ -473,7 +474,7 @@ class Solver:
             g, objective = np.asarray(sol["g"]).ravel(), float(sol["f"])
         worst = worst_violation(self.nlp.violations(g))
         stats = SolverStats(status, success, run.iterations, wall, objective, worst, decrement,
-                            "the offline reduction" if start is None else
+                            FROM_REDUCTION if start is None else
                             "a fit" if isinstance(start, Fit) else "a given point")
         return z, stats, multipliers
 

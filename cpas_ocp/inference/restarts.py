@@ -23,6 +23,7 @@ windows all fit their noise costs nothing more.
 
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass
 
 import numpy as np
@@ -113,6 +114,9 @@ def restart_start_times(est: Estimator, fit: Fit, progress: bool = False,
             start = _probe(est, moved, best.chi_square) if screen else moved
             if start is None:
                 continue
+            if progress:
+                print(f"{name} misfits: fitting again with it moved {shift:+g} s ...",
+                      file=sys.stderr, flush=True)
             try:
                 trial = est.solve(progress=progress, start=start, max_iter=RESTART_MAX_ITER)
             except SolverFailure:

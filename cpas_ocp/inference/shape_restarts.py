@@ -19,14 +19,25 @@ and the converged fit of least chi-square is kept: a restart replaces the
 first fit where it lowers chi-square by more than IMPROVEMENT_CHI2 (or where
 the first did not converge).  A fit whose shapes lie inside their bounds costs
 nothing more.
+
+A start that is the reduction's own (the reduction left every restarted shape at
+its default, as it does for a stage an altimeter alone barely sees, and the factor
+is 1) is not solved again where the first fit was solved from it: the solve is
+deterministic and would repeat the first fit iteration for iteration.  On the
+NDRT 2020 log (`problems/ndrt_2020.json`), whose main's fill constant ends on its
+guessed upper bound, that was one of three restarts of 51 iterations each.
 """
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Callable
+
+import numpy as np
 
 from cpas_ocp.errors import SolverFailure
 from cpas_ocp.estimation.estimator import Estimator, Fit
+from cpas_ocp.estimation.fit import FROM_REDUCTION
 from cpas_ocp.estimation.stage_curve_fit import inside_bounds
 from cpas_ocp.inference.restarts import IMPROVEMENT_CHI2
 from cpas_ocp.physics.parameters import split_name
@@ -80,6 +91,12 @@ def restart_shapes(est: Estimator, first: Callable[[], Fit], progress: bool = Fa
             prm = est.model.parameter(name)
             z = est.with_value(z, name, inside_bounds(factor * prm.default, prm.lower,
                                                       prm.upper))
+        if fit is not None and fit.solver.start == FROM_REDUCTION and np.array_equal(z, start):
+            continue  # the reduction's own start, from which the first fit was solved
+        if progress:
+            print(f"{', '.join(stuck)} on a guessed bound: fitting again from the reduction "
+                  f"with {', '.join(names)} at {factor:g} x their defaults ...",
+                  file=sys.stderr, flush=True)
         try:
             trial = est.solve(progress=progress, start=z)
         except SolverFailure:
