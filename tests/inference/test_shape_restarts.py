@@ -96,3 +96,12 @@ def test_a_restart_that_lowers_chi_square_is_kept_and_says_so() -> None:
     fit = restart_shapes(est, lambda: first)
     assert fit.chi_square == 50.0 and fit.parameters[N] == 20.0
     assert "at 0.5 x their defaults" in fit.solver.start and N in fit.solver.start
+
+
+def test_each_restart_says_what_it_refits_when_progress_is_shown(capsys) -> None:
+    est = StandIn(reduced_n=DEFAULT_N)
+    first = est.solve()
+    restart_shapes(est, lambda: first, progress=True)
+    lines = capsys.readouterr().err.splitlines()
+    assert lines == [f"{N} on a guessed bound: fitting again from the reduction with {N} at "
+                     f"{f:g} x their defaults ..." for f in SHAPE_START_FACTORS if f != 1.0]
