@@ -23,45 +23,88 @@ The modules: `preparation` (simulate, reduce, model files, test design),
 `reconstruction` (one test's fit and what follows from it), `discrepancy`
 (diagnose, discover, compare from a test folder), `kept_discovery` (a discovery
 kept on disk, resumed), `campaigns` (many tests, populations, a joint fit,
-dispersions, Monte Carlo) and `flights` (real flights' logs).
+dispersions, Monte Carlo), `log_import` (a recorder's log into a test folder) and
+`flights` (a real flight's logs reconstructed and compared).  Each name is imported
+from its module when first used.
 """
 
-from cpas_ocp.api.campaigns import (
-    Campaign,
-    Dispersions,
-    Joint,
-    MonteCarlo,
-    Population,
-    dispersions,
-    joint,
-    monte_carlo,
-    population,
-    reconstruct_campaign,
-)
-from cpas_ocp.api.discrepancy import compare, diagnose, discover
-from cpas_ocp.api.flights import Flight, flight, import_log
-from cpas_ocp.api.kept_discovery import resume_discovery
-from cpas_ocp.api.preparation import (
-    InitialGuess,
-    design,
-    effect,
-    load_model,
-    reduce,
-    simulate,
-)
-from cpas_ocp.api.reconstruction import (
-    FitOptions,
-    Reconstruction,
-    build,
-    demo,
-    fit_estimator,
-    reconstruct,
-    what_if,
-)
-from cpas_ocp.io.flight_test import load_test
-from cpas_ocp.physics.effects import baseline_effects
-from cpas_ocp.progress import Narration, terminal
-from cpas_ocp.reports.summaries import summary
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from cpas_ocp.api.campaigns import (
+        Campaign,
+        Dispersions,
+        Joint,
+        MonteCarlo,
+        Population,
+        dispersions,
+        joint,
+        monte_carlo,
+        population,
+        reconstruct_campaign,
+    )
+    from cpas_ocp.api.discrepancy import compare, diagnose, discover
+    from cpas_ocp.api.flights import Flight, flight, import_log
+    from cpas_ocp.api.kept_discovery import resume_discovery
+    from cpas_ocp.api.preparation import (
+        InitialGuess,
+        design,
+        effect,
+        load_model,
+        reduce,
+        simulate,
+    )
+    from cpas_ocp.api.reconstruction import (
+        FitOptions,
+        Reconstruction,
+        build,
+        demo,
+        fit_estimator,
+        reconstruct,
+        what_if,
+    )
+    from cpas_ocp.io.flight_test import load_test
+    from cpas_ocp.physics.effects import baseline_effects
+    from cpas_ocp.progress import Narration, terminal
+    from cpas_ocp.reports.summaries import summary
+
+# Where each name of the interface lives.  A name is imported from its module when first
+# used: a command imports only what its workflow needs (`cpas-ocp import` reads a log with
+# pandas and scipy, and never loads CasADi, matplotlib or the estimator).
+_HOMES = {
+    **dict.fromkeys(("Campaign", "Dispersions", "Joint", "MonteCarlo", "Population",
+                     "dispersions", "joint", "monte_carlo", "population",
+                     "reconstruct_campaign"), "cpas_ocp.api.campaigns"),
+    **dict.fromkeys(("compare", "diagnose", "discover"), "cpas_ocp.api.discrepancy"),
+    **dict.fromkeys(("Flight", "flight"), "cpas_ocp.api.flights"),
+    "import_log": "cpas_ocp.api.log_import",
+    "resume_discovery": "cpas_ocp.api.kept_discovery",
+    **dict.fromkeys(("InitialGuess", "design", "effect", "load_model", "reduce", "simulate"),
+                    "cpas_ocp.api.preparation"),
+    **dict.fromkeys(("FitOptions", "Reconstruction", "build", "demo", "fit_estimator",
+                     "reconstruct", "what_if"), "cpas_ocp.api.reconstruction"),
+    "load_test": "cpas_ocp.io.flight_test",
+    "baseline_effects": "cpas_ocp.physics.effects",
+    **dict.fromkeys(("Narration", "terminal"), "cpas_ocp.progress"),
+    "summary": "cpas_ocp.reports.summaries",
+}
+
+
+def __getattr__(name: str) -> Any:
+    """The interface's `name`, imported from its module on first use (PEP 562)."""
+    if name not in _HOMES:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(_HOMES[name]), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *_HOMES})
+
 
 __all__ = ["Campaign", "Dispersions", "FitOptions", "Flight", "InitialGuess", "Joint",
            "MonteCarlo", "Narration", "Population", "Reconstruction", "baseline_effects", "build",

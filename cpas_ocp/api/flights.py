@@ -1,6 +1,5 @@
-"""Real flights: a recorder's log into a test folder, and a flight card's logs imported,
-reconstructed, diagnosed and compared with the card's nominal drag areas (the command
-line's `import` and `flight`)."""
+"""Real flights: a flight card's logs imported (`log_import`), reconstructed, diagnosed and
+compared with the card's nominal drag areas (the command line's `flight`)."""
 
 from __future__ import annotations
 
@@ -27,7 +26,6 @@ from cpas_ocp.io.flight_card import FlightCard, card_folder, card_reading, is_ca
 from cpas_ocp.io.flight_log import import_flight
 from cpas_ocp.io.flight_record import FlightRecord
 from cpas_ocp.io.flight_test import load_test
-from cpas_ocp.io.import_reports import ImportSummary
 from cpas_ocp.io.log_formats import read_flight_log
 from cpas_ocp.io.model_spec import ModelSpec
 from cpas_ocp.io.recorder_clocks import RecorderEstimates
@@ -35,24 +33,6 @@ from cpas_ocp.physics.flight_test import FlightTest
 from cpas_ocp.progress import SILENT, Narration
 from cpas_ocp.reports.flight_report import air_motion_text, flight_text, held_opening_profiles
 from cpas_ocp.reports.import_text import import_text, recorders_text
-
-
-def import_log(log: str | Path, card: str | FlightCard, out: str | Path,
-               log_format: str | None = None, columns: str | Path | None = None,
-               still_air: bool = False) -> ImportSummary:
-    """A flight log, as it came off the recorder, into a test folder at `out` under the
-    flight `card` (a built-in name, a card file or a loaded card): read as `log_format` (a
-    built-in format: altus, cats) or through the column map `columns`, else as the card's
-    ``data`` block says (`cpas-ocp import`)."""
-    card = card if isinstance(card, FlightCard) else load_card(str(card))
-    if log_format is None and columns is None:  # the card says how its logs are read
-        if card.data_format is None and card.data_columns is None:
-            raise InputError(card.source, "data.format/data.columns", "one of the two, "
-                             "saying how the card's logs are read (a built-in format, or a "
-                             "column map), or --format/--columns on the command line")
-        log_format, columns = card_reading(card)
-    record = read_flight_log(log, log_format, columns, f"{card.source}: data.columns")
-    return import_flight(record, card, out, still_air)
 
 
 @dataclass

@@ -250,8 +250,7 @@ def _model_option(s: argparse.ArgumentParser, model: bool = True, plugin: bool =
 
 
 def _solver_options(s: argparse.ArgumentParser) -> None:
-    from cpas_ocp.estimation.estimator import MIN_GRID_STEP_S
-    from cpas_ocp.estimation.uncertainty import HESSIANS
+    from cpas_ocp.estimation.fit import HESSIANS, MIN_GRID_STEP_S
     s.add_argument("--grid-step", type=ranged(float, MIN_GRID_STEP_S), default=None,
                    help="force a uniform shooting interval [s] (default: chosen from the "
                         "dynamics, the fastest sensor's sampling interval where the motion "

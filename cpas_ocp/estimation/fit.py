@@ -5,11 +5,13 @@ sensor channel), the solver's statistics, and the settings the estimator was bui
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from cpas_ocp.physics.flight_test import FlightTest
-from cpas_ocp.physics.model import Model
+if TYPE_CHECKING:  # annotations only: the command line's parser reads this module's limits
+    from cpas_ocp.physics.flight_test import FlightTest
+    from cpas_ocp.physics.model import Model
 
 
 @dataclass
@@ -102,6 +104,9 @@ class Settings:
 
 
 MIN_GRID_STEP_S = 0.001
+
+
+HESSIANS = ("gauss-newton", "exact")  # curvatures a covariance may invert
 
 
 MAX_LATTICE_STEP_S = 0.025  # the lattice resolves a fill within a 10 Hz sample (s)

@@ -11,12 +11,11 @@ import casadi as ca
 import numpy as np
 
 from cpas_ocp.estimation import kkt_system
-from cpas_ocp.estimation.fit import Fit
+from cpas_ocp.estimation.fit import HESSIANS, Fit
 from cpas_ocp.estimation.gauss_newton import gauss_newton_step
 from cpas_ocp.estimation.kkt_system import Linearisation
 from cpas_ocp.estimation.transcription import Transcription
 from cpas_ocp.estimation.uncertainty import (
-    HESSIANS,
     Covariance,
     kkt_covariance,
     log_det_information,

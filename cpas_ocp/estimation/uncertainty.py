@@ -152,7 +152,6 @@ class Covariance:
         return float(np.sum(y**2 / w[ok])), int(ok.sum())
 
 
-HESSIANS = ("gauss-newton", "exact")  # curvatures a covariance may invert
 # Standard deviation along a direction, in units of the parameters' typical magnitudes
 # (`Parameter.scale`), above which the combination is reported as poorly determined: the
 # data then leave it uncertain by more than the size of the parameters themselves.

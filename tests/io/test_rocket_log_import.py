@@ -469,6 +469,13 @@ def test_unknown_format_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture
 def _import_layout(layout: str, flight: Flight, tmp_path: Path) -> Path:
     """The flight written in `layout` (altus, cats or a column-mapped CSV) and imported with
     one command into tmp_path/test."""
+    _import(layout_arguments(layout, flight, tmp_path), tmp_path / "test")
+    return tmp_path / "test"
+
+
+def layout_arguments(layout: str, flight: Flight, tmp_path: Path) -> list[str]:
+    """The flight written in `layout` (altus, cats or a column-mapped CSV) under tmp_path
+    with its card: the `import` command's arguments, less its output folder."""
     card = str(_card(tmp_path))
     if layout == "altus":
         write_altus(flight, tmp_path / "telemega-serial-1234-flight-0002.csv", seed=3)
@@ -481,8 +488,7 @@ def _import_layout(layout: str, flight: Flight, tmp_path: Path) -> Path:
         write_mapped(flight, tmp_path / "log.csv", seed=1)
         (tmp_path / "map.json").write_text(json.dumps(COLUMN_MAP))
         args = ["import", str(tmp_path / "log.csv"), "--columns", str(tmp_path / "map.json")]
-    _import([*args, "--card", card], tmp_path / "test")
-    return tmp_path / "test"
+    return [*args, "--card", card]
 
 
 @pytest.mark.slow
