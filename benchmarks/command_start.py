@@ -7,7 +7,7 @@ the covariance's curvatures) and `cpas_ocp.api` imported every workflow, with Ca
 estimator, matplotlib and the campaign's study code among them; `import` printed its
 summary through `api.summary`, which loads every report.  Now the parser reads its
 limits from `estimation.fit` alone, the interface imports a workflow when it is first
-used (PEP 562), and `import` reads a log with pandas and scipy only.
+used (PEP 562), and `import` reads a log without the estimator or matplotlib.
 
 Each command runs as its own process (`python -m cpas_ocp.cli ...`, the interpreter's
 start included), the two trees alternating, `--repeat` times; printed: the median wall

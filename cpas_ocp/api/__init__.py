@@ -73,7 +73,7 @@ if TYPE_CHECKING:
 
 # Where each name of the interface lives.  A name is imported from its module when first
 # used: a command imports only what its workflow needs (`cpas-ocp import` reads a log with
-# pandas and scipy, and never loads CasADi, matplotlib or the estimator).
+# pandas and scipy, and never loads matplotlib or the estimator).
 _HOMES = {
     **dict.fromkeys(("Campaign", "Dispersions", "Joint", "MonteCarlo", "Population",
                      "dispersions", "joint", "monte_carlo", "population",

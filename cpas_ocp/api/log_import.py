@@ -1,6 +1,7 @@
 """A recorder's log, as it came off the recorder, into a test folder under a flight card
-(the command line's `import`).  Reading a log needs pandas and scipy only: this module
-imports nothing of the estimator, so the command starts without CasADi or matplotlib."""
+(the command line's `import`).  Reading a log needs pandas and scipy (and CasADi's small
+Python module, for the atmosphere): this module imports nothing of the estimator, so the
+command starts without it or matplotlib."""
 
 from __future__ import annotations
 

@@ -56,8 +56,9 @@ from cpas_ocp.io.output_folder import check_output
 def main(argv: list[str] | None = None) -> int:
     """Run one command; every way it can end is an exit code and at most one line on stderr
     (the module's docstring lists them)."""
-    # The handlers first: building the parser imports CasADi (seconds), and a signal in
-    # that time is an interrupt like any other, not a traceback or a silent death.
+    # The handlers first: a command's imports take seconds (CasADi, matplotlib, scipy),
+    # and a signal in that time is an interrupt like any other, not a traceback or a
+    # silent death.
     previous = {sig: signal.getsignal(sig) for sig in interrupts.SIGNALS}
     interrupts.handle_signals()
     try:

@@ -115,7 +115,8 @@ def restart_start_times(est: Estimator, fit: Fit, progress: bool = False,
             if start is None:
                 continue
             if progress:
-                print(f"{name} misfits: fitting again with it moved {shift:+g} s ...",
+                print(f"{name} misfits: fitting again with it moved "
+                      f"{value - fit.parameters[name]:+.3g} s ...",
                       file=sys.stderr, flush=True)
             try:
                 trial = est.solve(progress=progress, start=start, max_iter=RESTART_MAX_ITER)

@@ -23,9 +23,10 @@ nothing more.
 A start that is the reduction's own (the reduction left every restarted shape at
 its default, as it does for a stage an altimeter alone barely sees, and the factor
 is 1) is not solved again where the first fit was solved from it: the solve is
-deterministic and would repeat the first fit iteration for iteration.  On the
-NDRT 2020 log (`problems/ndrt_2020.json`), whose main's fill constant ends on its
-guessed upper bound, that was one of three restarts of 51 iterations each.
+deterministic and would repeat the first fit iteration for iteration (to rounding,
+where one of the two ran in CasADi's virtual machine and the other in native code).
+On the NDRT 2020 log (`problems/ndrt_2020.json`), whose main's fill constant ends on
+its guessed upper bound, that restart repeated the first fit's 51 iterations.
 """
 
 from __future__ import annotations
