@@ -47,8 +47,9 @@ if TYPE_CHECKING:
         reconstruct_campaign,
     )
     from cpas_ocp.api.discrepancy import compare, diagnose, discover
-    from cpas_ocp.api.flights import Flight, flight, import_log
+    from cpas_ocp.api.flights import Flight, flight
     from cpas_ocp.api.kept_discovery import resume_discovery
+    from cpas_ocp.api.log_import import import_log
     from cpas_ocp.api.preparation import (
         InitialGuess,
         design,
@@ -103,6 +104,7 @@ def __getattr__(name: str) -> Any:
 
 
 def __dir__() -> list[str]:
+    """The module's names, the interface's not yet imported among them."""
     return sorted({*globals(), *_HOMES})
 
 
