@@ -56,8 +56,8 @@ def commands(root: Path) -> dict[str, list[str]]:
 
 
 def timed(code: Path, args: list[str], out: Path) -> float:
-    """Wall seconds of one command with the package from `code` (its output folder `out`,
-    removed first where it names one)."""
+    """Wall seconds of one command with the package from `code` (`out` appended where its
+    arguments end with ``--out``: a folder no other run writes)."""
     if args[-1] == "--out":
         args = [*args, str(out)]
     with tempfile.TemporaryDirectory() as scratch:

@@ -25,6 +25,8 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
+import harness
+
 ROOT = Path(__file__).resolve().parents[1]
 BENCHMARKS = ROOT / "benchmarks"
 
@@ -116,8 +118,6 @@ def compare_cases(benchmark: str, function: str, cases: Callable[[Path], dict[st
     module `benchmark` with the package of `against` and with this tree's (`call_both`):
     a line per case, its name, what `describe` says of each side and the ratio of wall
     times now/`against`; then the benchmark's report (`harness.report`)."""
-    import harness
-
     rows = {}
     with tempfile.TemporaryDirectory() as tmp, code_at(against) as before:
         for name, folder in cases(Path(tmp)).items():
