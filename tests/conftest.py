@@ -2,8 +2,12 @@
 
 from __future__ import annotations
 
+import importlib
 import json
 import shutil
+import sys
+import types
+from collections.abc import Sequence
 from pathlib import Path
 
 import pytest
@@ -17,6 +21,38 @@ from cpas_ocp.io.problems import load_problem
 from cpas_ocp.physics.parameters import split_name
 
 START_GUESS_OFFSET_S = 0.3
+TESTS = Path(__file__).parent
+
+
+def patch_everywhere(monkeypatch: pytest.MonkeyPatch, name: str, value: object,
+                     homes: Sequence[str]) -> None:
+    """`name` replaced by `value` in each module of `homes`, all of them imported before any
+    is patched.  A module first imported while another is patched binds the stand-in
+    through its `from ... import name`, and monkeypatch then records the stand-in as the
+    value to restore: it would stay for every later test in the process."""
+    modules = [importlib.import_module(home) for home in homes]
+    for module in modules:
+        monkeypatch.setattr(module, name, value)
+
+
+def stand_ins_left() -> list[str]:
+    """Functions defined in the tests that sit in a module of the package (a patch that
+    was never undone, or was undone to a stand-in)."""
+    return sorted(f"{module_name}.{name}"
+                  for module_name, module in list(sys.modules.items())
+                  if module_name.split(".")[0] == "cpas_ocp"
+                  for name, value in list(vars(module).items())
+                  if isinstance(value, types.FunctionType)
+                  and Path(value.__code__.co_filename).is_relative_to(TESTS))
+
+
+@pytest.fixture(autouse=True, scope="module")
+def no_stand_in_left_behind() -> object:
+    """A test module must leave the package as it found it: a stand-in left behind
+    silently changes what every later test in the same process runs."""
+    yield
+    leaked = stand_ins_left()
+    assert not leaked, f"stand-ins left in the package after this module: {leaked}"
 
 
 

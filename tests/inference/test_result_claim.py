@@ -23,6 +23,7 @@ from cpas_ocp.io.flight_test import load_test
 from cpas_ocp.io.model_spec import spec_from_block
 from cpas_ocp.physics.effects.canopy_inflation import CanopyInflation
 from cpas_ocp.reports.fit_text import claim_text
+from tests.conftest import patch_everywhere
 
 pytestmark = pytest.mark.slow
 
@@ -185,8 +186,8 @@ def pressed(drogue_folder, tmp_path_factory):
 
 def given(monkeypatch: pytest.MonkeyPatch, rec: co.Reconstruction) -> None:
     """Every fit the interface's workflows make (`api.fit_estimator`) is `rec`."""
-    for workflows in ("reconstruction", "discrepancy"):
-        monkeypatch.setattr(f"cpas_ocp.api.{workflows}.fit_estimator", lambda *_a, **_k: rec)
+    patch_everywhere(monkeypatch, "fit_estimator", lambda *_a, **_k: rec,
+                     ("cpas_ocp.api.reconstruction", "cpas_ocp.api.discrepancy"))
 
 
 def test_a_fit_still_pressed_exits_4_with_its_report_saying_why(
@@ -221,8 +222,8 @@ def test_discover_says_in_its_report_that_its_first_fit_is_not_a_result(
         return discovery.Discovery([discovery.DiscoveryStep(None, spec, fit)],
                                    "stopped before any diagnosis")
 
-    monkeypatch.setattr(discovery, "discover", stopped)
-    monkeypatch.setattr("cpas_ocp.api.kept_discovery.discover", stopped)  # the command's path to it
+    patch_everywhere(monkeypatch, "discover", stopped,  # the command's path to it, too
+                     ("cpas_ocp.discrepancy.discovery", "cpas_ocp.api.kept_discovery"))
     out = tmp_path / "discovery"
     assert main(["discover", str(test_dir), "--out", str(out)]) == 0
     notes = json.loads((out / "discovery.json").read_text())["notes"]
