@@ -36,14 +36,19 @@ def patch_everywhere(monkeypatch: pytest.MonkeyPatch, name: str, value: object,
 
 
 def stand_ins_left() -> list[str]:
-    """Functions defined in the tests that sit in a module of the package (a patch that
-    was never undone, or was undone to a stand-in)."""
+    """Functions and classes defined in the tests that sit in a module of the package (a
+    patch that was never undone, or was undone to a stand-in)."""
     return sorted(f"{module_name}.{name}"
                   for module_name, module in list(sys.modules.items())
                   if module_name.split(".")[0] == "cpas_ocp"
-                  for name, value in list(vars(module).items())
-                  if isinstance(value, types.FunctionType)
-                  and Path(value.__code__.co_filename).is_relative_to(TESTS))
+                  for name, value in list(vars(module).items()) if _from_tests(value))
+
+
+def _from_tests(value: object) -> bool:
+    """Whether `value` is a function or a class defined in the tests."""
+    if isinstance(value, types.FunctionType):
+        return Path(value.__code__.co_filename).is_relative_to(TESTS)
+    return isinstance(value, type) and value.__module__.split(".")[0] == "tests"
 
 
 @pytest.fixture(autouse=True, scope="module")
