@@ -14,6 +14,10 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
+pytestmark = pytest.mark.slow  # two fresh interpreters importing the workflows: 10 s
+
 ROOT = Path(__file__).parents[1]
 
 SCRIPT = """

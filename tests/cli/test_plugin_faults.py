@@ -51,6 +51,15 @@ def handlers() -> Iterator[None]:
         signal.signal(s, handler)
 
 
+@pytest.fixture
+def python_sigint() -> Iterator[None]:
+    """Python's own SIGINT handler, as a notebook has it.  A process started in the
+    background by a shell inherits SIGINT ignored, and Python then installs no handler."""
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, previous)
+
+
 @pytest.fixture(scope="module")
 def fbcp(problem_folder) -> Path:
     return problem_folder("fbcp", 1)
@@ -86,7 +95,7 @@ def test_a_plugin_failing_at_import_names_its_file(fault, tmp_path, handlers) ->
         load_plugin(path)
 
 
-def test_a_signal_is_not_the_plugins(tmp_path) -> None:
+def test_a_signal_is_not_the_plugins(tmp_path, python_sigint) -> None:
     """`Interrupted` (the handlers' signal) always passes through a hook; KeyboardInterrupt
     too where Python's own SIGINT handler may have raised it (a notebook's Ctrl-C)."""
     path = faulty_plugin(tmp_path / "gust.py", "parameters", "KeyboardInterrupt")
