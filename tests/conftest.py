@@ -5,6 +5,7 @@ from __future__ import annotations
 import importlib
 import json
 import shutil
+import signal
 import sys
 import types
 from collections.abc import Sequence
@@ -53,11 +54,15 @@ def _from_tests(value: object) -> bool:
 
 @pytest.fixture(autouse=True, scope="module")
 def no_stand_in_left_behind() -> object:
-    """A test module must leave the package as it found it: a stand-in left behind
-    silently changes what every later test in the same process runs."""
+    """A test module must leave the package and the process's signal handlers as it found
+    them: a stand-in or a handler left behind silently changes what every later test in
+    the same process runs."""
+    handlers = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
     yield
     leaked = stand_ins_left()
     assert not leaked, f"stand-ins left in the package after this module: {leaked}"
+    changed = [sig.name for sig, handler in handlers.items() if signal.getsignal(sig) != handler]
+    assert not changed, f"signal handlers left changed after this module: {changed}"
 
 
 
