@@ -8,7 +8,7 @@ import shutil
 import signal
 import sys
 import types
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 
 import pytest
@@ -36,6 +36,12 @@ def patch_everywhere(monkeypatch: pytest.MonkeyPatch, name: str, value: object,
         monkeypatch.setattr(module, name, value)
 
 
+# The modules that bind `discovery.discover` by name: the command's path to it
+# (`kept_discovery`) and the interface's in-memory one (`Reconstruction.discover`).
+DISCOVER_HOMES = ("cpas_ocp.discrepancy.discovery", "cpas_ocp.api.kept_discovery",
+                  "cpas_ocp.api.reconstruction")
+
+
 def stand_ins_left() -> list[str]:
     """Functions and classes defined in the tests that sit in a module of the package (a
     patch that was never undone, or was undone to a stand-in)."""
@@ -53,7 +59,7 @@ def _from_tests(value: object) -> bool:
 
 
 @pytest.fixture(autouse=True, scope="module")
-def no_stand_in_left_behind() -> object:
+def no_stand_in_left_behind() -> Iterator[None]:
     """A test module must leave the package and the process's signal handlers as it found
     them: a stand-in or a handler left behind silently changes what every later test in
     the same process runs."""

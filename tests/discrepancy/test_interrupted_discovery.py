@@ -15,11 +15,11 @@ import signal
 
 import pytest
 
-from cpas_ocp.api import kept_discovery
 from cpas_ocp.cli import main
 from cpas_ocp.discrepancy import discovery
 from cpas_ocp.interrupts import Interrupted
 from cpas_ocp.io.model_spec import load_model_file
+from tests.conftest import DISCOVER_HOMES, patch_everywhere
 
 pytestmark = pytest.mark.slow  # a discovery
 
@@ -44,8 +44,7 @@ def test_a_signal_keeps_the_finished_steps(drogue_folder, tmp_path, monkeypatch,
 
     monkeypatch.setattr(discovery, "diagnose", diagnose)
     monkeypatch.setattr(discovery, "next_step", next_step)
-    monkeypatch.setattr(discovery, "discover", discover)
-    monkeypatch.setattr(kept_discovery, "discover", discover)  # the command's path to it
+    patch_everywhere(monkeypatch, "discover", discover, DISCOVER_HOMES)
     out = tmp_path / "d"
     code = main(["discover", str(drogue_folder(1)), "--out", str(out)])
     err = capsys.readouterr().err

@@ -23,7 +23,7 @@ from cpas_ocp.io.flight_test import load_test
 from cpas_ocp.io.model_spec import spec_from_block
 from cpas_ocp.physics.effects.canopy_inflation import CanopyInflation
 from cpas_ocp.reports.fit_text import claim_text
-from tests.conftest import patch_everywhere
+from tests.conftest import DISCOVER_HOMES, patch_everywhere
 
 pytestmark = pytest.mark.slow
 
@@ -222,8 +222,7 @@ def test_discover_says_in_its_report_that_its_first_fit_is_not_a_result(
         return discovery.Discovery([discovery.DiscoveryStep(None, spec, fit)],
                                    "stopped before any diagnosis")
 
-    patch_everywhere(monkeypatch, "discover", stopped,  # the command's path to it, too
-                     ("cpas_ocp.discrepancy.discovery", "cpas_ocp.api.kept_discovery"))
+    patch_everywhere(monkeypatch, "discover", stopped, DISCOVER_HOMES)
     out = tmp_path / "discovery"
     assert main(["discover", str(test_dir), "--out", str(out)]) == 0
     notes = json.loads((out / "discovery.json").read_text())["notes"]
