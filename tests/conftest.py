@@ -14,6 +14,7 @@ from pathlib import Path
 import pytest
 from scipy.stats import chi2
 
+from cpas_ocp import interrupts
 from cpas_ocp.estimation.estimator import Estimator, Fit
 from cpas_ocp.estimation.simulate import simulate_problem
 from cpas_ocp.estimation.uncertainty import Covariance
@@ -63,7 +64,7 @@ def no_stand_in_left_behind() -> Iterator[None]:
     """A test module must leave the package and the process's signal handlers as it found
     them: a stand-in or a handler left behind silently changes what every later test in
     the same process runs."""
-    handlers = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+    handlers = {sig: signal.getsignal(sig) for sig in interrupts.SIGNALS}
     yield
     leaked = stand_ins_left()
     assert not leaked, f"stand-ins left in the package after this module: {leaked}"
