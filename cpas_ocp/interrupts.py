@@ -17,7 +17,6 @@ from __future__ import annotations
 import signal
 from collections.abc import Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass
 from types import FrameType
 
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
@@ -36,11 +35,14 @@ class Interrupted(BaseException):
         return 128 + self.signum
 
 
-@dataclass
 class _Signals:
-    depth: int = 0  # nested `deferred` regions entered
-    pending: int | None = None  # the signal that arrived inside one
-    received: int | None = None  # the last signal this process was asked to stop by
+    """The process's signal state (a plain class: the command line imports this module
+    before its handlers are in place, so it imports as little as it can)."""
+
+    def __init__(self) -> None:
+        self.depth = 0  # nested `deferred` regions entered
+        self.pending: int | None = None  # the signal that arrived inside one
+        self.received: int | None = None  # the last signal this process was asked to stop by
 
 
 _state = _Signals()

@@ -142,6 +142,18 @@ def _python_started(pid: int) -> bool:
     return bool(caught >> (signal.SIGINT - 1) & 1)
 
 
+def test_the_command_line_imports_only_its_handlers_before_installing_them() -> None:
+    """`python -m cpas_ocp.cli` imports the package and `cpas_ocp.cli` before `main` can
+    install the handlers; what that loads is the time in which a Ctrl-C is Python's
+    KeyboardInterrupt traceback.  The command line's own modules (the parser, the commands,
+    the output folder's checks) are imported by `main`, after the handlers."""
+    done = subprocess.run([sys.executable, "-c", "import sys, cpas_ocp.cli; print(sorted("
+                           "m for m in sys.modules if m.startswith('cpas_ocp')))"],
+                          capture_output=True, text=True, check=True)
+    assert done.stdout.strip() == str(["cpas_ocp", "cpas_ocp.cli", "cpas_ocp.errors",
+                                       "cpas_ocp.interrupts"])
+
+
 @pytest.mark.skipif(not Path("/proc/self/status").exists(), reason="reads /proc")
 def test_ctrl_c_in_the_first_moments_of_the_command_line_is_an_interrupt(tmp_path) -> None:
     """`python -m cpas_ocp.cli` itself, Ctrl-C 0.2 s after the interpreter started."""

@@ -47,10 +47,7 @@ import traceback
 from pathlib import Path
 
 from cpas_ocp import interrupts
-from cpas_ocp.cli import arguments
-from cpas_ocp.cli.commands import one_line
 from cpas_ocp.errors import InputError, NotAResult, PluginError, SolverFailure
-from cpas_ocp.io.output_folder import check_output
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -58,10 +55,15 @@ def main(argv: list[str] | None = None) -> int:
     (the module's docstring lists them)."""
     # The handlers first: a command's imports take seconds (CasADi, matplotlib, scipy),
     # and a signal in that time is an interrupt like any other, not a traceback or a
-    # silent death.
+    # silent death.  So this module imports nothing heavier than the handlers before
+    # they are in place (`python -m cpas_ocp.cli` runs it before `main`), and the
+    # command line's own modules are imported here, after them.
     previous = {sig: signal.getsignal(sig) for sig in interrupts.SIGNALS}
     interrupts.handle_signals()
     try:
+        from cpas_ocp.cli import arguments
+        from cpas_ocp.cli.commands import one_line
+        from cpas_ocp.io.output_folder import check_output
         try:
             args = arguments.parser().parse_args(argv)
         except SystemExit as exc:  # --help (0), or a usage error already printed as one line
