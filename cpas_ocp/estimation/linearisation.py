@@ -110,6 +110,10 @@ class Linearisations:
 
     def evaluate(self, z: np.ndarray) -> tuple[float, float]:
         """Chi-square at the decision vector `z` and its largest scaled constraint violation
-        (the shooting gaps in units of the state scales)."""
-        lin = self.linearise(z)
-        return float(lin.r @ lin.r), lin.violation
+        (the shooting gaps in units of the state scales), from the residuals' and the
+        constraints' values alone (`Linearisation.violation`'s figure; NaN where the
+        constraints are not finite).  Most points asked about are trials (a descent's,
+        a restart's) that are never linearised; where one is, its Jacobians are evaluated
+        then, and the values come from them."""
+        r = self.nlp.points.residual_value(z)
+        return float(r @ r), self.nlp.value_violation(z)

@@ -231,7 +231,9 @@ class StartingPoints:
         params = nlp.param_index
         point = self.swept(z, all_states)
         for _ in range(FEASIBILITY_SWEEPS):
-            g, A = nlp.points.constraints(point)
+            # The values only: the Jacobian serves the effects' constraints, where there are
+            # any, and a trial point that is not kept never needs it.
+            g = nlp.points.constraint_value(point)
             excess = g - np.clip(g, nlp.lbg, nlp.ubg)
             if not np.all(np.isfinite(excess)) \
                     or np.max(np.abs(excess[n_gaps:]), initial=0.0) <= STOP_CONSTRAINT_TOL:
@@ -240,7 +242,7 @@ class StartingPoints:
             # Capture rows read C_i - (the trajectory's value at the event) / cscale.
             point[captures] -= excess[n_gaps:n_gaps + ncap]
             if effect_rows.stop > effect_rows.start:
-                rows = A[effect_rows][:, params].toarray()
+                rows = nlp.points.constraints(point)[1][effect_rows][:, params].toarray()
                 point[params] -= np.linalg.lstsq(rows, excess[effect_rows], rcond=None)[0]
             point[params] = np.clip(point[params], nlp.lbz[params], nlp.ubz[params])
             point = self.swept(point, all_states)
