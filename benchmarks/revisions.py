@@ -6,7 +6,8 @@ temporary worktree; `run_child` runs a script in a fresh Python process whose
 ``import cpas_ocp`` resolves to a given code tree (this tree's or a
 worktree's), and returns the JSON object the script prints last; `call_at`
 calls a function of a benchmark module so, with this tree's benchmark code
-and the given tree's package.
+and the given tree's package; `compare_cases` does that for each case folder
+with a revision's package and this tree's, alternately.
 
 Paths the package no longer offers as switches are measured at the last
 revision that had them: `SWITCHES` (Settings' `polish`, `damping` and
@@ -18,6 +19,7 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -103,26 +105,27 @@ def call_at(code: Path, module: str, function: str, *args: object, cache: Path |
                      cache=cache, compile_first=True)
 
 
-def call_both(before: Path, module: str, function: str, *args: object, cache: Path
-              ) -> tuple[Any, Any]:
-    """`call_at` with the package from `before`, then from this tree, after an untimed call
-    with this tree's that compiles the models both sides use into `cache`: (before, now)."""
-    call_at(ROOT, module, function, *args, cache=cache)
-    return (call_at(before, module, function, *args, cache=cache),
-            call_at(ROOT, module, function, *args, cache=cache))
-
-
 def compare_cases(benchmark: str, function: str, cases: Callable[[Path], dict[str, Path]],
-                  against: str, describe: Callable[[dict[str, Any]], str]) -> None:
+                  against: str, describe: Callable[[dict[str, Any]], str],
+                  repeat: int = 1) -> None:
     """Each case folder `cases` makes (in a temporary folder) given to `function` of the
-    module `benchmark` with the package of `against` and with this tree's (`call_both`):
-    a line per case, its name, what `describe` says of each side and the ratio of wall
-    times now/`against`; then the benchmark's report (`harness.report`)."""
+    module `benchmark` with the package of `against` and with this tree's (`call_at`,
+    after an untimed call with this tree's that compiles the models both use into one
+    cache), the two alternately `repeat` times: a line per case, its name, what
+    `describe` says of each side (its first call, with the median wall time) and the
+    ratio of the median wall times now/`against`; then the benchmark's report
+    (`harness.report`)."""
     rows = {}
     with tempfile.TemporaryDirectory() as tmp, code_at(against) as before:
+        cache = Path(tmp) / "cache"
         for name, folder in cases(Path(tmp)).items():
-            old, new = call_both(before, benchmark, function, str(folder),
-                                 cache=Path(tmp) / "cache")
+            call_at(ROOT, benchmark, function, str(folder), cache=cache)
+            runs: dict[Path, list[dict[str, Any]]] = {before: [], ROOT: []}
+            for _ in range(repeat):
+                for code, made in runs.items():
+                    made.append(call_at(code, benchmark, function, str(folder), cache=cache))
+            old, new = ({**made[0], "wall_s": statistics.median(r["wall_s"] for r in made)}
+                        for made in runs.values())
             rows[name] = harness.paired(old, new)
             print(f"{name:20s} {against}: {describe(old)} | now: {describe(new)} | ratio "
                   f"{harness.ratio_text(new['wall_s'], old['wall_s'])}", flush=True)
