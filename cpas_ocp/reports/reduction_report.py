@@ -23,6 +23,7 @@ from cpas_ocp.io.strict_json import json_text
 from cpas_ocp.physics.flight_test import FlightTest
 from cpas_ocp.physics.model import Model
 from cpas_ocp.reports.display_units import DisplayUnits, display_units, pretty
+from cpas_ocp.reports.plots import write_figure
 
 
 def reduction_frame(red: Reduction) -> pd.DataFrame:
@@ -65,10 +66,8 @@ def write_reduction(test: FlightTest, out: str | Path, spec: ModelSpec,
             "stage_scale": red.stage_scale,
             "stage_windows_s": {k: list(v) for k, v in red.stage_windows.items()},
         }))
-        fig = reduction_axes(test, red, stage_starts(test, guess), shown).figure
-        fig.tight_layout()
-        fig.savefig(tmp / "reduction.png", dpi=110)
-        plt.close(fig)
+        write_figure(reduction_axes(test, red, stage_starts(test, guess), shown).figure, None,
+                     tmp / "reduction.png")
     return out, model, guess
 
 
