@@ -49,7 +49,9 @@ def test_a_killed_discovery_resumes_as_if_never_stopped(drogue_folder, tmp_path,
                                                        capsys) -> None:
     folder = drogue_folder(1)
     killed = tmp_path / "killed"
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(HERE.parent), *sys.path])}
+    # A killed process leaves its temporary folders: the child's go under the test's.
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(HERE.parent), *sys.path]),
+           "TMPDIR": str(tmp_path)}
     proc = subprocess.Popen([sys.executable, "-m", "tests.cheap_discovery", "discover",
                              str(folder), "--out", str(killed), "--max-steps", "3"],
                             env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
