@@ -6,7 +6,7 @@ the layout left a placeholder layout engine on the figure, for which `savefig`
 drew the whole figure a second time (its renderer off) before drawing it to the
 file, and each dispersion histogram was a patch per bin (60 of them per
 parameter).  Now the engine is dropped once the axes are placed
-(`reports.plots.write_figure`) and a histogram is one filled outline.
+(`reports.figure_files.write_figure`) and a histogram is one filled outline.
 
 Per case, in a fresh process per call (`revisions.compare_cases`, the two trees
 alternately, `--repeat` times): the figures written three times over (the fastest

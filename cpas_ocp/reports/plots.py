@@ -27,6 +27,7 @@ from cpas_ocp.physics.effects.wind_process import WindProcess
 from cpas_ocp.physics.parameters import param_name, split_name
 from cpas_ocp.physics.units import FT, LBF
 from cpas_ocp.reports.display_units import DisplayUnits, display_units, pretty
+from cpas_ocp.reports.figure_files import write_figure
 from cpas_ocp.reports.report_data import event_rows
 
 if TYPE_CHECKING:
@@ -359,22 +360,6 @@ def _plot_normalised(ax: plt.Axes, r: SensorResidual) -> None:
     ax.set_ylabel("res/σ (±1, ±3)")
     lim = max(4.0, float(np.percentile(np.abs(r.normalised), 99.5)))
     ax.set_ylim(-lim, lim)
-
-
-def write_figure(fig: plt.Figure, title: str | None, path: Path) -> Path:
-    """Title (if any), lay out, write at 110 dpi and close a figure; returns `path`.
-
-    `tight_layout` places the axes and leaves a placeholder layout engine on the figure,
-    for which `savefig` would draw the whole figure once more (with the renderer off)
-    before drawing it to the file.  The axes are already placed, so the engine is
-    dropped first: the same pixels, without that draw."""
-    if title is not None:
-        fig.suptitle(title)
-    fig.tight_layout()
-    fig.set_layout_engine(None)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
 
 
 def plot_hull_projections(model: DispersionModel, cases: pd.DataFrame, path: Path,

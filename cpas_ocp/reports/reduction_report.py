@@ -23,7 +23,7 @@ from cpas_ocp.io.strict_json import json_text
 from cpas_ocp.physics.flight_test import FlightTest
 from cpas_ocp.physics.model import Model
 from cpas_ocp.reports.display_units import DisplayUnits, display_units, pretty
-from cpas_ocp.reports.plots import write_figure
+from cpas_ocp.reports.figure_files import write_figure
 
 
 def reduction_frame(red: Reduction) -> pd.DataFrame:
