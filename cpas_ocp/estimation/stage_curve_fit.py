@@ -42,6 +42,7 @@ import casadi as ca
 import numpy as np
 from scipy.optimize import least_squares
 
+from cpas_ocp.estimation.nlp_functions import FunctionBuffer
 from cpas_ocp.physics.flight_test import Parachute
 from cpas_ocp.physics.inflation import (
     fill_length,
@@ -168,14 +169,15 @@ def _starting_point(data: StageData, t_cross: float, i_peak: int, expopen: float
 def curve_and_jacobian(data: StageData) -> ca.Function:
     """The stage's curve and its exact derivatives over a vector of times: (t, theta, V_i)
     -> (CdS (m^2), dCdS/d(theta, V_i)), theta the `fitted_names` in their order; the
-    derivatives of each time's CdS are consecutive."""
+    derivatives of each time's CdS are consecutive (dense, so that they can be read
+    straight from the function's buffer).  theta and V_i are shared by every time."""
     t = ca.SX.sym("t")
     v_i = ca.SX.sym("V_i")
     theta = ca.SX.sym("theta", len(fitted_names(data.chute, data.stage)))
     cds = _curve(data, t, ca.vertsplit(theta), v_i)
     fn = ca.Function("stage_curve_jacobian", [t, theta, v_i],
-                     [cds, ca.jacobian(cds, ca.vertcat(theta, v_i))])
-    return fn.map(data.t.size)
+                     [cds, ca.densify(ca.jacobian(cds, ca.vertcat(theta, v_i)))])
+    return fn.map(data.t.size, [False, True, True], [False, False])
 
 
 class _WeightedResidual:
@@ -188,7 +190,8 @@ class _WeightedResidual:
 
     def __init__(self, fn: ca.Function, data: StageData, weight: np.ndarray,
                  full: Callable[[np.ndarray], np.ndarray], free: np.ndarray) -> None:
-        self._fn, self._data, self._weight, self._full, self._free = fn, data, weight, full, free
+        self._fn = FunctionBuffer(fn)
+        self._data, self._weight, self._full, self._free = data, weight, full, free
         self._at: bytes | None = None
         self._r = self._J = np.empty(0)
 
@@ -206,11 +209,11 @@ class _WeightedResidual:
         data = self._data
         values = self._full(theta)
         v_i, dv_dt = _interpolated(values[0], data.t, data.airspeed)
-        cds, jac = self._fn(data.t[None, :], values, v_i)
-        jac = np.asarray(jac).reshape(data.t.size, values.size + 1)
+        cds, jac = self._fn.nonzeros(data.t, values, v_i)
+        jac = jac.reshape(data.t.size, values.size + 1)
         d_values = jac[:, :-1].copy()
         d_values[:, 0] += jac[:, -1] * dv_dt
-        self._r = self._weight * (np.asarray(cds).ravel() - data.cds)
+        self._r = self._weight * (cds - data.cds)
         self._J = self._weight[:, None] * d_values[:, self._free]
         self._at = theta.tobytes()
 
