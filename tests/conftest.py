@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import importlib
 import json
+import os
 import shutil
 import signal
 import sys
@@ -13,6 +14,7 @@ from pathlib import Path
 
 import pytest
 from scipy.stats import chi2
+from threadpoolctl import threadpool_limits
 
 from cpas_ocp import interrupts
 from cpas_ocp.estimation.estimator import Estimator, Fit
@@ -23,6 +25,8 @@ from cpas_ocp.io.problems import load_problem
 from cpas_ocp.physics.parameters import split_name
 
 START_GUESS_OFFSET_S = 0.3
+# The thread counts OpenBLAS and OpenMP read when they load.
+BLAS_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS")
 TESTS = Path(__file__).parent
 
 
@@ -76,9 +80,20 @@ def no_stand_in_left_behind() -> Iterator[None]:
 def pytest_configure(config: pytest.Config) -> None:
     """With whole files handed to the workers (`--dist loadfile`), xdist would start the
     files with the most tests first, which puts the long files of a few slow tests last;
-    the order `pytest_collection_modifyitems` gives is kept instead."""
+    the order `pytest_collection_modifyitems` gives is kept instead.
+
+    Each of the workers holds BLAS (NumPy's and CasADi's OpenBLAS, and the processes its
+    tests start) to its share of the cores.  Two workers on two cores, each with a pool
+    of two BLAS threads that wait for work by spinning, took 6-10 % longer on the
+    linear-algebra-heavy files and a sixth more CPU time (`docs/validation.md`)."""
     if hasattr(config.option, "loadscopereorder"):
         config.option.loadscopereorder = False
+    workers = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "0"))
+    if workers > 1:
+        threads = str(max(1, (os.cpu_count() or 1) // workers))
+        for variable in BLAS_THREAD_VARIABLES:
+            os.environ[variable] = threads  # libraries loaded later, and child processes
+        threadpool_limits(int(threads))  # the libraries already loaded
 
 
 @pytest.hookimpl(trylast=True)  # after `-m` has deselected: the tests that will run
