@@ -83,17 +83,18 @@ def pytest_configure(config: pytest.Config) -> None:
     the order `pytest_collection_modifyitems` gives is kept instead.
 
     Each of the workers holds BLAS (NumPy's and CasADi's OpenBLAS, and the processes its
-    tests start) to its share of the cores.  Two workers on two cores, each with a pool
-    of two BLAS threads that wait for work by spinning, took 6-10 % longer on the
-    linear-algebra-heavy files and a sixth more CPU time (`docs/validation.md`)."""
+    tests start) to its share of the cores, unless the thread counts are set in the
+    environment.  Two workers on two cores, each with a pool of two BLAS threads that
+    wait for work by spinning, took 6-10 % longer on the linear-algebra-heavy files and
+    a sixth more CPU time (`benchmarks/suite_blas_threads.py`)."""
     if hasattr(config.option, "loadscopereorder"):
         config.option.loadscopereorder = False
     workers = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "0"))
-    if workers > 1:
-        threads = str(max(1, (os.cpu_count() or 1) // workers))
+    if workers > 1 and not any(v in os.environ for v in BLAS_THREAD_VARIABLES):
+        threads = max(1, (os.cpu_count() or 1) // workers)
         for variable in BLAS_THREAD_VARIABLES:
-            os.environ[variable] = threads  # libraries loaded later, and child processes
-        threadpool_limits(int(threads))  # the libraries already loaded
+            os.environ[variable] = str(threads)  # libraries loaded later, child processes
+        threadpool_limits(threads)  # the libraries already loaded
 
 
 @pytest.hookimpl(trylast=True)  # after `-m` has deselected: the tests that will run
