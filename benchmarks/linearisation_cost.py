@@ -10,7 +10,7 @@ and point (the reduction's start; each problem simulated with seed 1 unless
 * ``dm``: the function called with a vector, its DM outputs copied out of
   Python lists (the earlier path, `via_dm` below);
 * ``buffer``: CasADi's function buffer writing into preallocated arrays on
-  a pattern converted once (`nlp_functions.FunctionBuffer`, the default).
+  a pattern converted once (`function_buffer.FunctionBuffer`, the default).
 
     python benchmarks/linearisation_cost.py [--problems drogue drogue_full ...] [--repeat 5]
                                             [--seed 1]
@@ -27,7 +27,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from cpas_ocp.estimation.estimator import Estimator
-from cpas_ocp.estimation.nlp_functions import FunctionBuffer
+from cpas_ocp.estimation.function_buffer import FunctionBuffer
 from cpas_ocp.estimation.simulate import simulate_problem
 from cpas_ocp.io.flight_test import load_test
 from cpas_ocp.io.problems import load_problem

@@ -42,7 +42,7 @@ import casadi as ca
 import numpy as np
 from scipy.optimize import least_squares
 
-from cpas_ocp.estimation.nlp_functions import FunctionBuffer
+from cpas_ocp.estimation.function_buffer import FunctionBuffer
 from cpas_ocp.physics.flight_test import Parachute
 from cpas_ocp.physics.inflation import (
     fill_length,
