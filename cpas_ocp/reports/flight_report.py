@@ -37,9 +37,10 @@ from cpas_ocp.estimation.uncertainty import Covariance
 from cpas_ocp.inference.model_comparison import channel_rms
 from cpas_ocp.inference.phase_windows import DEPLOYMENT_EVENTS
 from cpas_ocp.inference.profile_likelihood import THRESHOLD, Profile, held_profile
-from cpas_ocp.io.flight_log import EJECTION_EXCLUDE_S, OPENING_WINDOW_S, descent_load_factor_peak
+from cpas_ocp.io.import_events import EJECTION_EXCLUDE_S
 from cpas_ocp.io.import_reports import import_snatches
 from cpas_ocp.io.model_spec import ModelSpec
+from cpas_ocp.io.opening_loads import OPENING_WINDOW_S, descent_load_factor_peak
 from cpas_ocp.physics.atmosphere import density_at
 from cpas_ocp.physics.effects.canopy_inflation import BAND_BLEND_M
 from cpas_ocp.physics.effects.wind_process import WindProcess

@@ -21,13 +21,11 @@ from cpas_ocp.estimation.estimator import Estimator
 from cpas_ocp.io.altus_metrum import read_altus_log
 from cpas_ocp.io.flight_card import card_from_dict, load_card
 from cpas_ocp.io.flight_events import second_difference_sigma
-from cpas_ocp.io.flight_log import (
-    fit_lapse_rate,
-    import_flight,
-    opening_peak,
-)
+from cpas_ocp.io.flight_log import import_flight
 from cpas_ocp.io.flight_test import load_test
 from cpas_ocp.io.log_noise import settled_time
+from cpas_ocp.io.opening_loads import opening_peak
+from cpas_ocp.io.site_air import fit_lapse_rate
 from cpas_ocp.physics.atmosphere import (
     SiteAtmosphere,
     StandardAtmosphere,

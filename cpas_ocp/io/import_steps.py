@@ -1,0 +1,488 @@
+"""The steps that turn a flight log and its card into a test folder's contents.
+
+`flight_log.import_flight` runs `STEPS` in order on one `LogImport`, the import in
+progress: each step reads what the earlier ones found and adds its own (a series, an
+event, a decision, a note), or refuses the log with an `InputError` naming the file,
+the field and what was expected.  A new recorder's quirk or a new pathology is one
+step added to the sequence, tested on its own, not a branch inside the whole:
+
+1. `read_altimeter`: the barometer's samples, checked for a flight's speeds and boost;
+2. `find_events`: flight states or detected events, the pad's air, the card's events;
+3. `choose_deployments`: the event that deploys each canopy, and a descent long enough;
+4. `bound_phase`: touchdown, the phase, the altimeter's samples in it less the charges'
+   and a dead altimeter's;
+5. `site_air`: the site atmosphere, its lapse rate given or fitted to the GNSS;
+6. `descent_drag`: each canopy's drag area from its settled descent, and the diameters
+   the card leaves out;
+7. `altimeter_series`: the altimeter averaged over its noise's correlation, with a
+   sigma per canopy phase;
+8. `accelerometer_series`: the axial accelerometer less charges, snatches and dead
+   samples, with its sigmas, and each later canopy's full open;
+9. `gnss_series`: the GNSS altitude, where the lapse rate was fitted to it;
+10. `model_block`: the manifest, with the model to fit (`rocket_model`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from itertools import pairwise
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from cpas_ocp.errors import InputError
+from cpas_ocp.io.descent_drag import canopy_diameters, descent_drag_areas
+from cpas_ocp.io.flight_card import FlightCard, card_quantity, pad_temperature
+from cpas_ocp.io.flight_events import FlightEvent, sample_interval, second_difference_sigma
+from cpas_ocp.io.flight_record import FlightRecord, enu_about
+from cpas_ocp.io.flight_test import FORMAT
+from cpas_ocp.io.import_events import (
+    EJECTION_EXCLUDE_S,
+    EVENT_SIGMA_S,
+    card_events,
+    check_charges_deploy,
+    flight_events,
+)
+from cpas_ocp.io.import_reports import Snatch
+from cpas_ocp.io.log_noise import (
+    MIN_DESCENT_SAMPLES,
+    block_sigma,
+    dead_note,
+    dead_samples,
+    independent_blocks,
+    scatter_rms,
+    settled_time,
+)
+from cpas_ocp.io.opening_loads import MIN_ACCEL_SIGMA, OPENING_WINDOW_S, drag_ceiling, opening_peak
+from cpas_ocp.io.plausibility import (
+    MAX_DESCENT_M_S,
+    MAX_SPEED_M_S,
+    check_boost,
+    check_pad_air,
+    check_speed,
+    check_steady_accelerometer,
+)
+from cpas_ocp.io.rocket_model import held_openings, rocket_model
+from cpas_ocp.io.site_air import LAPSE_BOUNDS_K_M, fit_lapse_rate, pad_pressure
+from cpas_ocp.physics.atmosphere import ISA_LAPSE_K_M, SiteAtmosphere, pressure_altitude
+
+TOUCHDOWN_MARGIN_S = 0.5  # phase ends this long before the detected touchdown (s)
+
+
+MIN_EVENT_SIGMA_S = 1e-6  # least event sigma a manifest states (its times' resolution, s)
+
+
+MIN_BARO_SIGMA_M = 0.3  # floor of the altimeter noise sigma (the pressure resolution, m)
+
+
+SERIES_MARGIN_S = 1.5  # series extend this far beyond the phase: a 1 Hz GPS covers it (s)
+
+
+# A log must go on this long after the first deployment to be fitted (s), with at least
+# log_noise.MIN_DESCENT_SAMPLES altimeter samples.
+MIN_DESCENT_S = 5.0
+
+
+@dataclass
+class LogImport:
+    """An import in progress: the log and card it reads, and what the steps have found.
+
+    Times are on the log's own clock (s), heights pressure altitudes (m), pressures Pa,
+    temperatures K.  A field is None (or empty) until the step that sets it has run."""
+
+    record: FlightRecord
+    card: FlightCard
+    still_air: bool = False
+    notes: list[str] = field(default_factory=list)
+    dropped: dict[str, int] = field(default_factory=dict)
+    # read_altimeter
+    baro: pd.DataFrame = field(default_factory=pd.DataFrame)
+    # find_events
+    events: dict[str, FlightEvent] = field(default_factory=dict)
+    p0: float = float("nan")
+    t0: float = float("nan")
+    t0_note: str = ""
+    pad_altitude: float = float("nan")
+    elevation: float = float("nan")
+    # choose_deployments
+    deploy: dict[str, float] = field(default_factory=dict)
+    deploy_sigma: dict[str, float] = field(default_factory=dict)
+    # bound_phase
+    t_begin: float = float("nan")
+    t_down: float = float("nan")
+    t_end: float = float("nan")
+    baro_phase: pd.DataFrame = field(default_factory=pd.DataFrame)
+    # site_air
+    site: SiteAtmosphere | None = None
+    lapse_fit: tuple[float, float, float] | None = None
+    # descent_drag
+    parachutes: list[dict[str, Any]] = field(default_factory=list)
+    descent_areas: dict[str, float] = field(default_factory=dict)
+    # altimeter_series
+    settled: list[float] = field(default_factory=list)
+    baro_sigmas: list[float] = field(default_factory=list)
+    # accelerometer_series
+    accel_sigmas: list[float] = field(default_factory=list)
+    snatches: dict[str, Snatch] = field(default_factory=dict)
+    full_open: dict[str, tuple[float, float]] = field(default_factory=dict)
+    # every series step: the folder's files and its sensors
+    files: dict[str, pd.DataFrame] = field(default_factory=dict)
+    sensors: list[dict[str, Any]] = field(default_factory=list)
+    # model_block
+    manifest: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def source(self) -> str:
+        """The log's path, as errors name it."""
+        return str(self.record.path)
+
+    @property
+    def starts(self) -> list[float]:
+        """The deployments' times in order (s)."""
+        return sorted(self.deploy.values())
+
+    @property
+    def span(self) -> tuple[float, float]:
+        """The series' span (s): the phase and `SERIES_MARGIN_S` beyond each end, so that
+        every sensor covers it (the estimator uses the samples inside the phase only)."""
+        return self.t_begin - SERIES_MARGIN_S, self.t_end + SERIES_MARGIN_S
+
+    def charge_windows(self, t: pd.Series) -> np.ndarray:
+        """Which of the times `t` (s) lie in a deployment's charge window: from
+        `EVENT_SIGMA_S` before it to `EJECTION_EXCLUDE_S` after (the charge's pressure pulse
+        and jolt are no force of the flight)."""
+        near = np.zeros(len(t), dtype=bool)
+        for t_dep in self.deploy.values():
+            near |= ((t >= t_dep - EVENT_SIGMA_S) & (t <= t_dep + EJECTION_EXCLUDE_S)).to_numpy()
+        return near
+
+
+def read_altimeter(d: LogImport) -> None:
+    """The barometer's samples (time s, pressure altitude m, pressure Pa): at least 20, at
+    speeds a rocket flies, with the accelerometer's boost the right way up."""
+    samples = d.record.samples
+    d.baro = samples[["time", "altitude", "pressure"]].dropna()
+    if len(d.baro) < 20:
+        raise InputError(d.source, "pressure", "a barometer (pressure or altitude) read in at "
+                         f"least 20 samples; the log has {len(d.baro)}")
+    check_speed(d.record, d.baro["time"].to_numpy(), d.baro["altitude"].to_numpy(),
+                MAX_SPEED_M_S, "no rocket is faster in the lower atmosphere")
+    check_boost(d.record, samples)
+
+
+def find_events(d: LogImport) -> None:
+    """The log's flight events (`import_events.flight_events`), the pad's pressure and
+    temperature, checked for a pad's air, and the card's own events over them."""
+    events, notes = flight_events(d.record)
+    d.events, d.notes = events, [*d.notes, *notes]
+    card = d.card
+    d.p0, pad_note = pad_pressure(d.baro, d.events, card)
+    d.pad_altitude = float(pressure_altitude(d.p0))
+    d.notes.append(pad_note)
+    site_spec = card.site
+    d.elevation = card_quantity(site_spec.get("elevation"), "length", card.source,
+                                "site.elevation")
+    d.t0, d.t0_note = pad_temperature(site_spec, d.p0, d.elevation, card.source)
+    check_pad_air(d.record, d.p0, d.t0, "card" if "temperature" in site_spec else
+                  "density" if "surface_density" in site_spec else "standard", d.elevation,
+                  card.source, "pressure" in site_spec)
+    d.events.update(card_events(card, d.baro, d.pad_altitude, d.events))
+
+
+def choose_deployments(d: LogImport) -> None:
+    """Each canopy's deployment: the event its card names, one event per canopy; every
+    charge the log shows deploys one; the log goes on long enough after the first."""
+    card = d.card
+    kind = "a flight state of the log" if d.record.states else \
+        "an event detected in the log (it has no flight states)"
+    deploying = {name: e for name, e in d.events.items() if name != "landed"}
+    for i, chute in enumerate(card.parachutes):
+        state = chute["deployment"]
+        if state not in deploying:
+            listed = ", ".join(f"{n} {e.time:.2f} ± {e.sigma:.2f} s ({e.source})"
+                               for n, e in deploying.items())
+            raise InputError(card.source, f"parachutes[{i}].deployment",
+                             f"{kind} {d.source} that deploys {chute['name']}, or one the "
+                             f"card's 'events' gives (found: {listed or 'none'}); got {state!r}")
+        # Each canopy's opening is told apart by its own event (its charge, its snatch).
+        if any(card.parachutes[j]["deployment"] == state for j in range(i)):
+            raise InputError(card.source, f"parachutes[{i}].deployment",
+                             f"an event no other canopy of the card deploys at; "
+                             f"{state!r} deploys an earlier one too")
+        d.deploy[chute["name"]] = d.events[state].time
+        d.deploy_sigma[chute["name"]] = d.events[state].sigma
+    check_charges_deploy(d.events, d.deploy, card, d.source, bool(d.record.states))
+    d.t_begin = min(d.deploy.values())
+    descent = d.baro[d.baro["time"] > d.t_begin]
+    if len(descent) < MIN_DESCENT_SAMPLES or \
+            float(descent["time"].max()) - d.t_begin < MIN_DESCENT_S:
+        span = float(descent["time"].max()) - d.t_begin if len(descent) else 0.0
+        first = min(d.deploy, key=d.deploy.__getitem__)
+        raise InputError(d.source, "(time)", f"a descent of at least {MIN_DESCENT_S:g} s and "
+                         f"{MIN_DESCENT_SAMPLES} altimeter samples after the first deployment "
+                         f"({first} at {d.t_begin:.2f} s) to fit; the log ends {span:.2f} s "
+                         f"after it, with {len(descent)} samples")
+
+
+def bound_phase(d: LogImport) -> None:
+    """The phase, from the first deployment to `TOUCHDOWN_MARGIN_S` before touchdown (or
+    the log's end), and the altimeter's samples over it and `SERIES_MARGIN_S` beyond, less
+    the charges' windows and a dead altimeter's samples, at speeds a canopy descends."""
+    baro = d.baro
+    if "landed" in d.events:
+        d.t_down = d.events["landed"].time
+        ground = baro[(baro["time"] >= d.t_down) & (baro["time"] <= d.t_down + 3.0)]["altitude"]
+        d.notes.append(f"touchdown at {d.t_down:.2f} s, "
+                       f"{float(ground.median()) - d.pad_altitude:+.1f} m (pressure altitude) "
+                       "from the pad")
+    else:
+        d.t_down = float(baro["time"].iloc[-1])
+        d.notes.append(f"the log ends at {d.t_down:.2f} s, "
+                       f"{float(baro['altitude'].iloc[-1]) - d.pad_altitude:.1f} m above the "
+                       "pad: the phase ends at the log's end")
+    d.t_end = d.t_down - TOUCHDOWN_MARGIN_S
+    if not d.record.gnss.empty:
+        last = enu_about(d.record.gnss).iloc[-1]
+        d.notes.append(f"GNSS: {len(d.record.gnss)} fixes, the last {last['east']:+.0f} m "
+                       f"east, {last['north']:+.0f} m north of the first (the descent is "
+                       "fitted vertically: horizontal positions are not written to the "
+                       "folder)")
+    lo, hi = d.span
+    in_phase = ((baro["time"] >= lo) & (baro["time"] <= hi)).to_numpy()
+    near_charge = d.charge_windows(baro["time"])
+    d.dropped["ejection_charge_samples"] = int((in_phase & near_charge).sum())
+    phase = baro[in_phase & ~near_charge]
+    dead = dead_samples(phase["time"].to_numpy(), phase["altitude"].to_numpy())
+    if dead.any():
+        d.notes.append(dead_note("altimeter", phase["time"].to_numpy()[dead],
+                                 phase["altitude"].to_numpy()[dead], "m"))
+        phase = phase[~dead]
+    check_speed(d.record, phase["time"].to_numpy(), phase["altitude"].to_numpy(),
+                MAX_DESCENT_M_S, "no canopy descends faster")
+    d.baro_phase = phase
+
+
+def site_air(d: LogImport) -> None:
+    """The site atmosphere: the pad's pressure and temperature, and the card's lapse rate
+    or, with ``"gps"``, the one fitted to the descent's GNSS altitudes."""
+    card = d.card
+    d.notes.append(d.t0_note)
+    lapse_spec = card.site.get("lapse_rate", {"value": 1e3 * ISA_LAPSE_K_M, "unit": "K/km"})
+    if lapse_spec == "gps":
+        fixes = d.record.gps_fixes()
+        descent = fixes[(fixes["time"] >= d.t_begin) & (fixes["time"] <= d.t_down)]
+        if len(descent) < 10:
+            raise InputError(card.source, "site.lapse_rate", f"a value: 'gps' needs GPS "
+                             f"fixes in the descent, and {d.source} has {len(descent)}")
+        d.lapse_fit = fit_lapse_rate(descent, d.baro["pressure"], d.baro["time"],
+                                     d.elevation, d.p0, d.t0)
+        lapse = d.lapse_fit[0]
+    else:
+        lapse = card_quantity(lapse_spec, "lapse_rate", card.source, "site.lapse_rate")
+        if not 0.0 < lapse <= LAPSE_BOUNDS_K_M[1]:
+            raise InputError(card.source, "site.lapse_rate", f"a lapse rate above 0 and at "
+                             f"most the dry adiabat's {1e3 * LAPSE_BOUNDS_K_M[1]:g} K/km (or "
+                             f"'gps'); got {1e3 * lapse:g} K/km")
+        if d.record.has_gps_altitude:
+            d.notes.append("the GNSS altitudes are not fitted: the card's lapse rate is given "
+                           "('gps' fits it to them and fits them)")
+    d.site = SiteAtmosphere(d.elevation, d.p0, d.t0, lapse)
+
+
+def descent_drag(d: LogImport) -> None:
+    """Each canopy's own drag area from its settled descent (`descent_drag_areas`), the
+    diameters the card leaves out taken from it, and each later canopy's settled time,
+    from which its altimeter sigma applies."""
+    assert d.site is not None
+    t, h = d.baro_phase["time"].to_numpy(), d.baro_phase["altitude"].to_numpy()
+    starts = d.starts
+    d.settled = [settled_time(t, h, a, b) for a, b in pairwise([*starts[1:], d.t_end])]
+    d.parachutes = [dict(c) for c in d.card.parachutes]
+    d.descent_areas = descent_drag_areas(d.deploy, d.parachutes, d.card, d.site, t, h, d.t_end)
+    d.notes += canopy_diameters(d.parachutes, d.descent_areas, d.card)
+
+
+def altimeter_series(d: LogImport) -> None:
+    """``baro.csv``: the altimeter over the phase, each canopy phase's samples averaged in
+    blocks as long as its noise's correlation (`independent_blocks`: a recorder's filter,
+    the static port's swings as the vehicle swings), so that the fit weighs what the
+    altimeter measured independently; each sigma the scatter of the block means, a later
+    canopy's from its settled time."""
+    lo, hi = d.span
+    starts = d.starts
+    edges = [lo, *d.settled, hi + 1.0]
+    parts = []
+    order = sorted(d.deploy, key=d.deploy.__getitem__)
+    for (a, b), name, steady_end in zip(pairwise(edges), order, [*starts[1:], d.t_end],
+                                        strict=True):
+        part = d.baro_phase[(d.baro_phase["time"] >= a) & (d.baro_phase["time"] < b)]
+        blocks, size = independent_blocks(part[["time", "altitude"]], steady_end)
+        parts.append(blocks)
+        if size > 1:
+            seconds = size * sample_interval(part["time"].to_numpy())
+            d.notes.append(f"altimeter under the {name} (from {a:.2f} s): noise correlated "
+                           f"over {size} samples ({seconds:.2f} s), averaged in blocks of that "
+                           f"length: {len(part)} samples -> {len(blocks)}")
+        if len(blocks) < MIN_DESCENT_SAMPLES:  # too short a segment: the whole phase's
+            blocks, steady_end = independent_blocks(d.baro_phase[["time", "altitude"]])[0], \
+                d.t_end
+        d.baro_sigmas.append(max(MIN_BARO_SIGMA_M, block_sigma(blocks, steady_end)))
+    d.files["baro.csv"] = pd.concat(parts, ignore_index=True)
+    d.sensors.append(
+        {"name": "baro", "kind": "baro", "file": "baro.csv",
+         "columns": {"time": "s", "altitude": "m"},
+         "sigma": {"altitude": {"value": round(d.baro_sigmas[0], 3), "unit": "m"}},
+         "sigma_after": [{"time": {"value": round(t, 3), "unit": "s"},
+                          "sigma": {"altitude": {"value": round(sig, 3), "unit": "m"}}}
+                         for t, sig in zip(d.settled, d.baro_sigmas[1:], strict=True)]})
+
+
+def accelerometer_series(d: LogImport) -> None:
+    """``accelerometer.csv`` where the log's accelerometer reads over the whole phase: less
+    dead and clipped samples, the charges' windows and, in each later canopy's opening,
+    the samples above the drag ceiling (`drag_ceiling`: the shock cord's snatch, whose
+    time is that canopy's full open); a sigma per steady descent and per later opening
+    from the scatter about a local trend (the body's swing is noise of this sensor)."""
+    assert d.site is not None
+    lo, hi = d.span
+    starts = d.starts
+    accel = d.record.samples[["time", "acceleration"]].dropna()
+    dead = dead_samples(accel["time"].to_numpy(), accel["acceleration"].to_numpy(),
+                        clipped=True)
+    inside = ((accel["time"] >= lo) & (accel["time"] <= hi)).to_numpy()
+    if (dead & inside).any():
+        d.notes.append(dead_note("accelerometer", accel["time"].to_numpy()[dead & inside],
+                                 accel["acceleration"].to_numpy()[dead & inside], "m/s^2"))
+    accel = accel[inside & ~dead]
+    check_steady_accelerometer(d.record, accel["acceleration"].to_numpy())
+    d.full_open = {name: peak for name, t in d.deploy.items() if t > d.t_begin
+                   and (peak := opening_peak(accel, t)) is not None}
+    charge = d.charge_windows(accel["time"])
+    d.dropped["ejection_charge_accelerometer_samples"] = int(charge.sum())
+    accel = accel[~charge]
+    t_baro, h_baro = d.baro_phase["time"].to_numpy(), d.baro_phase["altitude"].to_numpy()
+    density = np.asarray(d.site.density(d.site.altitude_at_pressure(
+        d.baro_phase["pressure"].to_numpy())), dtype=float).ravel()
+    later = sorted((t, name) for name, t in d.deploy.items() if t > starts[0])
+    snatch = np.zeros(len(accel), dtype=bool)
+    # A later canopy's opening lasts from its charge until its descent has settled, and at
+    # least the OPENING_WINDOW_S its load peak is looked for in, up to the next deployment
+    # (or the phase's end).
+    nexts = [*starts[1:], d.t_end][1:]
+    opening_ends = [min(max(t_settled, t_charge + OPENING_WINDOW_S), t_next) for t_charge,
+                    t_settled, t_next in zip(starts[1:], d.settled, nexts, strict=True)]
+    for (t_charge, name), t_settled, t_open, t_next in zip(
+            later, d.settled, opening_ends, nexts, strict=True):
+        ceiling = drag_ceiling(t_baro, h_baro, density, t_charge, t_settled, t_next)
+        opening = (accel["time"] >= t_charge) & (accel["time"] < t_open)
+        if ceiling is None or not opening.any():  # no accelerometer reading of the opening
+            continue
+        above = (opening & (accel["acceleration"] > ceiling)).to_numpy()
+        left_out = accel[above]
+        k = int(np.argmax(left_out["acceleration"])) if above.any() else None
+        d.snatches[name] = Snatch(
+            ceiling, int(above.sum()),
+            None if k is None else float(left_out["acceleration"].iloc[k]),
+            None if k is None else float(left_out["time"].iloc[k]))
+        snatch |= above
+    d.dropped["snatch_samples_above_drag_ceiling"] = int(snatch.sum())
+    accel = accel[~snatch]
+    # A test folder's sensors each cover the whole phase: an accelerometer that stops
+    # reading inside it (dead, or logged in the boost only) is left out.
+    if not (len(accel) >= 10 and float(accel["time"].min()) <= d.t_begin + SERIES_MARGIN_S
+            and float(accel["time"].max()) >= d.t_end - SERIES_MARGIN_S):
+        span = (f" (its samples there span {accel['time'].min():.2f}-"
+                f"{accel['time'].max():.2f} s, not the phase {d.t_begin:.2f}-{d.t_end:.2f} s)"
+                if len(accel) else "")
+        d.notes.append(f"no accelerometer over the log's phase{span}: the folder has the "
+                       "altimeter only")
+        return
+    bounds = [*sorted({*starts, *opening_ends} - {d.t_end}), d.t_end]
+    for a, b in pairwise(bounds):
+        part = accel[(accel["time"] >= a) & (accel["time"] < b)]
+        d.accel_sigmas.append(max(MIN_ACCEL_SIGMA, scatter_rms(
+            part["time"].to_numpy(), part["acceleration"].to_numpy()) if len(part) > 10
+            else second_difference_sigma(accel["acceleration"].to_numpy())))
+    d.files["accelerometer.csv"] = accel
+    d.sensors.append({
+        "name": "accelerometer", "kind": "axial_accelerometer",
+        "file": "accelerometer.csv", "columns": {"time": "s", "acceleration": "m/s^2"},
+        "sigma": {"acceleration": {"value": round(d.accel_sigmas[0], 3), "unit": "m/s^2"}},
+        "sigma_after": [{"time": {"value": round(t, 3), "unit": "s"},
+                         "sigma": {"acceleration": {"value": round(sig, 3), "unit": "m/s^2"}}}
+                        for t, sig in zip(bounds[1:-1], d.accel_sigmas[1:], strict=True)]})
+
+
+def gnss_series(d: LogImport) -> None:
+    """``gps_altitude.csv``: the GNSS altitude over the phase, where the lapse rate was
+    fitted to it, at the fit's residual sigma."""
+    if d.lapse_fit is None:
+        return
+    lo, hi = d.span
+    fixes = d.record.gps_fixes()
+    fixes = fixes[(fixes["time"] >= lo) & (fixes["time"] <= hi)]
+    if len(fixes) < 2:
+        return
+    d.files["gps_altitude.csv"] = fixes[["time", "gps_altitude"]].rename(
+        columns={"gps_altitude": "up"})
+    d.sensors.append({"name": "gps_altitude", "kind": "gps_altitude",
+                      "file": "gps_altitude.csv", "columns": {"time": "s", "up": "m"},
+                      "sigma": {"altitude": {"value": round(d.lapse_fit[2], 3),
+                                             "unit": "m"}}})
+
+
+def model_block(d: LogImport) -> None:
+    """The manifest: the card's name, label, vehicle and canopies, each deployment as a
+    ``mortar_fire`` and each later full open as a ``full_open`` event, the sensors, the
+    site atmosphere, the phase and the model (`rocket_model`)."""
+    assert d.site is not None
+    card = d.card
+    d.manifest = {
+        "format": FORMAT,
+        "name": card.name,
+        "description": f"{card.title}: {d.record.recorder} log {d.record.path.name}",
+        "label": card.label,
+        "vehicle": card.vehicle,
+        "parachutes": [{k: v for k, v in c.items() if k != "deployment"}
+                       for c in d.parachutes],
+        "events": [event_entry("mortar_fire", name, t, d.deploy_sigma[name])
+                   for name, t in d.deploy.items()]
+                  + [event_entry("full_open", name, t, sigma)
+                     for name, (t, sigma) in d.full_open.items()],
+        "sensors": d.sensors,
+        "atmosphere": {"model": "site",
+                       "elevation": {"value": d.elevation, "unit": "m"},
+                       "pressure": {"value": round(d.p0, 2), "unit": "Pa"},
+                       "temperature": {"value": round(d.t0, 3), "unit": "K"},
+                       "lapse_rate": {"value": round(1e3 * d.site.lapse_rate_k_m, 4),
+                                      "unit": "K/km"}},
+        "phase": {"start": {"value": instant(d.t_begin), "unit": "s"},
+                  "end": {"value": round(d.t_end, 3), "unit": "s"}},
+        "model": rocket_model(card.model, [s["kind"] for s in d.sensors],
+                              [(c["name"], c["stages"][0]) for c in d.parachutes
+                               if not c.get("open_at_start")],
+                              held_openings(d.deploy, d.events), d.deploy_sigma, d.still_air),
+    }
+
+
+def instant(t: float) -> float:
+    """A time (s) as the manifest states it, to the microsecond: the phase's start and the
+    first deployment, rounded alike, stay equal."""
+    return round(t, 6)
+
+
+def event_entry(name: str, parachute: str, t: float, sigma: float) -> dict[str, Any]:
+    """A manifest event of `parachute` at `t` (s) with its timing `sigma` (s): the time to
+    the microsecond and the sigma to four significant digits, never below `MIN_EVENT_SIGMA_S`
+    (a detected event's sigma is a sample interval, a quarter of a millisecond at 4 kHz,
+    which rounding to the millisecond made 0)."""
+    return {"name": name, "parachute": parachute, "time": {"value": instant(t), "unit": "s"},
+            "sigma": {"value": max(MIN_EVENT_SIGMA_S, float(f"{sigma:.4g}")), "unit": "s"}}
+
+
+# The import, step by step (see the module docstring).
+STEPS: tuple[Callable[[LogImport], None], ...] = (
+    read_altimeter, find_events, choose_deployments, bound_phase, site_air, descent_drag,
+    altimeter_series, accelerometer_series, gnss_series, model_block)

@@ -1,0 +1,79 @@
+"""The model an imported rocket log is fitted with where its card lists no effects: the
+air's vertical motion, the canopies' drag, the altimeter and the other sensors' effects,
+with the openings no sensor of a rocket log resolves held at a shape.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from cpas_ocp.io.flight_events import DROGUE_WINDOW_S, FlightEvent
+from cpas_ocp.physics.effects.registry import SENSOR_EFFECTS
+
+# The rocket-log model where the card lists no effects: the air's vertical motion (an
+# Ornstein-Uhlenbeck process with a 1 m/s prior, knots every 4 s: a rocket's descent rate
+# of metres per second is moved by the air as much as by its canopy), the canopies' drag on
+# a rigid riser, the altimeter, and the other sensors' effects where the folder has them.
+# The altimeter's bias and lag only with a second sensor: against the altimeter alone a
+# bias is the initial altitude and a lag a shift of every event, which no fit can tell.
+ROCKET_EFFECTS: tuple[str | dict[str, Any], ...] = (
+    {"effect": "wind_process", "components": ["up"], "knot_s": 4.0, "tau_s": 20.0,
+     "sigma_vertical": 1.0},
+    "canopy_inflation", "forebody_drag", "rigid_riser", "baro")
+
+
+ALTIMETER_ERRORS = ("baro_bias", "baro_lag")
+
+
+# Held opening shape of a canopy deployed near apogee (the effect's default fill constant,
+# linear growth): its fill time n D_o / V_i divides by the small speed at deployment, and
+# no sensor of a rocket log resolves that opening.  A later canopy whose opening no
+# accelerometer reads has its shape exponent held (linear growth): the altimeter sees the
+# opening's duration, not the curve's shape.
+HELD_FILL_CONSTANT = 8.0
+
+
+HELD_EXPOPEN = 1.0
+
+
+MIN_START_WINDOW_S = 2.0  # least half-width of an inflation start's window about its event
+
+
+def held_openings(deploy: dict[str, float], events: dict[str, FlightEvent]) -> list[str]:
+    """Canopies deployed within `flight_events.DROGUE_WINDOW_S` of apogee (after it, or
+    before it by less than apogee's sigma plus a second), whose opening shape the default
+    model holds."""
+    if "apogee" not in events:
+        return []
+    top = events["apogee"]
+    return [name for name, t in deploy.items()
+            if top.time - top.sigma - 1.0 <= t <= top.time + DROGUE_WINDOW_S]
+
+
+def rocket_model(block: dict[str, Any], sensor_kinds: list[str],
+                 canopies: list[tuple[str, str]], held: list[str],
+                 deploy_sigma: dict[str, float], still_air: bool = False) -> dict[str, Any]:
+    """The manifest's model block: the card's where it lists effects; else `ROCKET_EFFECTS`
+    with the sensors' (`sensor_kinds`) and, with a second sensor, the altimeter's errors;
+    each start window at least three of its deployment's sigmas (and `MIN_START_WINDOW_S`);
+    the opening shape (n, expopen) of the canopies named in `held` held at
+    `HELD_FILL_CONSTANT`, `HELD_EXPOPEN`, and without an accelerometer every canopy's
+    expopen (`canopies`: each canopy's name and first stage); the card's own fixes, frees
+    and priors win.  `still_air` leaves the air's motion out."""
+    if "effects" in block:
+        return block
+    window = max(MIN_START_WINDOW_S, *(3.0 * s for s in deploy_sigma.values()))
+    effects = [{"effect": "canopy_inflation", "start_window": round(window, 3)}
+               if e == "canopy_inflation" else e for e in ROCKET_EFFECTS
+               if not (still_air and isinstance(e, dict) and e["effect"] == "wind_process")]
+    others = [SENSOR_EFFECTS[k] for k in dict.fromkeys(sensor_kinds) if k != "baro"]
+    effects += [*(ALTIMETER_ERRORS if others else ()), *others]
+    fix: dict[str, Any] = {}
+    accelerometer = "axial_accelerometer" in sensor_kinds
+    for name, stage in canopies:
+        if name in held:
+            fix[f"n[{name},{stage}]"] = HELD_FILL_CONSTANT
+        if name in held or not accelerometer:
+            fix[f"expopen[{name},{stage}]"] = HELD_EXPOPEN
+    return {**block, "effects": effects, "fix": {**fix, **block.get("fix", {})}}
+
