@@ -48,7 +48,9 @@ def card_events(card: FlightCard, baro: pd.DataFrame, pad_altitude: float,
             raise InputError(card.source, f"{field_name}.altitude", f"a height above the pad "
                              f"the descent passes below; after apogee at {top:.2f} s the log "
                              f"reads {float(after.min()) if after.size else float('nan'):.1f}"
-                             " m at the lowest")
+                             f" m at the lowest, and ends at {float(t[-1]):.2f} s before "
+                             f"coming down to {height:.0f} m: that canopy's deployment is not "
+                             "in the log (leave it out of the card, or give its time)")
         k = int(below[0])
         if not h[k - 1] > height:
             raise InputError(card.source, f"{field_name}.altitude", f"a height below apogee, "

@@ -6,24 +6,26 @@ event, a decision, a note), or refuses the log with an `InputError` naming the f
 the field and what was expected.  A new recorder's quirk or a new pathology is one
 step added to the sequence, tested on its own, not a branch inside the whole:
 
-1. `read_altimeter`: the barometer's samples, checked for a flight's speeds and boost;
-2. `find_events`: flight states or detected events, the pad's air, the card's events;
-3. `choose_deployments`: the event that deploys each canopy, and a descent long enough;
-4. `bound_phase`: touchdown, the phase, the altimeter's samples in it less the charges'
-   and a dead altimeter's;
-5. `site_air`: the site atmosphere, its lapse rate given or fitted to the GNSS;
-6. `descent_drag`: each canopy's drag area from its settled descent, and the diameters
+1. `clean_log_end`: a damaged end of the log (a reset, garbage) left out;
+2. `read_altimeter`: the barometer's samples, checked for a flight's speeds and boost;
+3. `find_events`: flight states or detected events, the pad's air, the card's events;
+4. `choose_deployments`: the event that deploys each canopy, and a descent long enough;
+5. `bound_phase`: touchdown, the phase, the altimeter's samples in it less the charges'
+   windows and swings and a dead altimeter's;
+6. `site_air`: the site atmosphere, its lapse rate given or fitted to the GNSS;
+7. `descent_drag`: each canopy's drag area from its settled descent, and the diameters
    the card leaves out;
-7. `altimeter_series`: the altimeter averaged over its noise's correlation, with a
+8. `altimeter_series`: the altimeter averaged over its noise's correlation, with a
    sigma per canopy phase;
-8. `accelerometer_series`: the axial accelerometer less charges, snatches and dead
+9. `accelerometer_series`: the axial accelerometer less charges, snatches and dead
    samples, with its sigmas, and each later canopy's full open;
-9. `gnss_series`: the GNSS altitude, where the lapse rate was fitted to it;
-10. `model_block`: the manifest, with the model to fit (`rocket_model`).
+10. `gnss_series`: the GNSS altitude, where the lapse rate was fitted to it;
+11. `model_block`: the manifest, with the model to fit (`rocket_model`).
 """
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from itertools import pairwise
@@ -46,6 +48,7 @@ from cpas_ocp.io.import_events import (
     flight_events,
 )
 from cpas_ocp.io.import_reports import Snatch
+from cpas_ocp.io.log_hygiene import charge_swing, damaged_end
 from cpas_ocp.io.log_noise import (
     MIN_DESCENT_SAMPLES,
     block_sigma,
@@ -114,6 +117,7 @@ class LogImport:
     t_down: float = float("nan")
     t_end: float = float("nan")
     baro_phase: pd.DataFrame = field(default_factory=pd.DataFrame)
+    charge_spans: dict[str, tuple[float, float]] = field(default_factory=dict)
     # site_air
     site: SiteAtmosphere | None = None
     lapse_fit: tuple[float, float, float] | None = None
@@ -151,12 +155,34 @@ class LogImport:
 
     def charge_windows(self, t: pd.Series) -> np.ndarray:
         """Which of the times `t` (s) lie in a deployment's charge window: from
-        `EVENT_SIGMA_S` before it to `EJECTION_EXCLUDE_S` after (the charge's pressure pulse
-        and jolt are no force of the flight)."""
+        `EVENT_SIGMA_S` before it to `EJECTION_EXCLUDE_S` after, or over the pressure swing
+        a recorder's filter spread it into (`charge_spans`), where that is longer (the
+        charge's pressure pulse and jolt are no force of the flight)."""
         near = np.zeros(len(t), dtype=bool)
-        for t_dep in self.deploy.values():
-            near |= ((t >= t_dep - EVENT_SIGMA_S) & (t <= t_dep + EJECTION_EXCLUDE_S)).to_numpy()
+        for name, t_dep in self.deploy.items():
+            a, b = self.charge_spans.get(name, (t_dep, t_dep))
+            near |= ((t >= min(a, t_dep - EVENT_SIGMA_S))
+                     & (t <= max(b, t_dep + EJECTION_EXCLUDE_S))).to_numpy()
         return near
+
+
+def clean_log_end(d: LogImport) -> None:
+    """The log without its damaged end (`log_hygiene.damaged_end`): samples no descent
+    produces are left out of the altimeter and, where the damage runs to the log's end,
+    every channel of the recorder is taken to end where it starts."""
+    samples = d.record.samples
+    baro = samples[["time", "altitude"]].dropna()
+    damage = damaged_end(baro["time"].to_numpy(), baro["altitude"].to_numpy())
+    if damage is None:
+        return
+    rows = baro.index[damage.rows]
+    samples = samples.copy()
+    samples.loc[rows, ["altitude", "pressure"]] = np.nan
+    if damage.to_end:
+        samples = samples[samples["time"] < damage.t_from]
+    d.notes.append(damage.note(float(baro["time"].iloc[-1])))
+    d.dropped["damaged_end_samples"] = int(damage.rows.size)
+    d.record = dataclasses.replace(d.record, samples=samples)
 
 
 def read_altimeter(d: LogImport) -> None:
@@ -250,6 +276,15 @@ def bound_phase(d: LogImport) -> None:
                        "fitted vertically: horizontal positions are not written to the "
                        "folder)")
     lo, hi = d.span
+    t, h = baro["time"].to_numpy(), baro["altitude"].to_numpy()
+    for name, t_dep in d.deploy.items():
+        swing = charge_swing(t, h, t_dep)
+        if swing is not None and (swing[0] < t_dep - EVENT_SIGMA_S
+                                  or swing[1] > t_dep + EJECTION_EXCLUDE_S):
+            d.charge_spans[name] = (swing[0] - EVENT_SIGMA_S, swing[1] + EJECTION_EXCLUDE_S)
+            d.notes.append(f"{name}'s charge: the altitude swings off its trend from "
+                           f"{swing[0]:.2f} to {swing[1]:.2f} s (a pressure pulse a recorder's "
+                           "filter spread out): left out like the charge's own window")
     in_phase = ((baro["time"] >= lo) & (baro["time"] <= hi)).to_numpy()
     near_charge = d.charge_windows(baro["time"])
     d.dropped["ejection_charge_samples"] = int((in_phase & near_charge).sum())
@@ -484,5 +519,5 @@ def event_entry(name: str, parachute: str, t: float, sigma: float) -> dict[str, 
 
 # The import, step by step (see the module docstring).
 STEPS: tuple[Callable[[LogImport], None], ...] = (
-    read_altimeter, find_events, choose_deployments, bound_phase, site_air, descent_drag,
-    altimeter_series, accelerometer_series, gnss_series, model_block)
+    clean_log_end, read_altimeter, find_events, choose_deployments, bound_phase, site_air,
+    descent_drag, altimeter_series, accelerometer_series, gnss_series, model_block)

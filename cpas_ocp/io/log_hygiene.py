@@ -1,0 +1,123 @@
+"""Samples of a flight log that no flight produces: a damaged end, and the pressure swing
+of an ejection charge in a recorder's filtered altitude.
+
+**A damaged end.**  A recorder that loses power, resets or writes its buffer out badly
+leaves samples at the log's end that are no descent's: on one public log the altitude
+falls 216 m in half a second from a descent at 6 m/s.  A descending body is slowed by
+its drag, never pulled down faster than free fall: from its rate r (m/s, negative
+down) over the seconds before, the next sample's rate can lie at most g dt below r.  In
+the log's last `TAIL_S` after its highest reading, the first sample whose rate from the
+one before falls below that by more than `TAIL_SIGMAS` rate-noise sigmas, or whose rate
+either way exceeds what no canopy descends at (`plausibility.MAX_DESCENT_M_S`), starts
+the damage; it ends at the first later sample back within reach of the flight (the last
+good height, moved at most by the rate before and free fall, give or take
+`TAIL_SIGMAS` height-noise sigmas): an impact's pressure pulse before the ground is one
+sample, a reset or garbage runs to the end.  An impact itself only stops the fall and
+is never cut.
+
+**A charge's swing.**  A recorder's filter spreads an ejection charge's one-sample
+pressure pulse over a second or more (on one filtered export the altitude dives 740 m
+and climbs back in 1.3 s).  About each deployment, the samples off the altitude's
+running median over `SWING_MEDIAN_S` by more than `SWING_SIGMAS` robust sigmas and
+a charge's least pulse (`flight_events.PULSE_MIN_M`: an opening's kink in the altitude
+stands a few metres off such a median, a charge's pulse tens to hundreds) within
+`SWING_REACH_S` form its swing, left out like the charge's own window.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from cpas_ocp.io.flight_events import PULSE_MIN_M, second_difference_sigma
+from cpas_ocp.io.plausibility import MAX_DESCENT_M_S
+from cpas_ocp.physics.units import G0
+
+TAIL_S = 5.0  # a damaged end is looked for in the log's last this long (s)
+
+
+TAIL_SIGMAS = 6.0  # a rate (or height) this many noise sigmas beyond reach is not flight
+
+
+RATE_BEFORE_S = 2.0  # the rate before a sample is the slope over this long (s)
+
+
+SWING_MEDIAN_S = 3.0  # a charge's swing stands off the running median over this long (s) ...
+
+
+SWING_SIGMAS = 8.0  # ... by this many robust sigmas of the scatter about it ...
+
+
+SWING_REACH_S = 3.0  # ... within this long of the deployment (s)
+
+
+@dataclass(frozen=True)
+class DamagedEnd:
+    """Samples at a log's end that no descent produces: their positions in the altimeter's
+    series, the time (s) the damage starts, and whether it runs to the log's end."""
+
+    rows: np.ndarray
+    t_from: float
+    to_end: bool
+
+    def note(self, t_last: float) -> str:
+        """One sentence for the import's notes."""
+        if self.to_end:
+            return (f"the log's last {self.rows.size} altimeter sample(s), from "
+                    f"{self.t_from:.2f} to {t_last:.2f} s, left out: no descent falls that "
+                    "way (a reset, an impact or garbage at the end of the log); the log is "
+                    f"taken to end at {self.t_from:.2f} s")
+        return (f"{self.rows.size} altimeter sample(s) from {self.t_from:.2f} s near the "
+                "log's end left out: no descent falls that way (an impact's pressure pulse?)")
+
+
+def damaged_end(t: np.ndarray, h: np.ndarray) -> DamagedEnd | None:
+    """The damaged end (see the module docstring) of the altitude `h` (m) at times `t` (s,
+    increasing), or None where the log ends in flight or on the ground."""
+    if t.size < 10:
+        return None
+    noise = max(second_difference_sigma(h), 0.05)
+    k_top = int(np.argmax(h))
+    first = max(k_top + 1, int(np.searchsorted(t, t[-1] - TAIL_S)), 2)
+    for i in range(first, t.size):
+        dt = t[i] - t[i - 1]
+        if not dt > 0.0:
+            continue
+        before = (t >= t[i - 1] - RATE_BEFORE_S) & (t <= t[i - 1])
+        if before.sum() < 3:
+            continue
+        rate = float(np.polyfit(t[before] - t[i - 1], h[before], 1)[0])
+        step = (h[i] - h[i - 1]) / dt
+        reach = G0 * dt + TAIL_SIGMAS * np.sqrt(2.0) * noise / dt
+        if not (step < rate - reach or abs(step) > MAX_DESCENT_M_S):
+            continue
+        # Back within reach of the flight from the last good sample: the damage ends there.
+        later = np.arange(i, t.size)
+        lag = t[later] - t[i - 1]
+        low = h[i - 1] + np.minimum(rate, 0.0) * lag - 0.5 * G0 * lag**2
+        high = h[i - 1] + np.maximum(rate, 0.0) * lag
+        back = np.flatnonzero((h[later] >= low - TAIL_SIGMAS * noise)
+                              & (h[later] <= high + TAIL_SIGMAS * noise))
+        end = int(later[back[0]]) if back.size else t.size
+        return DamagedEnd(np.arange(i, end), float(t[i]), end == t.size)
+    return None
+
+
+def charge_swing(t: np.ndarray, h: np.ndarray, t_charge: float) -> tuple[float, float] | None:
+    """The span (s) of the pressure swing about a charge at `t_charge` (s) in the altitude
+    `h` (m) at times `t` (s): the first and last samples within `SWING_REACH_S` of it off
+    the running median (see the module docstring); None where none is."""
+    near = np.abs(t - t_charge) <= SWING_REACH_S
+    if near.sum() < 10:
+        return None
+    interval = float(np.median(np.diff(t)))
+    n = max(3, round(SWING_MEDIAN_S / interval)) if interval > 0 else 3
+    trend = pd.Series(h).rolling(n, center=True, min_periods=1).median().to_numpy()
+    off = h - trend
+    scatter = 1.4826 * float(np.median(np.abs(off - np.median(off))))
+    swing = near & (np.abs(off) > max(SWING_SIGMAS * scatter, PULSE_MIN_M))
+    if not swing.any():
+        return None
+    return float(t[swing].min()), float(t[swing].max())

@@ -1,0 +1,97 @@
+"""A log's damaged end and a charge's filtered swing are left out; an impact, a landing, a
+ballistic fall and a canopy's opening are not (`cpas_ocp.io.log_hygiene`), and the
+import of a log with garbage at its end fits what the flight made."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from cpas_ocp.cli import main
+from cpas_ocp.io.log_hygiene import charge_swing, damaged_end
+from tests.io.test_rocket_log_import import CARD, COLUMN_MAP, fly, write_mapped
+
+NOISE_M = 0.5
+
+
+def _descent(rate_m_s: float, seconds: float, hz: float, seed: int, top: float = 1200.0
+             ) -> tuple[np.ndarray, np.ndarray]:
+    """A steady descent at `rate_m_s` (m/s, > 0) sampled at `hz`, with white noise."""
+    t = np.arange(0.0, seconds, 1.0 / hz)
+    rng = np.random.default_rng(seed)
+    return t, top - rate_m_s * t + rng.normal(0.0, NOISE_M, t.size)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_garbage_at_the_end_is_cut_to_the_end(seed: int) -> None:
+    """Two samples that fall hundreds of metres in half a second from a 6 m/s descent: no
+    descent falls so, and nothing after returns to the flight."""
+    t, h = _descent(6.0, 60.0, 2.0, seed)
+    h[-2:] = [h[-3] - 216.0, h[-3] - 391.0]
+    damage = damaged_end(t, h)
+    assert damage is not None and damage.to_end
+    assert damage.t_from == t[-2] and damage.rows.tolist() == [t.size - 2, t.size - 1]
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_a_clean_end_is_kept(seed: int) -> None:
+    """A descent at 25 m/s that lands and rests, a ballistic fall at 90 m/s to the log's end,
+    and a descent that ends in the air: all flight."""
+    t, h = _descent(25.0, 40.0, 100.0, seed)
+    ground = t >= 40.0 - 3.0
+    h[ground] = h[~ground][-1] + np.random.default_rng(seed).normal(0, NOISE_M, ground.sum())
+    assert damaged_end(t, h) is None
+    assert damaged_end(*_descent(90.0, 30.0, 20.0, seed, top=3000.0)) is None
+    assert damaged_end(*_descent(6.0, 300.0, 2.0, seed)) is None
+
+
+def test_an_impact_pulse_before_the_ground_is_cut_alone() -> None:
+    """One sample of an impact's pressure pulse, then the vehicle rests on the ground: only
+    the pulse is not flight."""
+    t, h = _descent(25.0, 40.0, 100.0, 1)
+    ground = t >= 38.0
+    h[ground] = h[~ground][-1]
+    k = int(np.flatnonzero(ground)[0])
+    h[k] -= 80.0
+    damage = damaged_end(t, h)
+    assert damage is not None and not damage.to_end and damage.rows.tolist() == [k]
+
+
+def test_a_filtered_charge_swing_is_found_and_an_opening_is_not() -> None:
+    """A recorder's filter spreads a charge's pulse into a 740 m dive over 1.3 s: the swing
+    spans it.  A main's opening (25 to 6 m/s in a second) bends the altitude by metres: no
+    swing."""
+    t, h = _descent(25.0, 30.0, 100.0, 2, top=3500.0)
+    dive = (t >= 10.0) & (t <= 11.3)
+    h[dive] -= 740.0 * np.sin(np.pi * (t[dive] - 10.0) / 1.3)
+    span = charge_swing(t, h, 10.0)
+    assert span is not None and span[0] <= 10.1 and span[1] >= 11.1
+    v = np.where(t < 10.0, 25.0, np.maximum(6.0, 25.0 - 19.0 * (t - 10.0)))
+    h_open = 3500.0 - np.cumsum(v) / 100.0 + np.random.default_rng(3).normal(0, NOISE_M, t.size)
+    assert charge_swing(t, h_open, 10.0) is None
+
+
+def test_a_log_with_garbage_at_its_end_imports_without_it(tmp_path: Path) -> None:
+    """A mapped log whose last two rows read 300 m below the descent (a recorder writing its
+    buffer out badly) imports, says so, and writes no altimeter sample after the damage."""
+    flight = fly()
+    write_mapped(flight, tmp_path / "log.csv", seed=4, end_s=flight.events["landed"] - 20.0)
+    log = pd.read_csv(tmp_path / "log.csv")
+    log.loc[log.index[-2:], "press_hPa"] += 35.0  # about 300 m lower
+    log.to_csv(tmp_path / "log.csv", index=False, float_format="%.7g")
+    accel = {**COLUMN_MAP["acceleration"], "axis": "-y"}
+    (tmp_path / "map.json").write_text(json.dumps({**COLUMN_MAP, "acceleration": accel}))
+    (tmp_path / "card.json").write_text(json.dumps(CARD))
+    assert main(["import", str(tmp_path / "log.csv"), "--columns", str(tmp_path / "map.json"),
+                 "--card", str(tmp_path / "card.json"), "--out", str(tmp_path / "test"),
+                 "--still-air"]) == 0
+    report = json.loads((tmp_path / "test" / "import.json").read_text())
+    assert report["dropped"]["damaged_end_samples"] == 2
+    assert any("left out: no descent falls that way" in n for n in report["notes"])
+    t_damage = 1e-3 * float(log["t_ms"].iloc[-2])
+    baro = pd.read_csv(tmp_path / "test" / "baro.csv")
+    assert baro["time"].max() < t_damage
