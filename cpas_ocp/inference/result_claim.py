@@ -110,6 +110,7 @@ from cpas_ocp.estimation.uncertainty import Covariance
 from cpas_ocp.inference.diagnostics import sensor_summary
 from cpas_ocp.inference.hypothesis_tests import chi_bar_square_sf, cone_statistic
 from cpas_ocp.inference.restarts import Restart
+from cpas_ocp.io.import_reports import import_deployments
 from cpas_ocp.io.model_spec import ModelSpec
 from cpas_ocp.physics.effects.canopy_inflation import CanopyInflation
 from cpas_ocp.physics.parameters import split_name
@@ -227,6 +228,9 @@ class Claim:
     undetermined_drag_areas: list[str] = field(default_factory=list)
     # Process prior blocks beyond their noise that do not depart (`process_misfits`).
     process_misfits: list[str] = field(default_factory=list)
+    # Canopies the log shows did not open, or that needed more drag area than their
+    # diameter gives (`failed_deployments`), each in a sentence.
+    failed_deployments: list[str] = field(default_factory=list)
 
     @property
     def pressed(self) -> list[HeldBound]:
@@ -249,10 +253,10 @@ class Claim:
     @property
     def is_result(self) -> bool:
         """No guessed bound pressed, chi^2/dof within MAX_MISFIT, every process within its
-        prior and every drag area determined: the fit is a result (its sigmas may still
-        need the misfit's scaling; see `fits_noise`)."""
-        return not (self.pressed or self.beyond_noise or self.departures
-                    or self.undetermined_drag_areas)
+        prior, every drag area determined and every canopy opened: the fit is a result (its
+        sigmas may still need the misfit's scaling; see `fits_noise`)."""
+        return not (self.failed_deployments or self.pressed or self.beyond_noise
+                    or self.departures or self.undetermined_drag_areas)
 
     @property
     def fits_noise(self) -> bool:
@@ -276,7 +280,7 @@ class Claim:
     def problems(self) -> list[str]:
         """One line per reason the fit is less than a plain result (empty when none); those
         that make it no result first."""
-        out = []
+        out = list(self.failed_deployments)
         if self.pressed:
             out.append(f"the data press {len(self.pressed)} parameter(s) against bounds that "
                        f"are guesses, not physical limits (p = {self.bound_p_value:.2g}): "
@@ -345,6 +349,7 @@ class Claim:
                                        for d in self.departures],
                 "undetermined_drag_areas": self.undetermined_drag_areas,
                 "process_misfits": self.process_misfits,
+                "failed_deployments": self.failed_deployments,
                 "window_moves": [vars(m) for m in self.moves], "notes": self.notes,
                 "problems": self.problems(), "alpha": self.alpha}
 
@@ -427,6 +432,28 @@ def _number(x: float) -> float | None:
     return float(x) if np.isfinite(x) else None
 
 
+def failed_deployments(fit: Fit) -> list[str]:
+    """What the import of the flight log of `fit` found of its canopies that makes the fit
+    no result for them (`io.deployment_forensics`, kept in the test folder's
+    ``import.json``), one sentence each: a canopy that did not open (the drag area its
+    descent needed is the airframe's or the earlier canopies', so the fit's drag area for
+    it is not the canopy's), and one whose descent needed more drag area than its diameter
+    gives (another canopy was out: the fit's drag area for it is more than the canopy's).
+    Empty for a folder not imported."""
+    canopies = {c.name for c in fit.test.parachutes}
+    out = []
+    for name, entry in import_deployments(fit.test.path).items():
+        if name not in canopies:
+            continue
+        if entry["verdict"] == "not_opened":
+            out.append(f"{entry['sentence']}; the fit's drag area for the {name} is not "
+                       "that canopy's")
+        elif entry.get("above_diameter") is True:
+            out.append(f"{entry['sentence']}; the fit's drag area for the {name} is more "
+                       "than that canopy's")
+    return out
+
+
 def check_claim(est: Estimator, fit: Fit, alpha: float = ALPHA) -> Claim:
     """The claim `fit` (of `est`) may make (see the module docstring)."""
     model = fit.model
@@ -440,6 +467,7 @@ def check_claim(est: Estimator, fit: Fit, alpha: float = ALPHA) -> Claim:
                   alpha=alpha, low_p_value=float(chi2_law.cdf(fit.chi_square, fit.dof)),
                   departures=process_departures(fit), process_misfits=process_misfits(fit, alpha))
     claim.worst_sensor, claim.worst_sensor_rms = worst_sensor(fit)
+    claim.failed_deployments = failed_deployments(fit)
     guessed = [h for h in held if not h.physical]
     if not guessed:
         return claim

@@ -74,6 +74,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from scipy.stats import norm
@@ -197,6 +198,23 @@ class CanopyForensics:
     t_open: float | None
     t_open_sigma: float | None
     rate_before: SettledDescent | None
+
+    def as_dict(self) -> dict[str, Any]:
+        """The verdict, its sentence and the numbers it rests on (SI), for ``import.json``."""
+        def area(a: DragArea | None) -> dict[str, Any] | None:
+            return None if a is None else {"value_m2": a.value, "sigma_m2": a.sigma,
+                                           "source": a.source}
+        descent = self.descent
+        return {"verdict": self.verdict, "sentence": self.sentence,
+                "deploy_time_s": self.deploy_time,
+                "descent_rate_m_s": None if descent is None else descent.rate,
+                "descent_rate_sigma_m_s": None if descent is None else descent.rate_sigma,
+                "drag_area_m2": None if descent is None else descent.drag_area,
+                "drag_area_sigma_m2": None if descent is None else descent.drag_area_sigma,
+                "own": area(self.own), "before": area(self.before),
+                "p_opened": self.p_opened, "p_short": self.p_short,
+                "above_diameter": self.above_diameter,
+                "t_open_s": self.t_open, "t_open_sigma_s": self.t_open_sigma}
 
 
 @dataclass(frozen=True)

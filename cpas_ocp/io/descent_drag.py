@@ -17,6 +17,14 @@ from cpas_ocp.physics.effects.canopy_inflation import MAX_CD
 from cpas_ocp.physics.units import G0
 
 
+def descent_mass(card: FlightCard, parachutes: list[dict[str, Any]]) -> float:
+    """The mass flown under the canopies (kg): the card's vehicle and every canopy's dry
+    mass."""
+    return card_quantity(card.vehicle.get("mass"), "mass", card.source, "vehicle.mass") + sum(
+        card_quantity(c["dry_mass"], "mass", card.source, "parachutes.dry_mass")
+        for c in parachutes)
+
+
 def descent_drag_areas(deploy: dict[str, float], parachutes: list[dict[str, Any]],
                        card: FlightCard, site: SiteAtmosphere, t: np.ndarray, h: np.ndarray,
                        t_end: float) -> dict[str, float]:
@@ -28,9 +36,7 @@ def descent_drag_areas(deploy: dict[str, float], parachutes: list[dict[str, Any]
     the flown mass; the canopy's own is that less what the earlier canopies showed (all of
     it where that is not less: a canopy cut away).  The forebody's drag area is in the
     first canopy's."""
-    mass = card_quantity(card.vehicle.get("mass"), "mass", card.source, "vehicle.mass") + sum(
-        card_quantity(c["dry_mass"], "mass", card.source, "parachutes.dry_mass")
-        for c in parachutes)
+    mass = descent_mass(card, parachutes)
     order = sorted(deploy, key=deploy.__getitem__)
     areas = []
     for k, name in enumerate(order):

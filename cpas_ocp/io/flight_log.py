@@ -106,7 +106,8 @@ def import_flight(log: FlightRecord | AltusLog, card: FlightCard, out: str | Pat
          "touchdown": d.t_down}, d.site, d.lapse_fit,
         d.baro_sigmas, {name: len(frame) for name, frame in d.files.items()},
         {**record.dropped, **d.dropped},
-        d.accel_sigmas, d.snatches, d.events, [*record.notes, *d.notes], card.nominal)
+        d.accel_sigmas, d.snatches, d.events, [*record.notes, *d.notes], card.nominal,
+        {} if d.forensics is None else {c.name: c.as_dict() for c in d.forensics.canopies})
     _write_folder(Path(out), d.manifest, d.files, summary, card.source, d.source)
     return summary
 

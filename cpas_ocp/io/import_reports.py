@@ -74,6 +74,17 @@ def import_nominal(folder: Path | None) -> dict[str, dict[str, Any]]:
             and isinstance(spec.get("value"), int | float) and spec.get("unit") in FACTORS["area"]}
 
 
+def import_deployments(folder: Path | None) -> dict[str, dict[str, Any]]:
+    """Per canopy, what the import's deployment forensics found in the log of the test
+    folder `folder` (its ``import.json``): ``{canopy: {verdict, sentence, ...}}``; empty
+    where it holds none, or an entry without a verdict and a sentence."""
+    found = _import_report(folder, "deployments")
+    if not isinstance(found, dict):
+        return {}
+    return {name: entry for name, entry in found.items() if isinstance(entry, dict)
+            and isinstance(entry.get("verdict"), str) and isinstance(entry.get("sentence"), str)}
+
+
 @dataclass(frozen=True)
 class ImportSummary:
     """What an import did, for the import report (`import.json`)."""
@@ -91,6 +102,8 @@ class ImportSummary:
     flight_events: dict[str, FlightEvent] = field(default_factory=dict)  # time, sigma, source
     notes: list[str] = field(default_factory=list)
     nominal: dict[str, dict[str, Any]] = field(default_factory=dict)  # the card's, as given
+    # Per canopy: whether it opened, from the log alone (`deployment_forensics`).
+    deployments: dict[str, dict[str, Any]] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         return {"recorder": self.recorder, "phase_s": list(self.phase), "events_s": self.events,
@@ -106,4 +119,4 @@ class ImportSummary:
                 "flight_events": {k: {"time_s": e.time, "sigma_s": e.sigma, "source": e.source}
                                   for k, e in self.flight_events.items()},
                 "notes": self.notes, "samples": self.samples, "dropped": self.dropped,
-                "nominal": self.nominal}
+                "nominal": self.nominal, "deployments": self.deployments}

@@ -17,10 +17,11 @@ step added to the sequence, tested on its own, not a branch inside the whole:
    the card leaves out;
 8. `altimeter_series`: the altimeter averaged over its noise's correlation, with a
    sigma per canopy phase;
-9. `accelerometer_series`: the axial accelerometer less charges, snatches and dead
+9. `canopy_forensics`: whether each canopy opened, and how fully, from the log alone;
+10. `accelerometer_series`: the axial accelerometer less charges, snatches and dead
    samples, with its sigmas, and each later canopy's full open;
-10. `gnss_series`: the GNSS altitude, where the lapse rate was fitted to it;
-11. `model_block`: the manifest, with the model to fit (`rocket_model`).
+11. `gnss_series`: the GNSS altitude, where the lapse rate was fitted to it;
+12. `model_block`: the manifest, with the model to fit (`rocket_model`).
 """
 
 from __future__ import annotations
@@ -35,7 +36,14 @@ import numpy as np
 import pandas as pd
 
 from cpas_ocp.errors import InputError
-from cpas_ocp.io.descent_drag import canopy_diameters, descent_drag_areas
+from cpas_ocp.io.deployment_forensics import (
+    Canopy,
+    DragArea,
+    Forensics,
+    coast_drag_area,
+    deployment_forensics,
+)
+from cpas_ocp.io.descent_drag import canopy_diameters, descent_drag_areas, descent_mass
 from cpas_ocp.io.flight_card import FlightCard, card_quantity, pad_temperature
 from cpas_ocp.io.flight_events import FlightEvent, sample_interval, second_difference_sigma
 from cpas_ocp.io.flight_record import FlightRecord, enu_about
@@ -127,6 +135,8 @@ class LogImport:
     # altimeter_series
     settled: list[float] = field(default_factory=list)
     baro_sigmas: list[float] = field(default_factory=list)
+    # canopy_forensics
+    forensics: Forensics | None = None
     # accelerometer_series
     accel_sigmas: list[float] = field(default_factory=list)
     snatches: dict[str, Snatch] = field(default_factory=dict)
@@ -374,6 +384,45 @@ def altimeter_series(d: LogImport) -> None:
                          for t, sig in zip(d.settled, d.baro_sigmas[1:], strict=True)]})
 
 
+def canopy_forensics(d: LogImport) -> None:
+    """Whether each canopy opened, and how fully, from the log alone
+    (`deployment_forensics`): the drag area its settled descent needs against the
+    airframe's (from the coast, else the card's ``forebody_cds`` where it gives one) and
+    against what its diameter gives; one sentence per canopy for the import's report."""
+    assert d.site is not None
+    site, elevation = d.site, d.elevation
+    baro = d.baro[~d.charge_windows(d.baro["time"])]
+    t = baro["time"].to_numpy()
+    height = np.asarray(site.altitude_at_pressure(baro["pressure"].to_numpy()),
+                        dtype=float).ravel() - elevation
+
+    def density(h: np.ndarray | float) -> np.ndarray:
+        return np.asarray(site.density(elevation + np.asarray(h, dtype=float)),
+                          dtype=float).reshape(np.shape(h))
+
+    mass = descent_mass(d.card, d.parachutes)
+    accel = d.record.samples[["time", "acceleration"]].dropna()
+    coast = coast_drag_area(
+        t, height, density, mass,
+        t_burnout=d.events["coast"].time if "coast" in d.events else None,
+        t_apogee=d.events["apogee"].time if "apogee" in d.events else None,
+        accel=(accel["time"].to_numpy(), accel["acceleration"].to_numpy())
+        if len(accel) else None)
+    card_cds = card_quantity(d.card.vehicle.get("forebody_cds", {"value": 0, "unit": "m^2"}),
+                             "area", d.card.source, "vehicle.forebody_cds")
+    # The card's airframe drag area as a measurement of a quarter of itself.
+    airframe = DragArea(card_cds, 0.25 * card_cds, "card") if card_cds > 0.0 else None
+    # Only a diameter the card gives is a reference: one taken from the descent
+    # (`canopy_diameters`) would judge the descent against itself.
+    canopies = [Canopy(c["name"], d.deploy[c["name"]], d.deploy_sigma[c["name"]],
+                       card_quantity(c["diameter"], "length", d.card.source,
+                                     f"parachutes[{i}].diameter") if "diameter" in c else None)
+                for i, c in enumerate(d.card.parachutes)]
+    d.forensics = deployment_forensics(t, height, density, mass, canopies, t_end=d.t_end,
+                                       noise_sigma=d.baro_sigmas, airframe=airframe,
+                                       coast=coast)
+
+
 def accelerometer_series(d: LogImport) -> None:
     """``accelerometer.csv`` where the log's accelerometer reads over the whole phase: less
     dead and clipped samples, the charges' windows and, in each later canopy's opening,
@@ -520,4 +569,5 @@ def event_entry(name: str, parachute: str, t: float, sigma: float) -> dict[str, 
 # The import, step by step (see the module docstring).
 STEPS: tuple[Callable[[LogImport], None], ...] = (
     clean_log_end, read_altimeter, find_events, choose_deployments, bound_phase, site_air,
-    descent_drag, altimeter_series, accelerometer_series, gnss_series, model_block)
+    descent_drag, altimeter_series, canopy_forensics, accelerometer_series, gnss_series,
+    model_block)

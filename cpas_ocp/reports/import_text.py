@@ -34,6 +34,7 @@ def import_text(summary: ImportSummary) -> str:
         lines.append("flight events: " + ", ".join(
             f"{k} {e.time:.2f} ± {e.sigma:.2f} s ({e.source})"
             for k, e in summary.flight_events.items()))
+    lines.extend(f"deployment: {entry['sentence']}" for entry in summary.deployments.values())
     lines.extend(f"note: {n}" for n in summary.notes)
     lines.append("samples: " + ", ".join(f"{k} {v}" for k, v in summary.samples.items())
                  + "; dropped: " + ", ".join(f"{k} {v}" for k, v in summary.dropped.items()))
