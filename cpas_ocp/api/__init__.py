@@ -23,8 +23,9 @@ The modules: `preparation` (simulate, reduce, model files, test design),
 `reconstruction` (one test's fit and what follows from it), `discrepancy`
 (diagnose, discover, compare from a test folder), `kept_discovery` (a discovery
 kept on disk, resumed), `campaigns` (many tests, populations, a joint fit,
-dispersions, Monte Carlo), `log_import` (a recorder's log into a test folder) and
-`flights` (a real flight's logs reconstructed and compared).  Each name is imported
+dispersions, Monte Carlo), `log_import` (a recorder's log into a test folder),
+`flights` (a real flight's logs reconstructed and compared) and `rocketpy_export` (a
+reconstruction's canopies as RocketPy parachutes).  Each name is imported
 from its module when first used.
 """
 
@@ -67,6 +68,7 @@ if TYPE_CHECKING:
         reconstruct,
         what_if,
     )
+    from cpas_ocp.api.rocketpy_export import RocketPyExport, rocketpy_export
     from cpas_ocp.io.flight_test import load_test
     from cpas_ocp.physics.effects import baseline_effects
     from cpas_ocp.progress import Narration, terminal
@@ -87,6 +89,7 @@ _HOMES = {
                     "cpas_ocp.api.preparation"),
     **dict.fromkeys(("FitOptions", "Reconstruction", "build", "demo", "fit_estimator",
                      "reconstruct", "what_if"), "cpas_ocp.api.reconstruction"),
+    **dict.fromkeys(("RocketPyExport", "rocketpy_export"), "cpas_ocp.api.rocketpy_export"),
     "load_test": "cpas_ocp.io.flight_test",
     "baseline_effects": "cpas_ocp.physics.effects",
     **dict.fromkeys(("Narration", "terminal"), "cpas_ocp.progress"),
@@ -109,8 +112,10 @@ def __dir__() -> list[str]:
 
 
 __all__ = ["Campaign", "Dispersions", "FitOptions", "Flight", "InitialGuess", "Joint",
-           "MonteCarlo", "Narration", "Population", "Reconstruction", "baseline_effects", "build",
+           "MonteCarlo", "Narration", "Population", "Reconstruction", "RocketPyExport",
+           "baseline_effects", "build",
            "compare", "demo", "design", "diagnose", "discover", "dispersions", "effect",
            "fit_estimator", "flight", "import_log", "joint", "load_model", "load_test",
            "monte_carlo", "population", "reconstruct", "reconstruct_campaign", "reduce",
-           "resume_discovery", "simulate", "summary", "terminal", "what_if"]
+           "resume_discovery", "rocketpy_export", "simulate", "summary", "terminal",
+           "what_if"]

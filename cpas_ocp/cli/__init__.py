@@ -21,6 +21,9 @@
                                               import-altus LOG ... is import --format altus
     cpas-ocp flight NAME --out DIR            import a real flight's logs, reconstruct, compare
                                               with the nominal drag areas and the measured descent
+    cpas-ocp rocketpy REPORT_DIR --test TEST_DIR --out DIR
+                                              a reconstruction's canopies as RocketPy
+                                              parachutes (a script and the numbers)
     cpas-ocp design PLAN --out DIR            predict each parameter's sigma under planned
                                               instrumentations, rank single sensor changes
     cpas-ocp demo [--out DIR]                 simulate the built-in Drogue test and reconstruct it

@@ -201,6 +201,19 @@ def parser() -> argparse.ArgumentParser:
     _solver_options(s)
     s.set_defaults(run=commands.flight)
 
+    s = sub.add_parser("rocketpy", help="a reconstruction's fitted canopies as RocketPy "
+                                        "parachutes: a script building them, and the numbers")
+    s.add_argument("report_dir", type=Path, metavar="REPORT_DIR",
+                   help="a report folder of cpas-ocp reconstruct (its result.json), one that "
+                        "is a result")
+    s.add_argument("--test", required=True, type=Path, metavar="TEST_DIR",
+                   help="the test folder it reconstructs (its canopies, deployments, "
+                        "altimeter and site)")
+    s.add_argument("--out", required=True, type=Path, metavar="DIR",
+                   help="folder to write parachutes.py (builds rocketpy.Parachute and "
+                        "StochasticParachute objects) and parachutes.json (the numbers)")
+    s.set_defaults(run=commands.rocketpy)
+
     s = sub.add_parser("design", help="predict the sigma of every parameter under planned "
                        "instrumentations and rank single sensor changes (a plan file)")
     s.add_argument("plan", type=Path)

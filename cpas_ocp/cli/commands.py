@@ -256,6 +256,14 @@ def import_log(args: argparse.Namespace) -> int:
     return 0
 
 
+def rocketpy(args: argparse.Namespace) -> int:
+    from cpas_ocp.api.rocketpy_export import EXPORT_FILES, rocketpy_export, write_export
+    export = rocketpy_export(args.report_dir, args.test)
+    out = write_export(export, args.out)
+    print(export.summary())
+    print(f"\nwritten to {out} ({', '.join(EXPORT_FILES)}); python {out / EXPORT_FILES[1]} "
+          "builds the parachutes where RocketPy is installed")
+    return 0
 
 
 def flight(args: argparse.Namespace) -> int:

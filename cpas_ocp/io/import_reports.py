@@ -85,6 +85,17 @@ def import_deployments(folder: Path | None) -> dict[str, dict[str, Any]]:
             and isinstance(entry.get("verdict"), str) and isinstance(entry.get("sentence"), str)}
 
 
+def import_flight_events(folder: Path | None) -> dict[str, FlightEvent]:
+    """The flight events an import found for the test folder `folder` (its ``import.json``:
+    apogee, the charges, touchdown, each with its time and sigma in s); empty for a folder
+    that was not imported, or whose report lacks them (`_import_report`)."""
+    try:
+        return {name: FlightEvent(float(e["time_s"]), float(e["sigma_s"]), str(e["source"]))
+                for name, e in (_import_report(folder, "flight_events") or {}).items()}
+    except (TypeError, KeyError, ValueError, AttributeError):
+        return {}
+
+
 @dataclass(frozen=True)
 class ImportSummary:
     """What an import did, for the import report (`import.json`)."""
