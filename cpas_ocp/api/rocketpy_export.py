@@ -38,11 +38,11 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from cpas_ocp.errors import InputError
-from cpas_ocp.io.flight_log import held_openings
 from cpas_ocp.io.flight_test import load_test
 from cpas_ocp.io.import_reports import import_flight_events
 from cpas_ocp.io.json_files import read_json
 from cpas_ocp.io.output_folder import atomic_folder
+from cpas_ocp.io.rocket_model import held_openings
 from cpas_ocp.io.strict_json import json_text
 from cpas_ocp.physics.atmosphere import SiteAtmosphere, geometric_altitude
 from cpas_ocp.physics.flight_test import FlightTest
