@@ -20,13 +20,16 @@ EJECTION_EXCLUDE_S = 0.3  # altimeter samples left out after an ejection charge 
 
 
 def card_events(card: FlightCard, baro: pd.DataFrame, pad_altitude: float,
-                events: dict[str, FlightEvent]) -> dict[str, FlightEvent]:
+                events: dict[str, FlightEvent]
+                ) -> tuple[dict[str, FlightEvent], dict[str, str]]:
     """The events the card gives (``events``): at a time, or where the descent first
     crosses below a height above the pad after apogee (a main fired by an altimeter at
     its set height), the crossing interpolated between the barometer's samples; each with
-    the card's sigma.  InputError naming the card's field where the descent never comes
-    down to that height, or the time lies outside the log."""
+    the card's sigma; and, per event at a height the log ends above (a recorder that
+    stopped in the air), why it is not in the log.  InputError naming the card's field
+    where the time lies outside the log, or the height above apogee."""
     out: dict[str, FlightEvent] = {}
+    unreached: dict[str, str] = {}
     for name, spec in card.events.items():
         field_name = f"events.{name}"
         sigma = card_quantity(spec["sigma"], "time", card.source, f"{field_name}.sigma")
@@ -45,12 +48,15 @@ def card_events(card: FlightCard, baro: pd.DataFrame, pad_altitude: float,
         below = np.flatnonzero((t > top) & (h <= height))
         if below.size == 0 or below[0] == 0:
             after = h[t > top]
+            if after.size and float(after.max()) > height:
+                unreached[name] = (f"the log ends at {float(t[-1]):.2f} s, "
+                                   f"{float(h[-1]):.0f} m above the pad, before the descent "
+                                   f"comes down to {height:.0f} m")
+                continue
             raise InputError(card.source, f"{field_name}.altitude", f"a height above the pad "
                              f"the descent passes below; after apogee at {top:.2f} s the log "
                              f"reads {float(after.min()) if after.size else float('nan'):.1f}"
-                             f" m at the lowest, and ends at {float(t[-1]):.2f} s before "
-                             f"coming down to {height:.0f} m: that canopy's deployment is not "
-                             "in the log (leave it out of the card, or give its time)")
+                             " m at the lowest")
         k = int(below[0])
         if not h[k - 1] > height:
             raise InputError(card.source, f"{field_name}.altitude", f"a height below apogee, "
@@ -59,7 +65,7 @@ def card_events(card: FlightCard, baro: pd.DataFrame, pad_altitude: float,
         frac = (h[k - 1] - height) / (h[k - 1] - h[k])
         out[name] = FlightEvent(float(t[k - 1] + frac * (t[k] - t[k - 1])), sigma,
                                 f"the card: the {height:.0f} m crossing")
-    return out
+    return out, unreached
 
 
 def flight_events(record: FlightRecord) -> tuple[dict[str, FlightEvent], list[str]]:

@@ -117,7 +117,9 @@ class LogImport:
     t0_note: str = ""
     pad_altitude: float = float("nan")
     elevation: float = float("nan")
+    unreached: dict[str, str] = field(default_factory=dict)  # card events past the log's end
     # choose_deployments
+    flown: list[dict[str, Any]] = field(default_factory=list)  # the card's canopies in the log
     deploy: dict[str, float] = field(default_factory=dict)
     deploy_sigma: dict[str, float] = field(default_factory=dict)
     # bound_phase
@@ -224,7 +226,8 @@ def find_events(d: LogImport) -> None:
     check_pad_air(d.record, d.p0, d.t0, "card" if "temperature" in site_spec else
                   "density" if "surface_density" in site_spec else "standard", d.elevation,
                   card.source, "pressure" in site_spec)
-    d.events.update(card_events(card, d.baro, d.pad_altitude, d.events))
+    given, d.unreached = card_events(card, d.baro, d.pad_altitude, d.events)
+    d.events.update(given)
 
 
 def choose_deployments(d: LogImport) -> None:
@@ -236,6 +239,13 @@ def choose_deployments(d: LogImport) -> None:
     deploying = {name: e for name, e in d.events.items() if name != "landed"}
     for i, chute in enumerate(card.parachutes):
         state = chute["deployment"]
+        if state in d.unreached and (d.flown or i + 1 < len(card.parachutes)):
+            d.notes.append(f"{chute['name']}: {d.unreached[state]} at which the card deploys "
+                           "it: its deployment is not in the log, and the fit leaves it out")
+            continue
+        if state in d.unreached:
+            raise InputError(card.source, f"parachutes[{i}].deployment", f"a deployment the "
+                             f"log shows; {d.unreached[state]} ({state!r})")
         if state not in deploying:
             listed = ", ".join(f"{n} {e.time:.2f} ± {e.sigma:.2f} s ({e.source})"
                                for n, e in deploying.items())
@@ -249,6 +259,7 @@ def choose_deployments(d: LogImport) -> None:
                              f"{state!r} deploys an earlier one too")
         d.deploy[chute["name"]] = d.events[state].time
         d.deploy_sigma[chute["name"]] = d.events[state].sigma
+        d.flown.append(chute)
     check_charges_deploy(d.events, d.deploy, card, d.source, bool(d.record.states))
     d.t_begin = min(d.deploy.values())
     descent = d.baro[d.baro["time"] > d.t_begin]
@@ -344,7 +355,7 @@ def descent_drag(d: LogImport) -> None:
     t, h = d.baro_phase["time"].to_numpy(), d.baro_phase["altitude"].to_numpy()
     starts = d.starts
     d.settled = [settled_time(t, h, a, b) for a, b in pairwise([*starts[1:], d.t_end])]
-    d.parachutes = [dict(c) for c in d.card.parachutes]
+    d.parachutes = [dict(c) for c in d.flown]
     d.descent_areas = descent_drag_areas(d.deploy, d.parachutes, d.card, d.site, t, h, d.t_end)
     d.notes += canopy_diameters(d.parachutes, d.descent_areas, d.card)
 
@@ -417,7 +428,7 @@ def canopy_forensics(d: LogImport) -> None:
     canopies = [Canopy(c["name"], d.deploy[c["name"]], d.deploy_sigma[c["name"]],
                        card_quantity(c["diameter"], "length", d.card.source,
                                      f"parachutes[{i}].diameter") if "diameter" in c else None)
-                for i, c in enumerate(d.card.parachutes)]
+                for i, c in enumerate(d.flown)]
     d.forensics = deployment_forensics(t, height, density, mass, canopies, t_end=d.t_end,
                                        noise_sigma=d.baro_sigmas, airframe=airframe,
                                        coast=coast)
