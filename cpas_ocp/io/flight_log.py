@@ -96,6 +96,7 @@ from cpas_ocp.io.log_noise import (
     MIN_DESCENT_SAMPLES,
     RATE_WINDOW_S,
     STEADY_RATE_S,
+    accelerometer_blocks,
     block_sigma,
     dead_note,
     dead_samples,
@@ -120,6 +121,7 @@ from cpas_ocp.physics.atmosphere import (
 )
 from cpas_ocp.physics.effects.canopy_inflation import MAX_CD
 from cpas_ocp.physics.effects.registry import SENSOR_EFFECTS
+from cpas_ocp.physics.effects.wind_process import VERTICAL_MEAN_SIGMA_M_S
 from cpas_ocp.physics.units import G0
 
 TOUCHDOWN_MARGIN_S = 0.5  # phase ends this long before the detected touchdown (s)
@@ -302,7 +304,7 @@ def canopy_diameters(parachutes: list[dict[str, Any]], areas: dict[str, float],
 # bias is the initial altitude and a lag a shift of every event, which no fit can tell.
 ROCKET_EFFECTS: tuple[str | dict[str, Any], ...] = (
     {"effect": "wind_process", "components": ["up"], "knot_s": 4.0, "tau_s": 20.0,
-     "sigma_vertical": 1.0},
+     "sigma_vertical": 1.0, "sigma_mean_vertical": VERTICAL_MEAN_SIGMA_M_S},
     "canopy_inflation", "forebody_drag", "rigid_riser", "baro")
 
 
@@ -679,11 +681,25 @@ def import_flight(log: FlightRecord | AltusLog, card: FlightCard, out: str | Pat
                 if len(accel) else "")
         notes.append(f"no accelerometer over the log's phase{span}: the folder has the "
                      "altimeter only")
-    for a, b in pairwise(accel_bounds):
-        part = accel[(accel["time"] >= a) & (accel["time"] < b)]
-        accel_sigmas.append(max(MIN_ACCEL_SIGMA, scatter_rms(
-            part["time"].to_numpy(), part["acceleration"].to_numpy()) if len(part) > 10
-            else second_difference_sigma(accel["acceleration"].to_numpy())))
+    # Each canopy's steady segment (the series' margins included) is written as block means
+    # of its correlation length at their sigma (`accelerometer_blocks`); a later canopy's
+    # opening keeps its samples, whose load peak the fit times.
+    accel_parts = []
+    for (a, b), (seg_lo, seg_hi) in zip(pairwise(accel_bounds), pairwise(
+            [lo, *accel_bounds[1:-1], hi + 1.0] if accel_bounds else []), strict=True):
+        part = accel[(accel["time"] >= seg_lo) & (accel["time"] < seg_hi)]
+        if len(part) > 10 and a not in starts[1:]:
+            n, (part, sigma, size) = len(part), accelerometer_blocks(part, b)
+            if size > 1:
+                notes.append(f"accelerometer from {seg_lo:.2f} s: noise correlated over "
+                             f"{size} samples, averaged in blocks of that length: {n} -> "
+                             f"{len(part)}")
+        else:
+            sigma = scatter_rms(part["time"].to_numpy(), part["acceleration"].to_numpy()) \
+                if len(part) > 10 else second_difference_sigma(accel["acceleration"].to_numpy())
+        accel_parts.append(part)
+        accel_sigmas.append(max(MIN_ACCEL_SIGMA, sigma))
+    accel = pd.concat(accel_parts, ignore_index=True) if accel_parts else accel
     files = {"baro.csv": baro_blocks}
     sensors: list[dict[str, Any]] = [
         {"name": "baro", "kind": "baro", "file": "baro.csv",
