@@ -14,7 +14,8 @@ chi^2_min the fit's chi-square (data and the process's innovations,
 u'S^-1 u), (J'J)_scaled the Gauss-Newton information of every free
 coordinate in the scaled decision vector on the constraints' null space
 (`Estimator.information_log_det`), and log det R = (K - 1) log(1 - phi^2)
-per component of K knots.  The Jacobian of u = s w cancels the s^K of
+per component of K knots (less the held mean's rank-one term where the process
+holds its vertical mean, `WindProcess.prior_log_det`).  The Jacobian of u = s w cancels the s^K of
 det S^1/2.  A larger s lowers chi^2_min (the wind explains more) and pays in
 the volume term (the posterior is wider than the data make it): the
 trade-off is Occam's, so s is not a free knob that absorbs everything, and
@@ -27,7 +28,6 @@ them; the grid scales both.
 from __future__ import annotations
 
 import dataclasses
-import math
 import sys
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -95,10 +95,7 @@ def evidence(est: Estimator, fit: Fit) -> float:
     """-2 log evidence of `fit`'s wind-process intensity, up to a constant (see the module
     docstring)."""
     wind = wind_effect(est.spec)
-    knots = len(wind.knot_times(est.test))
-    phi = math.exp(-wind.knot_s / wind.tau_s)
-    log_det_prior = len(wind.components) * (knots - 1) * math.log(1.0 - phi**2)
-    return fit.chi_square + log_det_prior + est.information_log_det(fit)
+    return fit.chi_square + wind.prior_log_det(est.test) + est.information_log_det(fit)
 
 
 FitAt = Callable[[ModelSpec, Fit | None], tuple[Estimator, Fit]]

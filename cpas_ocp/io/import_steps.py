@@ -59,6 +59,7 @@ from cpas_ocp.io.import_reports import Snatch
 from cpas_ocp.io.log_hygiene import charge_swing, damaged_end
 from cpas_ocp.io.log_noise import (
     MIN_DESCENT_SAMPLES,
+    accelerometer_blocks,
     block_sigma,
     dead_note,
     dead_samples,
@@ -495,11 +496,27 @@ def accelerometer_series(d: LogImport) -> None:
                        "altimeter only")
         return
     bounds = [*sorted({*starts, *opening_ends} - {d.t_end}), d.t_end]
-    for a, b in pairwise(bounds):
-        part = accel[(accel["time"] >= a) & (accel["time"] < b)]
-        d.accel_sigmas.append(max(MIN_ACCEL_SIGMA, scatter_rms(
-            part["time"].to_numpy(), part["acceleration"].to_numpy()) if len(part) > 10
-            else second_difference_sigma(accel["acceleration"].to_numpy())))
+    # Each canopy's steady segment (the series' margins included) is written as block means
+    # of its noise's correlation length at their sigma (`accelerometer_blocks`: a swinging
+    # rocket's readings are correlated over a fraction of a second, and each sample counted
+    # as independent would weigh the accelerometer tens of times over); a later canopy's
+    # opening keeps its samples, whose load peak the fit times.
+    parts = []
+    for (a, b), (seg_lo, seg_hi) in zip(pairwise(bounds),
+                                        pairwise([lo, *bounds[1:-1], hi + 1.0]), strict=True):
+        part = accel[(accel["time"] >= seg_lo) & (accel["time"] < seg_hi)]
+        if len(part) > 10 and a not in starts[1:]:
+            n, (part, sigma, size) = len(part), accelerometer_blocks(part, b)
+            if size > 1:
+                d.notes.append(f"accelerometer from {seg_lo:.2f} s: noise correlated over "
+                               f"{size} samples, averaged in blocks of that length: {n} -> "
+                               f"{len(part)}")
+        else:
+            sigma = scatter_rms(part["time"].to_numpy(), part["acceleration"].to_numpy()) \
+                if len(part) > 10 else second_difference_sigma(accel["acceleration"].to_numpy())
+        parts.append(part)
+        d.accel_sigmas.append(max(MIN_ACCEL_SIGMA, sigma))
+    accel = pd.concat(parts, ignore_index=True)
     d.files["accelerometer.csv"] = accel
     d.sensors.append({
         "name": "accelerometer", "kind": "axial_accelerometer",

@@ -9,6 +9,7 @@ from typing import Any
 
 from cpas_ocp.io.flight_events import DROGUE_WINDOW_S, FlightEvent
 from cpas_ocp.physics.effects.registry import SENSOR_EFFECTS
+from cpas_ocp.physics.effects.wind_process import VERTICAL_MEAN_SIGMA_M_S
 
 # The rocket-log model where the card lists no effects: the air's vertical motion (an
 # Ornstein-Uhlenbeck process with a 1 m/s prior, knots every 4 s: a rocket's descent rate
@@ -18,7 +19,7 @@ from cpas_ocp.physics.effects.registry import SENSOR_EFFECTS
 # bias is the initial altitude and a lag a shift of every event, which no fit can tell.
 ROCKET_EFFECTS: tuple[str | dict[str, Any], ...] = (
     {"effect": "wind_process", "components": ["up"], "knot_s": 4.0, "tau_s": 20.0,
-     "sigma_vertical": 1.0},
+     "sigma_vertical": 1.0, "sigma_mean_vertical": VERTICAL_MEAN_SIGMA_M_S},
     "canopy_inflation", "forebody_drag", "rigid_riser", "baro")
 
 

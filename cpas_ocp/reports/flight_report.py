@@ -287,6 +287,113 @@ def rate_sigmas(fit: Fit, rates: list[DescentRate]) -> dict[str, float]:
     return out
 
 
+@dataclass(frozen=True)
+class SteadyDragArea:
+    """A fitted steady drag area (m^2) against the one its steady window's descent gives,
+    2 W / (rho v^2) less the other canopies' fitted drag areas and the forebody's; its
+    sigma counts the measured rate's and the vertical air's (`air_sigma`, m/s: the airspeed
+    is v - w, and the air's mean w over the window is 0 to that sigma)."""
+
+    name: str
+    fitted: float
+    fitted_sigma: float
+    steady: float
+    steady_sigma: float
+    air_sigma: float
+    rate: DescentRate
+
+    @property
+    def z(self) -> float:
+        """Fitted minus steady-descent drag area, in the combined sigma."""
+        sigma = float(np.hypot(self.fitted_sigma, self.steady_sigma))
+        return (self.fitted - self.steady) / sigma if sigma > 0 else float("inf")
+
+
+def air_sigma(fit: Fit, t0: float, t1: float) -> float:
+    """Sigma (m/s) of the vertical air's mean over [t0, t1] (s) as the prior of the model's
+    wind process has it (`WindProcess.mean_sigma`); for a model in still air, as the rocket
+    default's (`WindProcess.vertical_thermals`) has it: the air moves whatever the model
+    says."""
+    wind = next((e for e in fit.model.effects
+                 if isinstance(e, WindProcess) and "up" in e.components),
+                WindProcess.vertical_thermals())
+    return wind.mean_sigma(fit.test, t0, t1)
+
+
+def steady_drag_areas(fit: Fit, cov: Covariance, rates: list[DescentRate]
+                      ) -> list[SteadyDragArea]:
+    """Each steady window's drag area for its last-opened canopy from the descent rate
+    alone (drag equals weight), against the fit's: sigma^2 = (2 CdS_total / v)^2
+    (sigma_v^2 + sigma_w^2) plus the other canopies' fitted variances."""
+    out = []
+    for r in rates:
+        name = _steady_cds(fit, r.canopies[-1], r.band)
+        rho = float(density_at(fit.test.atmosphere, r.altitude_m)[0])
+        total = 2.0 * fit.test.weight / (rho * r.measured**2)
+        others = [_steady_cds(fit, c, r.band) for c in r.canopies[:-1]]
+        w_sigma = air_sigma(fit, r.t0, r.t1)
+        var = (2.0 * total / r.measured) ** 2 * (r.measured_sigma**2 + w_sigma**2)
+        var += sum(cov.std.get(n, 0.0) ** 2 for n in others)
+        steady = total - sum(fit.parameters[n] for n in others) - fit.parameters.get("CdS_V",
+                                                                                     0.0)
+        out.append(SteadyDragArea(name, fit.parameters[name], cov.std.get(name, 0.0), steady,
+                                  float(np.sqrt(var)), w_sigma, r))
+    return out
+
+
+def window_residuals(fit: Fit, t0: float, t1: float) -> dict[str, tuple[int, float, float]]:
+    """Each sensor channel's residuals in [t0, t1] (s): (samples, chi-square, mean of the
+    normalised residuals); the pseudo-sensors (events, priors, processes) left out."""
+    out = {}
+    for r in fit.residuals:
+        sel = (r.t >= t0) & (r.t <= t1)
+        if r.sensor in fit.pseudo_sensors or not sel.any():
+            continue
+        n = r.normalised[sel]
+        out[f"{r.sensor}.{r.channel}"] = (int(sel.sum()), float(np.sum(n**2)),
+                                          float(np.mean(n)))
+    return out
+
+
+def steady_drag_area_text(fit: Fit, cov: Covariance, rates: list[DescentRate]) -> str:
+    """The markdown section setting each fitted drag area beside its steady descent's
+    (`steady_drag_areas`); where they differ by more than two sigma, which channel's
+    residuals are worst in the steady window (`window_residuals`), and the fitted air's
+    mean there against its prior."""
+    areas = steady_drag_areas(fit, cov, rates)
+    lines = ["## Drag areas from the steady descent", "",
+             "| parameter | window (s) | fitted (m²) | 2W/(ρ v²) (m²) | σ of the air's mean "
+             "(m/s) | difference (σ) |", "|---|---|---|---|---|---|"]
+    lines += [f"| {a.name} | {a.rate.t0:.1f}-{a.rate.t1:.1f} | {a.fitted:.4f} ± "
+              f"{a.fitted_sigma:.2g} | {a.steady:.4f} ± {a.steady_sigma:.2g} | "
+              f"{a.air_sigma:.2f} | {a.z:+.1f} |" for a in areas]
+    lines += ["", "The steady descent's drag area is drag equal to weight at the measured "
+              "rate and the window's mean altitude; its σ counts the rate's and the vertical "
+              "air's (the airspeed is v - w, and the air's mean over the window is zero to "
+              "the σ its prior gives), 2 CdS √(σ_v² + σ_w²) / v."]
+    for a in areas:
+        if abs(a.z) <= 2.0:
+            continue
+        chans = window_residuals(fit, a.rate.t0, a.rate.t1)
+        if not chans:
+            continue
+        worst = max(chans, key=lambda c: chans[c][1] / chans[c][0])
+        n, chi2, mean = chans[worst]
+        rest = "; ".join(f"{c} {np.sqrt(v[1] / v[0]):.2f} over {v[0]}" for c, v in chans.items()
+                         if c != worst)
+        updraft = mean_updraft(fit, a.rate.t0, a.rate.t1)
+        lines += ["", f"- {a.name}: the fit lies {a.z:+.1f} σ from the steady descent's. In "
+                  f"{a.rate.t0:.1f}-{a.rate.t1:.1f} s the worst residuals are the {worst}'s "
+                  f"(normalised RMS {np.sqrt(chi2 / n):.2f} over {n} samples, mean "
+                  f"{mean:+.2f}, chi-square {chi2:.0f}"
+                  + (f"; {rest}" if rest else "") + f"): {worst} drives the fit away from the "
+                  "descent rate"
+                  + (f", and the fitted air there moves at {updraft:+.2f} m/s on average "
+                     f"against the {a.air_sigma:.2f} m/s its prior allows." if updraft
+                     else ".")]
+    return "\n".join(lines)
+
+
 def nominal_comparisons(fit: Fit, cov: Covariance, nominal: dict[str, dict[str, Any]],
                         rates: list[DescentRate]) -> list[NominalComparison]:
     """Each nominal drag area against the fit, with the descent rate it would give; a
@@ -597,7 +704,8 @@ def flight_text(fit: Fit, cov: Covariance, nominal: dict[str, dict[str, Any]],
     and saying what the model misses (with `diagnosis`, its verdict too; with `held`, the
     profiles of the opening's held parameters, `held_opening_profiles`)."""
     rates = descent_rates(fit, cov)
-    lines = [descent_rate_text(rates), "", nominal_text(fit, cov, nominal, rates)]
+    lines = [descent_rate_text(rates), "", steady_drag_area_text(fit, cov, rates), "",
+             nominal_text(fit, cov, nominal, rates)]
     lines += opening_lines(fit, cov, held)
     return "\n".join(lines) + "\n\n" + missing_text(fit, diagnosis)
 

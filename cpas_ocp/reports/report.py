@@ -29,6 +29,7 @@ from cpas_ocp.reports.flight_report import (
     descent_rates,
     nominal_text,
     steady_descent_text,
+    steady_drag_area_text,
 )
 from cpas_ocp.reports.html_page import Page, drag_area_figure, sensor_figure, window_legend
 from cpas_ocp.reports.html_page import parameter_table as parameter_html
@@ -306,6 +307,8 @@ def reconstruction_page(fit: Fit, cov: Covariance | None, claim: Claim | None,
         page.heading("Steady descent rates")
         page.table(DESCENT_RATE_HEADER, descent_rate_rows(rates),
                    flagged=[abs(r.z) > 3.0 for r in rates])
+        page.heading("Drag areas from the steady descent")
+        page.preformatted(steady_drag_area_text(fit, cov, rates).split("\n", 2)[2])
         page.heading("Drag areas against the card's nominal values")
         page.preformatted(nominal_text(fit, cov, nominal, rates).split("\n", 2)[2])
     return page
@@ -315,7 +318,8 @@ def flight_markdown(fit: Fit, cov: Covariance, nominal: dict[str, dict[str, Any]
     """report.md's sections for an imported log with nominal drag areas: the steady descent
     rates and the drag areas against the card's nominal values."""
     rates = descent_rates(fit, cov)
-    return f"{descent_rate_text(rates)}\n\n{nominal_text(fit, cov, nominal, rates)}\n\n"
+    return (f"{descent_rate_text(rates)}\n\n{steady_drag_area_text(fit, cov, rates)}\n\n"
+            f"{nominal_text(fit, cov, nominal, rates)}\n\n")
 
 
 def write_report(fit: Fit, cov: Covariance | None, out: str | Path,

@@ -101,6 +101,10 @@ def test_each_log_reconstructs_to_its_noise_or_says_why(tmp_path: Path, card: st
     # with the steady descent rates, in report.md and on the page.
     report = (tmp_path / "report" / "report.md").read_text()
     assert "## Steady descent rates" in report
+    # Beside each fitted drag area, the steady descent's 2W/(rho v^2) with its sigma.
+    assert "## Drag areas from the steady descent" in report
+    for name in nominal:
+        assert f"| {name} | " in report.split("## Drag areas from the steady descent")[1]
     for name in nominal:
         assert f"| {name} | {result['parameters'][name]['value']:.4f} ± " in report
     page = (tmp_path / "report" / "report.html").read_text()

@@ -29,6 +29,31 @@ allows.  s and tau are given, not estimated (defaults: 1 m/s horizontal,
 0.5 m/s vertical, 5 s, for a calm to light boundary layer); the score test
 at u = 0 (`null_values`) asks whether the data want any air motion at all.
 
+*The mean vertical motion.*  A Gauss-Markov process lets its time average
+over a phase of T s wander by about s sqrt(2 tau / T) (0.45 m/s for s = 1
+m/s, tau = 20 s, T = 200 s), and a fit whose data outweigh that prior (a
+sensor whose correlated noise is counted as white, or a reading no drag can
+make) parks a column of sinking or rising air of metres per second under the
+vehicle and moves the drag area to keep the descent rate.  The atmosphere
+does not do that.  Averaged over a descent of minutes, vertical air motion
+is near zero: large-scale subsidence and ascent are centimetres per second
+(continuity: horizontal divergence of 1e-5 1/s over a few kilometres), and
+mesoscale convergence lines and gravity waves tenths of a metre per second;
+thermals of metres per second are local (hundreds of metres across) and
+brief to a vehicle falling through them, and they are fed by compensating
+sinking air around them, so the mean over the path stays small.  Only the
+lee waves downwind of a mountain ridge hold metres per second for minutes.
+`sigma_mean_vertical` (m/s; None: no such statement) says this separately
+from the gusts: the time average of the vertical component over the phase,
+u_mean = (1/T) integral u dt (a linear function of the knots,
+`mean_weights`), joins chi-square as one more standardised residual
+u_mean / sigma_mean_vertical (channel ``wind_up_mean``).  The prior is then
+the Gauss-Markov process conditioned on a zero mean known to that sigma: the
+gusts keep their sigma and correlation time, and only the long average is
+held (to 1/sqrt(1/sigma_mean^2 + T/(2 s^2 tau)); 0.2 m/s for 0.25 m/s with
+the numbers above).  The rocket default (`vertical_thermals`) holds it at
+0.25 m/s; a site in the lee of a ridge should say more.
+
 The knots are as many parameters as the phase has knot intervals per
 component: D = 1 s on a 20 s phase adds 21 per component.
 """
@@ -57,6 +82,9 @@ FLOW = ("airspeed", "dynamic_pressure", "drag_direction")
 # prior (the prior is the process).
 MAX_WIND_M_S = 30.0
 PENALTY = "wind_process"
+# Sigma of the vertical air motion's mean over a rocket's descent (m/s): subsidence is
+# centimetres per second, mesoscale lifting and gravity waves tenths (module docstring).
+VERTICAL_MEAN_SIGMA_M_S = 0.25
 
 
 @dataclass(frozen=True)
@@ -69,6 +97,7 @@ class WindProcess(Effect):
     tau_s: float = 5.0
     sigma_horizontal: float = 1.0
     sigma_vertical: float = 0.5
+    sigma_mean_vertical: float | None = None
     name: str = "wind_process"
 
     def __post_init__(self) -> None:
@@ -84,13 +113,24 @@ class WindProcess(Effect):
             if isinstance(value, bool) or not (isinstance(value, int | float)
                                                and math.isfinite(value) and value > 0):
                 raise ValueError(f"{label} must be a positive number; got {value!r}")
+        held = self.sigma_mean_vertical
+        if held is not None and (isinstance(held, bool) or not (
+                isinstance(held, int | float) and math.isfinite(held) and held > 0)):
+            raise ValueError(f"sigma_mean_vertical must be a positive number or null; got "
+                             f"{held!r}")
+        if held is not None and "up" not in components:
+            raise ValueError("sigma_mean_vertical holds the vertical component's mean: "
+                             f"components must include up; got {list(components)}")
 
     @classmethod
     def vertical_thermals(cls) -> WindProcess:
         """The vertical air motion of a rocket's descent through an afternoon boundary
         layer: thermals of about 1 m/s correlated over tens of seconds (tau 20 s), knots
-        every 4 s.  The altimeter and a GPS altitude see only the vertical component."""
-        return cls(components=("up",), knot_s=4.0, tau_s=20.0, sigma_vertical=1.0)
+        every 4 s, their mean over the descent held at 0.25 m/s (`sigma_mean_vertical`,
+        module docstring).  The altimeter and a GPS altitude see only the vertical
+        component."""
+        return cls(components=("up",), knot_s=4.0, tau_s=20.0, sigma_vertical=1.0,
+                   sigma_mean_vertical=VERTICAL_MEAN_SIGMA_M_S)
 
     def knot_times(self, test: FlightTest) -> np.ndarray:
         """The knot times t_k (s): every `knot_s` from the phase's start, the last at or past
@@ -108,6 +148,31 @@ class WindProcess(Effect):
         weights = hats.mean(axis=0)
         return {param_name(f"wind_{component}", str(k)): float(w)
                 for k, w in enumerate(weights) if w > 0.0}
+
+    def knot_weights(self, test: FlightTest, t0: float, t1: float) -> np.ndarray:
+        """`mean_weights` of the vertical component as a vector over the knots."""
+        w = self.mean_weights(test, "up", t0, t1)
+        return np.array([w.get(param_name("wind_up", str(k)), 0.0)
+                         for k in range(len(self.knot_times(test)))])
+
+    def correlation(self, test: FlightTest) -> np.ndarray:
+        """The knots' prior correlation under the Gauss-Markov process, phi^|i-j|."""
+        k = np.arange(len(self.knot_times(test)))
+        return math.exp(-self.knot_s / self.tau_s) ** np.abs(np.subtract.outer(k, k))
+
+    def mean_sigma(self, test: FlightTest, t0: float, t1: float) -> float:
+        """The prior's sigma (m/s) of the vertical air motion's mean over [t0, t1] (s):
+        sqrt(b' S b), b the window's knot weights (`knot_weights`) and S the knots' prior
+        covariance, s^2 phi^|i-j| conditioned on the held mean where there is one
+        (`sigma_mean_vertical`; Sherman-Morrison).  What the air may add to or take from
+        a steady descent rate measured over that window."""
+        cov = self.sigma_vertical**2 * self.correlation(test)
+        if self.sigma_mean_vertical is not None:
+            a = self.knot_weights(test, test.t_start, test.t_end)
+            held = cov @ a
+            cov = cov - np.outer(held, held) / (self.sigma_mean_vertical**2 + float(a @ held))
+        b = self.knot_weights(test, t0, t1)
+        return float(np.sqrt(max(float(b @ cov @ b), 0.0)))
 
     def sigma(self, component: str) -> float:
         return self.sigma_vertical if component == "up" else self.sigma_horizontal
@@ -159,6 +224,26 @@ class WindProcess(Effect):
             innovations = [u[0] / s] + [(u[k] - phi * u[k - 1]) / (s * spread)
                                         for k in range(1, len(knots))]
             out[f"wind_{c}"] = (knots, ca.vertcat(*innovations))
+        if self.sigma_mean_vertical is not None:
+            weights = self.mean_weights(ctx.test, "up", ctx.test.t_start, ctx.test.t_end)
+            mean = sum(w * ctx.p[k] for k, w in weights.items())
+            mid = np.array([0.5 * (ctx.test.t_start + ctx.test.t_end)])
+            out["wind_up_mean"] = (mid, ca.vertcat(mean / self.sigma_mean_vertical))
+        return out
+
+    def prior_log_det(self, test: FlightTest) -> float:
+        """log det of the knots' prior correlation in their scaled coordinates (u / s per
+        component): (K - 1) log(1 - phi^2) per component of K knots (`correlation`), and
+        with the mean held (`sigma_mean_vertical`), less log(1 + s^2 a'Ra /
+        sigma_mean^2), a the mean's knot weights (the rank-one precision the mean's
+        residual adds: the matrix determinant lemma)."""
+        knots = self.knot_times(test)
+        phi = math.exp(-self.knot_s / self.tau_s)
+        out = len(self.components) * (len(knots) - 1) * math.log(1.0 - phi**2)
+        if self.sigma_mean_vertical is not None:
+            a = self.knot_weights(test, test.t_start, test.t_end)
+            spread = float(a @ self.correlation(test) @ a) * self.sigma_vertical**2
+            out -= math.log(1.0 + spread / self.sigma_mean_vertical**2)
         return out
 
     def draw(self, test: FlightTest, rng: np.random.Generator) -> dict[str, float]:
