@@ -30,6 +30,12 @@ carrying dt's sensitivities (the step piece also gives dx+/dh and dx+/dt).
 Only the pieces are compiled, and their size does not grow with the
 sub-steps or a lag's steps; the chains cost a few matrix products per
 instance.  The lagged GPS output's Jacobian, expanded, was 5.5 MB of C.
+
+A model local in time (`Model(..., series_slots=L)`: a wind process's knots
+read through L slots) takes its slots' times and values as one more input
+of every chain, `k` (per series, L times then L values), joined to the
+parameter vector for the pieces; the slots' values are free columns of the
+Jacobian like the parameters (`free_cols` indexes the joined vector).
 """
 
 from __future__ import annotations
@@ -63,6 +69,8 @@ class ModelPieces:
     def __post_init__(self) -> None:
         m = self.model
         self._x, self._t, self._p, self._c = m.symbols
+        # The slots' times and values after the parameters (a model local in time).
+        self.n_slots = self._p.numel() - len(m.parameters)
         h = ca.SX.sym("h")
         self._add("rk4_step", [self._x, self._t, h, self._p, self._c],
                   rk4(m.rhs, self._x, self._t, h, self._p, self._c), [self._x, h, self._t])
@@ -106,9 +114,16 @@ class ModelPieces:
 
     # -- the chains --------------------------------------------------------------------
 
-    def _pc(self) -> tuple[ca.MX, ca.MX]:
+    def _pc(self) -> tuple[ca.MX, ca.MX, list[ca.MX], ca.MX]:
+        """A chain's parameter and capture inputs, its slot input (none for a model global
+        in time) and the parameter vector the pieces take (the parameters, then the
+        slots)."""
         m = self.model
-        return ca.MX.sym("p", len(m.parameters)), ca.MX.sym("c", len(m.captures))
+        p, c = ca.MX.sym("p", len(m.parameters)), ca.MX.sym("c", len(m.captures))
+        if not self.n_slots:
+            return p, c, [], p
+        k = ca.MX.sym("k", self.n_slots)
+        return p, c, [k], ca.vertcat(p, k)
 
     def _zeros(self, rows: int, n_states: int) -> list[ca.MX]:
         """Zero sensitivities of `rows` quantities to n_states states, p and c."""
@@ -151,9 +166,9 @@ class ModelPieces:
         nx = self.model.nx
         x, x1 = ca.MX.sym("x0", nx), ca.MX.sym("x1", nx)
         t, dt = ca.MX.sym("t"), ca.MX.sym("dt")
-        p, c = self._pc()
+        p_in, c, k, p = self._pc()
         inv = ca.diag(ca.DM(1.0 / self.xscale))
-        args = [x, x1, t, dt, p, c]
+        args = [x, x1, t, dt, p_in, c, *k]
         xe, _ = self._stepped(x, t, dt, steps, p, c, None)
         value = ca.Function(f"gap_{steps}_chain", args, [(x1 - xe) / self.xscale])
         xe, (dx, dp, dc) = self._stepped(x, t, dt, steps, p, c, self._at_node(1))
@@ -168,12 +183,12 @@ class ModelPieces:
         inside a long interval by Hermite interpolation (x, x1, t, dt, H, ym, sg, p, c)."""
         nx, n_out = self.model.nx, self.functions[observe].numel_out(0)
         ym, sg = ca.MX.sym("ym", n_out), ca.MX.sym("sg", n_out)
-        p, c = self._pc()
+        p_in, c, k, p = self._pc()
         t, dt, length = ca.MX.sym("t"), ca.MX.sym("dt"), ca.MX.sym("H")
         states = [ca.MX.sym(f"x{i}", nx) for i in range(2 if kind == 2 else 1)]
         extra, t_at = ([], t) if kind == 0 else ([dt], t + dt) if kind == 1 else \
             ([dt, length], t + dt)
-        args = [*states, t, *extra, ym, sg, p, c]
+        args = [*states, t, *extra, ym, sg, p_in, c, *k]
         fns = []
         for jacobian in (False, True):
             x_at, sens = self._sample_state(kind, states, t, dt, length, p, c, jacobian)

@@ -71,6 +71,10 @@ class Settings:
     misspecified refits it served, 8-11 steps ended the run, and a descent
     that needed 29 had ended in a worse minimum than Ipopt's.  0: Ipopt runs
     on to its limit (the earlier path, for benchmarks).
+    local_series: a model whose series of knots in time (a wind process) are read a
+    few knots per shooting interval gives the estimator's Jacobians only those
+    knots' columns (`series_slots`; False: every knot's column in every row,
+    the reference the suite checks the local one against).
 
     The statistical test may finish a nearly feasible run with Gauss-Newton
     steps of its own (`Solver._stop_test`); Ipopt's Gauss-Newton Hessian is
@@ -101,6 +105,7 @@ class Settings:
     levenberg: float | None = 1.0
     window_margin: float | None = 0.5
     descent_steps: int = 30
+    local_series: bool = True
 
 
 MIN_GRID_STEP_S = 0.001

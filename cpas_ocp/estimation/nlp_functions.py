@@ -28,6 +28,7 @@ parameter's window of action keeps (`action_windows`).
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Protocol
@@ -50,6 +51,13 @@ POINTS_KEPT = 2  # the accepted iterate and the line search's latest trial point
 SWITCH_AFTER = 40
 
 
+# Seconds of model evaluations in the VM after which a run switches to native code as soon
+# as it is ready, however few evaluations it has made: on a 10-minute 100 Hz rocket log
+# (131,000 residuals) one residual Jacobian in the VM took a minute, and forty of them
+# would have taken the fit past half an hour.
+SWITCH_AFTER_S = 10.0
+
+
 class PointEvaluations:
     """The four model evaluations of the NLP, each kept for the last POINTS_KEPT points.
 
@@ -63,7 +71,8 @@ class PointEvaluations:
                  constraint_value: ca.Function, constraints: ca.Function,
                  switch: Callable[[], Sequence[ca.Function] | None] | None = None) -> None:
         """`switch`, where given, is asked before each new evaluation from the
-        SWITCH_AFTER-th on for the same four functions in faster form (native code compiled
+        SWITCH_AFTER-th on (or once the evaluations have taken SWITCH_AFTER_S seconds) for
+        the same four functions in faster form (native code compiled
         meanwhile); once it gives them, they replace these (on the same patterns) and it is
         not asked again."""
         self._buffers = {name: FunctionBuffer(fn) for name, fn in (
@@ -71,6 +80,7 @@ class PointEvaluations:
             ("g", constraint_value), ("gA", constraints))}
         self._kept: dict[str, list[tuple[bytes, list]]] = {name: [] for name in self._buffers}
         self.evaluations = dict.fromkeys(self._buffers, 0)  # model evaluations made, per kind
+        self.seconds = 0.0  # spent in model evaluations before the switch
         self._switch = switch
         self.switched_at: int | None = None  # the evaluations made before the switch
 
@@ -81,7 +91,7 @@ class PointEvaluations:
     def _maybe_switch(self) -> None:
         if self._switch is None:
             return
-        if sum(self.evaluations.values()) < SWITCH_AFTER:
+        if sum(self.evaluations.values()) < SWITCH_AFTER and self.seconds < SWITCH_AFTER_S:
             advance_compilers()
             return
         functions = self._switch()
@@ -106,7 +116,10 @@ class PointEvaluations:
         if found is None:
             self._maybe_switch()
             buffer = self._buffers[name]
+            start = time.perf_counter()
             found = [buffer.shaped(i, v) for i, v in enumerate(buffer.nonzeros(z))]
+            if self._switch is not None:
+                self.seconds += time.perf_counter() - start
             self.evaluations[name] += 1
             self._kept[name] = [(key, found), *self._kept[name][:POINTS_KEPT - 1]]
         return found

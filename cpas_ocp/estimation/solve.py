@@ -62,8 +62,18 @@ DESCENT_CONVERGED = "Solved_Feasible_Descent_After_Stall"
 FINISHING_STEPS = 3
 
 
+# Where stderr is not a terminal (a pipe, a log file), a progress line is written at most
+# this often (s): a long solve shows that it goes on, a short one says nothing.
+PIPED_PROGRESS_S = 10.0
+
+
 class IterationMonitor(ca.Callback):
-    """Ipopt iteration callback: progress line on stderr, and the statistical stopping test.
+    """Ipopt iteration callback: progress on stderr, and the statistical stopping test.
+
+    Progress on a terminal is one line redrawn at every iteration (iteration and
+    chi-square); where stderr is not a terminal, a whole line is written at most
+    every PIPED_PROGRESS_S seconds of the run (with the seconds since it began),
+    so that a piped or logged run is not silent through a long solve.
 
     Gauss-Newton converges linearly, so Ipopt's optimality tests keep it
     polishing chi-square in its fifth decimal long after the estimate has
@@ -106,9 +116,12 @@ class IterationMonitor(ca.Callback):
         self._stalls = stall and self._stall is not None
         self.point: np.ndarray | None = None  # where the statistical test ended the run
         self.bounds = bounds
-        self.progress = progress and sys.stderr.isatty()
+        self.progress = progress
+        self._tty = sys.stderr.isatty()
+        self._said = time.monotonic()
         if done:
             return  # a widening restart goes on with what the run had gathered
+        self._started = self._said
         if self.damping is not None:
             self.damping.reset()
         self._first_chi2: float | None = None  # the run's first iterate's (divergence)
@@ -128,7 +141,7 @@ class IterationMonitor(ca.Callback):
             self.best, self._best_chi2 = z, chi2
 
     def finish(self) -> None:
-        if self.progress and self._k + self._done:
+        if self.progress and self._tty and self._k + self._done:
             sys.stderr.write("\n")
 
     # Successive iterates at which some parameter acts outside the window of action
@@ -145,6 +158,20 @@ class IterationMonitor(ca.Callback):
         self._outside = self._outside + 1 if outside else 0
         if self._outside >= self.OUTSIDE_PERSISTS and self.left_at is None:
             self.left_at = np.array(z, dtype=float)
+
+    def _show(self, chi2: float) -> None:
+        """The iteration's progress on stderr: redrawn in place on a terminal, else a line
+        once PIPED_PROGRESS_S seconds have passed since the last (or the run's start)."""
+        text = f"  iteration {self._done + self._k:4d}   chi-square {chi2:14.6g}"
+        if self._tty:
+            sys.stderr.write(f"\r{text}")
+        else:
+            now = time.monotonic()
+            if now - self._said < PIPED_PROGRESS_S:
+                return
+            self._said = now
+            sys.stderr.write(f"{text}   ({now - self._started:.0f} s)\n")
+        sys.stderr.flush()
 
     def get_n_in(self) -> int:
         return ca.nlpsol_n_out()
@@ -192,9 +219,7 @@ class IterationMonitor(ca.Callback):
         if self.damping is not None:
             self.damping.observe(np.asarray(arg[0]).ravel())
         if self.progress:
-            sys.stderr.write(f"\r  iteration {self._done + self._k:4d}   "
-                             f"chi-square {chi2:14.6g}")
-            sys.stderr.flush()
+            self._show(chi2)
         improved, self._chi2 = self._chi2 - chi2, chi2
         if self._tol is None or improved >= self._tol or self._k - self._last_test < self._gap:
             return [0]

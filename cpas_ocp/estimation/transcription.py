@@ -31,6 +31,7 @@ from cpas_ocp.estimation.fit import (
 from cpas_ocp.estimation.kinematic_track import guessed_states
 from cpas_ocp.estimation.nlp_functions import MarquardtDamping, PointEvaluations, bound_violations
 from cpas_ocp.estimation.reduction import initial_guess
+from cpas_ocp.estimation.series_slots import SeriesSlots, offset_reach, series_slots
 from cpas_ocp.estimation.shooting_grid import (
     TimeWindow,
     dynamics_grid,
@@ -43,7 +44,7 @@ from cpas_ocp.estimation.sparse_rows import Rows, stacked_parts
 from cpas_ocp.io.model_spec import ModelSpec, spec_from_effects, spec_of_test, unfitted_sensors
 from cpas_ocp.physics.effects import Effect
 from cpas_ocp.physics.flight_test import FlightTest
-from cpas_ocp.physics.model import CORE_STATES, timing_label
+from cpas_ocp.physics.model import CORE_STATES, Model, timing_label
 
 
 @dataclass
@@ -96,6 +97,9 @@ class _Block:
     times: np.ndarray
     data: list[np.ndarray]
     chain: tuple[str, int] = ("", 0)  # ("gap", RK4 steps) or (observation piece, kind)
+    # Per instance, the shooting interval it lies in, where its chain reads the knots of a
+    # model local in time (`series_slots`); None where it takes the whole parameter vector.
+    interval: np.ndarray | None = None
 
 
 @dataclass
@@ -314,9 +318,8 @@ class Transcription:
         step after the node before the sample)."""
         y = nlp.syms
         counts = substeps_of(self.t)
-        _, _, _, _, xscale, cscale = self._ctx
-        pieces = ModelPieces(self.model, [self.model.parameter_names.index(f) for f in self.free],
-                             self.pscale, cscale, xscale)
+        pieces = self._model_pieces()
+        local = self.slots is not None
         if counts.max() > 1:  # long intervals: samples inside them need the dynamics
             pieces.need_rhs()
         blocks, gap_rows = [], []
@@ -329,7 +332,8 @@ class Transcription:
                               [y["x"], y["x1"], y["t"], y["dt"], y["p"], y["c"]],
                               [(y["x1"] - xe) / nlp.xscale])
             blocks.append(_Block(gap, [ks, ks + 1], self.t[ks], [np.diff(self.t)[ks]],
-                                 ("gap", int(m) * self.settings.substeps)))
+                                 ("gap", int(m) * self.settings.substeps),
+                                 ks if local else None))
             gap_rows.append((ks[:, None] * self.model.nx
                              + np.arange(self.model.nx)[None, :]).ravel())
         n_gap_blocks = len(blocks)
@@ -354,6 +358,46 @@ class Transcription:
         nlp.residuals, nlp.g = self._block_pieces(pieces, *layout)
         nlp.lbg = [np.zeros(self.model.nx * n)]
         nlp.ubg = [np.zeros(self.model.nx * n)]
+
+    def _model_pieces(self) -> ModelPieces:
+        """The model's pieces for the gaps and sensors (`chained_jacobians`): of the model
+        itself, or, where it has series of knots in time (a wind process) that the
+        intervals read a few at a time (`series_slots`; `self.slots`), of the model local
+        in time, whose Jacobian columns are the free parameters other than the knots, then
+        each series' slots."""
+        _, _, _, _, xscale, cscale = self._ctx
+        m = self.model
+        reach = offset_reach(m, self.values, self.free)
+        self.slots: SeriesSlots | None = (None if reach is None or not self.settings.local_series
+                                          else series_slots(m, self.t, self.free, reach))
+        if self.slots is None:
+            return ModelPieces(m, [m.parameter_names.index(f) for f in self.free],
+                               self.pscale, cscale, xscale)
+        local = Model(self.test, m.effects, series_slots=self.slots.slots)
+        self._slot_columns = local.slot_columns
+        knots = {name for names in self.slots.names.values() for name in names}
+        self._unslotted = [i for i, f in enumerate(self.free) if f not in knots]
+        cols = [m.parameter_names.index(self.free[i]) for i in self._unslotted]
+        scales = [self.pscale[i] for i in self._unslotted]
+        for series, names in self.slots.names.items():
+            cols += [int(c) for c in local.slot_columns[series][1]]
+            scales += [self.pscale[self.free.index(names[0])]] * self.slots.slots
+        return ModelPieces(local, cols, np.asarray(scales), cscale, xscale)
+
+    def _slot_inputs(self, block: _Block) -> ca.MX:
+        """The slots' times and values of each instance of `block` (`_model_pieces`), in the
+        order the model local in time appends them to its parameters (one column each)."""
+        assert self.slots is not None and block.interval is not None
+        pfull, first = self._ctx[2], len(self.model.parameters)
+        rows: dict[int, ca.MX] = {}
+        for series, names in self.slots.names.items():
+            times, knots = self.slots.slot_data(series, block.interval)
+            t_cols, v_cols = self._slot_columns[series]
+            index = [self.model.parameter_names.index(n) for n in names]
+            for j in range(self.slots.slots):
+                rows[int(t_cols[j]) - first] = ca.MX(ca.DM(times[j]).T)
+                rows[int(v_cols[j]) - first] = pfull[[index[k] for k in knots[j]]].T
+        return ca.vertcat(*(rows[i] for i in range(len(rows))))
 
     def _block_pieces(self, pieces: ModelPieces, blocks: list[_Block], n_gap_blocks: int,
                       destinations: list[np.ndarray], offsets: list[int],
@@ -680,7 +724,7 @@ class Transcription:
                 fn = ca.Function(f"residual_{len(blocks)}",
                                  [*states, ts, *sym_extra, ym, sg, ps, cs], [(ym - y_at) / sg])
                 blocks.append(_Block(fn, nodes, self.t[k[samples]], [*extra, meas, sig], (
-                    observe, kind)))
+                    observe, kind), k[samples] if self.slots is not None else None))
                 # Row (sample j, channel c) of sensor i lies at offsets[i] + j n_i + c.
                 destinations.append(np.concatenate([
                     offsets[i] + samples[:, None] * len(self.samples[i][1])
@@ -710,10 +754,14 @@ class Transcription:
                            [out, ca.vec(ca.horzcat(*jblocks, jp, jc))])
 
     def _instance_arguments(self, block: _Block) -> list:
-        """The arguments of `block.fn` for all its instances at once (one column each)."""
+        """The arguments of `block.fn` for all its instances at once (one column each); where
+        its chain reads the knots of the model local in time, the slots' times and values
+        last (`_slot_inputs`), which `block.fn` does not take."""
         _, Xp, pfull, Cp, _, _ = self._ctx
+        slots = [] if block.interval is None else [self._slot_inputs(block)]
         return [*(Xp[:, k] for k in block.nodes), ca.DM(block.times).T,
-                *(ca.DM(d) if np.ndim(d) == 2 else ca.DM(d).T for d in block.data), pfull, Cp]
+                *(ca.DM(d) if np.ndim(d) == 2 else ca.DM(d).T for d in block.data), pfull, Cp,
+                *slots]
 
     def _instance_columns(self, block: _Block) -> np.ndarray:
         """Per instance of `block`, the decision-vector index of each local column (its
@@ -725,7 +773,18 @@ class Transcription:
         for j, k in enumerate(block.nodes):
             zcols[:, j * nx:(j + 1) * nx] = (np.asarray(k)[:, None] * nx + np.arange(nx))
         zcols[:, nx * n_states:] = nX + np.arange(nfree + ncap)
-        return zcols
+        if block.interval is None or self.slots is None:
+            return zcols
+        # The model local in time: the free parameters but the knots, then each series'
+        # slots, which are the knots the instance reads (`_model_pieces`).
+        free_index = {f: i for i, f in enumerate(self.free)}
+        cols = [nX + np.array(self._unslotted)[None, :].repeat(len(block.times), axis=0)]
+        for series, names in self.slots.names.items():
+            _, knots = self.slots.slot_data(series, block.interval)
+            index = np.array([free_index[name] for name in names])
+            cols.append(nX + index[knots].T)
+        cols.append(nX + nfree + np.arange(ncap)[None, :].repeat(len(block.times), axis=0))
+        return np.concatenate([zcols[:, :nx * n_states], *cols], axis=1)
 
     def _mapped_block(self, block: _Block, value_fn: ca.Function,
                       local: ca.Function) -> _Piece:
@@ -746,7 +805,7 @@ class Transcription:
         call = self._instance_arguments(block)
 
         def mapped(fn: ca.Function) -> list[ca.MX]:
-            out = fn.map(n_inst, "thread", 2)(*call)
+            out = fn.map(n_inst, "thread", 2)(*call[:fn.n_in()])
             return [ca.vec(o) for o in (out if isinstance(out, tuple | list) else [out])]
 
         with_jacobian, nz = mapped(local)

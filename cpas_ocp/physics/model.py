@@ -23,7 +23,7 @@ import casadi as ca
 import numpy as np
 
 from cpas_ocp.physics.effects.base import Capture, Constraint, Effect, EventTiming, State
-from cpas_ocp.physics.model_context import ModelContext
+from cpas_ocp.physics.model_context import SLOT_PREFIX, ModelContext
 from cpas_ocp.physics.parameters import Parameter, param_name, split_name
 from cpas_ocp.physics.units import G0
 
@@ -41,7 +41,12 @@ CORE_STATES = (
 class Model:
     """Dynamics x' = f(x, t, p, c) and sensor outputs y = h(x, t, p, c) of one test phase."""
 
-    def __init__(self, test: FlightTest, effects: Sequence[Effect]) -> None:
+    def __init__(self, test: FlightTest, effects: Sequence[Effect],
+                 series_slots: int = 0) -> None:
+        """The model of `effects` on `test`.  With `series_slots` L > 0 it is local in time:
+        each series of parameter knots (`ModelContext.time_series`) reads L consecutive
+        knots through slot symbols appended to the parameter vector (`slot_columns`), for
+        the estimator's pieces; the knots' own parameters then act on nothing."""
         self.test = test
         self.effects = tuple(effects)
         self.parameters: list[Parameter] = _unique_by_name(
@@ -72,6 +77,7 @@ class Model:
             test=test, t=t, x=xs,
             p={prm.name: p[i] for i, prm in enumerate(self.parameters)},
             c={cap.name: c[i] for i, cap in enumerate(self.captures)},
+            series_slots=series_slots,
         )
         self._environment(ctx)
         for e in self.effects:
@@ -106,6 +112,16 @@ class Model:
         if missing:
             raise ValueError(f"no effect defines the derivative of state(s) {missing}")
 
+        # The series' knots (`ModelContext.time_series`), and in a model local in time the
+        # slots' symbols after the parameters: their columns in the parameter vector.
+        self.series = dict(ctx.series)
+        slot_names = [n for n in ctx.p if n.startswith(SLOT_PREFIX)]
+        p = ca.vertcat(p, *(ctx.p[n] for n in slot_names))
+        first = len(self.parameters)
+        self.slot_columns = {
+            name: tuple(np.array([first + slot_names.index(f"{SLOT_PREFIX}{name}/{part}{j}")
+                                  for j in range(series_slots)]) for part in "tv")
+            for name in ctx.slots}
         args = [x, t, p, c]
         self.rhs = ca.Function("rhs", args, [ca.vertcat(*(ctx.xdot[s.name] for s in self.states))],
                                ["x", "t", "p", "c"], ["xdot"])

@@ -7,12 +7,16 @@ state derivatives and sensor outputs into it (`effects.base.Effect`), in two pas
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import casadi as ca
+import numpy as np
 
 from cpas_ocp.physics.flight_test import FlightTest
 from cpas_ocp.physics.integration import rk4
+
+SLOT_PREFIX = "@slot:"  # names of a local model's series slots in `ModelContext.p`
 
 
 @dataclass
@@ -36,6 +40,13 @@ class ModelContext:
     offsets: list[TimeOffset] = field(default_factory=list)  # `at_time_offset`'s
     # The offsets' symbols and their RK4 steps, once formed (`expand_offsets`).
     _expansion: tuple[ca.SX, ca.SX] | None = field(default=None, repr=False)
+    # Series of parameter knots in time (`time_series`): name -> (knot times (s), the
+    # knots' parameter names).  With `series_slots` (a model local in time), each series
+    # reads that many consecutive knots through symbols of their own, (times, values),
+    # appended to `p` (named SLOT_PREFIX + series + "/t" or "/v" and the slot).
+    series: dict[str, tuple[np.ndarray, tuple[str, ...]]] = field(default_factory=dict)
+    series_slots: int = 0
+    slots: dict[str, tuple[ca.SX, ca.SX]] = field(default_factory=dict)
 
     def separate_body(self, chute: str, effect: str) -> None:
         """Make canopy `chute` a body of its own (on behalf of riser model `effect`).
@@ -91,6 +102,37 @@ class ModelContext:
             raise ValueError(f"list the {effect} effect before the effects that form drag: "
                              f"{', '.join(early)} already use the air before it")
         self.set_air_relative_velocity(self.q["air_relative_velocity"] - u)
+
+    def time_series(self, name: str, times: np.ndarray, names: Sequence[str],
+                    spacing: float) -> ca.SX:
+        """A quantity piecewise linear in time through knots at `times` (s, `spacing` apart)
+        whose values are the parameters `names`, constant beyond the first and last knot:
+        the knots' hat functions, max(0, 1 - |t - t_k| / spacing), times their values,
+        summed.  A knot acts only within `spacing` of its time.
+
+        In a model local in time (`series_slots` L > 0) the sum runs over L slots of
+        consecutive knots instead, each a time and a value symbol of its own (appended to
+        `p`): the estimator gives every shooting interval and sample the knots around it,
+        so that its functions do not grow with the number of knots, nor its Jacobians
+        with a column per knot."""
+        times = np.asarray(times, dtype=float)
+        self.series[name] = (times, tuple(names))
+        t = ca.fmin(ca.fmax(self.t, times[0]), times[-1])
+        if self.series_slots:
+            if name not in self.slots:
+                self.slots[name] = (ca.SX.sym(f"{name}_t", self.series_slots),
+                                    ca.SX.sym(f"{name}_v", self.series_slots))
+                for j in range(self.series_slots):
+                    for part, sym in zip("tv", self.slots[name], strict=True):
+                        self.p[f"{SLOT_PREFIX}{name}/{part}{j}"] = sym[j]
+            tau, value = self.slots[name]
+            terms = [(tau[j], value[j]) for j in range(self.series_slots)]
+        else:
+            terms = [(float(tk), self.p[n]) for tk, n in zip(times, names, strict=True)]
+        u = ca.SX(0.0)
+        for tk, v in terms:
+            u = u + ca.fmax(0.0, 1.0 - ca.fabs(t - tk) / spacing) * v
+        return u
 
     def at_time_offset(self, expr: ca.SX, dt: ca.SX | float, steps: int) -> ca.SX:
         """`expr` (a function of state and time) evaluated at t + dt instead of t.

@@ -197,13 +197,11 @@ class WindProcess(Effect):
         """u(t) (m/s, east-north-up): the knots' hat functions summed (piecewise linear,
         constant beyond the last knot)."""
         knots = self.knot_times(ctx.test)
-        t = ca.fmin(ca.fmax(ctx.t, knots[0]), knots[-1])
         u = [ca.SX(0.0)] * 3
         for c in self.components:
-            axis = COMPONENTS.index(c)
-            for k, tk in enumerate(knots):
-                hat = ca.fmax(0.0, 1.0 - ca.fabs(t - tk) / self.knot_s)
-                u[axis] = u[axis] + hat * ctx.p[param_name(f"wind_{c}", str(k))]
+            u[COMPONENTS.index(c)] = ctx.time_series(
+                f"wind_{c}", knots, [param_name(f"wind_{c}", str(k)) for k in range(len(knots))],
+                self.knot_s)
         return ca.vertcat(*u)
 
     def forces(self, ctx: ModelContext) -> None:
