@@ -228,9 +228,12 @@ class Claim:
     undetermined_drag_areas: list[str] = field(default_factory=list)
     # Process prior blocks beyond their noise that do not depart (`process_misfits`).
     process_misfits: list[str] = field(default_factory=list)
-    # Canopies the log shows did not open, or that needed more drag area than their
-    # diameter gives (`failed_deployments`), each in a sentence.
+    # What the log shows of the canopies (`deployment_findings`), each in a sentence: those
+    # that make the fit no result (no canopy opened; one needed more drag area than its
+    # diameter gives), and those said beside a result (a canopy that did not open, held
+    # out of the fit, beside others that did; one that opened in part).
     failed_deployments: list[str] = field(default_factory=list)
+    deployment_notes: list[str] = field(default_factory=list)
 
     @property
     def pressed(self) -> list[HeldBound]:
@@ -280,7 +283,7 @@ class Claim:
     def problems(self) -> list[str]:
         """One line per reason the fit is less than a plain result (empty when none); those
         that make it no result first."""
-        out = list(self.failed_deployments)
+        out = [*self.failed_deployments, *self.deployment_notes]
         if self.pressed:
             out.append(f"the data press {len(self.pressed)} parameter(s) against bounds that "
                        f"are guesses, not physical limits (p = {self.bound_p_value:.2g}): "
@@ -322,13 +325,15 @@ class Claim:
         return "a result, with overstated sigmas" if self.overstates_noise else "a result"
 
     def headline(self) -> str:
-        """What a report says above all else, or '': the fit is not a result, or its
-        uncertainties are overstated."""
+        """What a report says above all else, or '': the fit is not a result, a canopy did
+        not open or opened in part, or its uncertainties are overstated."""
         if not self.is_result:
             return "Not a result. " + " ".join(f"{p}." for p in self.problems())
+        said = [f"{n[0].upper()}{n[1:]}." for n in self.deployment_notes]
         if self.overstates_noise:
-            return f"Uncertainties overstated. {overstated_text(self.ratio, self.low_p_value)}."
-        return ""
+            said.append(f"Uncertainties overstated. "
+                        f"{overstated_text(self.ratio, self.low_p_value)}.")
+        return " ".join(said)
 
     def as_dict(self) -> dict:
         pressed = self.pressed
@@ -350,6 +355,7 @@ class Claim:
                 "undetermined_drag_areas": self.undetermined_drag_areas,
                 "process_misfits": self.process_misfits,
                 "failed_deployments": self.failed_deployments,
+                "deployment_notes": self.deployment_notes,
                 "window_moves": [vars(m) for m in self.moves], "notes": self.notes,
                 "problems": self.problems(), "alpha": self.alpha}
 
@@ -432,26 +438,34 @@ def _number(x: float) -> float | None:
     return float(x) if np.isfinite(x) else None
 
 
-def failed_deployments(fit: Fit) -> list[str]:
-    """What the import of the flight log of `fit` found of its canopies that makes the fit
-    no result for them (`io.deployment_forensics`, kept in the test folder's
-    ``import.json``), one sentence each: a canopy that did not open (the drag area its
-    descent needed is the airframe's or the earlier canopies', so the fit's drag area for
-    it is not the canopy's), and one whose descent needed more drag area than its diameter
-    gives (another canopy was out: the fit's drag area for it is more than the canopy's).
-    Empty for a folder not imported."""
+def deployment_findings(fit: Fit) -> tuple[list[str], list[str]]:
+    """What the import of the flight log of `fit` found of its canopies
+    (`io.deployment_forensics`, kept in the test folder's ``import.json``), in sentences:
+    those that make the fit no result for its canopies, and those it states beside a
+    result.  A canopy that did not open is held out of the fit by the import (its drag area
+    at the model's least, the airframe's fitted where it was the first): where no canopy
+    opened the fit is the airframe's, not a canopy's, and no result; where others opened
+    it is theirs, and the sentence goes beside it.  A canopy whose descent needed more drag
+    area than its diameter gives had another canopy out with it: the fit's drag area for it
+    is not that canopy's.  A canopy that opened in part is said.  Empty for a folder not
+    imported."""
     canopies = {c.name for c in fit.test.parachutes}
-    out = []
-    for name, entry in import_deployments(fit.test.path).items():
-        if name not in canopies:
-            continue
+    found = {name: entry for name, entry in import_deployments(fit.test.path).items()
+             if name in canopies}
+    none_opened = bool(found) and all(e["verdict"] == "not_opened" for e in found.values()) \
+        and len(found) == len(canopies)
+    failed, notes = [], []
+    for name, entry in found.items():
         if entry["verdict"] == "not_opened":
-            out.append(f"{entry['sentence']}; the fit's drag area for the {name} is not "
-                       "that canopy's")
+            (failed if none_opened else notes).append(
+                f"{entry['sentence']}; the fit holds it closed"
+                + (" and fits the airframe's drag area (CdS_V) instead" if none_opened else ""))
         elif entry.get("above_diameter") is True:
-            out.append(f"{entry['sentence']}; the fit's drag area for the {name} is more "
-                       "than that canopy's")
-    return out
+            failed.append(f"{entry['sentence']}; the fit's drag area for the {name} is more "
+                          "than that canopy's")
+        elif entry["verdict"] == "partial":
+            notes.append(entry["sentence"])
+    return failed, notes
 
 
 def check_claim(est: Estimator, fit: Fit, alpha: float = ALPHA) -> Claim:
@@ -467,7 +481,7 @@ def check_claim(est: Estimator, fit: Fit, alpha: float = ALPHA) -> Claim:
                   alpha=alpha, low_p_value=float(chi2_law.cdf(fit.chi_square, fit.dof)),
                   departures=process_departures(fit), process_misfits=process_misfits(fit, alpha))
     claim.worst_sensor, claim.worst_sensor_rms = worst_sensor(fit)
-    claim.failed_deployments = failed_deployments(fit)
+    claim.failed_deployments, claim.deployment_notes = deployment_findings(fit)
     guessed = [h for h in held if not h.physical]
     if not guessed:
         return claim

@@ -76,7 +76,7 @@ from cpas_ocp.io.plausibility import (
     check_speed,
     check_steady_accelerometer,
 )
-from cpas_ocp.io.rocket_model import held_openings, rocket_model
+from cpas_ocp.io.rocket_model import held_closed, held_openings, rocket_model
 from cpas_ocp.io.site_air import LAPSE_BOUNDS_K_M, fit_lapse_rate, pad_pressure
 from cpas_ocp.physics.atmosphere import ISA_LAPSE_K_M, SiteAtmosphere, pressure_altitude
 
@@ -577,6 +577,24 @@ def model_block(d: LogImport) -> None:
                                if not c.get("open_at_start")],
                               held_openings(d.deploy, d.events), d.deploy_sigma, d.still_air),
     }
+    if d.forensics is None:
+        return
+    closed = {c.name: instant(d.deploy[c.name]) for c in d.forensics.canopies
+              if c.verdict == "not_opened"}
+    if closed:
+        areas = {c["name"]: np.pi * card_quantity(c["diameter"], "length", card.source,
+                                                  "parachutes.diameter") ** 2 / 4.0
+                 for c in d.parachutes}
+        first = min(d.deploy, key=d.deploy.__getitem__)
+        needed = d.forensics[first].descent
+        d.manifest["model"], d.manifest["vehicle"] = held_closed(
+            d.manifest["model"], d.manifest["vehicle"], closed, areas,
+            {c["name"]: c["stages"][0] for c in d.parachutes}, first,
+            needed.drag_area if needed is not None else 0.0)
+        d.notes.append(f"{', '.join(closed)}: did not open (see the deployment forensics): "
+                       "held closed in the fit" + (", which estimates the airframe's drag "
+                                                   "area CdS_V instead" if first in closed
+                                                   else ""))
 
 
 def instant(t: float) -> float:

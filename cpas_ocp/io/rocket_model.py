@@ -37,6 +37,11 @@ HELD_FILL_CONSTANT = 8.0
 HELD_EXPOPEN = 1.0
 
 
+# A canopy the log shows did not open is held at this share of its open area, twice the
+# least the canopy model allows: drag no sensor tells from none.
+UNOPENED_SHARE = 2e-3
+
+
 MIN_START_WINDOW_S = 2.0  # least half-width of an inflation start's window about its event
 
 
@@ -78,3 +83,29 @@ def rocket_model(block: dict[str, Any], sensor_kinds: list[str],
             fix[f"expopen[{name},{stage}]"] = HELD_EXPOPEN
     return {**block, "effects": effects, "fix": {**fix, **block.get("fix", {})}}
 
+
+
+def held_closed(model: dict[str, Any], vehicle: dict[str, Any], closed: dict[str, float],
+                areas: dict[str, float], stages: dict[str, str], first: str,
+                airframe_m2: float) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The manifest's model and vehicle with the canopies in `closed` (name: deployment
+    time, s) held closed: the deployment forensics found they did not open.  Each one's
+    drag area is held at `UNOPENED_SHARE` of its open area (`areas`, m^2, pi D_o^2 / 4),
+    its opening's shape at the held values and its start at its deployment; where the
+    first canopy deployed (`first`) did not open, the airframe carried the descent, so its
+    drag area CdS_V is estimated, from `airframe_m2` (m^2, what the descent needed) where
+    the card gives none.  The card's own fixes win."""
+    if not closed:
+        return model, vehicle
+    fix: dict[str, Any] = {}
+    for name, t_deploy in closed.items():
+        key = f"{name},{stages[name]}"
+        fix |= {f"CdS[{key}]": UNOPENED_SHARE * areas[name], f"n[{key}]": HELD_FILL_CONSTANT,
+                f"expopen[{key}]": HELD_EXPOPEN, f"t_start[{key}]": t_deploy}
+    model = {**model, "fix": {**fix, **model.get("fix", {})}}
+    if first in closed:
+        model["free"] = [*dict.fromkeys([*model.get("free", []), "CdS_V"])]
+        if not vehicle.get("forebody_cds", {}).get("value"):
+            vehicle = {**vehicle, "forebody_cds": {"value": round(airframe_m2, 6),
+                                                   "unit": "m^2"}}
+    return model, vehicle

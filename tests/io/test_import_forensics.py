@@ -1,6 +1,7 @@
 """The import says whether each canopy opened (`import_steps.canopy_forensics`), and a fit
 of a canopy the log shows did not open is no result for that canopy
-(`result_claim.failed_deployments`)."""
+(`result_claim.deployment_findings`): the import holds it closed, fitting the airframe's
+drag area where nothing opened."""
 
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ from types import SimpleNamespace
 import pytest
 
 from cpas_ocp.cli import main
-from cpas_ocp.inference.result_claim import Claim, failed_deployments
+from cpas_ocp.inference.result_claim import Claim, deployment_findings
 from tests.io.test_rocket_log_import import CARD, COLUMN_MAP, fly, write_mapped
 
 
@@ -43,6 +44,10 @@ def test_a_ballistic_descent_is_imported_as_a_drogue_that_did_not_open(
     assert "deployment: the drogue did not open" in out
     # What the descent needs is the airframe's drag area (0.012 m^2 in the simulation).
     assert drogue["drag_area_m2"] < 0.05
+    # The fit holds the drogue closed and estimates the airframe's drag area instead.
+    model = json.loads((tmp_path / "test" / "manifest.json").read_text())["model"]
+    assert "CdS_V" in model["free"]
+    assert {"CdS[drogue,stage1]", "t_start[drogue,stage1]"} <= set(model["fix"])
 
 
 def test_a_normal_recovery_is_imported_as_opened(tmp_path: Path,
@@ -52,21 +57,37 @@ def test_a_normal_recovery_is_imported_as_opened(tmp_path: Path,
     assert [e["verdict"] for e in report["deployments"].values()] == ["opened", "opened"]
 
 
-def test_the_claim_names_a_canopy_that_did_not_open(tmp_path: Path) -> None:
-    """A folder whose import found the drogue did not open and the main opened: the claim
-    lists the drogue's sentence and is no result; a folder without forensics lists none."""
-    (tmp_path / "import.json").write_text(json.dumps({"deployments": {
-        "drogue": {"verdict": "not_opened", "sentence": "the drogue did not open: X"},
-        "main": {"verdict": "opened", "sentence": "the main opened: Y",
-                 "above_diameter": False}}}))
-    fit = SimpleNamespace(test=SimpleNamespace(
-        parachutes=[SimpleNamespace(name="drogue"), SimpleNamespace(name="main")],
-        path=tmp_path))
-    found = failed_deployments(fit)  # type: ignore[arg-type]
-    assert found == ["the drogue did not open: X; the fit's drag area for the drogue is not "
-                     "that canopy's"]
-    claim = Claim(100.0, 100, 0.5, [], failed_deployments=found)
-    assert not claim.is_result and claim.problems()[0] == found[0]
-    assert claim.verdict() == "NOT A RESULT"
+def _fit_of(folder: Path, deployments: dict) -> SimpleNamespace:
+    """A stand-in fit of a test folder whose import found `deployments`: what
+    `deployment_findings` reads of a fit (its canopies' names and the folder)."""
+    (folder / "import.json").write_text(json.dumps({"deployments": deployments}))
+    return SimpleNamespace(test=SimpleNamespace(
+        parachutes=[SimpleNamespace(name=name) for name in deployments], path=folder))
+
+
+def test_the_claim_says_what_did_not_open(tmp_path: Path) -> None:
+    """Nothing opened: no result, the fit being the airframe's.  The main did not inflate
+    beside a drogue that opened: the fit is the drogue's, said beside it.  A streamer is
+    said.  A folder that was not imported says nothing."""
+    closed = {"verdict": "not_opened", "sentence": "the drogue did not open: X"}
+    opened = {"verdict": "opened", "sentence": "the drogue opened: Y", "above_diameter": False}
+    failed, notes = deployment_findings(_fit_of(tmp_path, {"drogue": closed}))  # type: ignore[arg-type]
+    assert failed == ["the drogue did not open: X; the fit holds it closed and fits the "
+                      "airframe's drag area (CdS_V) instead"] and notes == []
+    claim = Claim(100.0, 100, 0.5, [], failed_deployments=failed)
+    assert not claim.is_result and claim.problems()[0] == failed[0]
+    main_closed = {"verdict": "not_opened", "sentence": "the main did not inflate: Z"}
+    failed, notes = deployment_findings(_fit_of(  # type: ignore[arg-type]
+        tmp_path, {"drogue": opened, "main": main_closed}))
+    assert failed == [] and notes == ["the main did not inflate: Z; the fit holds it closed"]
+    claim = Claim(100.0, 100, 0.5, [], deployment_notes=notes)
+    assert claim.is_result and claim.headline().startswith("The main did not inflate: Z")
+    streamer = {"verdict": "partial", "sentence": "the drogue opened only in part: W"}
+    assert deployment_findings(_fit_of(tmp_path, {"drogue": streamer})) == (  # type: ignore[arg-type]
+        [], ["the drogue opened only in part: W"])
+    too_big = {**opened, "above_diameter": True}
+    failed, _ = deployment_findings(_fit_of(tmp_path, {"drogue": too_big}))  # type: ignore[arg-type]
+    assert len(failed) == 1 and "more than that canopy's" in failed[0]
+    fit = _fit_of(tmp_path, {"drogue": closed})
     fit.test.path = tmp_path / "elsewhere"
-    assert failed_deployments(fit) == []  # type: ignore[arg-type]
+    assert deployment_findings(fit) == ([], [])  # type: ignore[arg-type]
