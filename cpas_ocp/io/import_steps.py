@@ -56,7 +56,7 @@ from cpas_ocp.io.import_events import (
     flight_events,
 )
 from cpas_ocp.io.import_reports import Snatch
-from cpas_ocp.io.log_hygiene import charge_swing, damaged_end
+from cpas_ocp.io.log_hygiene import charge_swing, damaged_end, turned_over
 from cpas_ocp.io.log_noise import (
     MIN_DESCENT_SAMPLES,
     accelerometer_blocks,
@@ -79,6 +79,7 @@ from cpas_ocp.io.plausibility import (
 from cpas_ocp.io.rocket_model import held_closed, held_openings, rocket_model
 from cpas_ocp.io.site_air import LAPSE_BOUNDS_K_M, fit_lapse_rate, pad_pressure
 from cpas_ocp.physics.atmosphere import ISA_LAPSE_K_M, SiteAtmosphere, pressure_altitude
+from cpas_ocp.physics.units import G0
 
 TOUCHDOWN_MARGIN_S = 0.5  # phase ends this long before the detected touchdown (s)
 
@@ -486,7 +487,8 @@ def accelerometer_series(d: LogImport) -> None:
     d.dropped["snatch_samples_above_drag_ceiling"] = int(snatch.sum())
     accel = accel[~snatch]
     # A test folder's sensors each cover the whole phase: an accelerometer that stops
-    # reading inside it (dead, or logged in the boost only) is left out.
+    # reading inside it (dead, or logged in the boost only) is left out.  Gaps inside it (the
+    # charges', a tumble's) are not.
     if not (len(accel) >= 10 and float(accel["time"].min()) <= d.t_begin + SERIES_MARGIN_S
             and float(accel["time"].max()) >= d.t_end - SERIES_MARGIN_S):
         span = (f" (its samples there span {accel['time'].min():.2f}-"
@@ -495,6 +497,17 @@ def accelerometer_series(d: LogImport) -> None:
         d.notes.append(f"no accelerometer over the log's phase{span}: the folder has the "
                        "altimeter only")
         return
+    # Within the phase: the series' margins beyond it only carry the sensor over its ends.
+    times = accel["time"].to_numpy()
+    over = turned_over(times, accel["acceleration"].to_numpy() + G0) \
+        & (times >= d.t_begin) & (times <= d.t_end)
+    d.dropped["turned_over_accelerometer_samples"] = int(over.sum())
+    if over.any():
+        d.notes.append(f"accelerometer: {int(over.sum())} samples between "
+                       f"{accel['time'][over].min():.2f} and {accel['time'][over].max():.2f} s "
+                       "left out: the axial specific force reads below zero there, the body "
+                       "turned over (tumbling), which no drag makes")
+        accel = accel[~over]
     bounds = [*sorted({*starts, *opening_ends} - {d.t_end}), d.t_end]
     # Each canopy's steady segment (the series' margins included) is written as block means
     # of its noise's correlation length at their sigma (`accelerometer_blocks`: a swinging

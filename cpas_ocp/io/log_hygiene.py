@@ -15,6 +15,14 @@ good height, moved at most by the rate before and free fall, give or take
 sample, a reset or garbage runs to the end.  An impact itself only stops the fall and
 is never cut.
 
+**A body turned over.**  An axial accelerometer under a canopy reads the drag's specific
+force along the body's axis, f cos(theta), theta the axis's angle to the riser: never
+below zero while the body hangs below its canopy.  A vehicle that tumbles (on one log it
+turns over for 5 s, its axis reading -15 m/s^2 where the drag gives +10) reads it
+reversed, which no drag model makes: a fit would bend the air's motion to explain it.
+Where the axial specific force's running median over `TURNED_MEDIAN_S` is below zero the
+body has turned over; those samples and `TURNED_MARGIN_S` about them are left out.
+
 **A charge's swing.**  A recorder's filter spreads an ejection charge's one-sample
 pressure pulse over a second or more (on one filtered export the altitude dives 740 m
 and climbs back in 1.3 s).  About each deployment, the samples off the altitude's
@@ -51,6 +59,12 @@ SWING_SIGMAS = 8.0  # ... by this many robust sigmas of the scatter about it ...
 
 
 SWING_REACH_S = 3.0  # ... within this long of the deployment (s)
+
+
+TURNED_MEDIAN_S = 0.5  # a body turned over: the axial force's median over this long < 0 (s)
+
+
+TURNED_MARGIN_S = 0.5  # ... and the samples this long about it are left out too (s)
 
 
 @dataclass(frozen=True)
@@ -121,3 +135,22 @@ def charge_swing(t: np.ndarray, h: np.ndarray, t_charge: float) -> tuple[float, 
     if not swing.any():
         return None
     return float(t[swing].min()), float(t[swing].max())
+
+
+def turned_over(t: np.ndarray, specific_force: np.ndarray) -> np.ndarray:
+    """Which samples of an axial accelerometer, at times `t` (s) reading the axial
+    `specific_force` (m/s^2, gravity not subtracted: +g at rest, nose up), the body has
+    turned over in (see the module docstring): where the running median over
+    `TURNED_MEDIAN_S` is below zero, and within `TURNED_MARGIN_S` of such samples."""
+    if t.size < 3:
+        return np.zeros(t.size, dtype=bool)
+    interval = float(np.median(np.diff(t)))
+    n = max(3, round(TURNED_MEDIAN_S / interval)) if interval > 0 else 3
+    median = pd.Series(specific_force).rolling(n, center=True, min_periods=1).median()
+    over = t[median.to_numpy() < 0.0]
+    if over.size == 0:
+        return np.zeros(t.size, dtype=bool)
+    k = np.searchsorted(over, t)
+    before = np.abs(t - over[np.clip(k - 1, 0, over.size - 1)])
+    after = np.abs(over[np.clip(k, 0, over.size - 1)] - t)
+    return np.minimum(before, after) <= TURNED_MARGIN_S

@@ -12,7 +12,7 @@ import pandas as pd
 import pytest
 
 from cpas_ocp.cli import main
-from cpas_ocp.io.log_hygiene import charge_swing, damaged_end
+from cpas_ocp.io.log_hygiene import charge_swing, damaged_end, turned_over
 from tests.io.test_rocket_log_import import CARD, COLUMN_MAP, fly, write_mapped
 
 NOISE_M = 0.5
@@ -95,3 +95,18 @@ def test_a_log_with_garbage_at_its_end_imports_without_it(tmp_path: Path) -> Non
     t_damage = 1e-3 * float(log["t_ms"].iloc[-2])
     baro = pd.read_csv(tmp_path / "test" / "baro.csv")
     assert baro["time"].max() < t_damage
+
+
+def test_a_body_that_turns_over_is_found_and_a_swinging_one_is_not() -> None:
+    """A rocket hanging under its drogue reads +8 m/s^2 along its axis with a swing of
+    3 m/s^2; for 5 s it tumbles and reads -15: those samples (and half a second about them)
+    are found, the swing's troughs are not."""
+    t = np.arange(0.0, 60.0, 0.01)
+    rng = np.random.default_rng(7)
+    force = 8.0 + 3.0 * np.sin(2 * np.pi * t / 1.7) + rng.normal(0.0, 1.0, t.size)
+    assert not turned_over(t, force).any()
+    tumble = (t >= 30.0) & (t < 35.0)
+    force[tumble] = -15.0 + rng.normal(0.0, 1.0, tumble.sum())
+    over = turned_over(t, force)
+    assert over[tumble].all()
+    assert not over[(t < 29.4) | (t > 35.6)].any()
