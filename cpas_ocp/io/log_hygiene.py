@@ -20,8 +20,11 @@ force along the body's axis, f cos(theta), theta the axis's angle to the riser: 
 below zero while the body hangs below its canopy.  A vehicle that tumbles (on one log it
 turns over for 5 s, its axis reading -15 m/s^2 where the drag gives +10) reads it
 reversed, which no drag model makes: a fit would bend the air's motion to explain it.
-Where the axial specific force's running median over `TURNED_MEDIAN_S` is below zero the
-body has turned over; those samples and `TURNED_MARGIN_S` about them are left out.
+Where the axial specific force's running median over `TURNED_MEDIAN_S` is below zero by
+more than `TURNED_SIGMAS` of its own sigma (the scatter about it, 1.4826 MAD, times
+1.2533 / sqrt(n) for a median of n samples) and `TURNED_FLOOR_M_S2` (an accelerometer's
+offset: a body falling free near apogee reads zero, not below), the body has turned over;
+those samples and `TURNED_MARGIN_S` about them are left out.
 
 **A charge's swing.**  A recorder's filter spreads an ejection charge's one-sample
 pressure pulse over a second or more (on one filtered export the altitude dives 740 m
@@ -62,6 +65,12 @@ SWING_REACH_S = 3.0  # ... within this long of the deployment (s)
 
 
 TURNED_MEDIAN_S = 0.5  # a body turned over: the axial force's median over this long < 0 (s)
+
+
+TURNED_SIGMAS = 5.0  # ... by this many sigmas of that median ...
+
+
+TURNED_FLOOR_M_S2 = 1.0  # ... and this much at least (m/s^2) ...
 
 
 TURNED_MARGIN_S = 0.5  # ... and the samples this long about it are left out too (s)
@@ -141,13 +150,18 @@ def turned_over(t: np.ndarray, specific_force: np.ndarray) -> np.ndarray:
     """Which samples of an axial accelerometer, at times `t` (s) reading the axial
     `specific_force` (m/s^2, gravity not subtracted: +g at rest, nose up), the body has
     turned over in (see the module docstring): where the running median over
-    `TURNED_MEDIAN_S` is below zero, and within `TURNED_MARGIN_S` of such samples."""
+    `TURNED_MEDIAN_S` is significantly below zero, and within `TURNED_MARGIN_S` of such
+    samples."""
     if t.size < 3:
         return np.zeros(t.size, dtype=bool)
     interval = float(np.median(np.diff(t)))
     n = max(3, round(TURNED_MEDIAN_S / interval)) if interval > 0 else 3
-    median = pd.Series(specific_force).rolling(n, center=True, min_periods=1).median()
-    over = t[median.to_numpy() < 0.0]
+    median = pd.Series(specific_force).rolling(n, center=True, min_periods=1).median() \
+        .to_numpy()
+    off = specific_force - median
+    scatter = 1.4826 * float(np.median(np.abs(off - np.median(off))))
+    limit = max(TURNED_SIGMAS * 1.2533 * scatter / np.sqrt(n), TURNED_FLOOR_M_S2)
+    over = t[median < -limit]
     if over.size == 0:
         return np.zeros(t.size, dtype=bool)
     k = np.searchsorted(over, t)

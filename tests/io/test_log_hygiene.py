@@ -110,3 +110,11 @@ def test_a_body_that_turns_over_is_found_and_a_swinging_one_is_not() -> None:
     over = turned_over(t, force)
     assert over[tumble].all()
     assert not over[(t < 29.4) | (t > 35.6)].any()
+
+
+def test_a_body_falling_free_is_not_turned_over() -> None:
+    """Near apogee nothing pulls: the axis reads zero with its noise and a small offset,
+    whose half-second medians dip below zero by chance; that is no tumble."""
+    t = np.arange(0.0, 30.0, 0.01)
+    force = -0.3 + np.random.default_rng(8).normal(0.0, 2.0, t.size)
+    assert not turned_over(t, force).any()
