@@ -31,6 +31,8 @@ timing sigma (s):
   `DROGUE_WINDOW_S` after it; with none there the drogue is taken to open at
   apogee (its time and sigma, and a note).  The main's is the next charge;
   more are reported in a note;
+  A jolt within `GROUND_BAND_M` of the descent's lowest reading is the impact on the
+  ground, never a charge;
 * ``landed`` (touchdown, `touchdown`): from when the altitude stops falling.
 
 What cannot be found (no accelerometer, no boost in the log) is left out.
@@ -63,6 +65,7 @@ STILL_BAND_SIGMAS = 6.0  # ... its range within this many noise sigmas (+ STILL_
 STILL_BAND_M = 1.0
 REST_ACCEL_M_S2 = 1.0  # ... and the accelerometer's scatter within this (or 3 pad sigmas)
 IMPACT_WINDOW_S = 0.5  # the landing's impact is looked for this close to the baro's touchdown
+GROUND_BAND_M = 20.0  # a jolt this close above the descent's lowest reading is the impact
 
 
 @dataclass(frozen=True)
@@ -156,6 +159,17 @@ def detect_events(samples: pd.DataFrame) -> tuple[dict[str, FlightEvent], list[s
     pulses = _spikes(tb, h, PULSE_MIN_M, in_b)
     charges = _ejections(jolts, pulses, ta, tb)
     top = events["apogee"]
+    # No canopy is deployed at the ground: a jolt within GROUND_BAND_M of the descent's
+    # lowest reading is its impact (a log that ends at the impact finds no touchdown).
+    after_top = tb > top.time
+    if after_top.any():
+        ground = float(smooth[after_top].min())
+        impacts = [c for c in charges if c.time > top.time
+                   and float(np.interp(c.time, tb, smooth)) <= ground + GROUND_BAND_M]
+        if impacts:
+            notes.append(f"a jolt at {impacts[0].time:.2f} s, at the descent's lowest "
+                         "reading: the impact on the ground, not an ejection charge")
+            charges = [c for c in charges if c not in impacts]
     near = [c for c in charges
             if top.time - top.sigma - 1.0 <= c.time <= top.time + DROGUE_WINDOW_S]
     if near:

@@ -9,6 +9,8 @@ import json
 from pathlib import Path
 from types import SimpleNamespace
 
+import numpy as np
+import pandas as pd
 import pytest
 
 from cpas_ocp.cli import main
@@ -91,3 +93,28 @@ def test_the_claim_says_what_did_not_open(tmp_path: Path) -> None:
     fit = _fit_of(tmp_path, {"drogue": closed})
     fit.test.path = tmp_path / "elsewhere"
     assert deployment_findings(fit) == ([], [])  # type: ignore[arg-type]
+
+
+def test_a_ground_impact_at_the_log_s_end_is_no_charge(tmp_path: Path,
+                                                       capsys: pytest.CaptureFixture[str]
+                                                       ) -> None:
+    """A ballistic descent whose log ends at the impact, with its 30 g jolt: the jolt is the
+    ground, not a charge deploying a canopy the card lacks, and the import goes on."""
+    flight = fly(cds={"drogue": 0.0}, chutes=("drogue",), thrust_n=2600.0,
+                 seconds_after_touchdown=0.3)
+    write_mapped(flight, tmp_path / "log.csv", seed=6)
+    log = pd.read_csv(tmp_path / "log.csv")
+    hit = int(np.argmin(np.abs(1e-3 * log["t_ms"].to_numpy() - flight.events["landed"])))
+    log.loc[hit:hit + 2, "ay_g"] = -30.0  # the axial axis is -y: +30 g along it
+    log.to_csv(tmp_path / "log.csv", index=False, float_format="%.7g")
+    accel = {**COLUMN_MAP["acceleration"], "axis": "-y"}
+    (tmp_path / "map.json").write_text(json.dumps({**COLUMN_MAP, "acceleration": accel}))
+    card = {**CARD, "parachutes": [CARD["parachutes"][0]]}
+    (tmp_path / "card.json").write_text(json.dumps(card))
+    assert main(["import", str(tmp_path / "log.csv"), "--columns", str(tmp_path / "map.json"),
+                 "--card", str(tmp_path / "card.json"), "--out", str(tmp_path / "test")]) == 0
+    report = json.loads((tmp_path / "test" / "import.json").read_text())
+    assert "main" not in report["flight_events"]
+    assert any("the impact on the ground, not an ejection charge" in n
+               for n in report["notes"])
+    assert report["deployments"]["drogue"]["verdict"] == "not_opened"
