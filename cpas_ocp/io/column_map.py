@@ -206,6 +206,14 @@ def read_mapped_log(path: str | Path, column_map: dict[str, Any], map_source: st
             state = names.get(str(value)) if names is not None else str(value).lower()
             if state in FLIGHT_STATES:
                 states.setdefault(state, float(t))
+        if not states:  # a state block that gives none is a mistake, never ignored
+            seen = sorted({str(v) for v in frame["state"] if not pd.isna(v) and v != ""})
+            raise InputError(map_source, "state.names" if names is not None else
+                             "state.column", "values that name flight states ("
+                             + ", ".join(sorted(FLIGHT_STATES)) + ") or a 'names' map to them; "
+                             f"{src.path.name}'s column {spec['column']!r} holds "
+                             + (", ".join(repr(v) for v in seen[:8]) or "no value")
+                             + (" ..." if len(seen) > 8 else ""))
     notes = () if axis_used is None else (f"axial accelerometer axis: {axis_used}",)
     return FlightRecord(path, column_map.get("recorder", "flight computer"), samples, gnss,
                         states, dropped, notes, mapped_channels(column_map))

@@ -442,20 +442,23 @@ def test_a_card_deploying_at_no_single_event_is_one_line(
     assert not (tmp_path / "test").exists()
 
 
-def test_state_values_that_name_no_state_leave_the_events_to_detection(
-        flight: Flight, tmp_path: Path) -> None:
-    """A state column mapped without `names` whose values are no flight state's name
-    (a logger's numeric codes) gives no states: the events are detected, as without it."""
+def test_state_values_that_name_no_state_are_refused_not_ignored(
+        flight: Flight, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A state column mapped without `names` whose values are no flight state's name (a
+    logger's numeric codes) is a mistake the user can mend with a `names` map: one line
+    naming the map's field and the values the column holds, exit 2, nothing written."""
     write_mapped(flight, tmp_path / "log.csv", seed=5)
     table = pd.read_csv(tmp_path / "log.csv")
     table["mode"] = np.where(table["t_ms"] < 0, 1, 3)
     table.to_csv(tmp_path / "log.csv", index=False, float_format="%.7g")
     (tmp_path / "map.json").write_text(json.dumps({**COLUMN_MAP, "state": {"column": "mode"}}))
-    report = _import(["import", str(tmp_path / "log.csv"), "--columns",
-                      str(tmp_path / "map.json"), "--card", str(_card(tmp_path))],
-                     tmp_path / "test")
-    assert {"drogue", "main"} <= set(report["flight_events"])
-    assert all(e["source"] != "flight state" for e in report["flight_events"].values())
+    code = main(["import", str(tmp_path / "log.csv"), "--columns", str(tmp_path / "map.json"),
+                 "--card", str(_card(tmp_path)), "--out", str(tmp_path / "test")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1
+    assert err[0].startswith(f"error: {tmp_path / 'map.json'}: state.column:")
+    assert "'1', '3'" in err[0] and "names" in err[0]
+    assert not (tmp_path / "test").exists()
 
 
 def test_unknown_format_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
