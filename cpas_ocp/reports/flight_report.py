@@ -565,37 +565,51 @@ def descent_rate_text(rates: list[DescentRate]) -> str:
                       *(f"| {' | '.join(row)} |" for row in descent_rate_rows(rates))])
 
 
-def nominal_text(fit: Fit, cov: Covariance, nominal: dict[str, dict[str, Any]],
-                 rates: list[DescentRate] | None = None) -> str:
-    """The markdown section setting each fitted drag area against its published nominal
-    value (`nominal_comparisons`), with the descent rate the nominal would give; `rates`
-    the fit's `descent_rates` where already computed."""
+NOMINAL_HEADER = ("parameter", "fitted (m²)", "σ from the measured rate (m²)", "nominal (m²)",
+                  "fitted / nominal", "difference (σ)", "rate with the nominal CdS (m/s)",
+                  "measured rate (m/s)")
+
+
+@dataclass(frozen=True)
+class NominalSection:
+    """The drag areas against their nominal values, as plain data for report.md and the
+    page alike: one row per nominal drag area (`NOMINAL_HEADER`; first those with no
+    steady window, not compared), whether each row differs from its nominal by more than
+    3 sigma, a note on the sigmas, and one sentence per comparison."""
+
+    rows: list[list[str]]
+    flagged: list[bool]
+    note: str
+    sentences: list[str]
+
+
+def nominal_section(fit: Fit, cov: Covariance, nominal: dict[str, dict[str, Any]],
+                    rates: list[DescentRate] | None = None) -> NominalSection:
+    """Each fitted drag area against its published nominal value (`nominal_comparisons`),
+    with the descent rate the nominal would give and the drag area the measured rate
+    needs; `rates` the fit's `descent_rates` where already computed."""
     rates = descent_rates(fit, cov) if rates is None else rates
-    lines = ["## Drag areas against the published nominal values", "",
-             "| parameter | fitted (m²) | σ from the measured rate (m²) | nominal (m²) | "
-             "fitted / nominal | difference (σ) | rate with the nominal CdS (m/s) | "
-             "measured rate (m/s) |",
-             "|---|---|---|---|---|---|---|---|"]
     comps = nominal_comparisons(fit, cov, nominal, rates)
-    lines += [f"| {name} | no steady window of 5 s or more under its canopy: not compared "
-              "| | | | | | |" for name in uncompared(fit, nominal, comps)]
+    left = uncompared(fit, nominal, comps)
+    rows = [[name, "no steady window of 5 s or more under its canopy: not compared",
+             *[""] * (len(NOMINAL_HEADER) - 2)] for name in left]
     for c in comps:
-        fitted = f"{c.fitted:.4f} on its bound" if c.at_bound else f"{c.fitted:.4f} ± {c.sigma:.2g}"
-        lines.append(f"| {c.name} | {fitted} | {c.sigma_rate:.2g} | "
-                     f"{c.nominal:.3f} | {c.fitted / c.nominal:.2f} | {c.z:+.1f} | "
-                     f"{c.rate_nominal:.2f} | "
-                     f"{c.rate_measured.measured:.2f} ± {c.rate_measured.measured_sigma:.2f} |")
+        fitted = (f"{c.fitted:.4f} on its bound" if c.at_bound
+                  else f"{c.fitted:.4f} ± {c.sigma:.2g}")
+        rows.append([c.name, fitted, f"{c.sigma_rate:.2g}", f"{c.nominal:.3f}",
+                     f"{c.fitted / c.nominal:.2f}", f"{c.z:+.1f}", f"{c.rate_nominal:.2f}",
+                     f"{c.rate_measured.measured:.2f} ± {c.rate_measured.measured_sigma:.2f}"])
     if any(isinstance(e, WindProcess) for e in fit.model.effects):
-        lines += ["", "The fit's σ count the air's vertical motion (`wind_process`) as well "
-                  "as the sensors' noise; the σ that the measured rate's scatter allows is "
-                  "given beside them, and the difference from the nominal value is given in "
-                  "the larger of the two.", ""]
+        note = ("The fit's σ count the air's vertical motion (`wind_process`) as well as the "
+                "sensors' noise; the σ that the measured rate's scatter allows is given beside "
+                "them, and the difference from the nominal value is given in the larger of the "
+                "two.")
     else:
-        lines += ["", "The fit's σ treat the sensor noise as white. The descent wanders about "
-                  "the model over tens of seconds (see below), so the σ that the measured "
-                  "rate's scatter allows, with the residuals' autocorrelation counted, is the "
-                  "honest one; the difference from the nominal value is given in the larger of "
-                  "the two.", ""]
+        note = ("The fit's σ treat the sensor noise as white. The descent wanders about the "
+                "model over tens of seconds (see below), so the σ that the measured rate's "
+                "scatter allows, with the residuals' autocorrelation counted, is the honest "
+                "one; the difference from the nominal value is given in the larger of the two.")
+    sentences = []
     for c in comps:
         faster = "faster" if c.rate_nominal > c.rate_measured.measured else "slower"
         r = c.rate_measured
@@ -604,17 +618,27 @@ def nominal_text(fit: Fit, cov: Covariance, nominal: dict[str, dict[str, Any]],
                "wind process)" if updraft else "")
         bound = (f" (the fit left it on its bound, at {c.fitted:.3f} m²)" if c.at_bound
                  else "")
-        lines.append(f"- {c.name}: with the nominal {c.nominal:.3f} m² ({c.source}) the rocket "
-                     f"would have come down at {c.rate_nominal:.2f} m/s near "
-                     f"{r.altitude_m:.0f} m{air}, {faster} than the "
-                     f"{r.measured:.2f} m/s measured there; the measured rate "
-                     f"needs {c.needed:.3f} m² (2 W / (ρ v²) with the other drag areas "
-                     f"open taken away){bound}. A fitted drag area is the system's: it "
-                     "carries the drag of the body hanging beneath (the card fixes the "
-                     "forebody drag area at "
-                     f"{fit.parameters.get('CdS_V', 0.0):.3f} m²) and, for a later canopy, "
-                     "whatever the canopies opened before it lose or add to the wake.")
-    return "\n".join(lines)
+        sentences.append(
+            f"{c.name}: with the nominal {c.nominal:.3f} m² ({c.source}) the rocket would have "
+            f"come down at {c.rate_nominal:.2f} m/s near {r.altitude_m:.0f} m{air}, {faster} "
+            f"than the {r.measured:.2f} m/s measured there; the measured rate needs "
+            f"{c.needed:.3f} m² (2 W / (ρ v²) with the other drag areas open taken away)"
+            f"{bound}. A fitted drag area is the system's: it carries the drag of the body "
+            "hanging beneath (the card fixes the forebody drag area at "
+            f"{fit.parameters.get('CdS_V', 0.0):.3f} m²) and, for a later canopy, whatever "
+            "the canopies opened before it lose or add to the wake.")
+    return NominalSection(rows, [False] * len(left) + [abs(c.z) > 3.0 for c in comps], note,
+                          sentences)
+
+
+def nominal_text(fit: Fit, cov: Covariance, nominal: dict[str, dict[str, Any]],
+                 rates: list[DescentRate] | None = None) -> str:
+    """The markdown section of `nominal_section`: its table, note and sentences."""
+    section = nominal_section(fit, cov, nominal, rates)
+    return "\n".join(["## Drag areas against the published nominal values", "",
+                      f"| {' | '.join(NOMINAL_HEADER)} |", "|---" * len(NOMINAL_HEADER) + "|",
+                      *(f"| {' | '.join(row)} |" for row in section.rows),
+                      "", section.note, "", *(f"- {line}" for line in section.sentences)])
 
 
 def flight_text(fit: Fit, cov: Covariance, nominal: dict[str, dict[str, Any]],

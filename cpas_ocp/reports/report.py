@@ -24,9 +24,11 @@ from cpas_ocp.reports.failure_report import RESULT_MARKERS
 from cpas_ocp.reports.fit_text import claim_text
 from cpas_ocp.reports.flight_report import (
     DESCENT_RATE_HEADER,
+    NOMINAL_HEADER,
     descent_rate_rows,
     descent_rate_text,
     descent_rates,
+    nominal_section,
     nominal_text,
     steady_descent_text,
 )
@@ -307,7 +309,11 @@ def reconstruction_page(fit: Fit, cov: Covariance | None, claim: Claim | None,
         page.table(DESCENT_RATE_HEADER, descent_rate_rows(rates),
                    flagged=[abs(r.z) > 3.0 for r in rates])
         page.heading("Drag areas against the card's nominal values")
-        page.preformatted(nominal_text(fit, cov, nominal, rates).split("\n", 2)[2])
+        section = nominal_section(fit, cov, nominal, rates)
+        page.table(NOMINAL_HEADER, section.rows, flagged=section.flagged)
+        page.paragraph(section.note, "note")
+        for sentence in section.sentences:
+            page.paragraph(sentence)
     return page
 
 

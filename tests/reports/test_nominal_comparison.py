@@ -84,3 +84,23 @@ def test_a_drag_area_on_its_bound_says_so_and_the_rate_still_speaks(steady) -> N
     assert _needs(text, name) == before
     assert abs(_needs(text, name) - 0.8 * fit.parameters[name]) > 0.1 * fit.parameters[name]
     assert f"the fit left it on its bound, at {0.8 * fit.parameters[name]:.3f} m²" in text
+
+
+def test_the_page_tables_the_drag_areas_against_their_nominal_values(steady) -> None:
+    """report.html holds the comparison as an HTML table like its others (its header cells,
+    one row per drag area, the fitted value with its sigma in a cell), and its sentences
+    as paragraphs: no markdown inside <pre>."""
+    from cpas_ocp.reports.display_units import display_units
+    from cpas_ocp.reports.report import reconstruction_page
+
+    fit, cov, _ = steady
+    page = reconstruction_page(fit, cov, None, display_units(fit.test), nominal=NOMINAL).html()
+    section = page.split("<h2>Drag areas against the card&#x27;s nominal values</h2>")[1].lstrip()
+    assert section.startswith("<table><thead><tr><th>parameter</th><th>fitted (m²)</th>"
+                              "<th>σ from the measured rate (m²)</th>"), section[:400]
+    for name in NOMINAL:
+        value = f"{fit.parameters[name]:.4f} ± {cov.std[name]:.2g}"
+        assert f"<td>{name}</td><td>{value}</td>" in section
+        assert f"<p>{name}: with the nominal" in section
+    assert "|---" not in page and "| parameter |" not in page
+    assert not any("nominal" in pre for pre in re.findall(r"<pre>(.*?)</pre>", page, re.S))
