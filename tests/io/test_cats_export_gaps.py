@@ -27,6 +27,30 @@ def _import(export: Path, folder: Path, out: Path) -> int:
                  str(export / "card.json"), "--out", str(out)])
 
 
+@pytest.mark.parametrize(("states", "said"), [
+    (None, "the export has no flightStates.csv, so the flight events are detected from the "
+           "data"),
+    ("No data recorded", "the export records no flight states in flightStates.csv, so the "
+                         "flight events are detected from the data"),
+    ("ts,state\n1.0,9\n2.0,0\n", "the export records no flight states in flightStates.csv, so "
+                                 "the flight events are detected from the data")])
+def test_an_export_without_flight_states_says_its_events_are_detected(
+        export: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], states: str | None,
+        said: str) -> None:
+    folder = tmp_path / "export"
+    shutil.copytree(export / "export", folder)
+    if states is None:
+        (folder / "flightStates.csv").unlink()
+    else:
+        (folder / "flightStates.csv").write_text(states)
+    assert _import(export, folder, tmp_path / "test") == 0
+    report = json.loads((tmp_path / "test" / "import.json").read_text())
+    assert said in report["notes"]
+    assert f"note: {said}" in capsys.readouterr().out
+    assert {"drogue", "main"} <= set(report["flight_events"])
+    assert all(e["source"] != "flight state" for e in report["flight_events"].values())
+
+
 def test_an_export_whose_accelerometer_cells_are_all_blank_is_one_line_and_no_warning(
         export: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """Every Ax, Ay, Az blank: one line naming imu.csv and its columns, exit 2, and no
