@@ -40,6 +40,7 @@ from cpas_ocp.campaign.hulls import (
     sample_in_hull,
 )
 from cpas_ocp.errors import InputError
+from cpas_ocp.io.json_files import MAX_MAGNITUDE
 
 DISPERSED = ("CdS", "Ck", "n_p", "n", "expopen", "t_k")
 HULL_PARAMETERS = (("Ck", "n_p", "expopen"), ("n", "expopen"))
@@ -146,25 +147,33 @@ def _where(path: Path, row: int) -> str:
 def check_numbers(table: pd.DataFrame, path: Path, column: str, what: str,
                   missing: bool = False, positive: pd.Series | bool = False,
                   integer: bool = False) -> None:
-    """Column `column` of a campaign table read from `path` as finite numbers in place (NaN
-    only where `missing` allows a blank), above zero in the rows `positive` marks (a drag
-    area, a mass, a diameter: a negative one is no quantity, and a Monte Carlo case drawn
-    about it flies nothing), whole numbers where `integer`; InputError naming the file,
-    the row and the column where one is not, `what` saying what the column holds."""
-    values = pd.to_numeric(table[column], errors="coerce").astype(float)
-    blank = table[column].isna()
-    bad = (values.isna() & ~(blank & missing)) | np.isinf(values)
+    """Column `column` of a campaign table read from `path` as finite numbers of magnitude
+    at most MAX_MAGNITUDE (as a manifest's: beyond it no quantity of a test, and squares
+    overflow) in place (NaN only where `missing` allows a blank), above zero in the rows
+    `positive` marks (a drag area, a mass, a diameter: a negative one is no quantity, and a
+    Monte Carlo case drawn about it flies nothing), whole numbers where `integer`;
+    InputError naming the file, the row and the column where one is not, `what` saying
+    what the column holds.  A CSV holds text that reads as numbers; a Parquet table holds
+    numbers as numbers, so a text cell there ("21.3" in a string column) is refused."""
+    cells = table[column]
+    values = pd.to_numeric(cells, errors="coerce").astype(float)
+    blank = cells.isna()
+    bad = (values.isna() & ~(blank & missing)) | (values.abs() > MAX_MAGNITUDE)
     if integer:
         bad |= values.notna() & (values != np.round(values))
+    text = (cells.map(lambda v: isinstance(v, str)) if path.suffix == ".parquet"
+            else pd.Series(False, table.index))
     sign = positive if isinstance(positive, pd.Series) else pd.Series(positive, table.index)
     low = sign.to_numpy(bool) & (values <= 0.0).to_numpy(bool)
-    for rows, expected in ((bad.to_numpy(bool), f"a finite {'whole ' if integer else ''}"
-                            f"number{' or a blank' if missing else ''} ({what})"),
+    for rows, expected in ((text.to_numpy(bool), f"a number, not text ({what})"),
+                           (bad.to_numpy(bool), f"a finite {'whole ' if integer else ''}"
+                            f"number of magnitude at most {MAX_MAGNITUDE:g}"
+                            f"{' or a blank' if missing else ''} ({what})"),
                            (low, f"a number above zero ({what})")):
         if rows.any():
             row = int(np.flatnonzero(rows)[0])
             raise InputError(str(path), f"{_where(path, row)}, {column}",
-                             f"{expected}; got {str(table[column].iloc[row])!r}")
+                             f"{expected}; got {str(cells.iloc[row])!r}")
     table[column] = values
 
 

@@ -7,7 +7,9 @@ inputs to `run_tasks`, which runs them in this process (one worker), on a
 a Dask cluster through `distributed.Client.map` (the workers must have
 cpas-ocp installed and see the same file paths).  A scheduler that cannot be
 used is an `InputError` on ``--scheduler``; an address that is not one at all is
-refused before any work (`scheduler_address`), not by Dask's parser after it.
+refused before any work (`scheduler_address`), not by Dask's parser after it, and
+one whose scheme this installation's Dask cannot speak (``ucx://`` without its
+back end) before a connection is tried (`usable_scheme`).
 """
 
 from __future__ import annotations
@@ -135,6 +137,24 @@ def _worker_stop(signum: int, frame: FrameType | None) -> None:
     os._exit(128 + signum)
 
 
+def usable_scheme(scheduler: str) -> None:
+    """Refuse (InputError on ``--scheduler``) a scheduler address whose scheme this
+    installation's Dask has no working communication back end for: ``ucx://`` needs the
+    ``distributed-ucxx`` package (Dask's own UCX back end was removed, and connecting
+    through its stub fails with an internal TypeError).  Dask must be installed."""
+    from distributed.comm.registry import get_backend
+
+    scheme = scheduler.partition("://")[0] if "://" in scheduler else "tcp"
+    try:
+        get_backend(scheme).get_connector()
+    except Exception as exc:  # a back end missing, or a stub left where one was removed
+        why = ("UCX needs the distributed-ucxx package" if scheme == "ucx"
+               else f"{type(exc).__name__}: {exc}")
+        raise InputError("(command line)", "--scheduler",
+                         f"a scheme this installation's Dask can connect with; {scheduler}: "
+                         f"{scheme}:// has no working back end here ({why})") from None
+
+
 def _on_dask(fn: Callable[[T], R], items: Sequence[T],
              scheduler: str) -> Iterator[tuple[int, R]]:
     try:
@@ -143,6 +163,7 @@ def _on_dask(fn: Callable[[T], R], items: Sequence[T],
     except ImportError:
         raise InputError("(command line)", "--scheduler",
                          "dask.distributed installed (pip install 'cpas-ocp[cluster]')") from None
+    usable_scheme(scheduler)
     try:
         client = Client(scheduler, timeout=30)
     except OSError as exc:

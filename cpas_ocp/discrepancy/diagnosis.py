@@ -69,6 +69,10 @@ class Diagnosis:
     alpha: float = ALPHA
     notes: list[str] = field(default_factory=list)
     air: WindEvidence | None = None  # the air motion's evidence, where it was asked
+    # The plug-in files `discover` wrote from this diagnosis's residual signature (names in
+    # its proposed/ folder; empty where the signature asks for none); None where no chain
+    # asked for them (a diagnosis on its own).
+    proposed: list[str] | None = None
     _stand_in: dict[str, list[str]] = field(default_factory=dict, repr=False)
     _implausible: dict[str, list[str]] = field(default_factory=dict, repr=False)
     _noise: NoiseTest | None = field(default=None, repr=False)
@@ -118,32 +122,59 @@ class Diagnosis:
 
     @property
     def consistent_with_noise(self) -> bool:
-        """Nothing to add and nothing left: no effect confirmed or left unresolved, no air
-        motion named, no residual structure, and the fit's chi-square, overall and in
-        every window tested, within the noise at the level `alpha` (`noise`)."""
+        """Nothing to add and nothing above the noise: no effect confirmed or left
+        unresolved, no air motion named, and the fit's chi-square above the noise neither
+        overall nor in any window tested (`NoiseTest.above`).  The total may lie below the
+        noise (`NoiseTest.below`: the stated sigma too large), and the residuals may keep a
+        shape within the noise's size (`structure`); neither is a misfit."""
         return (self.explanation is None and not (self.air is not None and self.air.decisive)
-                and not self._unresolved(None) and not self.structure and self.noise.passes)
+                and not self._unresolved(None) and not self.noise.above)
 
     @property
     def state(self) -> str:
         """How the diagnosis ends, in one word: "missing effect" (one is confirmed, or the
         air's motion is named), "undecided" (significant effects whose refits did not
-        converge), "consistent" (`consistent_with_noise`) or "misfit" (nothing found,
-        and the residuals are not noise)."""
+        converge), "consistent" or "below the noise" (`consistent_with_noise`, the total
+        within the noise or below it) or "misfit" (nothing found, and the chi-square above
+        the noise)."""
         if (self.air is not None and self.air.decisive) or self.explanation is not None:
             return "missing effect"
         if self._unresolved(None):
             return "undecided"
-        return "consistent" if self.consistent_with_noise else "misfit"
+        if not self.consistent_with_noise:
+            return "misfit"
+        return "below the noise" if self.noise.below else "consistent"
 
     def misfit_text(self) -> str:
-        """What remains where nothing is found but the residuals are not noise: the noise
-        test, the signature, and the next move to try."""
+        """What remains where nothing is found and the chi-square lies above the noise: the
+        noise test, the signature, and the next move to try."""
         lines = [f"a misfit: {self.noise}"]
         if self.structure:
             lines.append("the residual's signature:\n" + signature_text(self.structure))
-        lines.append("next: " + next_move(self.noise, self.statistics, bool(self.structure)))
+        lines.append("next: " + next_move(self.noise, self.statistics, bool(self.structure),
+                                          self.proposed))
         return "\n".join(lines)
+
+    def noise_text(self) -> str:
+        """The verdict where nothing is found and the chi-square is not above the noise: the
+        residuals consistent with it, or below it (the stated sigma too large by about
+        1 / sqrt(chi2/dof), or the samples fewer than counted), and any shape they keep
+        within the noise's size (their signature)."""
+        noise = self.noise
+        if noise.below:
+            head = (f"the residuals are below the sensor noise: {noise}; the stated sigma are "
+                    f"about {100 * (1.0 / noise.sigma_scale - 1.0):.0f} % too large, or the "
+                    "samples fewer than counted (noise correlated in time, as a recorder's "
+                    "filter makes it)")
+        else:
+            head = f"the residuals are consistent with the sensor noise: {noise}"
+        head += f"; no effect is significant at the family-wise level {self.alpha:g}"
+        if not self.structure:
+            return head
+        return (f"{head}; within the noise's size the residuals keep a shape no effect tested "
+                "explains (noise correlated in time, or an effect smaller than the noise; "
+                f"{proposal_hint(self.proposed)}): the residual's signature:\n"
+                + signature_text(self.structure))
 
     @property
     def departure_level(self) -> float:
@@ -277,9 +308,7 @@ class Diagnosis:
                     "(see the refits above)" + signature)
         if not self.consistent_with_noise:
             return ("no effect in the library explains the residual, " + self.misfit_text())
-        return ("the residuals are consistent with the sensor noise: "
-                f"{self.noise}; no effect is significant at the family-wise level "
-                f"{self.alpha:g}")
+        return self.noise_text()
 
 
 def diagnose(fit: Fit, spec: ModelSpec, candidates: Mapping[str, EffectType] | None = None,
@@ -338,31 +367,49 @@ def confirm_past_stand_ins(diag: Diagnosis, tests: list[ScoreTest], progress: bo
         diag.effects = confirmed_ranking(tests)
 
 
-def next_move(noise: NoiseTest, statistics: list[WindowStatistic], structure: bool) -> str:
-    """The next thing to try on a misfit nothing tested explains, read from where it sits.
+def proposal_hint(proposed: list[str] | None) -> str:
+    """What `discover` did with a residual signature: the plug-in files it wrote from it
+    (`Diagnosis.proposed`), that it wrote none, or, for a diagnosis no chain asked (None),
+    which signatures it writes one for."""
+    if proposed is None:
+        return ("`discover` writes and tests one where the signature is a periodic line of "
+                "three cycles or more, a load cell that follows the load, or a residual that "
+                "follows altitude")
+    if not proposed:
+        return ("`discover` wrote none: a plug-in is written for a periodic line of three "
+                "cycles or more in its window, a load cell that follows the load, or a "
+                "residual that follows altitude")
+    return ("`discover` wrote " + ", ".join(f"proposed/{name}" for name in proposed)
+            + " from it and tested each as written")
+
+
+def next_move(noise: NoiseTest, statistics: list[WindowStatistic], structure: bool,
+              proposed: list[str] | None = None) -> str:
+    """The next thing to try on a misfit nothing tested explains (a chi-square above the
+    noise), read from where it sits; `proposed` as `Diagnosis.proposed`.
 
     Where every window tested passes once its chi-square is divided by the fit's
     chi^2/dof (phi), the excess is uniform: the sensors' sigma are about sqrt(phi)
     too small, or an effect acts everywhere alike.  Otherwise the misfit sits in the
     windows that still fail so scaled, which are named."""
-    phi = noise.chi_square / noise.dof if noise.dof > 0 else 1.0
+    phi = noise.sigma_scale**2
     tested = [w for w in statistics if w.samples >= MIN_TESTED_SAMPLES]
     level = noise.alpha / max(len(tested), 1)
     local = [w for w in tested if chi2_law.sf(w.chi_square / max(phi, 1.0), w.samples) < level]
     if not local:
         return (f"the excess is spread evenly (every window passes once scaled by chi2/dof "
                 f"{phi:.3f}): either the sensors' stated sigma are about "
-                f"{100 * (phi**0.5 - 1):.0f} % too small (check each sensor's sigma against "
-                "its settled residual), or a small effect acts everywhere alike (a plug-in; "
-                "see docs/plugins.md)")
+                f"{100 * (noise.sigma_scale - 1):.0f} % too small (check each sensor's sigma "
+                "against its settled residual), or a small effect acts everywhere alike (a "
+                "plug-in; see docs/plugins.md)")
     local.sort(key=lambda w: chi2_law.sf(w.chi_square / max(phi, 1.0), w.samples))
     channels = list(dict.fromkeys(f"{w.sensor}.{w.channel}" for w in local))
     windows = list(dict.fromkeys(w.window for w in local))
     where = (channels[0] if len(channels) == 1 else
              f"{len(channels)} channels ({', '.join(channels[:4])})") \
         + f" in {', '.join(windows[:4])}"
-    hint = ("write an effect that acts there as a plug-in (docs/plugins.md; `discover` "
-            "proposes some from the signature above)" if structure else
+    hint = (f"write an effect that acts there as a plug-in (docs/plugins.md; "
+            f"{proposal_hint(proposed)})" if structure else
             "look at that sensor's residual plot there: an effect acting on it (a plug-in, "
             "docs/plugins.md), a wrong sigma, or a start the fit did not reach")
     return f"the misfit sits in {where}; {hint}; `--confirm N` refits more candidates"

@@ -28,13 +28,16 @@ alone.  `discover` repeats the diagnosis on the model each step ends with:
    keep the lowest (`from_other_starts`); before the verdict, the same for
    the last model, then every effect added tested again against the last
    model and dropped where not significant (`_drop_unneeded`);
-6. end in one of three states (`Discovery.state`): consistent with the
-   noise (the last fit's chi-square passes its test overall and in every
-   window, `noise_test`), a misfit nothing tested explains (the last
-   diagnosis describes what remains: its signature and the next move), or
-   stopped early (the step limit, or a refit that would add the effect did
-   not converge: its likelihood ratio is only a bound, and a bound is not a
-   step).
+6. end in one of four states (`Discovery.state`): consistent with the
+   noise (the last fit's chi-square above it neither overall nor in any
+   window, `noise_test`; a shape the residuals keep within the noise's size
+   is described, not called a misfit), below the noise (the total in the
+   chi-square's lower tail: the stated sigma too large, or fewer independent
+   samples than counted), a misfit nothing tested explains (the chi-square
+   above the noise; the last diagnosis describes what remains: its signature
+   and the next move), or stopped early (the step limit, or a refit that
+   would add the effect did not converge: its likelihood ratio is only a
+   bound, and a bound is not a step).
 
 Every step keeps its fit, so each fall in chi-square is the likelihood ratio
 of one nested pair, tested at the diagnosis's family-wise level.  Each step
@@ -207,9 +210,10 @@ class Discovery:
     notes: list[str] = field(default_factory=list)
     proposals: list[ProposalTrial] = field(default_factory=list)
     plugins: dict[str, EffectType] = field(default_factory=dict)
-    # How the chain ended: "consistent" (the last fit passes the noise test), "misfit"
-    # (nothing left is confirmed and the residuals are not noise) or "stopped early"
-    # (the step limit, or a refit that did not converge); "in progress" while it runs.
+    # How the chain ended: "consistent" (the last fit's chi-square not above the noise),
+    # "below the noise" (in its lower tail), "misfit" (nothing left is confirmed and the
+    # chi-square lies above the noise) or "stopped early" (the step limit, or a refit that
+    # did not converge); "in progress" while it runs.
     state: str = ""
     alpha: float = ALPHA
 
@@ -234,6 +238,10 @@ class Discovery:
         noise = self.noise
         if self.state == "consistent":
             head = "consistent with the noise"
+        elif self.state == "below the noise":
+            head = (f"below the noise (the stated sigma about "
+                    f"{100 * (1.0 / noise.sigma_scale - 1.0):.0f} % too large, or fewer "
+                    "independent samples than counted)")
         elif self.state == "misfit":
             head = "a misfit nothing tested explains"
         elif self.state == "in progress":
@@ -272,8 +280,10 @@ def next_step(diag: Diagnosis, progress: bool = False) -> DiscoveryStep | str:
                              f"2 ln B = {air.two_ln_b:.1f} over still air")
     best = diag.explanation
     if best is None:
-        return ("the residuals are consistent with the noise" if diag.consistent_with_noise
-                else "nothing left is confirmed: the last diagnosis says what remains")
+        if not diag.consistent_with_noise:
+            return "nothing left is confirmed: the last diagnosis says what remains"
+        return ("the residuals lie below the noise" if diag.noise.below
+                else "the residuals are consistent with the noise")
     if best.refit is not None and best.spec is not None:
         from_other_starts(diag, best, progress)
     if _unconverged(best):
@@ -305,10 +315,11 @@ def _unconverged(best: ScoreTest) -> bool:
 
 def _ending_state(diag: Diagnosis) -> str:
     """The state of a chain that stops at the diagnosis `diag` with no step to take:
-    "consistent" (`Diagnosis.consistent_with_noise`), "stopped early" where the effect it
-    confirms could not be added (no refit converged), else "misfit"."""
+    "consistent" or "below the noise" (`Diagnosis.consistent_with_noise`, `NoiseTest.below`),
+    "stopped early" where the effect it confirms could not be added (no refit converged),
+    else "misfit"."""
     if diag.consistent_with_noise:
-        return "consistent"
+        return "below the noise" if diag.noise.below else "consistent"
     best = diag.explanation
     return "stopped early" if best is not None and _unconverged(best) else "misfit"
 
@@ -586,7 +597,8 @@ def _proposed_step(out: Discovery, step: DiscoveryStep, folder: Path, alpha: flo
     fit), recorded in `out`; the step the most significant confirmed one makes, or None."""
     diag = step.diagnosis
     assert diag is not None
-    fresh = [p for p in propose(diag, step.spec) if p.name not in out.plugins]
+    asked = propose(diag, step.spec)
+    fresh = [p for p in asked if p.name not in out.plugins]
     trials = []
     for proposal in fresh:
         path = folder / proposal.file_name
@@ -602,6 +614,10 @@ def _proposed_step(out: Discovery, step: DiscoveryStep, folder: Path, alpha: flo
                            and lr.p_value < alpha / len(fresh))
         trials.append(trial)
     out.proposals += trials
+    # What the diagnosis's text may say was written: the proposals the chain holds (this
+    # step's, and those an earlier step wrote from the same signature).
+    written = {t.proposal.name for t in out.proposals}
+    diag.proposed = [p.file_name for p in asked if p.name in written]
     confirmed = sorted((t for t in trials if t.confirmed), key=lambda t: (
         t.test.refit.p_value, -t.test.refit.statistic))
     if not confirmed:

@@ -13,7 +13,9 @@ Used here:
 * ``baro.csv``: ``ts``, ``id`` (BARO0, ...), ``T`` (deg C), ``P`` (Pa);
 * ``flightStates.csv``: ``ts``, ``state``: the firmware's flight_fsm_e
   (cats-embedded), 3 THRUSTING, 4 COASTING, 5 DROGUE, 6 MAIN, 7 TOUCHDOWN,
-  read as boost, coast, drogue, main, landed;
+  read as boost, coast, drogue, main, landed; an export without it (or with
+  no state in it) has its events detected from the data, and the record's
+  notes say so;
 * ``gnssInfo.csv`` (optional): ``ts``, ``latitude``, ``longitude`` (deg),
   ``satellites``.
 
@@ -123,5 +125,11 @@ def read_cats_log(path: str | Path, axis: str = "auto") -> FlightRecord:
                 "pressure": Channel("baro.csv column 'P'", "Pa", {"Pa": 1.0}),
                 "acceleration": Channel("imu.csv columns 'Ax/Ay/Az'", "m/s^2",
                                         {"m/s^2": 1.0}, G0)}
+    notes = [f"axial accelerometer axis: {used}"]
+    if not states:
+        held = (folder / "flightStates.csv").is_file()
+        notes.append(f"the export {'records no flight states' if held else 'has no'} "
+                     f"{'in ' if held else ''}flightStates.csv, so the flight events are "
+                     "detected from the data")
     return FlightRecord(folder, "CATS flight computer", samples, fixes, states, dropped,
-                        (f"axial accelerometer axis: {used}",), channels)
+                        tuple(notes), channels)

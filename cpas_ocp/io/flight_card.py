@@ -15,6 +15,7 @@ from typing import Any
 
 from cpas_ocp.errors import InputError
 from cpas_ocp.io.json_files import check_magnitudes, read_json, validate_block
+from cpas_ocp.io.model_spec import spec_from_block
 from cpas_ocp.io.problems import problem_names
 from cpas_ocp.physics.atmosphere import (
     R_AIR,
@@ -59,6 +60,7 @@ def card_from_dict(raw: dict[str, Any], source: str) -> FlightCard:
     with."""
     validate_block(raw, "flight_card.schema.json", source)
     check_magnitudes(raw, source)
+    check_card_model(raw.get("model") or {}, source)
     data = raw.get("data", {})
     return FlightCard(raw["name"], raw.get("title", raw["name"]), raw.get("label", ""),
                       data.get("folder", ""), tuple(data.get("logs", ())),
@@ -66,6 +68,18 @@ def card_from_dict(raw: dict[str, Any], source: str) -> FlightCard:
                       tuple(canopy_defaults(raw["parachutes"], raw["vehicle"], source)),
                       raw["site"], raw.get("model") or {}, raw.get("nominal", {}), source,
                       raw.get("events", {}), data.get("format"), data.get("columns"))
+
+
+def check_card_model(model: dict[str, Any], source: str) -> None:
+    """Refuse a card whose `model` lists an effect the library does not register, or an
+    option its effect does not take (InputError naming ``model.effects[i]`` and the known
+    effects), when the card is read rather than at the fit of the folder imported with it.
+
+    Where the block names plug-ins (``model.plugins``), their effects are known only once
+    their files are loaded, relative to the test folder the block is written to; the
+    effects are then checked when that folder's model is built."""
+    if "effects" in model and not model.get("plugins"):
+        spec_from_block(model, source, Path(source).parent)
 
 
 def canopy_defaults(parachutes: list[dict[str, Any]], vehicle: dict[str, Any], source: str

@@ -184,8 +184,12 @@ def axial_from_axes(path: str, axes: pd.DataFrame, axis: str, unit_factor: float
 def _boost_axis(path: str, si: np.ndarray, field_name: str) -> tuple[float, int]:
     """(sign, index) of the axis with the largest boost acceleration: the largest departure
     from its rest reading (the median of the first tenth of the log) held for `BOOST_RUN`
-    samples (a rolling minimum, so that one glitch does not choose)."""
-    rest = np.nanmedian(si[: max(10, si.shape[0] // 10)], axis=0)
+    samples (a rolling minimum, so that one glitch does not choose).  An axis with no
+    reading there (an export whose cells are all blank) has no rest and cannot be the
+    boost's: its median is not taken of nothing."""
+    head = si[: max(10, si.shape[0] // 10)]
+    rest = np.array([np.median(col[np.isfinite(col)]) if np.isfinite(col).any() else np.nan
+                     for col in head.T])
     dev = pd.DataFrame(si - rest)
     held_up = dev.rolling(BOOST_RUN).min().max().to_numpy()
     held_down = -dev.rolling(BOOST_RUN).max().min().to_numpy()

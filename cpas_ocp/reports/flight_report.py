@@ -1,9 +1,11 @@
 """What a real flight's reconstruction says about its parachutes, against the published
 nominal values and the measured descent.
 
-* Drag areas: each fitted steady CdS with its sigma against the card's
-  nominal value, the difference in sigmas, and the descent rate the nominal
-  value would give at the same altitude against the rate measured there.
+* Drag areas: each fitted steady CdS with its sigma (or that it sits on its
+  bound, where the data give it none) against the card's nominal value, the
+  difference in sigmas, the descent rate the nominal value would give at the
+  same altitude against the rate measured there, and the drag area the
+  measured rate needs, 2 W / (rho v^2) less the other drag areas open.
   A nominal drag area is a design number (Cd on the canopy's nominal area);
   the measured rate is what the canopy did.
 * Steady descent rates: under each canopy phase, in a steady window away
@@ -82,7 +84,9 @@ class DescentRate:
 
 @dataclass(frozen=True)
 class NominalComparison:
-    """A fitted drag area (m^2) against its published nominal value."""
+    """A fitted drag area (m^2) against its published nominal value; `needed` the drag area
+    the measured descent rate needs (`needed_cds`), `at_bound` whether the fit left it on
+    a bound (its `sigma` then 0: the data give it none)."""
 
     name: str
     fitted: float
@@ -92,6 +96,8 @@ class NominalComparison:
     rate_nominal: float
     rate_measured: DescentRate
     sigma_rate: float
+    needed: float = float("nan")
+    at_bound: bool = False
 
     @property
     def z(self) -> float:
@@ -131,6 +137,25 @@ def _measured_rate(fit: Fit, t0: float, t1: float) -> tuple[float, float, float]
     rho1 = float(np.corrcoef(r[:-1], r[1:])[0, 1])
     inflation = (1.0 + rho1) / (1.0 - rho1) if rho1 > 0 else 1.0
     return -float(coef[0]), float(np.sqrt(cov[0, 0] * inflation)), float(hh.mean())
+
+
+def needed_cds(fit: Fit, rate: DescentRate, canopy: str) -> float:
+    """The drag area of `canopy` (m^2) that the measured descent `rate` needs: drag equal
+    to weight at the window's mean altitude, 2 W / (rho(h) v^2), with v the measured rate
+    through the fitted air (the rate over the ground plus the mean updraft there), less
+    the fitted drag areas of the other canopies open and of the forebody.  Computed from
+    the measurement, not the fit: where the fitted drag area sits on a bound, the two
+    differ."""
+    rho = float(density_at(fit.test.atmosphere, rate.altitude_m)[0])
+    v = rate.measured + mean_updraft(fit, rate.t0, rate.t1)
+    return 2.0 * fit.test.weight / (rho * v**2) - _other_cds(fit, rate, canopy)
+
+
+def _other_cds(fit: Fit, rate: DescentRate, canopy: str) -> float:
+    """The fitted drag areas (m^2) open in `rate`'s window besides `canopy`'s: the other
+    canopies' (in the window's band) and the forebody's."""
+    return sum(fit.parameters[_steady_cds(fit, c, rate.band)] for c in rate.canopies
+               if c != canopy) + fit.parameters.get("CdS_V", 0.0)
 
 
 def steady_rate(fit: Fit, cds: float, altitude: float) -> float:
@@ -411,13 +436,12 @@ def nominal_comparisons(fit: Fit, cov: Covariance, nominal: dict[str, dict[str, 
                     None)
         if rate is None:
             continue
-        others = sum(fit.parameters[_steady_cds(fit, c, rate.band)] for c in rate.canopies
-                     if c != canopy)
-        v_nom = steady_rate(fit, value + others + fit.parameters.get("CdS_V", 0.0),
-                            rate.altitude_m) - mean_updraft(fit, rate.t0, rate.t1)
+        v_nom = steady_rate(fit, value + _other_cds(fit, rate, canopy), rate.altitude_m) \
+            - mean_updraft(fit, rate.t0, rate.t1)
         out.append(NominalComparison(name, fit.parameters[name], cov.std.get(name, 0.0), value,
                                      spec.get("source", ""), v_nom, rate,
-                                     by_rate.get(name, 0.0)))
+                                     by_rate.get(name, 0.0), needed_cds(fit, rate, canopy),
+                                     name in cov.at_bound))
     return out
 
 
@@ -649,52 +673,80 @@ def descent_rate_text(rates: list[DescentRate]) -> str:
                       *(f"| {' | '.join(row)} |" for row in descent_rate_rows(rates))])
 
 
-def nominal_text(fit: Fit, cov: Covariance, nominal: dict[str, dict[str, Any]],
-                 rates: list[DescentRate] | None = None) -> str:
-    """The markdown section setting each fitted drag area against its published nominal
-    value (`nominal_comparisons`), with the descent rate the nominal would give; `rates`
-    the fit's `descent_rates` where already computed."""
+NOMINAL_HEADER = ("parameter", "fitted (m²)", "σ from the measured rate (m²)", "nominal (m²)",
+                  "fitted / nominal", "difference (σ)", "rate with the nominal CdS (m/s)",
+                  "measured rate (m/s)")
+
+
+@dataclass(frozen=True)
+class NominalSection:
+    """The drag areas against their nominal values, as plain data for report.md and the
+    page alike: one row per nominal drag area (`NOMINAL_HEADER`; first those with no
+    steady window, not compared), whether each row differs from its nominal by more than
+    3 sigma, a note on the sigmas, and one sentence per comparison."""
+
+    rows: list[list[str]]
+    flagged: list[bool]
+    note: str
+    sentences: list[str]
+
+
+def nominal_section(fit: Fit, cov: Covariance, nominal: dict[str, dict[str, Any]],
+                    rates: list[DescentRate] | None = None) -> NominalSection:
+    """Each fitted drag area against its published nominal value (`nominal_comparisons`),
+    with the descent rate the nominal would give and the drag area the measured rate
+    needs; `rates` the fit's `descent_rates` where already computed."""
     rates = descent_rates(fit, cov) if rates is None else rates
-    lines = ["## Drag areas against the published nominal values", "",
-             "| parameter | fitted (m²) | σ from the measured rate (m²) | nominal (m²) | "
-             "fitted / nominal | difference (σ) | rate with the nominal CdS (m/s) | "
-             "measured rate (m/s) |",
-             "|---|---|---|---|---|---|---|---|"]
     comps = nominal_comparisons(fit, cov, nominal, rates)
-    lines += [f"| {name} | no steady window of 5 s or more under its canopy: not compared "
-              "| | | | | | |" for name in uncompared(fit, nominal, comps)]
+    left = uncompared(fit, nominal, comps)
+    rows = [[name, "no steady window of 5 s or more under its canopy: not compared",
+             *[""] * (len(NOMINAL_HEADER) - 2)] for name in left]
     for c in comps:
-        lines.append(f"| {c.name} | {c.fitted:.4f} ± {c.sigma:.2g} | {c.sigma_rate:.2g} | "
-                     f"{c.nominal:.3f} | {c.fitted / c.nominal:.2f} | {c.z:+.1f} | "
-                     f"{c.rate_nominal:.2f} | "
-                     f"{c.rate_measured.measured:.2f} ± {c.rate_measured.measured_sigma:.2f} |")
+        fitted = (f"{c.fitted:.4f} on its bound" if c.at_bound
+                  else f"{c.fitted:.4f} ± {c.sigma:.2g}")
+        rows.append([c.name, fitted, f"{c.sigma_rate:.2g}", f"{c.nominal:.3f}",
+                     f"{c.fitted / c.nominal:.2f}", f"{c.z:+.1f}", f"{c.rate_nominal:.2f}",
+                     f"{c.rate_measured.measured:.2f} ± {c.rate_measured.measured_sigma:.2f}"])
     if any(isinstance(e, WindProcess) for e in fit.model.effects):
-        lines += ["", "The fit's σ count the air's vertical motion (`wind_process`) as well "
-                  "as the sensors' noise; the σ that the measured rate's scatter allows is "
-                  "given beside them, and the difference from the nominal value is given in "
-                  "the larger of the two.", ""]
+        note = ("The fit's σ count the air's vertical motion (`wind_process`) as well as the "
+                "sensors' noise; the σ that the measured rate's scatter allows is given beside "
+                "them, and the difference from the nominal value is given in the larger of the "
+                "two.")
     else:
-        lines += ["", "The fit's σ treat the sensor noise as white. The descent wanders about "
-                  "the model over tens of seconds (see below), so the σ that the measured "
-                  "rate's scatter allows, with the residuals' autocorrelation counted, is the "
-                  "honest one; the difference from the nominal value is given in the larger of "
-                  "the two.", ""]
+        note = ("The fit's σ treat the sensor noise as white. The descent wanders about the "
+                "model over tens of seconds (see below), so the σ that the measured rate's "
+                "scatter allows, with the residuals' autocorrelation counted, is the honest "
+                "one; the difference from the nominal value is given in the larger of the two.")
+    sentences = []
     for c in comps:
         faster = "faster" if c.rate_nominal > c.rate_measured.measured else "slower"
         r = c.rate_measured
         updraft = mean_updraft(fit, r.t0, r.t1)
         air = (f" through air rising at {updraft:+.2f} m/s on average there (the fitted "
                "wind process)" if updraft else "")
-        lines.append(f"- {c.name}: with the nominal {c.nominal:.3f} m² ({c.source}) the rocket "
-                     f"would have come down at {c.rate_nominal:.2f} m/s near "
-                     f"{r.altitude_m:.0f} m{air}, {faster} than the "
-                     f"{r.measured:.2f} m/s measured there; the measured rate "
-                     f"needs {c.fitted:.3f} m². A fitted drag area is the system's: it "
-                     "carries the drag of the body hanging beneath (the card fixes the "
-                     "forebody drag area at "
-                     f"{fit.parameters.get('CdS_V', 0.0):.3f} m²) and, for a later canopy, "
-                     "whatever the canopies opened before it lose or add to the wake.")
-    return "\n".join(lines)
+        bound = (f" (the fit left it on its bound, at {c.fitted:.3f} m²)" if c.at_bound
+                 else "")
+        sentences.append(
+            f"{c.name}: with the nominal {c.nominal:.3f} m² ({c.source}) the rocket would have "
+            f"come down at {c.rate_nominal:.2f} m/s near {r.altitude_m:.0f} m{air}, {faster} "
+            f"than the {r.measured:.2f} m/s measured there; the measured rate needs "
+            f"{c.needed:.3f} m² (2 W / (ρ v²) with the other drag areas open taken away)"
+            f"{bound}. A fitted drag area is the system's: it carries the drag of the body "
+            "hanging beneath (the card fixes the forebody drag area at "
+            f"{fit.parameters.get('CdS_V', 0.0):.3f} m²) and, for a later canopy, whatever "
+            "the canopies opened before it lose or add to the wake.")
+    return NominalSection(rows, [False] * len(left) + [abs(c.z) > 3.0 for c in comps], note,
+                          sentences)
+
+
+def nominal_text(fit: Fit, cov: Covariance, nominal: dict[str, dict[str, Any]],
+                 rates: list[DescentRate] | None = None) -> str:
+    """The markdown section of `nominal_section`: its table, note and sentences."""
+    section = nominal_section(fit, cov, nominal, rates)
+    return "\n".join(["## Drag areas against the published nominal values", "",
+                      f"| {' | '.join(NOMINAL_HEADER)} |", "|---" * len(NOMINAL_HEADER) + "|",
+                      *(f"| {' | '.join(row)} |" for row in section.rows),
+                      "", section.note, "", *(f"- {line}" for line in section.sentences)])
 
 
 def flight_text(fit: Fit, cov: Covariance, nominal: dict[str, dict[str, Any]],

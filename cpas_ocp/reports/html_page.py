@@ -161,9 +161,9 @@ def parameter_table(page: Page, rows: Sequence[ParameterRow]) -> None:
     """The free parameters: value, 1 sigma, 95 % interval, unit, initial guess, flag."""
     page.table(["parameter", "value", "± 1σ", "95 % interval", "unit", "initial", "flag"],
                [[r.name, r.value, float("nan") if r.std is None else r.std,
-                 "—" if r.ci95 is None else f"[{r.ci95[0]:.5g}, {r.ci95[1]:.5g}]",
+                 r.interval,
                  pretty(r.unit), r.initial, r.flag] for r in rows],
-               flagged=[bool(r.flag) for r in rows])
+               flagged=[bool(r.flag) or r.window is not None for r in rows])
 
 
 def _axis(row: int) -> str:

@@ -24,9 +24,11 @@ from cpas_ocp.reports.failure_report import RESULT_MARKERS
 from cpas_ocp.reports.fit_text import claim_text
 from cpas_ocp.reports.flight_report import (
     DESCENT_RATE_HEADER,
+    NOMINAL_HEADER,
     descent_rate_rows,
     descent_rate_text,
     descent_rates,
+    nominal_section,
     nominal_text,
     steady_descent_text,
     steady_drag_area_text,
@@ -50,6 +52,7 @@ from cpas_ocp.reports.report_data import (
     event_rows,
     parameter_rows,
     sensor_spans,
+    undetermined_window,
 )
 
 if TYPE_CHECKING:
@@ -120,6 +123,11 @@ def result_dict(fit: Fit, cov: Covariance | None,
             entry["std"] = std[name]
             entry["ci95"] = [fit.parameters[name] - Z95 * std[name],
                              fit.parameters[name] + Z95 * std[name]]
+            # Its sigma wider than its bounds: the interval is no interval (`ParameterRow`).
+            entry["undetermined_within_bounds"] = undetermined_window(fit, cov, name) \
+                is not None
+            if entry["undetermined_within_bounds"]:
+                entry["bounds"] = [prm.lower, prm.upper]
         params[name] = entry
     fixed = {n: {"value": v, "unit": fit.model.parameter(n).unit}
              for n, v in fit.parameters.items() if n not in fit.free}
@@ -164,13 +172,14 @@ def parameter_table(fit: Fit, cov: Covariance | None, units: DisplayUnits | None
     test's own): value, 1 sigma, 95 % interval, correlations and the combinations the data
     do not determine."""
     units = units or display_units(fit.test)
-    lines = [f"{'parameter':30s} {'value':>11s} {'± 1σ':>10s} {'95 % interval':>25s}  "
+    rows = parameter_rows(fit, cov, units)
+    width = max([25, *(len(row.interval) for row in rows)])
+    lines = [f"{'parameter':30s} {'value':>11s} {'± 1σ':>10s} {'95 % interval':>{width}s}  "
              f"{'unit':6s} {'initial':>10s}"]
-    for row in parameter_rows(fit, cov, units):
+    for row in rows:
         s = f"{'—':>10s}" if row.std is None else f"{row.std:10.4g}"
-        ci = "—" if row.ci95 is None else f"[{row.ci95[0]:.5g}, {row.ci95[1]:.5g}]"
-        lines.append(f"{row.name:30s} {row.value:11.5g} {s} {ci:>25s}  {row.unit:6s} "
-                     f"{row.initial:10.4g}" + (f"  {row.flag}" if row.flag else ""))
+        lines.append(f"{row.name:30s} {row.value:11.5g} {s} {row.interval:>{width}s}  "
+                     f"{row.unit:6s} {row.initial:10.4g}" + (f"  {row.flag}" if row.flag else ""))
     if cov is not None:
         lines.append(correlation_line(cov))
         lines.append(identifiability_text(cov))
@@ -310,7 +319,11 @@ def reconstruction_page(fit: Fit, cov: Covariance | None, claim: Claim | None,
         page.heading("Drag areas from the steady descent")
         page.preformatted(steady_drag_area_text(fit, cov, rates).split("\n", 2)[2])
         page.heading("Drag areas against the card's nominal values")
-        page.preformatted(nominal_text(fit, cov, nominal, rates).split("\n", 2)[2])
+        section = nominal_section(fit, cov, nominal, rates)
+        page.table(NOMINAL_HEADER, section.rows, flagged=section.flagged)
+        page.paragraph(section.note, "note")
+        for sentence in section.sentences:
+            page.paragraph(sentence)
     return page
 
 

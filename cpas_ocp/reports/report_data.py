@@ -44,7 +44,9 @@ class Span:
 @dataclass(frozen=True)
 class ParameterRow:
     """A free parameter's estimate in display units: value, 1 sigma and 95 % interval
-    (None where the covariance gives none), initial guess, and what is wrong with it."""
+    (None where the covariance gives none), initial guess, what is wrong with it, and the
+    bounds within which the data leave it undetermined (`undetermined_window`; None
+    where they determine it)."""
 
     name: str
     value: float
@@ -53,6 +55,18 @@ class ParameterRow:
     unit: str
     initial: float
     flag: str
+    window: tuple[float, float] | None = None
+
+    @property
+    def interval(self) -> str:
+        """The 95 % interval as printed: "[lo, hi]", "—" without one, or, where its sigma
+        exceeds the width of its bounds, that it is undetermined within them (an interval
+        of 11.461 ± 13.62 s, [-15.2, 38.2], inside a start window of 4 s is none)."""
+        if self.window is not None:
+            what = "window" if self.unit == "s" else "bounds"
+            return (f"undetermined within its {what} "
+                    f"[{self.window[0]:.5g}, {self.window[1]:.5g}]")
+        return "—" if self.ci95 is None else f"[{self.ci95[0]:.5g}, {self.ci95[1]:.5g}]"
 
 
 def channel_series(fit: Fit, units: DisplayUnits) -> list[ChannelSeries]:
@@ -96,6 +110,19 @@ def bound_flag(fit: Fit, cov: Covariance | None, name: str) -> str:
     return f"{where} its {side} bound ({prm.lower if side == 'lower' else prm.upper:.6g}, {kind})"
 
 
+def undetermined_window(fit: Fit, cov: Covariance | None, name: str
+                        ) -> tuple[float, float] | None:
+    """The bounds (SI) of a free parameter whose standard deviation exceeds their width, so
+    that its 95 % interval runs far past both: the data do not determine it within them
+    (a start time 11.461 ± 13.62 s in a window of 4 s).  None where its sigma is smaller,
+    it has none, or a bound is infinite."""
+    std = cov.std.get(name) if cov is not None else None
+    prm = fit.model.parameter(name)
+    if std is None or not (np.isfinite(prm.lower) and np.isfinite(prm.upper)):
+        return None
+    return (prm.lower, prm.upper) if std > prm.upper - prm.lower else None
+
+
 def parameter_flag(fit: Fit, cov: Covariance | None, name: str) -> str:
     """What is wrong with a free parameter's estimate (`bound_flag`, undetermined by the
     covariance, or outside its effect's plausible range), or ''."""
@@ -127,8 +154,10 @@ def parameter_rows(fit: Fit, cov: Covariance | None, units: DisplayUnits
         v = fit.parameters[name] * k
         s = std[name] * k if name in std else None
         ci = None if s is None else (v - Z95 * s, v + Z95 * s)
+        window = undetermined_window(fit, cov, name)
         rows.append(ParameterRow(name, v, s, ci, unit, fit.guess.get(name, prm.default) * k,
-                                 parameter_flag(fit, cov, name)))
+                                 parameter_flag(fit, cov, name),
+                                 None if window is None else (window[0] * k, window[1] * k)))
     return rows
 
 

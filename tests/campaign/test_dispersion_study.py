@@ -144,6 +144,42 @@ def test_a_damaged_campaign_table_is_one_line(case, tmp_path, capsys) -> None:
     assert not (tmp_path / "o").exists()
 
 
+# A Parquet table holds numbers as numbers: what a damaged one holds, and the one line.
+BAD_PARQUET = {
+    "values written as text": (lambda t: t.astype({"value": str}), "row 1, value",
+                               "not text"),
+    "a value beyond 1e9": (lambda t: _cell(t, 3, "value", 5e9), "row 4, value", "at most 1e+09"),
+    "a std beyond 1e9": (lambda t: _cell(t, 2, "std", -2e12), "row 3, std", "at most 1e+09"),
+    "a cluster size as text": (lambda t: t.astype({"cluster_size": str}), "row 1, cluster_size",
+                               "not text"),
+}
+
+
+@pytest.mark.parametrize("case", list(BAD_PARQUET))
+def test_a_damaged_parquet_table_is_one_line(case, tmp_path, capsys) -> None:
+    """Text in a column of numbers, or a number beyond any test's, in parameters.parquet:
+    one line naming the file, the row and the column, and what was expected; exit 2,
+    nothing written (both were dispersed, exit 0)."""
+    damage, named, expected = BAD_PARQUET[case]
+    damage(_table()).to_parquet(tmp_path / "parameters.parquet", index=False)
+    code = main(["dispersions", str(tmp_path), "--out", str(tmp_path / "o"), "--cases", "100",
+                 "--seed", "1"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1, err
+    assert f"parameters.parquet: {named}: " in err[0] and expected in err[0], err
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_csv_value_beyond_1e9_is_one_line(tmp_path, capsys) -> None:
+    """A CSV's cells are text that reads as numbers; one beyond 1e9 is refused like a
+    Parquet table's."""
+    _cell(_table(), 3, "value", 5e9).to_csv(tmp_path / "parameters.csv", index=False)
+    code = main(["dispersions", str(tmp_path), "--out", str(tmp_path / "o"), "--cases", "100",
+                 "--seed", "1"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and "parameters.csv: line 5, value: " in err[0], err
+
+
 def test_a_negative_diameter_in_the_stages_table_is_one_line(tmp_path, capsys) -> None:
     _table().to_csv(tmp_path / "parameters.csv", index=False)
     pd.DataFrame([{"test": "d0", "parachute": "drogue1", "type": "drogue", "stage": "stage1",

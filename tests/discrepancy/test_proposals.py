@@ -64,3 +64,53 @@ def test_a_load_cell_follows_its_own_canopy_not_the_other(drogue_fit) -> None:
     assert "tension_gain" not in proposed("cds[drogue2]")
     assert "tension_gain" in proposed("cds[drogue1]")
     assert "tension_gain" in proposed("dynamic_pressure")
+
+
+def _misfit(fit, findings: list[Finding]) -> Diagnosis:
+    """A diagnosis of `fit` with `findings`, whose window (of the first) holds a chi-square
+    of 4 per sample: a misfit that sits there."""
+    from scipy.stats import chi2
+
+    from cpas_ocp.discrepancy.diagnosis import ALPHA
+    from cpas_ocp.inference.diagnostics import WindowStatistic
+    from cpas_ocp.inference.noise_test import NoiseTest
+
+    f = findings[0]
+    window = WindowStatistic(f.sensor, f.channel, f.window, f.t0, f.t1, 100, 1.0, 2.0, 400.0,
+                             0.01)
+    chi = fit.dof + 300.0
+    noise = NoiseTest(chi, fit.dof, float(chi2.sf(chi, fit.dof)), ALPHA, 1, [window])
+    return Diagnosis(fit, phase_windows(fit), [window], [], findings, _noise=noise)
+
+
+def test_what_a_chain_says_it_proposes_is_written(drogue_fit, tmp_path) -> None:
+    """A line of two cycles in its window asks for no plug-in: the misfit's advice says
+    `discover` wrote none, and the discovery folder has no proposed/.  A line of many
+    cycles asks for a drag-area modulation: the advice names proposed/ and its file, and
+    the folder holds it (the advice said "`discover` proposes some" of both)."""
+    from cpas_ocp.discrepancy.diagnosis import ALPHA
+    from cpas_ocp.discrepancy.discovery import Discovery, DiscoveryStep, _proposed_step
+    from cpas_ocp.reports.discrepancy_report import write_discovery
+
+    fit, _, _ = drogue_fit(1)
+    window = max((w for w in phase_windows(fit) if w.kind == "steady"),
+                 key=lambda w: w.t1 - w.t0)
+    for cycles, written in ((2.0, []), (20.0, ["drag_area_modulation.py"])):
+        finding = _finding("riser_drogue1", "tension", window, (PERIODICITY,),
+                           frequency_hz=cycles / (window.t1 - window.t0))
+        diag = _misfit(fit, [finding])
+        chain = Discovery([DiscoveryStep(None, baseline_spec(), fit, diagnosis=diag)],
+                          state="misfit", stopped="nothing left is confirmed")
+        folder = tmp_path / f"{cycles:g}"
+        folder.mkdir()
+        _proposed_step(chain, chain.steps[0], folder, ALPHA, False)
+        verdict = diag.verdict()
+        assert "proposes some" not in verdict, verdict
+        assert diag.proposed == written
+        out = write_discovery(chain, tmp_path / f"discovery{cycles:g}", figures=False)
+        if written:
+            assert "`discover` wrote proposed/drag_area_modulation.py" in verdict, verdict
+            assert (out / "proposed" / "drag_area_modulation.py").is_file()
+        else:
+            assert "`discover` wrote none" in verdict, verdict
+            assert not (out / "proposed").exists()
