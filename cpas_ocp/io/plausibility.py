@@ -44,6 +44,7 @@ MAX_SPEED_M_S = 5000.0  # no rocket climbs or falls faster in the lower atmosphe
 MAX_DESCENT_M_S = 400.0  # no vehicle descends faster under a canopy (m/s)
 SPEED_WINDOW_S = 0.5  # the altitude's running median and its change span this long (s) ...
 MEDIAN_SAMPLES = 9  # ... and at least this many samples (a charge's pulse is 1-3)
+STEADY_SPEED_S = 3.0  # a unit hint needs the rate over this long beyond the ceiling too (s)
 PAD_PRESSURE_PA = (30e3, 110e3)  # air pressure on any launch pad (Pa)
 PAD_TEMPERATURE_K = (180.0, 340.0)  # air temperature on any launch pad (K)
 MAX_PAD_OFFSET_M = 2000.0  # the pad's pressure altitude off the site's elevation (m)
@@ -53,16 +54,17 @@ BOOST_WINDOW_S = 10.0  # ... whose thrust the accelerometer reads in this long b
 MIN_BOOST_G = 1.0  # ... above this (g, 1 g subtracted: a thrust twice the weight)
 
 
-def climb_rates(t: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def climb_rates(t: np.ndarray, h: np.ndarray, window_s: float = SPEED_WINDOW_S
+                ) -> tuple[np.ndarray, np.ndarray]:
     """The rate of climb (m/s, negative in a descent) of the altitude `h` (m) at times `t` (s,
     increasing), robust to short pulses, and the times it applies from: the change of the
-    running median over `SPEED_WINDOW_S` (at least `MEDIAN_SAMPLES` samples, at most an
+    running median over `window_s` (at least `MEDIAN_SAMPLES` samples, at most an
     eighth of the log) across as many samples, so that a pulse of a few samples (an
     ejection charge's gas at the static port) does not count.  Empty for under 2 samples."""
     if t.size < 2:
         return np.empty(0), np.empty(0)
     interval = float(np.median(np.diff(t)))
-    n = max(MEDIAN_SAMPLES, round(SPEED_WINDOW_S / interval) if interval > 0 else 0)
+    n = max(MEDIAN_SAMPLES, round(window_s / interval) if interval > 0 else 0)
     # An eighth of the log at most: a log whose time unit is off by 1000 spans milliseconds.
     n = min(n, max(MEDIAN_SAMPLES, t.size // 8)) // 2 * 2 + 1
     n = min(n, t.size - 1)
@@ -70,10 +72,11 @@ def climb_rates(t: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return (smooth[n:] - smooth[:-n]) / (t[n:] - t[:-n]), t[:-n]
 
 
-def peak_speed(t: np.ndarray, h: np.ndarray) -> tuple[float, float]:
+def peak_speed(t: np.ndarray, h: np.ndarray, window_s: float = SPEED_WINDOW_S
+               ) -> tuple[float, float]:
     """The largest rate of change (m/s) of the altitude `h` (m) at times `t` (s), either way
-    (`climb_rates`), and its time."""
-    rate, at = climb_rates(t, h)
+    (`climb_rates` over `window_s`), and its time."""
+    rate, at = climb_rates(t, h, window_s)
     if rate.size == 0:
         return 0.0, float(t[0]) if t.size else 0.0
     k = int(np.argmax(np.abs(rate)))
@@ -88,9 +91,15 @@ def check_speed(record: FlightRecord, t: np.ndarray, h: np.ndarray, ceiling: flo
     if speed <= ceiling:
         return
     time, baro = record.channel("time"), record.channel("pressure")
-    hint = time.hint(lambda unit: speed / time.reread(1.0, unit) <= ceiling)
-    if not hint.startswith("is the unit") and baro.altitude:
-        hint = baro.hint(lambda unit: speed * baro.reread(1.0, unit) <= ceiling)
+    # A unit scales the steady flight's rates, not only a transient's: where the rate over
+    # STEADY_SPEED_S stays within the ceiling, the excess is a pulse or a glitch.
+    if peak_speed(t, h, STEADY_SPEED_S)[0] <= ceiling:
+        hint = ("a transient: over 3 s the altitude keeps to a flight's rates, so this is a "
+                "pressure pulse or a glitch in the log, not its unit")
+    else:
+        hint = time.hint(lambda unit: speed / time.reread(1.0, unit) <= ceiling)
+        if not hint.startswith("is the unit") and baro.altitude:
+            hint = baro.hint(lambda unit: speed * baro.reread(1.0, unit) <= ceiling)
     raise InputError(str(record.path), f"{time.column}, {baro.column}",
                      f"an altitude that changes at most {ceiling:g} m/s ({what}); read in "
                      f"{baro.unit} and {time.unit}, it changes at {speed:.4g} m/s near "

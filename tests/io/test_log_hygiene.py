@@ -118,3 +118,24 @@ def test_a_body_falling_free_is_not_turned_over() -> None:
     t = np.arange(0.0, 30.0, 0.01)
     force = -0.3 + np.random.default_rng(8).normal(0.0, 2.0, t.size)
     assert not turned_over(t, force).any()
+
+
+def test_a_glitch_under_the_canopies_is_named_a_transient_not_a_unit(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """0.6 s of samples 600 m off in the middle of the main's descent: the import stops, as
+    no canopy descends at such rates, but names a transient, not a unit the steady flight
+    does not support."""
+    flight = fly()
+    write_mapped(flight, tmp_path / "log.csv", seed=4)
+    log = pd.read_csv(tmp_path / "log.csv")
+    mid = int(np.argmin(np.abs(1e-3 * log["t_ms"].to_numpy() - 45.0)))
+    log.loc[mid:mid + 59, "press_hPa"] += 70.0  # about 600 m lower for 0.6 s
+    log.to_csv(tmp_path / "log.csv", index=False, float_format="%.7g")
+    accel = {**COLUMN_MAP["acceleration"], "axis": "-y"}
+    (tmp_path / "map.json").write_text(json.dumps({**COLUMN_MAP, "acceleration": accel}))
+    (tmp_path / "card.json").write_text(json.dumps(CARD))
+    code = main(["import", str(tmp_path / "log.csv"), "--columns", str(tmp_path / "map.json"),
+                 "--card", str(tmp_path / "card.json"), "--out", str(tmp_path / "test")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1
+    assert "a transient" in err[0] and "is the unit" not in err[0]
