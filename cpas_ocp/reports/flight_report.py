@@ -380,22 +380,25 @@ def window_residuals(fit: Fit, t0: float, t1: float) -> dict[str, tuple[int, flo
     return out
 
 
-def steady_drag_area_text(fit: Fit, cov: Covariance, rates: list[DescentRate]) -> str:
-    """The markdown section setting each fitted drag area beside its steady descent's
-    (`steady_drag_areas`); where they differ by more than two sigma, which channel's
-    residuals are worst in the steady window (`window_residuals`), and the fitted air's
-    mean there against its prior."""
+STEADY_HEADER = ["parameter", "window (s)", "fitted (m²)", "2W/(ρ v²) (m²)",
+                 "σ of the air's mean (m/s)", "difference (σ)"]
+
+
+def steady_drag_area_section(fit: Fit, cov: Covariance, rates: list[DescentRate]
+                             ) -> TableSection:
+    """Each fitted drag area beside its steady descent's (`steady_drag_areas`), flagged
+    where they differ by more than two sigma; for those, which channel's residuals are
+    worst in the steady window (`window_residuals`), and the fitted air's mean there
+    against its prior."""
     areas = steady_drag_areas(fit, cov, rates)
-    lines = ["## Drag areas from the steady descent", "",
-             "| parameter | window (s) | fitted (m²) | 2W/(ρ v²) (m²) | σ of the air's mean "
-             "(m/s) | difference (σ) |", "|---|---|---|---|---|---|"]
-    lines += [f"| {a.name} | {a.rate.t0:.1f}-{a.rate.t1:.1f} | {a.fitted:.4f} ± "
-              f"{a.fitted_sigma:.2g} | {a.steady:.4f} ± {a.steady_sigma:.2g} | "
-              f"{a.air_sigma:.2f} | {a.z:+.1f} |" for a in areas]
-    lines += ["", "The steady descent's drag area is drag equal to weight at the measured "
-              "rate and the window's mean altitude; its σ counts the rate's and the vertical "
-              "air's (the airspeed is v - w, and the air's mean over the window is zero to "
-              "the σ its prior gives), 2 CdS √(σ_v² + σ_w²) / v."]
+    rows = [[a.name, f"{a.rate.t0:.1f}-{a.rate.t1:.1f}", f"{a.fitted:.4f} ± "
+             f"{a.fitted_sigma:.2g}", f"{a.steady:.4f} ± {a.steady_sigma:.2g}",
+             f"{a.air_sigma:.2f}", f"{a.z:+.1f}"] for a in areas]
+    note = ("The steady descent's drag area is drag equal to weight at the measured rate and "
+            "the window's mean altitude; its σ counts the rate's and the vertical air's (the "
+            "airspeed is v - w, and the air's mean over the window is zero to the σ its prior "
+            "gives), 2 CdS √(σ_v² + σ_w²) / v.")
+    sentences = []
     for a in areas:
         if abs(a.z) <= 2.0:
             continue
@@ -407,16 +410,21 @@ def steady_drag_area_text(fit: Fit, cov: Covariance, rates: list[DescentRate]) -
         rest = "; ".join(f"{c} {np.sqrt(v[1] / v[0]):.2f} over {v[0]}" for c, v in chans.items()
                          if c != worst)
         updraft = mean_updraft(fit, a.rate.t0, a.rate.t1)
-        lines += ["", f"- {a.name}: the fit lies {a.z:+.1f} σ from the steady descent's. In "
-                  f"{a.rate.t0:.1f}-{a.rate.t1:.1f} s the worst residuals are the {worst}'s "
-                  f"(normalised RMS {np.sqrt(chi2 / n):.2f} over {n} samples, mean "
-                  f"{mean:+.2f}, chi-square {chi2:.0f}"
-                  + (f"; {rest}" if rest else "") + f"): {worst} drives the fit away from the "
-                  "descent rate"
-                  + (f", and the fitted air there moves at {updraft:+.2f} m/s on average "
-                     f"against the {a.air_sigma:.2f} m/s its prior allows." if updraft
-                     else ".")]
-    return "\n".join(lines)
+        sentences.append(
+            f"{a.name}: the fit lies {a.z:+.1f} σ from the steady descent's. In "
+            f"{a.rate.t0:.1f}-{a.rate.t1:.1f} s the worst residuals are the {worst}'s "
+            f"(normalised RMS {np.sqrt(chi2 / n):.2f} over {n} samples, mean {mean:+.2f}, "
+            f"chi-square {chi2:.0f}" + (f"; {rest}" if rest else "")
+            + f"): {worst} drives the fit away from the descent rate"
+            + (f", and the fitted air there moves at {updraft:+.2f} m/s on average against "
+               f"the {a.air_sigma:.2f} m/s its prior allows." if updraft else "."))
+    return TableSection(rows, [abs(a.z) > 2.0 for a in areas], note, sentences)
+
+
+def steady_drag_area_text(fit: Fit, cov: Covariance, rates: list[DescentRate]) -> str:
+    """The markdown section of `steady_drag_area_section`."""
+    return steady_drag_area_section(fit, cov, rates).markdown(
+        "Drag areas from the steady descent", STEADY_HEADER)
 
 
 def nominal_comparisons(fit: Fit, cov: Covariance, nominal: dict[str, dict[str, Any]],
@@ -679,20 +687,25 @@ NOMINAL_HEADER = ("parameter", "fitted (m²)", "σ from the measured rate (m²)"
 
 
 @dataclass(frozen=True)
-class NominalSection:
-    """The drag areas against their nominal values, as plain data for report.md and the
-    page alike: one row per nominal drag area (`NOMINAL_HEADER`; first those with no
-    steady window, not compared), whether each row differs from its nominal by more than
-    3 sigma, a note on the sigmas, and one sentence per comparison."""
+class TableSection:
+    """A report section as plain data for report.md and the page alike: its table's rows,
+    which rows are flagged, a note on the table, and its sentences."""
 
     rows: list[list[str]]
     flagged: list[bool]
     note: str
     sentences: list[str]
 
+    def markdown(self, title: str, header: list[str]) -> str:
+        """The section as markdown: a heading, the table, the note and the sentences."""
+        return "\n".join([f"## {title}", "", f"| {' | '.join(header)} |",
+                          "|---" * len(header) + "|",
+                          *(f"| {' | '.join(row)} |" for row in self.rows),
+                          "", self.note, "", *(f"- {line}" for line in self.sentences)])
+
 
 def nominal_section(fit: Fit, cov: Covariance, nominal: dict[str, dict[str, Any]],
-                    rates: list[DescentRate] | None = None) -> NominalSection:
+                    rates: list[DescentRate] | None = None) -> TableSection:
     """Each fitted drag area against its published nominal value (`nominal_comparisons`),
     with the descent rate the nominal would give and the drag area the measured rate
     needs; `rates` the fit's `descent_rates` where already computed."""
@@ -735,18 +748,15 @@ def nominal_section(fit: Fit, cov: Covariance, nominal: dict[str, dict[str, Any]
             "hanging beneath (the card fixes the forebody drag area at "
             f"{fit.parameters.get('CdS_V', 0.0):.3f} m²) and, for a later canopy, whatever "
             "the canopies opened before it lose or add to the wake.")
-    return NominalSection(rows, [False] * len(left) + [abs(c.z) > 3.0 for c in comps], note,
+    return TableSection(rows, [False] * len(left) + [abs(c.z) > 3.0 for c in comps], note,
                           sentences)
 
 
 def nominal_text(fit: Fit, cov: Covariance, nominal: dict[str, dict[str, Any]],
                  rates: list[DescentRate] | None = None) -> str:
     """The markdown section of `nominal_section`: its table, note and sentences."""
-    section = nominal_section(fit, cov, nominal, rates)
-    return "\n".join(["## Drag areas against the published nominal values", "",
-                      f"| {' | '.join(NOMINAL_HEADER)} |", "|---" * len(NOMINAL_HEADER) + "|",
-                      *(f"| {' | '.join(row)} |" for row in section.rows),
-                      "", section.note, "", *(f"- {line}" for line in section.sentences)])
+    return nominal_section(fit, cov, nominal, rates).markdown(
+        "Drag areas against the published nominal values", NOMINAL_HEADER)
 
 
 def flight_text(fit: Fit, cov: Covariance, nominal: dict[str, dict[str, Any]],

@@ -25,12 +25,14 @@ from cpas_ocp.reports.fit_text import claim_text
 from cpas_ocp.reports.flight_report import (
     DESCENT_RATE_HEADER,
     NOMINAL_HEADER,
+    STEADY_HEADER,
     descent_rate_rows,
     descent_rate_text,
     descent_rates,
     nominal_section,
     nominal_text,
     steady_descent_text,
+    steady_drag_area_section,
     steady_drag_area_text,
 )
 from cpas_ocp.reports.html_page import Page, drag_area_figure, sensor_figure, window_legend
@@ -316,14 +318,16 @@ def reconstruction_page(fit: Fit, cov: Covariance | None, claim: Claim | None,
         page.heading("Steady descent rates")
         page.table(DESCENT_RATE_HEADER, descent_rate_rows(rates),
                    flagged=[abs(r.z) > 3.0 for r in rates])
-        page.heading("Drag areas from the steady descent")
-        page.preformatted(steady_drag_area_text(fit, cov, rates).split("\n", 2)[2])
-        page.heading("Drag areas against the card's nominal values")
-        section = nominal_section(fit, cov, nominal, rates)
-        page.table(NOMINAL_HEADER, section.rows, flagged=section.flagged)
-        page.paragraph(section.note, "note")
-        for sentence in section.sentences:
-            page.paragraph(sentence)
+        for title, header, section in (
+                ("Drag areas from the steady descent", STEADY_HEADER,
+                 steady_drag_area_section(fit, cov, rates)),
+                ("Drag areas against the card's nominal values", NOMINAL_HEADER,
+                 nominal_section(fit, cov, nominal, rates))):
+            page.heading(title)
+            page.table(header, section.rows, flagged=section.flagged)
+            page.paragraph(section.note, "note")
+            for sentence in section.sentences:
+                page.paragraph(sentence)
     return page
 
 
