@@ -79,6 +79,7 @@ from typing import Any
 import numpy as np
 from scipy.stats import norm
 
+from cpas_ocp.io.import_events import EJECTION_EXCLUDE_S
 from cpas_ocp.io.log_noise import (
     MIN_DESCENT_SAMPLES,
     integrated_time,
@@ -102,7 +103,6 @@ MIN_SETTLED_S = 4.0  # least settled descent fitted under a canopy (s)
 
 RELAXATION_TIMES = 3.0  # the fit starts this many speed relaxation times (v / 2g) after settling
 
-CHARGE_EXCLUDE_S = 0.3  # altimeter samples left out after a charge (its gas at the static port)
 
 COAST_WINDOW_S = 1.0  # the coast's height is fitted by a quadratic in windows this long (s)
 
@@ -505,7 +505,7 @@ def deployment_forensics(t: np.ndarray, height: np.ndarray, density: Density, ma
         nxt = next((c for c in charges[k + 1:] if c is not None), None)
         t_to = t_end if nxt is None or nxt >= t_end else \
             nxt - 3.0 * order[k + 1].deploy_sigma - 0.1
-        t_from = t_dep + 3.0 * chute.deploy_sigma + CHARGE_EXCLUDE_S
+        t_from = t_dep + 3.0 * chute.deploy_sigma + EJECTION_EXCLUDE_S
         descent = settled_descent(t, height, density, mass, t_from, t_to,
                                   sigmas[min(k, len(sigmas) - 1)], air_sigma)
         if descent is None:
