@@ -603,7 +603,8 @@ def model_block(d: LogImport) -> None:
         d.manifest["model"], d.manifest["vehicle"] = held_closed(
             d.manifest["model"], d.manifest["vehicle"], closed, areas,
             {c["name"]: c["stages"][0] for c in d.parachutes}, first,
-            needed.drag_area if needed is not None else 0.0)
+            needed.drag_area if needed is not None else 0.0,
+            {c["name"]: c.get("inflation") == "infinite_mass" for c in d.parachutes})
         d.notes.append(f"{', '.join(closed)}: did not open (see the deployment forensics): "
                        "held closed in the fit" + (", which estimates the airframe's drag "
                                                    "area CdS_V instead" if first in closed

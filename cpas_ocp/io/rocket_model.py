@@ -87,23 +87,28 @@ def rocket_model(block: dict[str, Any], sensor_kinds: list[str],
 
 def held_closed(model: dict[str, Any], vehicle: dict[str, Any], closed: dict[str, float],
                 areas: dict[str, float], stages: dict[str, str], first: str,
-                airframe_m2: float) -> tuple[dict[str, Any], dict[str, Any]]:
+                airframe_m2: float, infinite_mass: dict[str, bool]
+                ) -> tuple[dict[str, Any], dict[str, Any]]:
     """The manifest's model and vehicle with the canopies in `closed` (name: deployment
     time, s) held closed: the deployment forensics found they did not open.  Each one's
     drag area is held at `UNOPENED_SHARE` of its open area (`areas`, m^2, pi D_o^2 / 4),
-    its opening's shape at the held values and its start at its deployment; where the
-    first canopy deployed (`first`) did not open, the airframe carried the descent, so its
-    drag area CdS_V is estimated, from `airframe_m2` (m^2, what the descent needed) where
-    the card gives none.  The card's own fixes win."""
+    its start at its deployment and, for a monotone fill (not `infinite_mass`), its shape
+    at the held values; where the first canopy deployed (`first`) did not open, the
+    airframe carried the descent, so its drag area CdS_V is estimated (where the model
+    has `forebody_drag`), from `airframe_m2` (m^2, what the descent needed) where the card
+    gives none.  The card's own fixes win."""
     if not closed:
         return model, vehicle
     fix: dict[str, Any] = {}
     for name, t_deploy in closed.items():
         key = f"{name},{stages[name]}"
-        fix |= {f"CdS[{key}]": UNOPENED_SHARE * areas[name], f"n[{key}]": HELD_FILL_CONSTANT,
-                f"expopen[{key}]": HELD_EXPOPEN, f"t_start[{key}]": t_deploy}
+        fix |= {f"CdS[{key}]": UNOPENED_SHARE * areas[name], f"t_start[{key}]": t_deploy}
+        if not infinite_mass.get(name):  # a monotone fill's shape (an over-inflation's is
+            # left to the data, which then say nothing of it)
+            fix |= {f"n[{key}]": HELD_FILL_CONSTANT, f"expopen[{key}]": HELD_EXPOPEN}
     model = {**model, "fix": {**fix, **model.get("fix", {})}}
-    if first in closed:
+    named = {e if isinstance(e, str) else e.get("effect") for e in model.get("effects", ())}
+    if first in closed and "forebody_drag" in named:
         model["free"] = [*dict.fromkeys([*model.get("free", []), "CdS_V"])]
         if not vehicle.get("forebody_cds", {}).get("value"):
             vehicle = {**vehicle, "forebody_cds": {"value": round(airframe_m2, 6),
