@@ -497,10 +497,14 @@ def accelerometer_series(d: LogImport) -> None:
         d.notes.append(f"no accelerometer over the log's phase{span}: the folder has the "
                        "altimeter only")
         return
-    # Within the phase: the series' margins beyond it only carry the sensor over its ends.
+    # Within the phase (the series' margins beyond it only carry the sensor over its ends)
+    # and outside each later canopy's opening, whose load peak times its full open and
+    # where the canopy's snatch may swing the body about.
     times = accel["time"].to_numpy()
     over = turned_over(times, accel["acceleration"].to_numpy() + G0) \
         & (times >= d.t_begin) & (times <= d.t_end)
+    for t_charge, t_open in zip(starts[1:], opening_ends, strict=True):
+        over &= ~((times >= t_charge) & (times < t_open))
     d.dropped["turned_over_accelerometer_samples"] = int(over.sum())
     if over.any():
         d.notes.append(f"accelerometer: {int(over.sum())} samples between "
