@@ -56,7 +56,7 @@ from cpas_ocp.io.import_events import (
     flight_events,
 )
 from cpas_ocp.io.import_reports import Snatch
-from cpas_ocp.io.log_hygiene import charge_swing, damaged_end, turned_over
+from cpas_ocp.io.log_hygiene import charge_swing, damaged_end
 from cpas_ocp.io.log_noise import (
     MIN_DESCENT_SAMPLES,
     accelerometer_blocks,
@@ -79,7 +79,6 @@ from cpas_ocp.io.plausibility import (
 from cpas_ocp.io.rocket_model import held_closed, held_openings, rocket_model
 from cpas_ocp.io.site_air import LAPSE_BOUNDS_K_M, fit_lapse_rate, pad_pressure
 from cpas_ocp.physics.atmosphere import ISA_LAPSE_K_M, SiteAtmosphere, pressure_altitude
-from cpas_ocp.physics.units import G0
 
 TOUCHDOWN_MARGIN_S = 0.5  # phase ends this long before the detected touchdown (s)
 
@@ -497,21 +496,6 @@ def accelerometer_series(d: LogImport) -> None:
         d.notes.append(f"no accelerometer over the log's phase{span}: the folder has the "
                        "altimeter only")
         return
-    # Within the phase (the series' margins beyond it only carry the sensor over its ends)
-    # and outside each later canopy's opening, whose load peak times its full open and
-    # where the canopy's snatch may swing the body about.
-    times = accel["time"].to_numpy()
-    over = turned_over(times, accel["acceleration"].to_numpy() + G0) \
-        & (times >= d.t_begin) & (times <= d.t_end)
-    for t_charge, t_open in zip(starts[1:], opening_ends, strict=True):
-        over &= ~((times >= t_charge) & (times < t_open))
-    d.dropped["turned_over_accelerometer_samples"] = int(over.sum())
-    if over.any():
-        d.notes.append(f"accelerometer: {int(over.sum())} samples between "
-                       f"{accel['time'][over].min():.2f} and {accel['time'][over].max():.2f} s "
-                       "left out: the axial specific force reads below zero there, the body "
-                       "turned over (tumbling), which no drag makes")
-        accel = accel[~over]
     bounds = [*sorted({*starts, *opening_ends} - {d.t_end}), d.t_end]
     # Each canopy's steady segment (the series' margins included) is written as block means
     # of its noise's correlation length at their sigma (`accelerometer_blocks`: a swinging

@@ -20,7 +20,9 @@ force along the body's axis, f cos(theta), theta the axis's angle to the riser: 
 below zero while the body hangs below its canopy.  A vehicle that tumbles (on one log it
 turns over for 5 s, its axis reading -15 m/s^2 where the drag gives +10) reads it
 reversed, which no drag model makes: a fit would bend the air's motion to explain it.
-Where the axial specific force's running median over `TURNED_MEDIAN_S` is below zero by
+`turned_over` finds such samples; the import does not yet leave them out (on one
+Altus log the fit without them no longer converged).  Where the axial specific force's
+running median over `TURNED_MEDIAN_S` is below zero by
 more than `TURNED_SIGMAS` of its own sigma (the scatter about it, 1.4826 MAD, times
 1.2533 / sqrt(n) for a median of n samples) and `TURNED_FLOOR_M_S2` (an accelerometer's
 offset: a body falling free near apogee reads zero, not below), the body has turned over;
