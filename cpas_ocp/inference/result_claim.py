@@ -283,7 +283,7 @@ class Claim:
     def problems(self) -> list[str]:
         """One line per reason the fit is less than a plain result (empty when none); those
         that make it no result first."""
-        out = [*self.failed_deployments, *self.deployment_notes]
+        out = list(self.failed_deployments)
         if self.pressed:
             out.append(f"the data press {len(self.pressed)} parameter(s) against bounds that "
                        f"are guesses, not physical limits (p = {self.bound_p_value:.2g}): "
@@ -311,6 +311,7 @@ class Claim:
                        f"the noise is wrong somewhere and the sigmas are too small by about "
                        f"that factor (--rescale-sigmas scales them){self._worst()}")
         out += self.process_misfits
+        out += self.deployment_notes
         if self.overstates_noise:
             out.append(overstated_text(self.ratio, self.low_p_value))
         return out
