@@ -54,7 +54,7 @@ from tests.io.test_rocket_log_import import (  # noqa: E402
     sensor_readings,
 )
 
-BASELINE = "9348220"  # before the estimator read the wind's knots a few per interval
+BASELINE = "f7978ab"  # before the import merged a series' straight stretches into means
 THRUST_N = 4200.0  # boost thrust (N, 2.5 s): apogee about 4.4 km above the pad
 CDS_TRUE = {"drogue": 8.0, "main": 20.0}  # the canopies' full drag areas (m^2)
 DIAMETER_IN = {"drogue": 120, "main": 200}  # nominal diameters on the card (in)
@@ -176,7 +176,9 @@ def describe(label: str, stages: dict) -> str:
                 lines.append(f"    {fit['status']}, {fit['iterations']} iterations, chi2/dof "
                              f"{fit['chi2_dof']:.3f}; " + ", ".join(
                                  f"{k} {v:.4f} +- {s or float('nan'):.4f}"
-                                 for k, (v, s) in fit["cds"].items()))
+                                 for k, (v, s) in fit["cds"].items())
+                             + " (flown: " + ", ".join(f"{k} {v:g}" for k, v in CDS_TRUE.items())
+                             + " m^2)")
             elif st["stderr_tail"]:
                 lines.append(f"    stderr: {st['stderr_tail'][-1]}")
     return "\n".join(lines)

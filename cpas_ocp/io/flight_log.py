@@ -35,14 +35,18 @@ folder:
   (`drag_ceiling`: the shock cord's snatch, which no drag model makes; the
   largest is the full-open event below);
 * a ``full_open`` event for each later canopy whose opening the
-  accelerometer shows (`opening_peak`): the time of the largest axial
+  accelerometer shows (`opening_peak`) where the accelerometer's series is
+  not written (it stops inside the phase): the time of the largest axial
   specific force in the `OPENING_WINDOW_S` after the charge, with one
   accelerometer sample interval as its sigma.  On a hobby rocket that peak
-  is the snatch of the elastic shock cord, which comes when the canopy, full,
-  has stopped ahead of the vehicle: the peak marks full open to within a
-  sample (it lies anywhere between two) and needs no attitude (the axis
-  swinging against the riser scales the reading, not its timing).  The first
-  canopy's is not taken: it opens near apogee, where the load barely rises;
+  is often the snatch of the elastic shock cord, when the canopy has stopped
+  ahead of the vehicle; it needs no attitude (the axis swinging against the
+  riser scales the reading, not its timing).  Where the series is written,
+  the fit reads the opening from the samples themselves, and the peak's time
+  is reported (``events_s``) but not fitted: a snatch before the fill ends
+  would otherwise be forced onto the fill's end at a sample's sigma.  The
+  first canopy's is not taken: it opens near apogee, where the load barely
+  rises;
 * the site atmosphere (`atmosphere.SiteAtmosphere`): the pad pressure (median
   before launch), the temperature from the card's surface density
   (T = p / (R rho)), and the lapse rate from the card or, with ``"gps"``,

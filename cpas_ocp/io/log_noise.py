@@ -10,6 +10,7 @@ from collections.abc import Callable
 
 import numpy as np
 import pandas as pd
+from scipy.ndimage import maximum_filter1d
 from scipy.signal import savgol_filter
 
 from cpas_ocp.io.flight_events import (
@@ -41,6 +42,19 @@ STUCK_RUN_SAMPLES = 10  # ... and this many samples is a dead channel
 
 
 CLIP_RUN_SAMPLES = 3  # a channel's extreme reading met this often is its range's end: clipped
+
+
+MERGE_SPAN_S = 1.0  # longest span of independent samples merged into one mean (s)
+
+
+MERGE_FROM_HZ = 10.0  # a series sampled slower is left as it is: its rows are few already
+
+
+CURVATURE_WINDOW_S = 1.5  # window of the local quadratic whose curvature bounds a merge (s)
+
+
+CURVATURE_BIAS = 0.1  # a merged mean's curvature bias, at most this share of its sigma (1 %
+# of its expected chi-square)
 
 
 def _scatter(t: np.ndarray, values: np.ndarray) -> np.ndarray | None:
@@ -245,3 +259,58 @@ def dead_note(channel: str, t: np.ndarray, values: np.ndarray, unit: str) -> str
     return (f"{channel}: {t.size} samples between {t.min():.2f} and {t.max():.2f} s left out: "
             f"the channel repeats one reading ({readings} {unit}) for {STUCK_RUN_S:g} s or "
             "more, or sits at its range's end: it did not measure there")
+
+
+def merged_blocks(t: np.ndarray, values: np.ndarray, sigma: float) -> tuple[np.ndarray, ...]:
+    """Independent samples (`t` s, `values` in the channel's unit, each at noise `sigma`)
+    merged into means of 2^k consecutive samples wherever the signal is straight enough
+    that a mean at its mean time says what the samples say: the times, the means and each
+    mean's sample count.  Its sigma is `sigma` / sqrt(count).
+
+    A mean of m samples spanning L s of a signal with curvature y'' lies y'' L^2/24 from
+    the value at its mean time.  A merge is kept where that bias is at most
+    `CURVATURE_BIAS` of the mean's own sigma, sigma sqrt(dt/L): L^2.5 <= 24 kappa sigma
+    sqrt(dt) / |y''|, |y''| the largest within half a `MERGE_SPAN_S` of the local
+    quadratic over `CURVATURE_WINDOW_S` (its noise counts as curvature: merges only
+    shorten).  Over a steady descent a 100 Hz channel merges to a few hertz without
+    losing information (the least-squares fit of a smooth model to the means equals the
+    fit to the samples); an opening's deceleration or load peak keeps its samples.  Merges
+    never span a gap (over 1.5 sample intervals: a left-out charge window) and never exceed
+    `MERGE_SPAN_S`.  A series sampled slower than `MERGE_FROM_HZ` is returned as it is: its
+    rows cost little, and means of two or three would only coarsen the residuals a user
+    reads (and, under a misfit, raise chi-square/dof, whose excess stays while the noise's
+    degrees of freedom merge away)."""
+    n = t.size
+    counts = np.ones(n, dtype=int)
+    if n < 5 or sample_interval(t) > 1.0 / MERGE_FROM_HZ:
+        return t, values, counts
+    dt = sample_interval(t)
+    allowed = np.ones(n, dtype=int)
+    run = np.r_[0, np.cumsum(np.diff(t) > 1.5 * dt)]
+    for r in np.unique(run):
+        idx = np.flatnonzero(run == r)
+        window = min(int(CURVATURE_WINDOW_S / dt) // 2 * 2 + 1, idx.size // 2 * 2 - 1)
+        if window < 5:
+            continue
+        curvature = np.abs(savgol_filter(values[idx], window, 2, deriv=2, delta=dt))
+        reach = max(1, int(0.5 * MERGE_SPAN_S / dt))
+        curvature = maximum_filter1d(curvature, 2 * reach + 1, mode="nearest")
+        span = (24.0 * CURVATURE_BIAS * sigma * np.sqrt(dt)
+                / np.maximum(curvature, 1e-12)) ** 0.4
+        m = np.floor(np.minimum(span, MERGE_SPAN_S) / dt).astype(int)
+        allowed[idx] = 2 ** np.floor(np.log2(np.maximum(m, 1))).astype(int)
+    starts, sizes = [], []
+    i = 0
+    while i < n:
+        m = int(allowed[i])
+        while m > 1 and (i + m > n or run[i + m - 1] != run[i]
+                         or int(allowed[i:i + m].min()) < m):
+            m //= 2
+        starts.append(i)
+        sizes.append(m)
+        i += m
+    first = np.asarray(starts)
+    count = np.asarray(sizes)
+    merged_t = np.add.reduceat(t, first) / count
+    merged_v = np.add.reduceat(values, first) / count
+    return merged_t, merged_v, count

@@ -28,9 +28,12 @@ ALTIMETER_ERRORS = ("baro_bias", "baro_lag")
 
 # Held opening shape of a canopy deployed near apogee (the effect's default fill constant,
 # linear growth): its fill time n D_o / V_i divides by the small speed at deployment, and
-# no sensor of a rocket log resolves that opening.  A later canopy whose opening no
-# accelerometer reads has its shape exponent held (linear growth): the altimeter sees the
-# opening's duration, not the curve's shape.
+# an altimeter does not resolve that opening.  Where an accelerometer reads it (the fall
+# from weightlessness to the steady pull, over a second or two) the fill constant is
+# left to the data, linear growth held: a held n there makes the fill last as long as the
+# small V_i says, and the fit bends the air and the drag area to shorten it.  A later
+# canopy whose opening no accelerometer reads has its shape exponent held (linear
+# growth): the altimeter sees the opening's duration, not the curve's shape.
 HELD_FILL_CONSTANT = 8.0
 
 
@@ -58,14 +61,16 @@ def held_openings(deploy: dict[str, float], events: dict[str, FlightEvent]) -> l
 
 def rocket_model(block: dict[str, Any], sensor_kinds: list[str],
                  canopies: list[tuple[str, str]], held: list[str],
-                 deploy_sigma: dict[str, float], still_air: bool = False) -> dict[str, Any]:
+                 deploy_sigma: dict[str, float], still_air: bool = False,
+                 timed: tuple[str, ...] = ()) -> dict[str, Any]:
     """The manifest's model block: the card's where it lists effects; else `ROCKET_EFFECTS`
     with the sensors' (`sensor_kinds`) and, with a second sensor, the altimeter's errors;
     each start window at least three of its deployment's sigmas (and `MIN_START_WINDOW_S`);
     the opening shape (n, expopen) of the canopies named in `held` held at
-    `HELD_FILL_CONSTANT`, `HELD_EXPOPEN`, and without an accelerometer every canopy's
-    expopen (`canopies`: each canopy's name and first stage); the card's own fixes, frees
-    and priors win.  `still_air` leaves the air's motion out."""
+    `HELD_FILL_CONSTANT`, `HELD_EXPOPEN` (those in `timed`, whose opening an accelerometer
+    reads, their expopen only), and without an accelerometer every canopy's expopen
+    (`canopies`: each canopy's name and first stage); the card's own fixes, frees and
+    priors win.  `still_air` leaves the air's motion out."""
     if "effects" in block:
         return block
     window = max(MIN_START_WINDOW_S, *(3.0 * s for s in deploy_sigma.values()))
@@ -77,7 +82,7 @@ def rocket_model(block: dict[str, Any], sensor_kinds: list[str],
     fix: dict[str, Any] = {}
     accelerometer = "axial_accelerometer" in sensor_kinds
     for name, stage in canopies:
-        if name in held:
+        if name in held and name not in timed:
             fix[f"n[{name},{stage}]"] = HELD_FILL_CONSTANT
         if name in held or not accelerometer:
             fix[f"expopen[{name},{stage}]"] = HELD_EXPOPEN

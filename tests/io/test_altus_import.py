@@ -49,12 +49,13 @@ def _pressure_at(h: np.ndarray) -> np.ndarray:
     return np.array([float(SITE.pressure(float(x))) for x in np.atleast_1d(h)])
 
 
-def _write_log(path: Path, seed: int, peak: float = 150.0) -> dict[str, float]:
+def _write_log(path: Path, seed: int, peak: float = 150.0,
+               accel_until: float = np.inf) -> dict[str, float]:
     """An AltOS-layout log of a known descent: pad, boost/coast, 30 m/s drogue descent
     from 3000 m above the pad, main at 400 m, 6 m/s to the ground.  The axial
-    accelerometer reads 1 g less than the specific force with 2 m/s^2 noise; the main's
-    charge jolts it by -50 m/s^2 and its opening pulls a `peak` (m/s^2) one second later
-    (returned as ``main_open``)."""
+    accelerometer reads 1 g less than the specific force with 2 m/s^2 noise (NaN after
+    `accel_until`, s); the main's charge jolts it by -50 m/s^2 and its opening
+    pulls a `peak` (m/s^2) one second later (returned as ``main_open``)."""
     rng = np.random.default_rng(seed)
     t = np.concatenate([np.arange(-0.3, 0.0, 0.01), np.arange(0.0, 20.0, 0.01),
                         np.arange(20.0, 190.0, 0.1)])
@@ -72,6 +73,7 @@ def _write_log(path: Path, seed: int, peak: float = 150.0) -> dict[str, float]:
     accel[k_main] -= 50.0
     k_open = int(np.argmin(np.abs(t - t[k_main] - 1.0)))
     accel[k_open] += peak
+    accel[t > accel_until] = np.nan
     fix_every = 1.0
     lines = [HEADER]
     last_fix = -10.0
@@ -208,14 +210,23 @@ def test_import_writes_a_loadable_test_folder(tmp_path: Path) -> None:
     starts = {p.name: p for p in CanopyInflation(start_window=5.0).parameters(test)}
     assert starts["t_start[main,stage2]"].lower == pytest.approx(charge.time - charge.sigma)
     assert starts["t_start[main,stage2]"].upper == pytest.approx(charge.time + 0.5 + 5.0)
-    # The main's opening peak, not the charge's jolt, is its full-open time, one 10 Hz
-    # sample its sigma; the drogue, opened near apogee, has none.
+    # The main's opening peak, not the charge's jolt, is reported as its full-open time;
+    # the drogue, opened near apogee, has none.  The folder has the accelerometer's
+    # samples of that opening, so the peak is not also fitted as the fill's end.
+    assert summary.events["main full open"] == pytest.approx(events["main_open"])
+    assert test.event("full_open", "main") is None
+    assert test.event("full_open", "drogue") is None
+    # Where the accelerometer's series is not written (it stops reading inside the phase)
+    # the peak is the main's full-open event, one 10 Hz sample its sigma ...
+    _write_log(tmp_path / "short.csv", seed=2, accel_until=events["main"] + 20.0)
+    import_flight(read_altus_log(tmp_path / "short.csv"), card_from_dict(CARD, "card.json"),
+                  tmp_path / "no_accel")
+    test = load_test(tmp_path / "no_accel")
+    assert not test.sensors_of("axial_accelerometer")
     full = test.event("full_open", "main")
     assert full is not None and full.stage == "stage2"
     assert full.time == pytest.approx(events["main_open"]) and full.sigma == pytest.approx(0.1)
-    assert test.event("full_open", "drogue") is None
-    assert summary.events["main full open"] == pytest.approx(events["main_open"])
-    # The model predicts that event at the end of the main's fill, t_i + n D / V_i.
+    # ... which the model predicts at the end of the main's fill, t_i + n D / V_i.
     model = Estimator(test).model
     values = {p.name: p.default for p in model.parameters}
     v_start = 27.0
@@ -230,7 +241,7 @@ def test_a_reading_above_the_drag_ceiling_is_left_out_as_the_snatch(tmp_path: Pa
     """A 300 m/s^2 opening peak is more than the main's drag can pull at the charge's
     30 m/s (about 235 m/s^2 as read, the settled 6 m/s giving the full drag area): the
     import leaves it out of the fitted series and says so, and its time is still the
-    full-open event."""
+    opening's reported full-open time."""
     events = _write_log(tmp_path / "log.csv", seed=2, peak=300.0)
     summary = import_flight(read_altus_log(tmp_path / "log.csv"),
                             card_from_dict(CARD, "card.json"), tmp_path / "test")
@@ -241,7 +252,7 @@ def test_a_reading_above_the_drag_ceiling_is_left_out_as_the_snatch(tmp_path: Pa
     test = load_test(tmp_path / "test")
     accel = test.sensors_of("axial_accelerometer")[0]
     assert np.abs(accel.time - events["main_open"]).min() > 0.05
-    assert test.event("full_open", "main").time == pytest.approx(events["main_open"])
+    assert summary.events["main full open"] == pytest.approx(events["main_open"])
     report = json.loads((tmp_path / "test" / "import.json").read_text())
     assert report["snatch"]["main"]["samples_left_out"] == 1
     assert "left out as the shock cord's snatch" in import_text(summary)
