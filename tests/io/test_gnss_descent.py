@@ -224,3 +224,20 @@ def test_files_of_different_spans_import_each_over_its_own(tmp_path: Path) -> No
     manifest = json.loads((tmp_path / "test" / "manifest.json").read_text())
     assert "gps_altitude" in manifest["model"]["effects"]
     assert any("lists no gps_altitude effect" in n for n in notes)
+
+
+def test_a_lapse_rate_fitted_to_a_descent_the_barometer_does_not_read_is_one_line(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``"lapse_rate": "gps"`` fits the GNSS against the barometer over the descent: with
+    the GNSS alone reading it, one line naming the card's field, exit 2, nothing written."""
+    flight = fly(chutes=("drogue",), thrust_n=700.0)
+    write_mapped(flight, tmp_path / "log.csv", seed=21, end_s=flight.events["apogee"])
+    write_gnss(flight, tmp_path / "gps.csv", seed=22)
+    card = {**CARD, "parachutes": [CARD["parachutes"][0]],
+            "site": {**CARD["site"], "lapse_rate": "gps"}}
+    code, _ = _run_import(tmp_path, card, GNSS_MAP)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1, err
+    assert err[0].startswith(f"error: {tmp_path / 'card.json'}: site.lapse_rate:")
+    assert "barometer ends at" in err[0]
+    assert not (tmp_path / "test").exists()
