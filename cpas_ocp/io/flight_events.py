@@ -35,6 +35,16 @@ timing sigma (s):
   ground, never a charge;
 * ``landed`` (touchdown, `touchdown`): from when the altitude stops falling.
 
+Each sensor is read over its own span: a log may be several files, an altimeter's that
+ends at apogee or just after the drogue's charge beside a GNSS file (1-10 Hz fixes with
+an altitude) that goes on to the ground.  Where the barometer stops in the air and the
+GNSS altitude reads on past its end (`gnss_reads_on`), touchdown is the GNSS's, the
+descent's lowest reading (the ground of the impact rule) is the GNSS's, and the
+accelerometer's jolts are looked for over its own samples up to the GNSS's touchdown or
+end, not the barometer's end.  No charge is ever looked for in the GNSS altitude: a fix's
+noise and jumps (its last fixes as the receiver loses its lock on the ground) are no
+pressure pulse.
+
 What cannot be found (no accelerometer, no boost in the log) is left out.
 """
 
@@ -66,6 +76,9 @@ STILL_BAND_M = 1.0
 REST_ACCEL_M_S2 = 1.0  # ... and the accelerometer's scatter within this (or 3 pad sigmas)
 IMPACT_WINDOW_S = 0.5  # the landing's impact is looked for this close to the baro's touchdown
 GROUND_BAND_M = 20.0  # a jolt this close above the descent's lowest reading is the impact
+MIN_GNSS_FIXES = 5  # least GNSS fixes past the barometer's end that read on the descent
+HOLD_SAMPLES = 5  # a still stretch holds at least this many samples (a 1 Hz GNSS: 5 s)
+STILL_SLOPE_SIGMAS = 3.0  # a still stretch's slope within this many of its noise's sigmas
 
 
 @dataclass(frozen=True)
@@ -114,9 +127,24 @@ def _spikes(t: np.ndarray, x: np.ndarray, floor: float, within: np.ndarray) -> n
     return t[within][np.abs(r) > max(SPIKE_SIGMAS * scatter, floor)]
 
 
-def detect_events(samples: pd.DataFrame) -> tuple[dict[str, FlightEvent], list[str]]:
+def gnss_reads_on(t_baro: np.ndarray, gnss: pd.DataFrame | None) -> bool:
+    """Whether the GNSS altitude (`gnss`: ``time`` s, ``gps_altitude`` m) reads on more than
+    `HOLD_S` past the barometer's last sample (`t_baro`, s), with at least
+    `MIN_GNSS_FIXES` fixes after it: a descent the barometer's file does not cover."""
+    if gnss is None or gnss.empty or t_baro.size == 0:
+        return False
+    after = gnss["time"].to_numpy(float) > t_baro[-1]
+    return bool(after.sum() >= MIN_GNSS_FIXES
+                and gnss["time"].to_numpy(float)[after][-1] > t_baro[-1] + HOLD_S)
+
+
+def detect_events(samples: pd.DataFrame, gnss: pd.DataFrame | None = None
+                  ) -> tuple[dict[str, FlightEvent], list[str]]:
     """The events of the module docstring found in a record's `samples` (time (s), altitude
-    (m), acceleration (m/s^2, 1 g subtracted)), and notes on what could not be told."""
+    (m), acceleration (m/s^2, 1 g subtracted)), and notes on what could not be told;
+    `gnss` (``time`` s, ``gps_altitude`` m), where the log has GNSS altitudes, gives
+    touchdown and the ground's level where the barometer stops in the air and the GNSS
+    reads on (`gnss_reads_on`)."""
     accel = samples[["time", "acceleration"]].dropna()
     baro = samples[["time", "altitude"]].dropna()
     ta, a = accel["time"].to_numpy(float), accel["acceleration"].to_numpy(float)
@@ -152,20 +180,33 @@ def detect_events(samples: pd.DataFrame) -> tuple[dict[str, FlightEvent], list[s
                                        0.5 * float(near_top.max() - near_top.min())),
                                    "altimeter")
     down = touchdown(tb, h, ta, a, float(tb[k_top]))
-    t_stop = down.time - HOLD_S if down is not None else float(tb[-1])
+    # The channel that reads the descent to its end: the barometer, or the GNSS where the
+    # barometer's file stops in the air and the GNSS's reads on.
+    t_low, h_low = tb, smooth
+    if down is None and gnss_reads_on(tb, gnss):
+        assert gnss is not None
+        tg, hg = gnss["time"].to_numpy(float), gnss["gps_altitude"].to_numpy(float)
+        t_low, h_low = tg, _running_median(tg, hg, SMOOTH_S)
+        down = touchdown(tg, hg, ta, a, float(tb[k_top]))
+        if down is not None and down.source == "altimeter":
+            down = FlightEvent(down.time, down.sigma, "GNSS altitude")
+    # Each sensor over its own span: the altimeter's pulses up to its end, the
+    # accelerometer's jolts up to the end of the channel that reads their height.
+    t_stop_b = down.time - HOLD_S if down is not None else float(tb[-1])
+    t_stop_a = down.time - HOLD_S if down is not None else float(t_low[-1])
     lo = start + (AFTER_BURNOUT_S if "coast" in events else 0.0)
-    in_a, in_b = (ta >= lo) & (ta < t_stop), (tb >= lo) & (tb < t_stop)
+    in_a, in_b = (ta >= lo) & (ta < t_stop_a), (tb >= lo) & (tb < t_stop_b)
     jolts = _spikes(ta, a, SPIKE_MIN_G * G0, in_a)
     pulses = _spikes(tb, h, PULSE_MIN_M, in_b)
     charges = _ejections(jolts, pulses, ta, tb)
     top = events["apogee"]
     # No canopy is deployed at the ground: a jolt within GROUND_BAND_M of the descent's
     # lowest reading is its impact (a log that ends at the impact finds no touchdown).
-    after_top = tb > top.time
+    after_top = t_low > top.time
     if after_top.any():
-        ground = float(smooth[after_top].min())
+        ground = float(h_low[after_top].min())
         impacts = [c for c in charges if c.time > top.time
-                   and float(np.interp(c.time, tb, smooth)) <= ground + GROUND_BAND_M]
+                   and float(np.interp(c.time, t_low, h_low)) <= ground + GROUND_BAND_M]
         if impacts:
             notes.append(f"a jolt at {impacts[0].time:.2f} s, at the descent's lowest "
                          "reading: the impact on the ground, not an ejection charge")
@@ -231,30 +272,36 @@ def touchdown(tb: np.ndarray, h: np.ndarray, ta: np.ndarray, a: np.ndarray,
               after: float) -> FlightEvent | None:
     """Touchdown after `after` (s), or None where the log ends before the vehicle is down.
 
-    Landed: the altitude's slope within STILL_RATE_M_S and its range within
-    STILL_BAND_SIGMAS noise sigmas (+ STILL_BAND_M) over HOLD_S (or to the log's end,
-    where that comes sooner but after MIN_HOLD_S), and the
-    accelerometer's scatter there within REST_ACCEL_M_S2 (or three times the
-    pad's).  The touchdown time is where the line through the last 2 s
-    of the descent above the ground's noise meets the ground level (the median
-    altitude while still); where the accelerometer shows the impact within
-    IMPACT_WINDOW_S of it, the impact's sample.  Sigma: one sample interval of
-    the sensor that timed it, or the noise over the descent rate."""
+    Landed: the altitude's slope within STILL_RATE_M_S (or STILL_SLOPE_SIGMAS of the
+    noise's slope sigma over the window, where that is larger: a GNSS's metres of noise)
+    and its range within STILL_BAND_SIGMAS noise sigmas (+ STILL_BAND_M) over HOLD_S and
+    HOLD_SAMPLES samples (or to the log's end, where that comes sooner but after
+    MIN_HOLD_S), and the accelerometer's scatter there within REST_ACCEL_M_S2 (or three
+    times the pad's).  The touchdown time is where the line through the last 2 s (four
+    samples at least) of the descent above the ground's noise meets the ground level (the
+    median altitude while still); where the accelerometer shows the impact within
+    IMPACT_WINDOW_S of it, the impact's sample.  Sigma: one sample interval of the
+    sensor that timed it, or the noise over the descent rate.  `tb`, `h`: the altitude
+    channel's times (s) and heights (m): the barometer's, or a GNSS's at 1-10 Hz."""
     noise = max(second_difference_sigma(h), 0.05)
     band = STILL_BAND_SIGMAS * noise + STILL_BAND_M
     rest_a = (max(REST_ACCEL_M_S2, 3.0 * float(np.std(a[: max(10, ta.size // 20)])))
               if ta.size > 20 else np.inf)
     dtb = sample_interval(tb)
+    hold_s, min_hold_s = max(HOLD_S, HOLD_SAMPLES * dtb), max(MIN_HOLD_S,
+                                                               (HOLD_SAMPLES - 1) * dtb)
     step = max(1, round(0.1 / dtb))
     candidates = np.flatnonzero(tb > after)[::step]
     for i in candidates:
         # A log that ends soon after landing holds still for what is left, MIN_HOLD_S at least.
-        hold = min(HOLD_S, float(tb[-1] - tb[i]))
+        hold = min(hold_s, float(tb[-1] - tb[i]))
         w = (tb >= tb[i]) & (tb <= tb[i] + hold)
-        if hold < MIN_HOLD_S or w.sum() < 5:
+        if hold < min_hold_s or w.sum() < HOLD_SAMPLES:
             return None
-        hw = h[w]
-        if np.ptp(hw) > band or abs(np.polyfit(tb[w] - tb[i], hw, 1)[0]) > STILL_RATE_M_S:
+        hw, tw = h[w], tb[w] - tb[i]
+        still_rate = max(STILL_RATE_M_S, STILL_SLOPE_SIGMAS * noise
+                         / float(np.sqrt(np.sum((tw - tw.mean()) ** 2))))
+        if np.ptp(hw) > band or abs(np.polyfit(tw, hw, 1)[0]) > still_rate:
             continue
         wa = (ta >= tb[i]) & (ta <= tb[i] + hold)
         if wa.sum() >= 5 and np.std(a[wa]) > rest_a:
@@ -265,11 +312,14 @@ def touchdown(tb: np.ndarray, h: np.ndarray, ta: np.ndarray, a: np.ndarray,
         if above.size == 0:
             return FlightEvent(float(tb[i]), _step_at(tb, tb[i]), "altimeter")
         t_c = tb[above[-1]]
-        fit = (tb >= t_c - 2.0) & (tb <= t_c) & (tb > after)
+        fit = (tb >= t_c - max(2.0, 3.0 * dtb)) & (tb <= t_c) & (tb > after)
         if fit.sum() < 4:
             return FlightEvent(float(t_c), _step_at(tb, t_c), "altimeter")
         slope, icpt = np.polyfit(tb[fit] - t_c, h[fit], 1)
-        t_down = t_c + (float(np.clip((ground - icpt) / slope, 0.0, 1.0)) if slope < 0 else 0.0)
+        # The ground lies within the noise's band below the last sample above it, at most
+        # twice the time the descent takes across that band (a second at least).
+        reach = max(1.0, 2.0 * (3.0 * noise + 0.5) / abs(slope)) if slope < 0 else 0.0
+        t_down = t_c + (float(np.clip((ground - icpt) / slope, 0.0, reach)) if slope < 0 else 0.0)
         step_c = _step_at(tb, t_c)
         sigma = max(step_c, noise / abs(slope)) if slope < 0 else step_c
         near = (ta >= t_down - IMPACT_WINDOW_S) & (ta <= t_down + IMPACT_WINDOW_S)

@@ -17,8 +17,13 @@ folder:
   or apogee itself, is ``drogue``, the next ``main``);
 * phase: from the first deployment to touchdown (`flight_events.touchdown`:
   the altitude has stopped falling and the accelerometer is at rest), less
-  `TOUCHDOWN_MARGIN_S`; a log that ends before touchdown ends the phase at
-  its end, and the import says so;
+  `TOUCHDOWN_MARGIN_S` (or three of touchdown's sigmas); a log that ends
+  before touchdown ends the phase at its end, and the import says so;
+* the descent's altitude channel: the barometer's or, where the altimeter's
+  file stops in the air and a GNSS altitude reads on to the ground, the
+  GNSS's (`gnss_descent`): touchdown, the descent's drag areas and forensics
+  read it, and a note says so; each file is read over its own span, and a
+  channel that stops inside the phase is left out of what it does not read;
 * events: each deployment as a ``mortar_fire`` of its canopy, with the state
   machine's timing sigma `EVENT_SIGMA_S` or the detector's sigma;
 * every series runs `SERIES_MARGIN_S` beyond the phase, so that each
@@ -27,7 +32,8 @@ folder:
   `EJECTION_EXCLUDE_S` after a deployment are left out (the ejection charge's pressure pulse reads
   as a 150 m jump in one sample);
 * ``gps_altitude.csv``: GPS altitude (m MSL) at each new fix with at least
-  four satellites;
+  four satellites, where the lapse rate is fitted to it or it carries the
+  descent (then less its datum offset, at a sigma from its scatter);
 * ``accelerometer.csv`` (where the log has an accelerometer): axial
   acceleration (m/s^2, 1 g subtracted), fitted by the `axial_accelerometer`
   effect, less the charge samples and, in each
@@ -111,7 +117,8 @@ def import_flight(log: FlightRecord | AltusLog, card: FlightCard, out: str | Pat
         d.baro_sigmas, {name: len(frame) for name, frame in d.files.items()},
         {**record.dropped, **d.dropped},
         d.accel_sigmas, d.snatches, d.events, [*record.notes, *d.notes], card.nominal,
-        {} if d.forensics is None else {c.name: c.as_dict() for c in d.forensics.canopies})
+        {} if d.forensics is None else {c.name: c.as_dict() for c in d.forensics.canopies},
+        d.carrier, d.gnss_sigma if d.carrier == "gps_altitude" else None)
     _write_folder(Path(out), d.manifest, d.files, summary, card.source, d.source)
     return summary
 

@@ -72,8 +72,11 @@ def flight_events(record: FlightRecord) -> tuple[dict[str, FlightEvent], list[st
     """The record's flight events with their sigmas: its logged states (sigma
     `EVENT_SIGMA_S`) where it has them, with apogee from the altimeter where they hold
     none, else those `detect_events` finds; touchdown (``landed``) always detected from the
-    data, never taken from a state or the log's end.  Notes say what could not be found."""
-    detected, notes = detect_events(record.samples)
+    data, never taken from a state or the log's end (the GNSS altitude's where the
+    barometer's file stops in the air and the GNSS's reads on).  Notes say what could not
+    be found."""
+    detected, notes = detect_events(record.samples,
+                                    record.gps_fixes() if record.has_gps_altitude else None)
     if record.states:
         events = {name: FlightEvent(t, EVENT_SIGMA_S, "flight state")
                   for name, t in record.states.items() if name != "landed"}

@@ -115,6 +115,10 @@ class ImportSummary:
     nominal: dict[str, dict[str, Any]] = field(default_factory=dict)  # the card's, as given
     # Per canopy: whether it opened, from the log alone (`deployment_forensics`).
     deployments: dict[str, dict[str, Any]] = field(default_factory=dict)
+    # The channel that reads the descent (``baro``, or ``gps_altitude`` where the
+    # barometer's file stops in the air), and the GNSS altitude's sigma (m) where it does.
+    descent_channel: str = "baro"
+    gnss_sigma_m: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return {"recorder": self.recorder, "phase_s": list(self.phase), "events_s": self.events,
@@ -130,4 +134,5 @@ class ImportSummary:
                 "flight_events": {k: {"time_s": e.time, "sigma_s": e.sigma, "source": e.source}
                                   for k, e in self.flight_events.items()},
                 "notes": self.notes, "samples": self.samples, "dropped": self.dropped,
-                "nominal": self.nominal, "deployments": self.deployments}
+                "nominal": self.nominal, "deployments": self.deployments,
+                "descent_channel": self.descent_channel, "gnss_sigma_m": self.gnss_sigma_m}

@@ -7,23 +7,33 @@ the field and what was expected.  A new recorder's quirk or a new pathology is o
 step added to the sequence, tested on its own, not a branch inside the whole:
 
 1. `clean_log_end`: a damaged end of the log (a reset, garbage) left out;
-2. `read_altimeter`: the barometer's samples, checked for a flight's speeds and boost;
-3. `find_events`: flight states or detected events, the pad's air, the card's events;
-4. `choose_deployments`: the event that deploys each canopy, and a descent long enough;
-5. `bound_phase`: touchdown, the phase, the altimeter's samples in it less the charges'
-   windows and swings and a dead altimeter's;
-6. `site_air`: the site atmosphere, its lapse rate given or fitted to the GNSS;
-7. `descent_drag`: each canopy's drag area from its settled descent, and the diameters
+2. `read_altimeter`: the barometer's samples, checked for a flight's speeds and boost,
+   and the GNSS's fixes with an altitude;
+3. `find_events`: flight states or detected events, the pad's air;
+4. `descent_channel`: the channel that reads the descent: the barometer's, or the GNSS
+   altitude's where the barometer's file stops in the air and the GNSS's reads on
+   (`gnss_descent`);
+5. `given_events`: the card's events, a height's crossing read in that channel;
+6. `choose_deployments`: the event that deploys each canopy, and a descent long enough;
+7. `bound_phase`: touchdown, the phase, the altimeter's samples in it less the charges'
+   windows and swings and a dead altimeter's, the descent channel's samples in it;
+8. `site_air`: the site atmosphere, its lapse rate given or fitted to the GNSS;
+9. `descent_drag`: each canopy's drag area from its settled descent, and the diameters
    the card leaves out;
-8. `altimeter_series`: the altimeter averaged over its noise's correlation, with a
-   sigma per canopy phase;
-9. `canopy_forensics`: whether each canopy opened, and how fully, from the log alone;
-10. `accelerometer_series`: the axial accelerometer less charges, snatches and dead
+10. `altimeter_series`: the altimeter averaged over its noise's correlation, with a
+   sigma per canopy phase, over the part of the phase it reads;
+11. `canopy_forensics`: whether each canopy opened, and how fully, from the log alone;
+12. `accelerometer_series`: the axial accelerometer less charges, snatches and dead
    samples, with its sigmas, and each later canopy's full open;
-11. `gnss_series`: the GNSS altitude, where the lapse rate was fitted to it;
-12. `merged_series`: each series' independent samples merged where the signal is straight,
+13. `gnss_series`: the GNSS altitude, where the lapse rate was fitted to it or it reads
+   the descent;
+14. `merged_series`: each series' independent samples merged where the signal is straight,
    so that a long log's steady descent is a few means a second, not every sample;
-13. `model_block`: the manifest, with the model to fit (`rocket_model`).
+15. `model_block`: the manifest, with the model to fit (`rocket_model`).
+
+Each file of a log is read over its own span: the altimeter's end is not the GNSS's,
+nor the accelerometer's.  A channel that stops inside the phase is left out of the part
+it does not read (or of the folder), with a note; it never ends the phase.
 """
 
 from __future__ import annotations
@@ -47,9 +57,16 @@ from cpas_ocp.io.deployment_forensics import (
 )
 from cpas_ocp.io.descent_drag import canopy_diameters, descent_drag_areas, descent_mass
 from cpas_ocp.io.flight_card import FlightCard, card_quantity, pad_temperature
-from cpas_ocp.io.flight_events import FlightEvent, sample_interval, second_difference_sigma
+from cpas_ocp.io.flight_events import (
+    GROUND_BAND_M,
+    FlightEvent,
+    gnss_reads_on,
+    sample_interval,
+    second_difference_sigma,
+)
 from cpas_ocp.io.flight_record import FlightRecord, enu_about
 from cpas_ocp.io.flight_test import FORMAT
+from cpas_ocp.io.gnss_descent import DATUM_SPEED_M_S, descent_sigma, gnss_channel, gnss_offset
 from cpas_ocp.io.import_events import (
     EJECTION_EXCLUDE_S,
     EVENT_SIGMA_S,
@@ -86,7 +103,10 @@ from cpas_ocp.io.rocket_model import held_closed, held_openings, rocket_model
 from cpas_ocp.io.site_air import LAPSE_BOUNDS_K_M, fit_lapse_rate, pad_pressure
 from cpas_ocp.physics.atmosphere import ISA_LAPSE_K_M, SiteAtmosphere, pressure_altitude
 
-TOUCHDOWN_MARGIN_S = 0.5  # phase ends this long before the detected touchdown (s)
+TOUCHDOWN_MARGIN_S = 0.5  # phase ends this long before the detected touchdown (s) ...
+
+
+TOUCHDOWN_SIGMAS = 3.0  # ... or this many of touchdown's sigmas, where that is longer
 
 
 MIN_EVENT_SIGMA_S = 1e-6  # least event sigma a manifest states (its times' resolution, s)
@@ -120,6 +140,7 @@ class LogImport:
     dropped: dict[str, int] = field(default_factory=dict)
     # read_altimeter
     baro: pd.DataFrame = field(default_factory=pd.DataFrame)
+    gnss: pd.DataFrame = field(default_factory=pd.DataFrame)  # time, gps_altitude (m MSL)
     # find_events
     events: dict[str, FlightEvent] = field(default_factory=dict)
     p0: float = float("nan")
@@ -127,6 +148,12 @@ class LogImport:
     t0_note: str = ""
     pad_altitude: float = float("nan")
     elevation: float = float("nan")
+    # descent_channel: the channel that reads the descent ("baro" or "gps_altitude"), its
+    # samples as an altimeter's (time, altitude, pressure), and the GNSS's datum offset (m)
+    carrier: str = "baro"
+    altitude: pd.DataFrame = field(default_factory=pd.DataFrame)
+    gnss_offset: float = 0.0
+    # given_events
     unreached: dict[str, str] = field(default_factory=dict)  # card events past the log's end
     # choose_deployments
     flown: list[dict[str, Any]] = field(default_factory=list)  # the card's canopies in the log
@@ -137,6 +164,8 @@ class LogImport:
     t_down: float = float("nan")
     t_end: float = float("nan")
     baro_phase: pd.DataFrame = field(default_factory=pd.DataFrame)
+    altitude_phase: pd.DataFrame = field(default_factory=pd.DataFrame)  # the carrier's
+    gnss_sigma: float = float("nan")  # m, where the GNSS carries the descent
     charge_spans: dict[str, tuple[float, float]] = field(default_factory=dict)
     # site_air
     site: SiteAtmosphere | None = None
@@ -202,12 +231,27 @@ class LogImport:
 def clean_log_end(d: LogImport) -> None:
     """The log without its damaged end (`log_hygiene.damaged_end`): samples no descent
     produces are left out of the altimeter and, where the damage runs to the log's end,
-    every channel of the recorder is taken to end where it starts."""
+    every channel of the recorder is taken to end where it starts.  The altimeter's end
+    is not the flight's: a pulse the altitude comes back from, at the end of an altimeter
+    file beside a GNSS that reads the vehicle still coming down after it by more than
+    `flight_events.GROUND_BAND_M`, is no impact but an ejection charge's, and is kept
+    for the charge's detection."""
     samples = d.record.samples
     baro = samples[["time", "altitude"]].dropna()
     damage = damaged_end(baro["time"].to_numpy(), baro["altitude"].to_numpy())
     if damage is None:
         return
+    fixes = d.record.gps_fixes()
+    if not damage.to_end and gnss_reads_on(baro["time"].to_numpy(), fixes):
+        tg, hg = fixes["time"].to_numpy(float), fixes["gps_altitude"].to_numpy(float)
+        fall = float(np.interp(damage.t_from, tg, hg)) - float(hg[tg > damage.t_from].min())
+        if fall > GROUND_BAND_M:
+            d.notes.append(f"{damage.rows.size} altimeter sample(s) from {damage.t_from:.2f} s, "
+                           "near the altimeter's end, kept: they jump off the descent and "
+                           f"come back, and the GNSS reads the vehicle {fall:.0f} m further "
+                           "down after them: an ejection charge's pressure pulse, not an "
+                           "impact")
+            return
     rows = baro.index[damage.rows]
     samples = samples.copy()
     samples.loc[rows, ["altitude", "pressure"]] = np.nan
@@ -223,6 +267,7 @@ def read_altimeter(d: LogImport) -> None:
     speeds a rocket flies, with the accelerometer's boost the right way up."""
     samples = d.record.samples
     d.baro = samples[["time", "altitude", "pressure"]].dropna()
+    d.gnss = d.record.gps_fixes()[["time", "gps_altitude"]]
     if len(d.baro) < 20:
         raise InputError(d.source, "pressure", "a barometer (pressure or altitude) read in at "
                          f"least 20 samples; the log has {len(d.baro)}")
@@ -233,7 +278,7 @@ def read_altimeter(d: LogImport) -> None:
 
 def find_events(d: LogImport) -> None:
     """The log's flight events (`import_events.flight_events`), the pad's pressure and
-    temperature, checked for a pad's air, and the card's own events over them."""
+    temperature, checked for a pad's air."""
     events, notes = flight_events(d.record)
     d.events, d.notes = events, [*d.notes, *notes]
     card = d.card
@@ -247,7 +292,48 @@ def find_events(d: LogImport) -> None:
     check_pad_air(d.record, d.p0, d.t0, "card" if "temperature" in site_spec else
                   "density" if "surface_density" in site_spec else "standard", d.elevation,
                   card.source, "pressure" in site_spec)
-    given, d.unreached = card_events(card, d.baro, d.pad_altitude, d.events)
+
+
+def descent_channel(d: LogImport) -> None:
+    """The channel that reads the descent: the barometer's where it finds touchdown or no
+    GNSS altitude reads on past its end; else the GNSS altitude's (`gnss_descent`), read
+    as an altimeter would have read it through the site atmosphere of the card's lapse
+    rate, about its datum offset (`gnss_offset`); a note says which and why."""
+    d.altitude = d.baro
+    landed = d.events.get("landed")
+    tb = d.baro["time"].to_numpy()
+    if (landed is not None and landed.source != "GNSS altitude") \
+            or not gnss_reads_on(tb, d.gnss):
+        return
+    card = d.card
+    if card.site.get("lapse_rate") == "gps":
+        raise InputError(card.source, "site.lapse_rate", f"a value: 'gps' fits the lapse rate "
+                         f"to the GNSS altitudes of the descent against the barometer's, and "
+                         f"{d.source}'s barometer ends at {tb[-1]:.2f} s, before the descent "
+                         "the GNSS reads")
+    d.site = SiteAtmosphere(d.elevation, d.p0, d.t0, card_lapse_rate(card))
+    d.gnss_offset, used = gnss_offset(d.gnss, d.baro, d.site)
+    d.altitude = gnss_channel(d.gnss, d.site, d.gnss_offset)
+    d.carrier = "gps_altitude"
+    tg = d.gnss["time"].to_numpy()
+    height = float(d.baro["altitude"].iloc[-1]) - d.pad_altitude
+    ending = (f"touchdown at {landed.time:.2f} s" if landed is not None
+              else f"their end at {tg[-1]:.2f} s")
+    datum = (f"its datum {d.gnss_offset:+.1f} m from the site atmosphere's altitude (the "
+             f"median over the {used} fixes where both read the vehicle slower than "
+             f"{DATUM_SPEED_M_S:g} m/s)" if used else "no fix where both read a slow "
+             "vehicle: its altitude taken as the site atmosphere's")
+    d.notes.append(f"the GNSS altitude carries the descent: the barometer's samples end at "
+                   f"{tb[-1]:.2f} s, {height:.0f} m above the pad, and the GNSS's "
+                   f"{int((tg > tb[-1]).sum())} fixes after that go on to {ending}; the "
+                   f"events, the descent's drag areas, the forensics and the fit read the "
+                   f"descent in it ({datum})")
+
+
+def given_events(d: LogImport) -> None:
+    """The card's own events over the log's (`import_events.card_events`): at a time, or at
+    a height's crossing in the descent's channel."""
+    given, d.unreached = card_events(d.card, d.altitude, d.pad_altitude, d.events)
     d.events.update(given)
 
 
@@ -283,34 +369,45 @@ def choose_deployments(d: LogImport) -> None:
         d.flown.append(chute)
     check_charges_deploy(d.events, d.deploy, card, d.source, bool(d.record.states))
     d.t_begin = min(d.deploy.values())
-    descent = d.baro[d.baro["time"] > d.t_begin]
+    descent = d.altitude[d.altitude["time"] > d.t_begin]
     if len(descent) < MIN_DESCENT_SAMPLES or \
             float(descent["time"].max()) - d.t_begin < MIN_DESCENT_S:
         span = float(descent["time"].max()) - d.t_begin if len(descent) else 0.0
         first = min(d.deploy, key=d.deploy.__getitem__)
+        what = "GNSS fixes" if d.carrier == "gps_altitude" else "altimeter samples"
         raise InputError(d.source, "(time)", f"a descent of at least {MIN_DESCENT_S:g} s and "
-                         f"{MIN_DESCENT_SAMPLES} altimeter samples after the first deployment "
-                         f"({first} at {d.t_begin:.2f} s) to fit; the log ends {span:.2f} s "
-                         f"after it, with {len(descent)} samples")
+                         f"{MIN_DESCENT_SAMPLES} {what} after the first deployment "
+                         f"({first} at {d.t_begin:.2f} s) to fit (or a GNSS altitude that "
+                         f"reads on to the ground); the log ends {span:.2f} s after it, with "
+                         f"{len(descent)} samples")
 
 
 def bound_phase(d: LogImport) -> None:
-    """The phase, from the first deployment to `TOUCHDOWN_MARGIN_S` before touchdown (or
-    the log's end), and the altimeter's samples over it and `SERIES_MARGIN_S` beyond, less
-    the charges' windows and a dead altimeter's samples, at speeds a canopy descends."""
-    baro = d.baro
-    if "landed" in d.events:
-        d.t_down = d.events["landed"].time
-        ground = baro[(baro["time"] >= d.t_down) & (baro["time"] <= d.t_down + 3.0)]["altitude"]
-        d.notes.append(f"touchdown at {d.t_down:.2f} s, "
-                       f"{float(ground.median()) - d.pad_altitude:+.1f} m (pressure altitude) "
-                       "from the pad")
+    """The phase, from the first deployment to `TOUCHDOWN_MARGIN_S` (or `TOUCHDOWN_SIGMAS`
+    of touchdown's sigma) before touchdown (or the descent channel's end), and the
+    altimeter's samples over it and `SERIES_MARGIN_S` beyond, less the charges' windows
+    and a dead altimeter's samples, at speeds a canopy descends; the descent channel's
+    samples over it (the GNSS's, with their noise sigma, where it carries the descent)."""
+    baro, alt = d.baro, d.altitude
+    read_as = "pressure altitude" if d.carrier == "baro" else \
+        "the GNSS altitude as pressure altitude"
+    landed = d.events.get("landed")
+    if landed is not None:
+        d.t_down = landed.time
+        after = alt[alt["time"] >= d.t_down]
+        ground = after[after["time"] <= d.t_down + max(3.0, 5.0 * sample_interval(
+            alt["time"].to_numpy()))]["altitude"]
+        level = float(ground.median()) if len(ground) else float(alt["altitude"].iloc[-1])
+        d.notes.append(f"touchdown at {d.t_down:.2f} s, {level - d.pad_altitude:+.1f} m "
+                       f"({read_as}) from the pad")
+        d.t_end = d.t_down - max(TOUCHDOWN_MARGIN_S, TOUCHDOWN_SIGMAS * landed.sigma)
     else:
-        d.t_down = float(baro["time"].iloc[-1])
-        d.notes.append(f"the log ends at {d.t_down:.2f} s, "
-                       f"{float(baro['altitude'].iloc[-1]) - d.pad_altitude:.1f} m above the "
-                       "pad: the phase ends at the log's end")
-    d.t_end = d.t_down - TOUCHDOWN_MARGIN_S
+        d.t_down = float(alt["time"].iloc[-1])
+        ends = "the log ends" if d.carrier == "baro" else "the GNSS's fixes end"
+        d.notes.append(f"{ends} at {d.t_down:.2f} s, "
+                       f"{float(alt['altitude'].iloc[-1]) - d.pad_altitude:.1f} m ({read_as}) "
+                       "above the pad: the phase ends at the log's end")
+        d.t_end = d.t_down - TOUCHDOWN_MARGIN_S
     if not d.record.gnss.empty:
         last = enu_about(d.record.gnss).iloc[-1]
         d.notes.append(f"GNSS: {len(d.record.gnss)} fixes, the last {last['east']:+.0f} m "
@@ -338,14 +435,34 @@ def bound_phase(d: LogImport) -> None:
         phase = phase[~dead]
     check_speed(d.record, phase["time"].to_numpy(), phase["altitude"].to_numpy(),
                 MAX_DESCENT_M_S, "no canopy descends faster")
-    d.baro_phase = phase
+    d.baro_phase = d.altitude_phase = phase
+    if d.carrier == "gps_altitude":
+        d.altitude_phase = alt[(alt["time"] >= lo) & (alt["time"] <= hi)]
+        d.gnss_sigma = descent_sigma(d.gnss["time"].to_numpy(),
+                                     d.gnss["gps_altitude"].to_numpy(), d.starts, d.t_end)
+
+
+def card_lapse_rate(card: FlightCard) -> float:
+    """The card's lapse rate (K/m; the standard atmosphere's where it gives none), above 0
+    and at most the dry adiabat's; InputError naming ``site.lapse_rate`` otherwise (or for
+    ``"gps"``, which is fitted, not given)."""
+    lapse_spec = card.site.get("lapse_rate", {"value": 1e3 * ISA_LAPSE_K_M, "unit": "K/km"})
+    lapse = card_quantity(lapse_spec, "lapse_rate", card.source, "site.lapse_rate")
+    if not 0.0 < lapse <= LAPSE_BOUNDS_K_M[1]:
+        raise InputError(card.source, "site.lapse_rate", f"a lapse rate above 0 and at "
+                         f"most the dry adiabat's {1e3 * LAPSE_BOUNDS_K_M[1]:g} K/km (or "
+                         f"'gps'); got {1e3 * lapse:g} K/km")
+    return lapse
 
 
 def site_air(d: LogImport) -> None:
     """The site atmosphere: the pad's pressure and temperature, and the card's lapse rate
-    or, with ``"gps"``, the one fitted to the descent's GNSS altitudes."""
+    or, with ``"gps"``, the one fitted to the descent's GNSS altitudes (already set where
+    the GNSS carries the descent: `descent_channel`)."""
     card = d.card
     d.notes.append(d.t0_note)
+    if d.site is not None:
+        return
     lapse_spec = card.site.get("lapse_rate", {"value": 1e3 * ISA_LAPSE_K_M, "unit": "K/km"})
     if lapse_spec == "gps":
         fixes = d.record.gps_fixes()
@@ -357,11 +474,7 @@ def site_air(d: LogImport) -> None:
                                      d.elevation, d.p0, d.t0)
         lapse = d.lapse_fit[0]
     else:
-        lapse = card_quantity(lapse_spec, "lapse_rate", card.source, "site.lapse_rate")
-        if not 0.0 < lapse <= LAPSE_BOUNDS_K_M[1]:
-            raise InputError(card.source, "site.lapse_rate", f"a lapse rate above 0 and at "
-                             f"most the dry adiabat's {1e3 * LAPSE_BOUNDS_K_M[1]:g} K/km (or "
-                             f"'gps'); got {1e3 * lapse:g} K/km")
+        lapse = card_lapse_rate(card)
         if d.record.has_gps_altitude:
             d.notes.append("the GNSS altitudes are not fitted: the card's lapse rate is given "
                            "('gps' fits it to them and fits them)")
@@ -373,7 +486,7 @@ def descent_drag(d: LogImport) -> None:
     diameters the card leaves out taken from it, and each later canopy's settled time,
     from which its altimeter sigma applies."""
     assert d.site is not None
-    t, h = d.baro_phase["time"].to_numpy(), d.baro_phase["altitude"].to_numpy()
+    t, h = d.altitude_phase["time"].to_numpy(), d.altitude_phase["altitude"].to_numpy()
     starts = d.starts
     d.settled = [settled_time(t, h, a, b) for a, b in pairwise([*starts[1:], d.t_end])]
     d.parachutes = [dict(c) for c in d.flown]
@@ -386,14 +499,31 @@ def altimeter_series(d: LogImport) -> None:
     blocks as long as its noise's correlation (`independent_blocks`: a recorder's filter,
     the static port's swings as the vehicle swings), so that the fit weighs what the
     altimeter measured independently; each sigma the scatter of the block means, a later
-    canopy's from its settled time."""
+    canopy's from its settled time.  Where the GNSS carries the descent, the altimeter's
+    file stopped inside the phase: it is written over the canopy phases it reads into, or
+    left out of the folder where it reads fewer than `MIN_DESCENT_SAMPLES` samples of
+    the phase, with a note."""
     lo, hi = d.span
     starts = d.starts
+    in_phase = d.baro_phase[(d.baro_phase["time"] >= d.t_begin)
+                            & (d.baro_phase["time"] <= d.t_end)]
+    last = float(d.baro["time"].iloc[-1])
+    if d.carrier == "gps_altitude":
+        if len(in_phase) < MIN_DESCENT_SAMPLES:
+            d.notes.append(f"altimeter: its samples end at {last:.2f} s, with "
+                           f"{len(in_phase)} in the phase ({d.t_begin:.2f}-{d.t_end:.2f} s): "
+                           "left out of the folder, whose descent the GNSS altitude carries")
+            return
+        d.notes.append(f"altimeter: its samples end at {last:.2f} s, inside the phase: "
+                       f"baro.csv reads the phase to there, the GNSS altitude all of it")
     edges = [lo, *d.settled, hi + 1.0]
     parts = []
+    sigma_after = []
     order = sorted(d.deploy, key=d.deploy.__getitem__)
     for (a, b), name, steady_end in zip(pairwise(edges), order, [*starts[1:], d.t_end],
                                         strict=True):
+        if a > last:  # the altimeter's file ended before this canopy phase
+            break
         part = d.baro_phase[(d.baro_phase["time"] >= a) & (d.baro_phase["time"] < b)]
         blocks, size = independent_blocks(part[["time", "altitude"]], steady_end)
         parts.append(blocks)
@@ -406,27 +536,35 @@ def altimeter_series(d: LogImport) -> None:
             blocks, steady_end = independent_blocks(d.baro_phase[["time", "altitude"]])[0], \
                 d.t_end
         d.baro_sigmas.append(max(MIN_BARO_SIGMA_M, block_sigma(blocks, steady_end)))
+        if len(d.baro_sigmas) > 1:
+            sigma_after.append({"time": {"value": round(a, 3), "unit": "s"},
+                                "sigma": {"altitude": {"value": round(d.baro_sigmas[-1], 3),
+                                                       "unit": "m"}}})
     d.files["baro.csv"] = pd.concat(parts, ignore_index=True)
     d.sensors.append(
         {"name": "baro", "kind": "baro", "file": "baro.csv",
          "columns": {"time": "s", "altitude": "m"},
          "sigma": {"altitude": {"value": round(d.baro_sigmas[0], 3), "unit": "m"}},
-         "sigma_after": [{"time": {"value": round(t, 3), "unit": "s"},
-                          "sigma": {"altitude": {"value": round(sig, 3), "unit": "m"}}}
-                         for t, sig in zip(d.settled, d.baro_sigmas[1:], strict=True)]})
+         "sigma_after": sigma_after})
 
 
 def canopy_forensics(d: LogImport) -> None:
     """Whether each canopy opened, and how fully, from the log alone
     (`deployment_forensics`): the drag area its settled descent needs against the
     airframe's (from the coast, else the card's ``forebody_cds`` where it gives one) and
-    against what its diameter gives; one sentence per canopy for the import's report."""
+    against what its diameter gives; one sentence per canopy for the import's report.  The
+    coast is the barometer's, the descents the descent channel's (the GNSS altitude's at its
+    own noise sigma, where it carries the descent)."""
     assert d.site is not None
     site, elevation = d.site, d.elevation
-    baro = d.baro[~d.charge_windows(d.baro["time"])]
-    t = baro["time"].to_numpy()
-    height = np.asarray(site.altitude_at_pressure(baro["pressure"].to_numpy()),
-                        dtype=float).ravel() - elevation
+
+    def heights(channel: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
+        """Times (s) and geometric heights above the site (m), less the charges' windows."""
+        kept = channel[~d.charge_windows(channel["time"])]
+        return kept["time"].to_numpy(), np.asarray(site.altitude_at_pressure(
+            kept["pressure"].to_numpy()), dtype=float).ravel() - elevation
+
+    t, height = heights(d.baro)
 
     def density(h: np.ndarray | float) -> np.ndarray:
         return np.asarray(site.density(elevation + np.asarray(h, dtype=float)),
@@ -450,9 +588,12 @@ def canopy_forensics(d: LogImport) -> None:
                        card_quantity(c["diameter"], "length", d.card.source,
                                      f"parachutes[{i}].diameter") if "diameter" in c else None)
                 for i, c in enumerate(d.flown)]
-    d.forensics = deployment_forensics(t, height, density, mass, canopies, t_end=d.t_end,
-                                       noise_sigma=d.baro_sigmas, airframe=airframe,
-                                       coast=coast)
+    if d.carrier == "gps_altitude":
+        t, height = heights(d.altitude)
+    d.forensics = deployment_forensics(
+        t, height, density, mass, canopies, t_end=d.t_end,
+        noise_sigma=d.gnss_sigma if d.carrier == "gps_altitude" else d.baro_sigmas,
+        airframe=airframe, coast=coast)
 
 
 def accelerometer_series(d: LogImport) -> None:
@@ -478,9 +619,9 @@ def accelerometer_series(d: LogImport) -> None:
     charge = d.charge_windows(accel["time"])
     d.dropped["ejection_charge_accelerometer_samples"] = int(charge.sum())
     accel = accel[~charge]
-    t_baro, h_baro = d.baro_phase["time"].to_numpy(), d.baro_phase["altitude"].to_numpy()
+    t_baro, h_baro = d.altitude_phase["time"].to_numpy(), d.altitude_phase["altitude"].to_numpy()
     density = np.asarray(d.site.density(d.site.altitude_at_pressure(
-        d.baro_phase["pressure"].to_numpy())), dtype=float).ravel()
+        d.altitude_phase["pressure"].to_numpy())), dtype=float).ravel()
     later = sorted((t, name) for name, t in d.deploy.items() if t > starts[0])
     snatch = np.zeros(len(accel), dtype=bool)
     # A later canopy's opening lasts from its charge until its descent has settled, and at
@@ -513,8 +654,8 @@ def accelerometer_series(d: LogImport) -> None:
         span = (f" (its samples there span {accel['time'].min():.2f}-"
                 f"{accel['time'].max():.2f} s, not the phase {d.t_begin:.2f}-{d.t_end:.2f} s)"
                 if len(accel) else "")
-        d.notes.append(f"no accelerometer over the log's phase{span}: the folder has the "
-                       "altimeter only")
+        d.notes.append(f"no accelerometer over the log's phase{span}: left out of the "
+                       "folder")
         return
     bounds = [*sorted({*starts, *opening_ends} - {d.t_end}), d.t_end]
     # Each canopy's steady segment (the series' margins included) is written as block means
@@ -550,20 +691,22 @@ def accelerometer_series(d: LogImport) -> None:
 
 def gnss_series(d: LogImport) -> None:
     """``gps_altitude.csv``: the GNSS altitude over the phase, where the lapse rate was
-    fitted to it, at the fit's residual sigma."""
-    if d.lapse_fit is None:
+    fitted to it (at the fit's residual sigma), or where it carries the descent (less its
+    datum offset, `gnss_descent.gnss_offset`, so that it reads the site atmosphere's
+    geometric altitude, at its own sigma from its scatter, `gnss_descent.gnss_sigma`)."""
+    if d.lapse_fit is None and d.carrier != "gps_altitude":
         return
     lo, hi = d.span
-    fixes = d.record.gps_fixes()
-    fixes = fixes[(fixes["time"] >= lo) & (fixes["time"] <= hi)]
+    fixes = d.gnss[(d.gnss["time"] >= lo) & (d.gnss["time"] <= hi)]
     if len(fixes) < 2:
         return
-    d.files["gps_altitude.csv"] = fixes[["time", "gps_altitude"]].rename(
-        columns={"gps_altitude": "up"})
+    sigma, offset = (d.lapse_fit[2], 0.0) if d.lapse_fit is not None else \
+        (d.gnss_sigma, d.gnss_offset)
+    d.files["gps_altitude.csv"] = pd.DataFrame({
+        "time": fixes["time"].to_numpy(), "up": fixes["gps_altitude"].to_numpy() - offset})
     d.sensors.append({"name": "gps_altitude", "kind": "gps_altitude",
                       "file": "gps_altitude.csv", "columns": {"time": "s", "up": "m"},
-                      "sigma": {"altitude": {"value": round(d.lapse_fit[2], 3),
-                                             "unit": "m"}}})
+                      "sigma": {"altitude": {"value": round(sigma, 3), "unit": "m"}}})
 
 
 def merged_series(d: LogImport) -> None:
@@ -660,6 +803,12 @@ def model_block(d: LogImport) -> None:
                               held_openings(d.deploy, d.events), d.deploy_sigma, d.still_air,
                               d.openings_read()),
     }
+    effects = d.manifest["model"].get("effects", [])
+    named = {e if isinstance(e, str) else e.get("effect") for e in effects}
+    if d.carrier == "gps_altitude" and "gps_altitude" not in named:
+        d.manifest["model"] = {**d.manifest["model"], "effects": [*effects, "gps_altitude"]}
+        d.notes.append("the card's model lists no gps_altitude effect, which the descent the "
+                       "GNSS carries needs: added")
     if d.forensics is None:
         return
     closed = {c.name: instant(d.deploy[c.name]) for c in d.forensics.canopies
@@ -698,6 +847,6 @@ def event_entry(name: str, parachute: str, t: float, sigma: float) -> dict[str, 
 
 # The import, step by step (see the module docstring).
 STEPS: tuple[Callable[[LogImport], None], ...] = (
-    clean_log_end, read_altimeter, find_events, choose_deployments, bound_phase, site_air,
-    descent_drag, altimeter_series, canopy_forensics, accelerometer_series, gnss_series,
-    merged_series, model_block)
+    clean_log_end, read_altimeter, find_events, descent_channel, given_events,
+    choose_deployments, bound_phase, site_air, descent_drag, altimeter_series,
+    canopy_forensics, accelerometer_series, gnss_series, merged_series, model_block)

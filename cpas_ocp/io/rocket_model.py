@@ -64,7 +64,8 @@ def rocket_model(block: dict[str, Any], sensor_kinds: list[str],
                  deploy_sigma: dict[str, float], still_air: bool = False,
                  timed: tuple[str, ...] = ()) -> dict[str, Any]:
     """The manifest's model block: the card's where it lists effects; else `ROCKET_EFFECTS`
-    with the sensors' (`sensor_kinds`) and, with a second sensor, the altimeter's errors;
+    with the sensors' (`sensor_kinds`) and, with an altimeter and a second sensor, the
+    altimeter's errors;
     each start window at least three of its deployment's sigmas (and `MIN_START_WINDOW_S`);
     the opening shape (n, expopen) of the canopies named in `held` held at
     `HELD_FILL_CONSTANT`, `HELD_EXPOPEN` (those in `timed`, whose opening an accelerometer
@@ -78,7 +79,7 @@ def rocket_model(block: dict[str, Any], sensor_kinds: list[str],
                if e == "canopy_inflation" else e for e in ROCKET_EFFECTS
                if not (still_air and isinstance(e, dict) and e["effect"] == "wind_process")]
     others = [SENSOR_EFFECTS[k] for k in dict.fromkeys(sensor_kinds) if k != "baro"]
-    effects += [*(ALTIMETER_ERRORS if others else ()), *others]
+    effects += [*(ALTIMETER_ERRORS if others and "baro" in sensor_kinds else ()), *others]
     fix: dict[str, Any] = {}
     accelerometer = "axial_accelerometer" in sensor_kinds
     for name, stage in canopies:

@@ -23,8 +23,12 @@ def import_text(summary: ImportSummary) -> str:
         lines.append(f"  (lapse rate fitted to the GPS fixes: GPS offset "
                      f"{summary.lapse_fit[1]:+.1f} m, residual sigma "
                      f"{summary.lapse_fit[2]:.1f} m)")
-    lines.append("altimeter sigma per canopy phase: "
-                 + ", ".join(f"{s:.2f} m" for s in summary.baro_sigma_m))
+    if summary.baro_sigma_m:
+        lines.append("altimeter sigma per canopy phase: "
+                     + ", ".join(f"{s:.2f} m" for s in summary.baro_sigma_m))
+    if summary.descent_channel == "gps_altitude":
+        lines.append(f"the descent is read in the GNSS altitude (the altimeter stops in the "
+                     f"air), sigma {summary.gnss_sigma_m:.2f} m from its scatter")
     if summary.accel_sigma:
         lines.append("accelerometer sigma per steady descent and opening (the swing "
                      "counted): " + ", ".join(f"{s:.2f} m/s²" for s in summary.accel_sigma))
