@@ -480,7 +480,9 @@ def late_opening(t: np.ndarray, height: np.ndarray, density: Density, mass: floa
     heights after the charge (`rate_change_time`, nothing before it: the apogee's top is no
     descent) up to `HINGE_AFTER_S` past its settled `descent` (or `t_to`), more than
     `LATE_OPENING_S` after the charge, with the fall before it (a line through the heights
-    from the charge to the corner) `LATE_RATE_RATIO` times faster than the settled rate.
+    of the later half from the charge to the corner, short of its last half second: the
+    vehicle speeds up after the charge) `LATE_RATE_RATIO` times faster than the settled
+    rate.
     Returns the corner (s), its sigma (s), the fall's rate (m/s) and the drag area it
     needs, 2 m g / (rho v^2) at its mean height (m^2, its sigma from the line's scatter and
     `AIR_SIGMA_M_S`): what held the vehicle before the canopy opened (the airframe and the
@@ -489,7 +491,8 @@ def late_opening(t: np.ndarray, height: np.ndarray, density: Density, mass: floa
                              before_s=0.0)
     if found is None or found[0] - t_charge <= LATE_OPENING_S:
         return None
-    fall = (t >= t_charge) & (t <= found[0])
+    # The fall's later half, short of the corner: the vehicle speeds up after the charge.
+    fall = (t >= 0.5 * (t_charge + found[0])) & (t <= found[0] - 0.5)
     if fall.sum() < MIN_DESCENT_SAMPLES // 2:
         return None
     h_ref = float(np.mean(height[fall]))
