@@ -479,8 +479,9 @@ def late_opening(t: np.ndarray, height: np.ndarray, density: Density, mass: floa
     """Where the first canopy deployed at `t_charge` (s) took hold late: the corner of the
     heights after the charge (`rate_change_time`, nothing before it: the apogee's top is no
     descent) up to `HINGE_AFTER_S` past its settled `descent` (or `t_to`), more than
-    `LATE_OPENING_S` after the charge, with the fall before it (a line through the heights
-    of the later half from the charge to the corner, short of its last half second: the
+    `LATE_OPENING_S` after the charge by three of its sigmas, with the fall before it (a
+    line through the heights of the later half from the charge to the corner, short of its
+    last half second: the
     vehicle speeds up after the charge) `LATE_RATE_RATIO` times faster than the settled
     rate.
     Returns the corner (s), its sigma (s), the fall's rate (m/s) and the drag area it
@@ -489,7 +490,8 @@ def late_opening(t: np.ndarray, height: np.ndarray, density: Density, mass: floa
     canopy streaming).  None where the canopy took hold at its charge."""
     found = rate_change_time(t, height, t_charge, min(t_to, descent.t_from + HINGE_AFTER_S),
                              before_s=0.0)
-    if found is None or found[0] - t_charge <= LATE_OPENING_S:
+    # Late beyond doubt: three of the corner's sigmas short of it still past LATE_OPENING_S.
+    if found is None or found[0] - 3.0 * found[1] - t_charge <= LATE_OPENING_S:
         return None
     # The fall's later half, short of the corner: the vehicle speeds up after the charge.
     fall = (t >= 0.5 * (t_charge + found[0])) & (t <= found[0] - 0.5)
