@@ -49,8 +49,14 @@ open canopy of diameter D gives:
 * ``opened``: not below F, and above 0 (or above F) significantly; with the time the
   descent rate changed (`rate_change_time`) where there is a settled descent before the
   charge, and a flag where the drag area is more than `MAX_CD` pi D^2 / 4 can give (a
-  larger canopy was out: the main, at apogee?).  A later canopy whose charge changes
-  nothing after such a flag is ``undetermined`` (it may have been out already);
+  larger canopy was out: the main, at apogee?).  The first canopy's descent may take hold
+  late: where the heights after its charge fall `LATE_RATE_RATIO` times faster than its
+  settled descent up to a corner more than `LATE_OPENING_S` after the charge
+  (`late_opening`), the canopy hung (in its bag, streaming, tangled with a separated part)
+  and opened at that corner; the fall before it and the drag area that fall needs are
+  said, for the fit to start the canopy there (`rocket_model.late_openings`).  A later
+  canopy whose charge changes nothing after such a flag is ``undetermined`` (it may have
+  been out already);
 * ``undetermined``: the log ends before the charge or too soon after it (a settled
   descent of `MIN_SETTLED_S` and `log_noise.MIN_DESCENT_SAMPLES` samples), or the noise
   lets both nulls stand.  Where the canopy's diameter is unknown, "below F" is replaced by
@@ -124,6 +130,13 @@ HINGE_BEFORE_S = 5.0  # the rate-change fit looks this far before a charge (s) .
 
 HINGE_AFTER_S = 5.0  # ... and this far past the settled time after it
 
+# A canopy fills within a second or two of its charge; the descent's corner this long after
+# the first canopy's charge, from a fall this many times faster than the settled descent,
+# is a late opening (`late_opening`).
+LATE_OPENING_S = 2.0
+
+LATE_RATE_RATIO = 1.5
+
 VERDICTS = ("opened", "partial", "not_opened", "undetermined")
 
 
@@ -180,7 +193,9 @@ class CanopyForensics:
     the test of "nothing opened" (own <= 0); z_short, p_short: of "open at F or more"
     (own >= F); above_diameter: the own drag area is significantly more than MAX_CD pi D^2
     / 4; t_open, t_open_sigma: when the descent rate changed (s); rate_before: the settled
-    descent before the charge (a later canopy's)."""
+    descent before the charge (a later canopy's); fall_before: the drag area (m^2) the
+    fall from the charge to a late opening needs (`late_opening`; None where the canopy
+    took hold at its charge)."""
 
     name: str
     verdict: str
@@ -198,6 +213,7 @@ class CanopyForensics:
     t_open: float | None
     t_open_sigma: float | None
     rate_before: SettledDescent | None
+    fall_before: DragArea | None = None
 
     def as_dict(self) -> dict[str, Any]:
         """The verdict, its sentence and the numbers it rests on (SI), for ``import.json``."""
@@ -214,7 +230,8 @@ class CanopyForensics:
                 "own": area(self.own), "before": area(self.before),
                 "p_opened": self.p_opened, "p_short": self.p_short,
                 "above_diameter": self.above_diameter,
-                "t_open_s": self.t_open, "t_open_sigma_s": self.t_open_sigma}
+                "t_open_s": self.t_open, "t_open_sigma_s": self.t_open_sigma,
+                "fall_before_m2": None if self.fall_before is None else self.fall_before.value}
 
 
 @dataclass(frozen=True)
@@ -427,16 +444,16 @@ def coast_drag_area(t: np.ndarray, height: np.ndarray, density: Density, mass: f
                     "coast (altimeter and accelerometer)")
 
 
-def rate_change_time(t: np.ndarray, height: np.ndarray, t_charge: float, t_to: float
-                     ) -> tuple[float, float] | None:
+def rate_change_time(t: np.ndarray, height: np.ndarray, t_charge: float, t_to: float,
+                     before_s: float = HINGE_BEFORE_S) -> tuple[float, float] | None:
     """When the descent rate changed after a charge at `t_charge` (s): the corner of two
-    straight lines joined there, fitted to the heights from `HINGE_BEFORE_S` before the
+    straight lines joined there, fitted to the heights from `before_s` before the
     charge to `t_to` (s), by least squares over corners at every sample from the charge
     on; its sigma the half-width of the corners whose residual sum exceeds the least by
     at most one noise variance (the residual variance times their integrated
     autocorrelation time).  The opening's deceleration is a curve: the corner marks its
     middle.  None with too few samples."""
-    sel = (t >= t_charge - HINGE_BEFORE_S) & (t <= t_to)
+    sel = (t >= t_charge - before_s) & (t <= t_to)
     ts, hs = t[sel], height[sel]
     corners = ts[(ts >= t_charge) & (ts <= t_to - 1.0)]
     if ts.size < MIN_DESCENT_SAMPLES or corners.size < 3:
@@ -454,6 +471,40 @@ def rate_change_time(t: np.ndarray, height: np.ndarray, t_charge: float, t_to: f
     near = corners[rss - rss[k] <= noise]
     step = float(np.median(np.diff(ts)))
     return float(c), max(step, 0.5 * float(near.max() - near.min()))
+
+
+def late_opening(t: np.ndarray, height: np.ndarray, density: Density, mass: float,
+                 t_charge: float, descent: SettledDescent, t_to: float
+                 ) -> tuple[float, float, float, DragArea] | None:
+    """Where the first canopy deployed at `t_charge` (s) took hold late: the corner of the
+    heights after the charge (`rate_change_time`, nothing before it: the apogee's top is no
+    descent) up to `HINGE_AFTER_S` past its settled `descent` (or `t_to`), more than
+    `LATE_OPENING_S` after the charge by three of its sigmas, with the fall before it (a
+    line through the heights of the later half from the charge to the corner, short of its
+    last half second: the
+    vehicle speeds up after the charge) `LATE_RATE_RATIO` times faster than the settled
+    rate.
+    Returns the corner (s), its sigma (s), the fall's rate (m/s) and the drag area it
+    needs, 2 m g / (rho v^2) at its mean height (m^2, its sigma from the line's scatter and
+    `AIR_SIGMA_M_S`): what held the vehicle before the canopy opened (the airframe and the
+    canopy streaming).  None where the canopy took hold at its charge."""
+    found = rate_change_time(t, height, t_charge, min(t_to, descent.t_from + HINGE_AFTER_S),
+                             before_s=0.0)
+    # Late beyond doubt: three of the corner's sigmas short of it still past LATE_OPENING_S.
+    if found is None or found[0] - 3.0 * found[1] - t_charge <= LATE_OPENING_S:
+        return None
+    # The fall's later half, short of the corner: the vehicle speeds up after the charge.
+    fall = (t >= 0.5 * (t_charge + found[0])) & (t <= found[0] - 0.5)
+    if fall.sum() < MIN_DESCENT_SAMPLES // 2:
+        return None
+    h_ref = float(np.mean(height[fall]))
+    rho_ref = float(_rho(density, h_ref)[0])
+    rate, sigma = _line(t[fall], scaled_height(density, height[fall], rho_ref), 0.0)
+    if not rate > LATE_RATE_RATIO * descent.rate:
+        return None
+    sigma = math.hypot(sigma, AIR_SIGMA_M_S)
+    area = 2.0 * mass * G0 / (rho_ref * rate**2)
+    return found[0], found[1], rate, DragArea(area, area * 2.0 * sigma / rate, "fall")
 
 
 def _p(z: float) -> float:
@@ -516,7 +567,7 @@ def deployment_forensics(t: np.ndarray, height: np.ndarray, density: Density, ma
             previous, before = None, None
             continue
         out.append(_judge(chute, descent, before, previous, floor, z_c, out_already, t, height,
-                          t_to))
+                          t_to, density, mass))
         verdict = out[-1]
         out_already = out_already or verdict.above_diameter
         previous = descent
@@ -534,8 +585,8 @@ def _undetermined(chute: Canopy, floor: float | None, before: DragArea | None,
 
 def _judge(chute: Canopy, descent: SettledDescent, before: DragArea | None,
            previous: SettledDescent | None, floor: float | None, z_c: float,
-           out_already: bool, t: np.ndarray, height: np.ndarray, t_to: float
-           ) -> CanopyForensics:
+           out_already: bool, t: np.ndarray, height: np.ndarray, t_to: float,
+           density: Density, mass: float) -> CanopyForensics:
     """The verdict on one canopy whose settled descent was fitted (module docstring)."""
     name, total, s_total = chute.name, descent.drag_area, descent.drag_area_sigma
     if before is not None:
@@ -566,11 +617,23 @@ def _judge(chute: Canopy, descent: SettledDescent, before: DragArea | None,
     if already:
         verdict = "undetermined"
     t_open = None
+    fall: DragArea | None = None
     if verdict == "opened" and previous is not None:
         t_open = rate_change_time(t, height, float(chute.deploy_time),  # type: ignore[arg-type]
                                   min(t_to, descent.t_from + HINGE_AFTER_S))
+    late = None
+    if verdict in ("opened", "partial") and previous is None:
+        late = late_opening(t, height, density, mass,
+                            float(chute.deploy_time), descent, t_to)  # type: ignore[arg-type]
+    if late is not None:
+        t_open, fall = (late[0], late[1]), late[3]
     why = _why(chute, verdict, descent, own, before, previous, cut, above, bound, t_open,
                already)
+    if late is not None:
+        why = (f"it took hold {late[0] - float(chute.deploy_time):.1f} s after its charge "  # type: ignore[arg-type]
+               f"at {chute.deploy_time:.2f} s (hung in its bag, streaming or tangled?): the "
+               f"fall before at {_figure(late[2], AIR_SIGMA_M_S)} m/s needs "
+               f"{measured(fall.value, fall.sigma)} m^2 (airframe and canopy); then {why}")  # type: ignore[union-attr]
     head = {"opened": f"the {name} opened"
             + (f" at {measured(*t_open)} s" if t_open is not None else ""),
             "partial": f"the {name} opened only in part (a streamer, or a canopy partly "
@@ -582,7 +645,7 @@ def _judge(chute: Canopy, descent: SettledDescent, before: DragArea | None,
                            before, cut, z_opened, None if z_opened is None else _p(z_opened),
                            z_short, None if z_short is None else _p(z_short), above,
                            None if t_open is None else t_open[0],
-                           None if t_open is None else t_open[1], previous)
+                           None if t_open is None else t_open[1], previous, fall)
 
 
 def _why(chute: Canopy, verdict: str, descent: SettledDescent, own: DragArea,

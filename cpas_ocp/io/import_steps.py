@@ -99,9 +99,10 @@ from cpas_ocp.io.plausibility import (
     check_speed,
     check_steady_accelerometer,
 )
-from cpas_ocp.io.rocket_model import held_closed, held_openings, rocket_model
+from cpas_ocp.io.rocket_model import held_closed, held_openings, late_openings, rocket_model
 from cpas_ocp.io.site_air import LAPSE_BOUNDS_K_M, fit_lapse_rate, pad_pressure
 from cpas_ocp.physics.atmosphere import ISA_LAPSE_K_M, SiteAtmosphere, pressure_altitude
+from cpas_ocp.physics.effects.canopy_inflation import MORTAR_TO_INFLATION_S
 
 TOUCHDOWN_MARGIN_S = 0.5  # phase ends this long before the detected touchdown (s) ...
 
@@ -828,6 +829,18 @@ def model_block(d: LogImport) -> None:
                        "held closed in the fit" + (", which estimates the airframe's drag "
                                                    "area CdS_V instead" if first in closed
                                                    else ""))
+    late = {c.name: c for c in d.forensics.canopies
+            if c.fall_before is not None and c.t_open is not None}
+    if late:
+        d.manifest["model"], d.manifest["vehicle"] = late_openings(
+            d.manifest["model"], d.manifest["vehicle"],
+            {name: c.t_open - (d.deploy[name] + MORTAR_TO_INFLATION_S)  # type: ignore[operator]
+             for name, c in late.items()},
+            {c["name"]: c["stages"][0] for c in d.parachutes},
+            max(c.fall_before.value for c in late.values()))  # type: ignore[union-attr]
+        d.notes.append(f"{', '.join(late)}: took hold late (see the deployment forensics): "
+                       "its start's window is centred on the opening, and the fall before "
+                       "it is fitted as the airframe's drag area CdS_V")
 
 
 def instant(t: float) -> float:

@@ -120,3 +120,38 @@ def held_closed(model: dict[str, Any], vehicle: dict[str, Any], closed: dict[str
             vehicle = {**vehicle, "forebody_cds": {"value": round(airframe_m2, 6),
                                                    "unit": "m^2"}}
     return model, vehicle
+
+
+def late_openings(model: dict[str, Any], vehicle: dict[str, Any], late: dict[str, float],
+                  stages: dict[str, str], fall_m2: float) -> tuple[dict[str, Any],
+                                                                   dict[str, Any]]:
+    """The manifest's model and vehicle where the log shows a canopy that took hold late
+    (`deployment_forensics.late_opening`): `late` maps each such canopy to the shift (s)
+    from the start its charge seeds (`CanopyInflation.observed_start`) to the corner of the
+    descent where it opened, written as the canopy_inflation effect's ``start_shifts`` so
+    that its start's window lies about the opening; and the drag that held the fall before
+    it (`fall_m2`, m^2: the airframe and the canopy streaming, which no opening curve from
+    the charge gives) is the airframe's CdS_V, estimated from that guess (where the model
+    has `forebody_drag`; the canopy's own drag area is then what it added).  Without this
+    the fit opens the canopy at its charge and the air's motion must sink at the fall's
+    excess speed.  The card's own start shifts and airframe drag area win."""
+    if not late:
+        return model, vehicle
+    shifts = {f"t_start[{name},{stages[name]}]": round(shift, 3)
+              for name, shift in late.items()}
+    effects = []
+    for e in model.get("effects", ()):
+        if e == "canopy_inflation" or (isinstance(e, dict)
+                                       and e.get("effect") == "canopy_inflation"):
+            entry = {"effect": "canopy_inflation"} if isinstance(e, str) else dict(e)
+            entry["start_shifts"] = {**shifts, **entry.get("start_shifts", {})}
+            e = entry
+        effects.append(e)
+    model = {**model, "effects": effects}
+    named = {e if isinstance(e, str) else e.get("effect") for e in effects}
+    if "forebody_drag" in named:
+        model["free"] = [*dict.fromkeys([*model.get("free", []), "CdS_V"])]
+        if not vehicle.get("forebody_cds", {}).get("value"):
+            vehicle = {**vehicle, "forebody_cds": {"value": round(fall_m2, 6),
+                                                   "unit": "m^2"}}
+    return model, vehicle

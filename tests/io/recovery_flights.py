@@ -40,13 +40,25 @@ def density(h: np.ndarray) -> np.ndarray:
 @dataclass(frozen=True)
 class Chute:
     """A canopy: the drag area it reaches (m^2), its fill time (s), its diameter (m), and
-    its charge: `delay_s` after apogee, or where the descent passes `height_m` (m)."""
+    its charge: `delay_s` after apogee, or where the descent passes `height_m` (m).  A canopy
+    that hangs (in its bag, tangled) streams at `streaming_cds` (m^2) from its line
+    stretch for `hang_s` (s) before it fills."""
 
     cds: float
     fill_s: float
     diameter: float
     delay_s: float | None = None
     height_m: float | None = None
+    hang_s: float = 0.0
+    streaming_cds: float = 0.0
+
+    def drag_area(self, since_charge: float) -> float:
+        """The drag area (m^2) `since_charge` s after the charge."""
+        out = since_charge - LINE_STRETCH_S
+        if out < 0.0:
+            return 0.0
+        grow = min(max((out - self.hang_s) / self.fill_s, 0.0), 1.0)
+        return self.streaming_cds + (self.cds - self.streaming_cds) * grow
 
 
 DROGUE = Chute(0.467, 0.6, 0.61, delay_s=1.0)
@@ -80,9 +92,8 @@ def fly_recovery(seed: int, chutes: dict[str, Chute], body_cds: float = BODY_CDS
     landed = None
     while landed is None or t < landed + 5.0:
         thrust = THRUST_N if 0.0 <= t < BURN_S else 0.0
-        cds = body_cds + sum(
-            c.cds * min(max((t - events[n] - LINE_STRETCH_S) / c.fill_s, 0.0), 1.0)
-            for n, c in chutes.items() if n in events)
+        cds = body_cds + sum(c.drag_area(t - events[n]) for n, c in chutes.items()
+                             if n in events)
         air = v - w
         drag = -0.5 * float(density(h)) * air * abs(air) * cds
         flying = t >= 0.0 and landed is None

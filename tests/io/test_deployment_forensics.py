@@ -24,6 +24,7 @@ from cpas_ocp.io.deployment_forensics import (
     deployment_forensics,
     measured,
 )
+from cpas_ocp.io.rocket_model import late_openings, rocket_model
 from tests.io.recovery_flights import (
     BARO_SIGMA_M,
     BODY_CDS,
@@ -243,3 +244,62 @@ def test_andromeda_descent_needs_far_more_than_its_drogue() -> None:
     assert drogue.verdict == "opened" and drogue.above_diameter, drogue.sentence
     assert drogue.descent is not None and drogue.descent.drag_area > 3.0 * math.pi * 0.41**2
     assert main.verdict == "undetermined"
+
+
+# A single main fired 1 s after apogee that hangs 7 s streaming (0.25 m^2) before it fills:
+# the Lince 2023 log's recovery, whose main took hold 8 s after its charge.
+HUNG_MAIN = {"main": Chute(2.5, 1.0, 1.5, delay_s=1.0, hang_s=7.0, streaming_cds=0.25)}
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_a_main_that_hangs_after_its_charge_is_found_where_it_took_hold(seed: int) -> None:
+    """The descent's corner lies between the fill's start and its end plus three speed
+    relaxation times of the fall (v / 2g: the deceleration's tail); the fall before it
+    needs the streaming canopy's and the airframe's drag area, which its line overstates
+    a little (the fall still speeds up towards its terminal rate): a first guess within a
+    quarter of the truth for the fit to estimate; the sentence says when and how late."""
+    flight = fly_recovery(seed, HUNG_MAIN)
+    main = _forensics(flight, HUNG_MAIN)["main"]
+    assert main.verdict == "opened", main.sentence
+    chute, charge = HUNG_MAIN["main"], flight.events["main"]
+    fill_start = charge + LINE_STRETCH_S + chute.hang_s
+    assert main.t_open is not None and main.fall_before is not None
+    terminal = math.sqrt(2.0 * MASS * 9.80665 / (float(density(np.array([2000.0]))[0])
+                                                 * (BODY_CDS + chute.streaming_cds)))
+    assert fill_start <= main.t_open <= fill_start + chute.fill_s + 3.0 * terminal / (
+        2.0 * 9.80665)
+    truth = BODY_CDS + chute.streaming_cds
+    assert truth <= main.fall_before.value + 3.0 * main.fall_before.sigma
+    assert abs(main.fall_before.value - truth) < 0.25 * truth
+    assert f"it took hold {main.t_open - charge:.1f} s after its charge" in main.sentence
+
+
+def test_a_canopy_that_opens_at_its_charge_is_never_read_as_late() -> None:
+    """Over 20 normal recoveries (the drogue filling 0.3 s after its charge near apogee) the
+    first canopy is never said to have hung."""
+    for seed in range(20):
+        drogue = _forensics(fly_recovery(seed + 200, NORMAL), NORMAL)["drogue"]
+        assert drogue.fall_before is None, (seed, drogue.sentence)
+
+
+def test_a_late_opening_moves_the_start_s_window_and_frees_the_airframe_s_drag() -> None:
+    """The rocket model of a canopy that took hold late: its start's window centred on the
+    opening (the shift from the start its charge seeds), the fall's drag area the airframe's
+    first guess, CdS_V free; the card's own shift and airframe drag area win."""
+    model = rocket_model({}, ["baro"], [("main", "open")], ["main"], {"main": 0.01})
+    out, vehicle = late_openings(model, {"name": "r", "mass": {"value": 9.9, "unit": "kg"}},
+                                 {"main": 7.74}, {"main": "open"}, 0.30)
+    [inflation] = [e for e in out["effects"]
+                   if isinstance(e, dict) and e["effect"] == "canopy_inflation"]
+    assert inflation["start_shifts"] == {"t_start[main,open]": 7.74}
+    assert "CdS_V" in out["free"] and vehicle["forebody_cds"]["value"] == 0.30
+    card = {**model, "effects": [*model["effects"][:1],
+                                 {"effect": "canopy_inflation",
+                                  "start_shifts": {"t_start[main,open]": 5.0}},
+                                 *model["effects"][2:]]}
+    out, vehicle = late_openings(card, {"forebody_cds": {"value": 0.1, "unit": "m^2"}},
+                                 {"main": 7.74}, {"main": "open"}, 0.30)
+    [inflation] = [e for e in out["effects"]
+                   if isinstance(e, dict) and e["effect"] == "canopy_inflation"]
+    assert inflation["start_shifts"] == {"t_start[main,open]": 5.0}
+    assert vehicle["forebody_cds"]["value"] == 0.1

@@ -105,6 +105,22 @@ def test_lince_s_filtered_charge_swing_is_cut_not_read_as_a_unit(tmp_path: Path)
     assert report["deployments"]["main"]["verdict"] == "opened"
 
 
+def test_lince_s_main_took_hold_8_s_after_its_charge(tmp_path: Path) -> None:
+    """The filtered altitude falls at about 28 m/s from the charge (26.86 s) to a corner near
+    35 s, then at 9 m/s: the main hung, and the model starts it there, with the fall's drag
+    carried by the airframe's CdS_V (a streaming canopy: a few tenths of a square metre)."""
+    report = _import("lince_2023", tmp_path / "test")
+    main = report["deployments"]["main"]
+    assert 33.0 < main["t_open_s"] < 37.0 and "took hold" in main["sentence"]
+    assert 0.1 < main["fall_before_m2"] < 0.5
+    model = json.loads((tmp_path / "test" / "manifest.json").read_text())["model"]
+    assert "CdS_V" in model["free"]
+    [inflation] = [e for e in model["effects"]
+                   if isinstance(e, dict) and e["effect"] == "canopy_inflation"]
+    assert 26.86 + 0.5 + inflation["start_shifts"]["t_start[main,open]"] == pytest.approx(
+        main["t_open_s"], abs=1e-3)
+
+
 def test_andromeda_s_garbage_end_is_cut_and_its_main_is_past_the_log(tmp_path: Path) -> None:
     """The last two rows fall 216 and 175 m in half a second each: cut.  The log then ends
     1084 m above the pad, before the card's 500 m main, which the fit leaves out; the
