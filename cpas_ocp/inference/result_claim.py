@@ -460,7 +460,8 @@ def deployment_findings(fit: Fit) -> tuple[list[str], list[str]]:
         if entry["verdict"] == "not_opened":
             (failed if none_opened else notes).append(
                 f"{entry['sentence']}; the fit holds it closed"
-                + (" and fits the airframe's drag area (CdS_V) instead" if none_opened else ""))
+                + (" and fits the airframe's drag area (CdS_V) instead"
+                   if none_opened and "CdS_V" in fit.free else ""))
         elif entry.get("above_diameter") is True:
             failed.append(f"{entry['sentence']}; the fit's drag area for the {name} is more "
                           "than that canopy's")

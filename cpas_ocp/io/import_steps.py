@@ -741,6 +741,8 @@ def merged_series(d: LogImport) -> None:
                 changes.append((t_from, sigma))
                 continue
             steady = settled(t, min([t_to, d.t_end, *(s for s in d.starts if s > t[0])]))
+            if steady.sum() < 4 * MIN_DESCENT_SAMPLES:  # beyond the phase's end: all of it
+                steady[:] = True
             tau = correlation_length(t[steady], v[steady])
             mt, mv, count = merged_blocks(t, v, sigma)
             sig = sigma * np.sqrt(np.minimum(count, tau) / count)
@@ -827,7 +829,8 @@ def model_block(d: LogImport) -> None:
             {c["name"]: c.get("inflation") == "infinite_mass" for c in d.parachutes})
         d.notes.append(f"{', '.join(closed)}: did not open (see the deployment forensics): "
                        "held closed in the fit" + (", which estimates the airframe's drag "
-                                                   "area CdS_V instead" if first in closed
+                                                   "area CdS_V instead"
+                                                   if "CdS_V" in d.manifest["model"].get("free", ())
                                                    else ""))
     late = {c.name: c for c in d.forensics.canopies
             if c.fall_before is not None and c.t_open is not None}

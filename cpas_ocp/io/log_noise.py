@@ -108,8 +108,10 @@ def correlation_length(t: np.ndarray, values: np.ndarray) -> int:
     `values`' scatter about their local trend (`_scatter`): the number of samples that
     carry as much information as one independent sample.  1 for white noise or too few
     samples (under 80)."""
+    if t.size < 4 * MIN_DESCENT_SAMPLES:
+        return 1
     r = _scatter(t, values)
-    if r is None or r.size < 4 * MIN_DESCENT_SAMPLES:
+    if r is None:
         return 1
     return max(1, round(integrated_time(r)))
 

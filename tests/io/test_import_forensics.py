@@ -52,6 +52,21 @@ def test_a_ballistic_descent_is_imported_as_a_drogue_that_did_not_open(
     assert {"CdS[drogue,stage1]", "t_start[drogue,stage1]"} <= set(model["fix"])
 
 
+def test_a_model_without_the_airframes_drag_does_not_say_it_fits_it(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str],
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """A card whose own model leaves out forebody_drag: the drogue that did not open is held
+    closed, and neither the manifest nor the note claims an airframe's drag area fitted."""
+    model = {"effects": [e for e in CARD["model"]["effects"] if e != "forebody_drag"]}
+    monkeypatch.setitem(CARD, "model", model)
+    report, _ = _import(tmp_path, ("drogue",), {"drogue": 0.0}, 3, capsys)
+    assert report["deployments"]["drogue"]["verdict"] == "not_opened"
+    manifest = json.loads((tmp_path / "test" / "manifest.json").read_text())
+    assert "CdS_V" not in manifest["model"].get("free", [])
+    [note] = [n for n in report["notes"] if "did not open" in n and "held closed" in n]
+    assert "CdS_V" not in note
+
+
 def test_a_normal_recovery_is_imported_as_opened(tmp_path: Path,
                                                  capsys: pytest.CaptureFixture[str]) -> None:
     report, _ = _import(tmp_path, ("drogue", "main"), {"drogue": 0.467, "main": 5.78}, 5,
@@ -59,12 +74,15 @@ def test_a_normal_recovery_is_imported_as_opened(tmp_path: Path,
     assert [e["verdict"] for e in report["deployments"].values()] == ["opened", "opened"]
 
 
-def _fit_of(folder: Path, deployments: dict) -> SimpleNamespace:
+def _fit_of(folder: Path, deployments: dict, free: tuple[str, ...] = ("CdS_V",)
+            ) -> SimpleNamespace:
     """A stand-in fit of a test folder whose import found `deployments`: what
-    `deployment_findings` reads of a fit (its canopies' names and the folder)."""
+    `deployment_findings` reads of a fit (its canopies' names, the folder and the free
+    parameters)."""
     (folder / "import.json").write_text(json.dumps({"deployments": deployments}))
     return SimpleNamespace(test=SimpleNamespace(
-        parachutes=[SimpleNamespace(name=name) for name in deployments], path=folder))
+        parachutes=[SimpleNamespace(name=name) for name in deployments], path=folder),
+        free=list(free))
 
 
 def test_the_claim_says_what_did_not_open(tmp_path: Path) -> None:
@@ -78,6 +96,10 @@ def test_the_claim_says_what_did_not_open(tmp_path: Path) -> None:
                       "airframe's drag area (CdS_V) instead"] and notes == []
     claim = Claim(100.0, 100, 0.5, [], failed_deployments=failed)
     assert not claim.is_result and claim.problems()[0] == failed[0]
+    # A model without the airframe's drag (the card's own, without forebody_drag) fits no
+    # CdS_V, and the sentence does not say it does.
+    failed, _ = deployment_findings(_fit_of(tmp_path, {"drogue": closed}, free=()))  # type: ignore[arg-type]
+    assert failed == ["the drogue did not open: X; the fit holds it closed"]
     main_closed = {"verdict": "not_opened", "sentence": "the main did not inflate: Z"}
     failed, notes = deployment_findings(_fit_of(  # type: ignore[arg-type]
         tmp_path, {"drogue": opened, "main": main_closed}))
