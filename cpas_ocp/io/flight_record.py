@@ -45,6 +45,9 @@ BOOST_AXIS_G = 2.0  # an axis counts as boosting where it reads this many g abov
 BOOST_RUN = 3  # ... for this many samples in a row
 
 
+PAD_REST_G = 0.2  # on the pad the specific force's magnitude is 1 g within this (g)
+
+
 @dataclass(frozen=True)
 class Channel:
     """Where one series of a record came from, for the errors that name it: the log's
@@ -183,11 +186,20 @@ def axial_from_axes(path: str, axes: pd.DataFrame, axis: str, unit_factor: float
 
 def _boost_axis(path: str, si: np.ndarray, field_name: str) -> tuple[float, int]:
     """(sign, index) of the axis with the largest boost acceleration: the largest departure
-    from its rest reading (the median of the first tenth of the log) held for `BOOST_RUN`
-    samples (a rolling minimum, so that one glitch does not choose).  An axis with no
-    reading there (an export whose cells are all blank) has no rest and cannot be the
-    boost's: its median is not taken of nothing."""
-    head = si[: max(10, si.shape[0] // 10)]
+    from its rest reading held for `BOOST_RUN` samples (a rolling minimum, so that one
+    glitch does not choose).  The rest is the median over the pad: the log's leading
+    samples whose specific force has the magnitude of gravity (within `PAD_REST_G`, until
+    `BOOST_RUN` samples in a row depart from it); a log
+    that does not start at rest (or has too few such samples) takes the first tenth of the
+    log.  (The first tenth alone, on a short log whose pad time is brief, reaches into the
+    boost and can turn the sign.)  An axis with no reading there (an export whose cells
+    are all blank) has no rest and cannot be the boost's: its median is not taken of
+    nothing."""
+    magnitude = np.sqrt(np.nansum(si**2, axis=1))
+    off = pd.Series(~(np.abs(magnitude - G0) < PAD_REST_G * G0)).astype(float)
+    moving = np.flatnonzero(off.rolling(BOOST_RUN).min().to_numpy() == 1.0)
+    pad = int(moving[0]) - BOOST_RUN + 1 if moving.size else si.shape[0]
+    head = si[:pad] if pad >= 10 else si[: max(10, si.shape[0] // 10)]
     rest = np.array([np.median(col[np.isfinite(col)]) if np.isfinite(col).any() else np.nan
                      for col in head.T])
     dev = pd.DataFrame(si - rest)

@@ -539,3 +539,17 @@ def test_a_card_event_after_the_log_ends_is_the_cards(
                                         "sigma": {"value": 0.5, "unit": "s"}}}}
     code, _, err = _import(tmp_path, tmp_path / "log.csv", AXIAL_MAP, card, capsys)
     assert code == 2 and "card.json: events.main.time" in err, err
+
+
+def test_a_short_log_takes_the_accelerometers_rest_from_its_pad(flight: Flight,
+                                                                 tmp_path: Path) -> None:
+    """A log cut 20 s before touchdown lasts 43 s, 2 s of them on the pad: its first tenth
+    reaches 2.3 s into the boost, and a rest taken there read the boost's axis with the
+    wrong sign (refused as "is its sign reversed?").  The rest is the pad's, where the
+    specific force is 1 g: the axis is -y, as the log was written."""
+    from tests.io.test_rocket_log_import import COLUMN_MAP
+    write_mapped(flight, tmp_path / "log.csv", seed=3,
+                 end_s=flight.events["landed"] - 20.0)
+    code, report, _ = _import(tmp_path, tmp_path / "log.csv", COLUMN_MAP, CARD)
+    assert code == 0 and report is not None
+    assert "axial accelerometer axis: -y" in report["notes"]
