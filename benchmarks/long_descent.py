@@ -23,7 +23,7 @@ sigmas; then the ratios (baseline / this tree).  A baseline that runs past
 `--timeout` seconds is stopped and its ratio printed as a lower bound.
 
     python benchmarks/long_descent.py [--baseline REV] [--seed N] [--timeout S]
-                                      [--thrust N] [--no-baseline] [--normal-points]
+                                      [--thrust N] [--no-baseline]
     python benchmarks/long_descent.py --per-iteration TEST_DIR
 
 The wall times of whole runs meet whatever else the machine runs; the
@@ -55,7 +55,6 @@ THRUST_N = 6500.0  # boost thrust (N, 2.5 s): apogee about 6.1 km above the pad
 CDS_TRUE = {"drogue": 4.0, "main": 12.0}  # the canopies' full drag areas (m^2)
 DIAMETER_IN = {"drogue": 72, "main": 120}  # nominal diameters on the card (in)
 MODEL = ["canopy_inflation", "forebody_drag", "rigid_riser", "baro", "axial_accelerometer"]
-KEEP_S = 10.0  # samples kept as they are after the phase's start and each event (s)
 
 
 def write_long_log(folder: Path, seed: int, thrust_n: float = THRUST_N) -> dict[str, float]:
@@ -88,10 +87,6 @@ t0 = time.perf_counter()
 with contextlib.redirect_stdout(quiet):
     code = main(["import", str(folder / "log.csv"), "--columns", str(folder / "map.json"),
                  "--card", str(folder / "card.json"), "--out", str(out / "test")])
-if mode == "thin":
-    sys.path.insert(0, sys.argv[3])
-    from benchmarks.long_descent import thin_folder
-    thin_folder(out / "test")
 t1 = time.perf_counter()
 if mode == "warm":
     from cpas_ocp.estimation.estimator import Estimator
@@ -109,53 +104,17 @@ print(json.dumps({"code": code, "import_s": t1 - t0, "reconstruct_s": t2 - t1,
 """
 
 
-def thin_folder(test_dir: Path, keep_s: float = KEEP_S) -> None:
-    """Rewrite the imported test folder's sensors as normal points (`normal_points`):
-    every sample kept from the phase's start and from 1 s before each event for
-    `keep_s` seconds (the openings), bins of at most MAX_BIN_S elsewhere; each
-    sensor's sigma then changes where a stretch of bins starts and ends
-    (``sigma_after``).  The folder's columns are in SI, as the import writes them."""
-    import numpy as np
-    import pandas as pd
-
-    from cpas_ocp.io.flight_test import load_test
-    from cpas_ocp.normal_points import normal_points
-    test = load_test(test_dir)
-    keep = [(test.t_start, test.t_start + keep_s)]
-    keep += [(e.time - 1.0, e.time + keep_s) for e in test.events]
-    manifest = json.loads((test_dir / "manifest.json").read_text())
-    for entry in manifest["sensors"]:
-        sensor = next(s for s in test.sensors if s.name == entry["name"])
-        channels = [c for c in entry["columns"] if c != "time"]
-        units = {c: entry["sigma"][c]["unit"] for c in channels}
-        t, y, sigma = normal_points(
-            sensor.time, np.column_stack([sensor.data[c].to_numpy() for c in channels]),
-            np.column_stack([sensor.absolute_sigma(c) for c in channels]), keep)
-        pd.DataFrame({"time": t, **{c: y[:, i] for i, c in enumerate(channels)}}).to_csv(
-            test_dir / entry["file"], index=False, float_format="%.9g")
-        changes = np.flatnonzero(np.any(np.diff(sigma, axis=0) != 0.0, axis=1)) + 1
-        entry["sigma"] = {c: {"value": float(sigma[0, i]), "unit": units[c]}
-                          for i, c in enumerate(channels)}
-        entry["sigma_after"] = [
-            {"time": {"value": float(t[j]) - 1e-6, "unit": "s"},
-             "sigma": {c: {"value": float(sigma[j, i]), "unit": units[c]}
-                       for i, c in enumerate(channels)}} for j in changes]
-    (test_dir / "manifest.json").write_text(json.dumps(manifest, indent=1))
-
-
-def run_tree(code: Path, folder: Path, timeout: float, thin: bool = False
-             ) -> tuple[float, dict | None]:
+def run_tree(code: Path, folder: Path, timeout: float) -> tuple[float, dict | None]:
     """The cold build's seconds (compiling the model functions into an empty cache) and
     the timed child's JSON for the code tree `code` on the log in `folder` (None past
-    `timeout`); with `thin`, the imported folder made normal points (`thin_folder`)
-    within the timed import."""
+    `timeout`)."""
     import os
     import subprocess
     import tempfile
     with tempfile.TemporaryDirectory() as cache:
         env = {**os.environ, "CPAS_OCP_CACHE": cache}
         outs = []
-        for mode in ("warm", "thin" if thin else "time"):
+        for mode in ("warm", "time"):
             try:
                 out = subprocess.run([sys.executable, "-c", PRELUDE + CHILD, str(code),
                                       str(folder), mode, str(ROOT)], env=env, cwd=folder,
@@ -248,9 +207,6 @@ def main() -> None:
     parser = harness.parser(__doc__, seed=1, seed_help="seed of the log's sensor noise")
     parser.add_argument("--baseline", default=BASELINE, help="the revision to compare with")
     parser.add_argument("--no-baseline", action="store_true", help="time this tree only")
-    parser.add_argument("--normal-points", action="store_true",
-                        help="also time this tree with the imported samples made normal "
-                             "points outside the openings (`normal_points`)")
     parser.add_argument("--thrust", type=float, default=THRUST_N, help="boost thrust (N)")
     parser.add_argument("--timeout", type=float, default=1800.0,
                         help="stop a tree's run after this many seconds")
@@ -267,15 +223,13 @@ def main() -> None:
     with tempfile.TemporaryDirectory(prefix="cpas-ocp-long-descent-") as tmp:
         base = args.folder or Path(tmp)
         runs, builds, ratios = {}, {}, {}
-        trees = [("this tree", None, False)]
-        trees += [("this tree, normal points", None, True)] if args.normal_points else []
-        trees += [] if args.no_baseline else [(f"baseline {args.baseline}", args.baseline,
-                                               False)]
-        for label, revision, thin in trees:
+        trees = [("this tree", None)]
+        trees += [] if args.no_baseline else [(f"baseline {args.baseline}", args.baseline)]
+        for label, revision in trees:
             folder = base / label.replace(" ", "_").replace(",", "")
             events = write_long_log(folder, args.seed, args.thrust)
             with code_at(revision) as code:
-                build_s, run = run_tree(code, folder, args.timeout, thin)
+                build_s, run = run_tree(code, folder, args.timeout)
             runs[label], builds[label] = run, build_s
             print(f"{label}: first build, compiling into an empty cache: {build_s:.1f} s")
             if run is None:

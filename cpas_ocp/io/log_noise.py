@@ -265,9 +265,10 @@ def dead_note(channel: str, t: np.ndarray, values: np.ndarray, unit: str) -> str
 
 def merged_blocks(t: np.ndarray, values: np.ndarray, sigma: float) -> tuple[np.ndarray, ...]:
     """Independent samples (`t` s, `values` in the channel's unit, each at noise `sigma`)
-    merged into means of 2^k consecutive samples wherever the signal is straight enough
-    that a mean at its mean time says what the samples say: the times, the means and each
-    mean's sample count.  Its sigma is `sigma` / sqrt(count).
+    merged into means of 2^k consecutive samples (the normal points of satellite laser
+    ranging) wherever the signal is straight enough that a mean at its mean time says
+    what the samples say: the times, the means and each mean's sample count.  Its sigma
+    is `sigma` / sqrt(count).
 
     A mean of m samples spanning L s of a signal with curvature y'' lies y'' L^2/24 from
     the value at its mean time.  A merge is kept where that bias is at most
