@@ -85,9 +85,9 @@ from cpas_ocp.io.log_noise import (
     dead_note,
     dead_samples,
     independent_blocks,
+    longest_stretch,
     merged_blocks,
     scatter_rms,
-    settled,
     settled_time,
 )
 from cpas_ocp.io.opening_loads import MIN_ACCEL_SIGMA, OPENING_WINDOW_S, drag_ceiling, opening_peak
@@ -716,9 +716,9 @@ def merged_series(d: LogImport) -> None:
     each noise segment (the sensor's sigma, then each `sigma_after`) on its own; a run of
     means of one size gets the sigma of such a mean.  Rows still correlated (an opening's
     raw accelerometer samples) merge at sigma sqrt(min(m, tau) / m), tau their correlation
-    length (samples) over the segment's later half up to the next deployment or the phase's
-    end (`settled`: an opening's deceleration and the touchdown are signal, not correlated
-    noise).
+    length (samples) over the later half of the segment's longest stretch between
+    deployments and the phase's end (`longest_stretch`: an opening's deceleration and the
+    touchdown are signal, not correlated noise).
 
     A 10-minute log at 100 Hz is 60,000 samples a channel; its steady descent changes over
     seconds, so its information is in a few means a second, and a fit to the means costs
@@ -740,9 +740,7 @@ def merged_series(d: LogImport) -> None:
             if t.size == 0:
                 changes.append((t_from, sigma))
                 continue
-            steady = settled(t, min([t_to, d.t_end, *(s for s in d.starts if s > t[0])]))
-            if steady.sum() < 4 * MIN_DESCENT_SAMPLES:  # beyond the phase's end: all of it
-                steady[:] = True
+            steady = longest_stretch(t, [*d.starts, d.t_end])
             tau = correlation_length(t[steady], v[steady])
             mt, mv, count = merged_blocks(t, v, sigma)
             sig = sigma * np.sqrt(np.minimum(count, tau) / count)

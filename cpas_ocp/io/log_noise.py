@@ -7,6 +7,7 @@ readings a stuck or clipped channel repeated.  Units are the series' own (SI).
 from __future__ import annotations
 
 from collections.abc import Callable
+from itertools import pairwise
 
 import numpy as np
 import pandas as pd
@@ -123,6 +124,15 @@ def settled(t: np.ndarray, steady_end: float = np.inf) -> np.ndarray:
     not follow, would read there as correlated noise."""
     end = min(float(t[-1]), steady_end)
     return (t >= 0.5 * (t[0] + end)) & (t <= end)
+
+
+def longest_stretch(t: np.ndarray, breaks: list[float]) -> np.ndarray:
+    """Which of the times `t` (s, sorted) lie in the later half of their longest stretch
+    between `breaks` (s: the deployments and the phase's end): a segment's settled
+    descent, whatever openings it spans."""
+    edges = sorted({float(t[0]), float(t[-1]), *(b for b in breaks if t[0] < b < t[-1])})
+    a, b = max(pairwise(edges), key=lambda e: e[1] - e[0], default=(t[0], t[-1]))
+    return (t >= 0.5 * (a + b)) & (t <= b)
 
 
 def block_sigma(blocks: pd.DataFrame, steady_end: float = np.inf,
