@@ -135,6 +135,12 @@ class IterationMonitor(ca.Callback):
         # The Gauss-Newton decrement the statistical test last found at an iterate.
         self.promised = 0.0
 
+    def count_progress_from(self, iteration: int) -> None:
+        """Count the iterations without progress afresh from `iteration` (a run that goes
+        on after a descent that did not finish it gets STALL_ITERATIONS more to progress),
+        from the lowest nearly feasible chi-square found so far."""
+        self._progress = (self._best_chi2, iteration)
+
     def offer(self, z: np.ndarray, chi2: float) -> None:
         """A feasible point found outside the run, kept as its best iterate where lower."""
         if chi2 < self._best_chi2:
@@ -254,6 +260,16 @@ DIVERGED_FACTOR = 1e6
 # at chi-square 78,604 (a fall of 18,100 in 20 iterations against a decrement of 36,500),
 # and the descent from there ended in a minimum of its own at 65,190, where Ipopt goes on
 # to 7,200.
+#
+# A run that goes on after a descent that did not finish it is stopped, as stalled, where
+# it again makes no progress in STALL_ITERATIONS iterations: a second descent would start
+# where the first failed, and Ipopt left to its cap cycles.  On the NDRT 2020 altimeter
+# log (`problems/ndrt_2020.json`: the drogue opening at apogee, its start time anywhere in
+# 17.0-18.5 s within 1 of chi-square) the run stalled at iteration 51, the descent failed
+# (17 steps, a feasible chi-square of 385 against the run's nearly feasible 349), and Ipopt
+# then repeated a cycle of three steps (chi-square 349.80 / 349.79 / 349.80, the barrier
+# parameter held at 1.6e-4) to its 500th iteration: 75 s, where the shape restarts that
+# converged took 8 s.
 STALL_ITERATIONS = 20
 
 
@@ -274,6 +290,7 @@ class _Run:
     iterations: int = 0
     left: np.ndarray | None = None
     descended: DescentEnd | None = None
+    stalls: int = 0
 
 
 class Solver:
@@ -430,8 +447,12 @@ class Solver:
         parameters act outside their windows goes on with the windows widened."""
         run = _Run()
         multipliers: dict[str, ca.DM] = {}
+        after_descent = False
         while True:
             self._monitor.reset(progress, box, cap - run.iterations, run.iterations, stall)
+            if after_descent:
+                self._monitor.count_progress_from(run.iterations)
+                after_descent = False
             with interrupts.deferred():  # a signal stops Ipopt at its next iteration
                 run.sol = self._solver(x0=z0, lbx=box[0], ubx=box[1], lbg=self.nlp.lbg,
                                        ubg=self.nlp.ubg, **multipliers)
@@ -444,17 +465,20 @@ class Solver:
             barrier = float(mu[-1]) if len(mu) else None
             run.left = self._monitor.left_at
             if self._monitor.stalled:
+                if run.stalls:
+                    break  # stalled again after a descent that did not finish it (above)
+                run.stalls += 1
                 run.descended = self._descend(z0, box, cap - run.iterations)
                 run.iterations += run.descended.steps if run.descended is not None else 0
                 if (run.descended is not None and run.descended.converged) \
                         or run.iterations >= cap:
                     break
-                # Not finished that way: Ipopt goes on from its iterate, no longer stopped
-                # for stalling.
+                # Not finished that way: Ipopt goes on from its iterate, and is stopped as
+                # stalled (a failure) where it makes no progress in STALL_ITERATIONS more.
                 if run.descended is not None and run.descended.steps:
                     self._monitor.offer(run.descended.z, run.descended.chi2)
-                stall = False
                 self.make_solver(barrier)
+                after_descent = True
                 continue
             if run.left is None and run.stats["success"] and self.nlp.windows.active \
                     and self.nlp.windows.outside_at(self._jacobian_values(z0)):

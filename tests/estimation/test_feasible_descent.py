@@ -113,6 +113,26 @@ def test_a_run_that_stops_falling_stalls_and_a_falling_one_does_not() -> None:
     assert not monitor.stalled
 
 
+def test_a_run_going_on_after_a_failed_descent_gets_a_fresh_count_then_stalls() -> None:
+    """After a descent that did not finish a stalled run, Ipopt goes on from its iterate:
+    its iterations without progress are counted afresh from there, and a run that makes
+    none in STALL_ITERATIONS more stalls again (where it cycled to its cap before)."""
+    monitor = IterationMonitor(1, 1, np.abs, lambda z: None, None, stall=STALL_ITERATIONS)
+    box = (np.full(1, -np.inf), np.full(1, np.inf))
+    monitor.reset(False, box)
+    stops = [_iterate(monitor, 500.0) for _ in range(2 * STALL_ITERATIONS)]
+    assert stops.index(1) == STALL_ITERATIONS and monitor.stalled
+    done = STALL_ITERATIONS + 1
+    monitor.reset(False, box, None, done)  # the run goes on from the stalled iterate
+    monitor.count_progress_from(done)
+    stops = [_iterate(monitor, 500.0) for _ in range(2 * STALL_ITERATIONS)]
+    assert stops.index(1) == STALL_ITERATIONS - 1 and monitor.stalled
+    # Progress after the descent keeps it going.
+    monitor.reset(False, box, None, done)
+    monitor.count_progress_from(done)
+    assert not any(_iterate(monitor, 500.0 - 2.0 * k) for k in range(3 * STALL_ITERATIONS))
+
+
 def test_a_solve_never_inherits_an_earlier_solves_warm_start(problem_folder) -> None:
     """A restart (after a stall, or with wider windows) rebuilds Ipopt warm-started at the
     run's barrier parameter; the next solve of the same estimator starts cold again, also
