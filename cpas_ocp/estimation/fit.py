@@ -67,7 +67,8 @@ class Settings:
     is stopped, and at most this many Gauss-Newton steps through feasible
     points from its iterate may finish the fit at the statistical test
     (`feasible_descent`); they count as iterations.  Where they do not, Ipopt
-    goes on from its iterate.  A finish, not a second engine: on the
+    goes on from its iterate, and a run that stalls again is stopped as stalled
+    (`solve.STALL_ITERATIONS`).  A finish, not a second engine: on the
     misspecified refits it served, 8-11 steps ended the run, and a descent
     that needed 29 had ended in a worse minimum than Ipopt's.  0: Ipopt runs
     on to its limit (the earlier path, for benchmarks).

@@ -137,3 +137,40 @@ def test_altimeter_only_rocket_fit_starts_inside_the_bounds_and_converges(
     rec = reconstruct(test)  # a SolverFailure would raise
     assert rec.fit.solver.success
     assert rec.fit.chi_square / rec.fit.dof < 1.5
+
+
+@pytest.mark.slow
+def test_a_2_hz_altimeter_fit_that_stalls_after_its_descent_stops_there(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """At 2 Hz the altimeter barely sees the drogue's opening at apogee, and the fit from
+    the reduction stalls, its feasible descent does not finish it, and Ipopt, sent on from
+    its iterate, makes no progress (it ran to the 500-iteration cap, 61 s, before).  The run
+    is stopped as stalled AFTER_DESCENT_STALLS x STALL_ITERATIONS iterations after the
+    descent at most, and reported as
+    a failure with that status and its iterations, for the restarts to take over."""
+    from cpas_ocp.errors import SolverFailure
+    from cpas_ocp.estimation.estimator import Estimator
+    from cpas_ocp.estimation.solve import (
+        AFTER_DESCENT_STALLS,
+        STALL_ITERATIONS,
+        STALLED,
+        Solver,
+    )
+
+    est = Estimator(load_test(altimeter_log(tmp_path, 2.0)))
+    descents: list[tuple[int, int, bool]] = []  # (iterations before it, steps, converged)
+    descend = Solver._descend
+
+    def recorded(self: Solver, z: np.ndarray, bounds: tuple, left: int):
+        end = descend(self, z, bounds, left)
+        descents.append((est.settings.max_iter - left, end.steps if end else 0,
+                         bool(end and end.converged)))
+        return end
+
+    monkeypatch.setattr(Solver, "_descend", recorded)
+    with pytest.raises(SolverFailure) as failed:
+        est.solve()
+    assert len(descents) == 1 and not descents[0][2]
+    before, steps, _ = descents[0]
+    assert failed.value.status == STALLED
+    assert failed.value.iterations <= before + steps + AFTER_DESCENT_STALLS * STALL_ITERATIONS

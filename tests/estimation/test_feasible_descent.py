@@ -11,7 +11,13 @@ from scipy.optimize import minimize_scalar
 
 from cpas_ocp.estimation.feasible_descent import DescentProblem, bounded_step, descend
 from cpas_ocp.estimation.kkt_system import linearise
-from cpas_ocp.estimation.solve import STALL_ITERATIONS, STALL_SHARE, IterationMonitor
+from cpas_ocp.estimation.solve import (
+    AFTER_DESCENT_STALLS,
+    STALL_GAIN,
+    STALL_ITERATIONS,
+    STALL_SHARE,
+    IterationMonitor,
+)
 from cpas_ocp.estimation.structured_secant import StructuredSecant
 
 
@@ -111,6 +117,32 @@ def test_a_run_that_stops_falling_stalls_and_a_falling_one_does_not() -> None:
     monitor.reset(False, (np.full(1, -np.inf), np.full(1, np.inf)), stall=False)
     assert not any(_iterate(monitor, 1000.0) for _ in range(3 * STALL_ITERATIONS))
     assert not monitor.stalled
+
+
+def test_a_run_going_on_after_a_failed_descent_gets_a_fresh_count_then_stalls() -> None:
+    """After a descent that did not finish a stalled run, Ipopt goes on from its iterate:
+    its iterations without progress are counted afresh from there, any fall of STALL_GAIN
+    is progress (the decrement found before the descent no longer counts), and a run that
+    makes none in AFTER_DESCENT_STALLS times STALL_ITERATIONS more stalls again (where it
+    cycled to its cap before)."""
+    monitor = IterationMonitor(1, 1, np.abs, lambda z: None, None, stall=STALL_ITERATIONS)
+    box = (np.full(1, -np.inf), np.full(1, np.inf))
+    monitor.reset(False, box)
+    stops = [_iterate(monitor, 500.0) for _ in range(2 * STALL_ITERATIONS)]
+    assert stops.index(1) == STALL_ITERATIONS and monitor.stalled
+    patience = AFTER_DESCENT_STALLS * STALL_ITERATIONS
+    done = STALL_ITERATIONS + 1
+    monitor.reset(False, box, None, done)  # the run goes on from the stalled iterate
+    monitor.count_progress_from(done)
+    stops = [_iterate(monitor, 500.0) for _ in range(2 * patience)]
+    assert stops.index(1) == patience - 1 and monitor.stalled
+    # Falls of 2 per STALL_ITERATIONS / 2 iterations keep it going, small as they are
+    # against the decrement on offer.
+    monitor.reset(False, box, None, done)
+    monitor.count_progress_from(done)
+    monitor.promised = 300.0
+    fall = 2.0 * STALL_GAIN / (STALL_ITERATIONS // 2)
+    assert not any(_iterate(monitor, 500.0 - fall * k) for k in range(3 * patience))
 
 
 def test_a_solve_never_inherits_an_earlier_solves_warm_start(problem_folder) -> None:

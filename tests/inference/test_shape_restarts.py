@@ -13,6 +13,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from cpas_ocp.errors import SolverFailure
 from cpas_ocp.estimation.fit import FROM_REDUCTION
 from cpas_ocp.estimation.stage_curve_fit import inside_bounds
 from cpas_ocp.inference.shape_restarts import SHAPE_START_FACTORS, restart_shapes
@@ -33,6 +34,7 @@ class StandIn:
     free: tuple[str, ...] = ("CdS[main,open]", N)
 
     def __post_init__(self) -> None:
+        self.settings = SimpleNamespace(max_iter=500)
         self.model = SimpleNamespace(parameter=lambda name: SimpleNamespace(
             default=DEFAULT_N, lower=LOWER_N, upper=UPPER_N, physical_lower=False,
             physical_upper=False))
@@ -105,3 +107,25 @@ def test_each_restart_says_what_it_refits_when_progress_is_shown(capsys) -> None
     lines = capsys.readouterr().err.splitlines()
     assert lines == [f"{N} on a guessed bound: fitting again from the reduction with {N} at "
                      f"{f:g} x their defaults ..." for f in SHAPE_START_FACTORS if f != 1.0]
+
+
+@pytest.mark.parametrize("status, iterations, repeated", [
+    ("Stalled_Without_Progress", 91, False), ("Maximum_Iterations_Exceeded", 500, False),
+    ("Maximum_Iterations_Exceeded", 100, True)])
+def test_a_first_attempt_that_failed_from_the_reduction_is_not_solved_again(
+        status: str, iterations: int, repeated: bool) -> None:
+    """The first attempt failed from the reduction's own point, which left the fill
+    constant at its default: solved again from there with the same limit it would fail
+    again (it had repeated 500 iterations on the NDRT 2020 log), so only the other
+    factors are solved.  A failure stopped short of the limit (a direct start of a model
+    with continuation effects, capped at 100) is solved again with the whole limit."""
+    est = StandIn(reduced_n=DEFAULT_N)
+    failure = SolverFailure(status, iterations, "",
+                            100.0, fitted(UPPER_N, 100.0, FROM_REDUCTION))
+
+    def first() -> SimpleNamespace:
+        raise failure
+
+    restart_shapes(est, first)
+    factors = tuple(f for f in SHAPE_START_FACTORS if repeated or f != 1.0)
+    assert est.starts == factor_starts(factors)
