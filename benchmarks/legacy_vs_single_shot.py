@@ -217,7 +217,7 @@ def legacy_reconstruction(test: FlightTest, step: float, peak_iterations: int) -
     starts = stage_starts(test, {p.name: p.default for p in model.parameters})
     stages = list(dict.fromkeys(s for c in chutes for s in c.stages))
     log("[legacy] a. reduction: stage scale factors "
-        + ", ".join(f"{s} {red.stage_scale[s]:.4f}" for s in stages))
+        + ", ".join(f"{s} {red.drag_scale(s):.4f}" for s in stages))
     timings["a. reduction"] = timer.split("a. reduction")
 
     # b. Nelder-Mead fit of every canopy stage's drag-area curve.
@@ -225,7 +225,7 @@ def legacy_reconstruction(test: FlightTest, step: float, peak_iterations: int) -
     params: dict[str, float] = {p.name: p.default for p in model.parameters}
     params.update({param_name("t_start", c, s): t for (c, s), t in starts.items()})
     for s in stages:
-        params[param_name("drag_scale", s)] = red.stage_scale[s]
+        params[param_name("drag_scale", s)] = red.drag_scale(s)
     for chute in chutes:
         riser = red.cds_riser[chute.name]
         cds_prev = 0.0
@@ -238,8 +238,8 @@ def legacy_reconstruction(test: FlightTest, step: float, peak_iterations: int) -
             sel = (red.t >= t0) & (red.t < t1)
             v_i = float(np.interp(t0, red.t, red.airspeed))
             fit = fit_stage_curve(curve_fn, model, chute, stage, red.t[sel],
-                                  red.stage_scale[stage] * riser[sel], t0, cds_prev, v_i,
-                                  guess, cds_full_open)
+                                  red.group_of(chute.name, stage).scale * riser[sel], t0,
+                                  cds_prev, v_i, guess, cds_full_open)
             params.update(fit.values)
             cds_prev = fit.values[param_name("CdS", chute.name, stage)]
             if k + 1 == len(chute.stages):
@@ -279,7 +279,7 @@ def legacy_reconstruction(test: FlightTest, step: float, peak_iterations: int) -
         multipliers[stage] = m_star
         for c, v in fitted.items():
             params[param_name("CdS", c, stage)] = m_star * v
-        params[param_name("drag_scale", stage)] = red.stage_scale[stage] * m_star
+        params[param_name("drag_scale", stage)] = red.drag_scale(stage) * m_star
         log(f"[legacy] c. {stage}: multiplier {m_star:.5f} after {n_iter} simulations to "
             f"t = {t_end:.2f} s (GPS altitude {h_gps:.1f} m)")
     timings["c. drag-scale bisection"] = timer.split("c. drag-scale bisection")
@@ -297,7 +297,7 @@ def legacy_reconstruction(test: FlightTest, step: float, peak_iterations: int) -
                    else test.t_end)
             win = (t0, min(t0 + PEAK_WINDOW_S, nxt - 1e-6))
             windows[(chute.name, stage)] = win
-            scaled = reading * red.stage_scale[stage]
+            scaled = reading * red.group_of(chute.name, stage).scale
             targets[(chute.name, stage)] = peak_of(tc, scaled, *win)
     t_sim1 = min(test.t_end, max(b for _, b in windows.values()) + 0.1)
     t_sim1 = t_sim0 + step * math.ceil((t_sim1 - t_sim0) / step - 1e-9)

@@ -60,7 +60,7 @@ def test_reduction_matches_the_imu_to_the_axial_riser_drag(problem_folder) -> No
     model = truth.model(test)
     guess, red = reduce_and_guess(test, model, truth.fixed_values(model))
     true_scale = load_problem("main3").truth["drag_scale[stage3]"]
-    assert abs(red.stage_scale["stage3"] / true_scale - 1.0) < 0.01
+    assert abs(red.drag_scale("stage3") / true_scale - 1.0) < 0.01
     ignored = reduce(test, stage_starts(test, guess))
-    assert ignored.stage_scale["stage3"] / true_scale - 1.0 < -0.03
+    assert ignored.drag_scale("stage3") / true_scale - 1.0 < -0.03
     assert guess[param_name("flyout_angle", "main1", "stage3")] == math.radians(16)

@@ -16,6 +16,9 @@ Without any simulation, on the IMU's time base:
   is the initial guess of ``drag_scale[stage]``, since the trajectory's drag is
   the load-cell drag times that factor.
 
+Clusters, their stages and the steady windows are those of `stage_groups`:
+canopies whose first stages share a name and start together.
+
 From these curves the initial guess of every canopy's inflation parameters
 follows: CdS from the scaled riser drag area in the steady window, then the
 start time and shape of every stage from a least-squares fit of the Eq. 5/6
@@ -25,7 +28,7 @@ but the test folder.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -38,6 +41,7 @@ from cpas_ocp.estimation.stage_curve_fit import (
     fit_stage_curve,
     fitted_names,
 )
+from cpas_ocp.estimation.stage_groups import StageGroup, clusters, stage_groups
 from cpas_ocp.io.flight_test import MANIFEST
 from cpas_ocp.physics.atmosphere import density_at, wind_at
 from cpas_ocp.physics.effects.canopy_inflation import steady_parameter_names
@@ -46,15 +50,14 @@ from cpas_ocp.physics.model import Model
 from cpas_ocp.physics.parameters import param_name, split_name
 from cpas_ocp.physics.units import G0
 
-SETTLE_S = 1.0  # time after a stage start before its drag area counts as steady (s)
-
 
 @dataclass
 class Reduction:
     """Offline drag areas (m^2) on the time base `t` (s), with the track's altitude (m).
 
     `cds_riser` holds each canopy's drag area from its load cell (Eq. 3), or,
-    in a test without load cells, attributed from the total drag area.
+    in a test without load cells, attributed from the total drag area.  `groups`: every
+    cluster's every stage with its steady window and scale factor (`stage_groups`).
     """
 
     t: np.ndarray
@@ -64,8 +67,18 @@ class Reduction:
     load_factor: np.ndarray
     cds_imu: np.ndarray
     cds_riser: dict[str, np.ndarray]
-    stage_scale: dict[str, float]
-    stage_windows: dict[str, tuple[float, float]]
+    groups: list[StageGroup]
+
+    def group_of(self, canopy: str, stage: str) -> StageGroup:
+        """The group that starts `canopy`'s `stage`."""
+        return next(g for g in self.groups if g.stage == stage and canopy in g.canopies)
+
+    def drag_scale(self, stage: str) -> float:
+        """Scale factor of the stages named `stage`, as the model's one ``drag_scale[stage]``
+        takes it: the mean over the groups that start a stage so named (one in a cluster
+        test)."""
+        scales = [g.scale for g in self.groups if g.stage == stage]
+        return sum(scales) / len(scales)
 
 
 def reduce(test: FlightTest, starts: dict[tuple[str, str], float],
@@ -100,63 +113,44 @@ def reduce(test: FlightTest, starts: dict[tuple[str, str], float],
         tension = np.interp(t, cell.time, cell.data["tension"])
         cds_riser[chute.name] = (tension + chute.dry_mass * G0 * G) / q
 
-    windows = _steady_windows(test, starts)
+    groups = stage_groups(test, starts)
     if not cells and not imu:  # an altimeter-only log: the track is all there is
-        cds_riser = _attributed_cds(test, starts, windows, t, cds_imu)
-    scale = {}
-    for stage, (a, b) in windows.items():
+        cds_riser = _attributed_cds(test, starts, groups, t, cds_imu)
+    scaled = []
+    for group in groups:
+        a, b = group.window
         sel = (t >= a) & (t <= b)
-        riser_sum = sum(np.cos(flyout.get((name, stage), 0.0)) * cds
+        riser_sum = sum(np.cos(flyout.get((name, group.stage), 0.0)) * cds
                         for name, cds in cds_riser.items())
         if imu and cds_riser and sel.sum() > 3:
-            scale[stage] = float(np.mean(cds_imu[sel]) / np.mean(riser_sum[sel]))
-        else:
-            scale[stage] = 1.0
-    return Reduction(t, pos[:, 2], q, airspeed, G, cds_imu, cds_riser, scale, windows)
+            group = replace(group, scale=float(np.mean(cds_imu[sel]) / np.mean(riser_sum[sel])))
+        scaled.append(group)
+    return Reduction(t, pos[:, 2], q, airspeed, G, cds_imu, cds_riser, scaled)
 
 
 def _attributed_cds(test: FlightTest, starts: dict[tuple[str, str], float],
-                    windows: dict[str, tuple[float, float]], t: np.ndarray,
+                    groups: list[StageGroup], t: np.ndarray,
                     cds_total: np.ndarray) -> dict[str, np.ndarray]:
     """Each canopy's drag area (m^2) without load cells.
 
-    Canopies whose first stage has the same name open together (a cluster)
-    and share what is theirs equally; groups opened later get the total drag
-    area less the steady drag areas (medians over their last stage's steady
-    window) of the groups opened before them.
+    The canopies of a cluster (`stage_groups.clusters`: first stages of one name started
+    together) share what is theirs equally; clusters opened later get the total drag
+    area less the steady drag areas (medians over their last stage's steady window) of
+    the clusters opened before them.
     """
-    groups: dict[str, list[Parachute]] = {}
-    for chute in test.parachutes:
-        groups.setdefault(chute.stages[0], []).append(chute)
-    ordered = sorted(groups.values(),
-                     key=lambda g: min(starts[(c.name, c.stages[0])] for c in g))
     out: dict[str, np.ndarray] = {}
     opened = 0.0
-    for group in ordered:
-        share = (cds_total - opened) / len(group)
-        a, b = windows[group[0].stages[-1]]
+    for cluster in clusters(test, starts):
+        share = (cds_total - opened) / len(cluster)
+        last = cluster[0].stages[-1]
+        a, b = next(g.window for g in groups
+                     if g.stage == last and cluster[0].name in g.canopies)
         steady = (t >= a) & (t <= b)
-        for chute in group:
+        for chute in cluster:
             out[chute.name] = share
         if steady.any():
-            opened += len(group) * float(np.median(share[steady]))
+            opened += len(cluster) * float(np.median(share[steady]))
     return out
-
-
-def _steady_windows(test: FlightTest, starts: dict[tuple[str, str], float]
-                    ) -> dict[str, tuple[float, float]]:
-    """Per stage name: from the last canopy's start + SETTLE_S (from the start itself for a
-    canopy open at the phase's start) to the first next start."""
-    stage_names = list(dict.fromkeys(s for c in test.parachutes for s in c.stages))
-    settle = {(c.name, s): 0.0 if c.open_at_start else SETTLE_S
-              for c in test.parachutes for s in c.stages}
-    windows = {}
-    for k, stage in enumerate(stage_names):
-        begin = max(t + settle[key] for key, t in starts.items() if key[1] == stage)
-        later = [t for (c, s), t in starts.items() if s in stage_names[k + 1:]]
-        end = min(later) if later else test.t_end
-        windows[stage] = (begin, max(end, begin))
-    return windows
 
 
 def stage_starts(test: FlightTest, values: dict[str, float]) -> dict[tuple[str, str], float]:
@@ -196,7 +190,7 @@ def _fit_stage(test: FlightTest, red: Reduction, chute: Parachute, k: int,
     fit_bounds = {**{n: bounds[n] for n in names}, names[0]: (max(t_lo, lo), min(t_hi, hi))}
     cds_of = [guess[param_name("CdS", chute.name, s)] for s in chute.stages]
     data = StageData(chute, stage, red.t[sel],
-                     red.stage_scale.get(stage, 1.0) * red.cds_riser[chute.name][sel],
+                     red.group_of(chute.name, stage).scale * red.cds_riser[chute.name][sel],
                      red.airspeed[sel], cds_of[k - 1] if k else 0.0, cds_of[k], cds_of[-1],
                      fit_bounds, {n: v for n, v in fixed.items() if n in names},
                      red.dynamic_pressure[sel])
@@ -243,23 +237,24 @@ def reduce_and_guess(test: FlightTest, model: Model, fixed: dict[str, float] | N
               if param_name("flyout_angle", c.name, s) in guess}
     red = reduce(test, starts, flyout, guess.get("CdS_V"))
     bounds = {p.name: (p.lower, p.upper) for p in model.parameters}
-    for stage, s in red.stage_scale.items():
+    for stage in dict.fromkeys(g.stage for g in red.groups):
         name = param_name("drag_scale", stage)
         if name in guess and name not in fixed:
-            guess[name] = float(np.clip(s, *bounds[name]))
+            guess[name] = float(np.clip(red.drag_scale(stage), *bounds[name]))
     for chute in test.parachutes:
         _require_bands_entered(test, red, chute)
         curve = red.cds_riser.get(chute.name)
         if curve is None:
             continue
         for stage in chute.stages:
-            a, b = red.stage_windows[stage]
+            group = red.group_of(chute.name, stage)
+            a, b = group.window
             steady = (red.t >= a) & (red.t <= b)
             # The riser sees PRF*CdS (wake_deficit); the model's CdS is the free-stream one.
             prf = guess.get(param_name("prf", chute.name), 1.0)
             for name, (lo, hi) in _steady_names(test, red, chute, stage, steady):
                 sel = steady & (red.altitude >= lo) & (red.altitude < hi)
-                cds = red.stage_scale.get(stage, 1.0) * float(np.median(curve[sel])) \
+                cds = group.scale * float(np.median(curve[sel])) \
                     if sel.any() else 0.0
                 if cds > 0 and name not in fixed:
                     guess[name] = cds / prf

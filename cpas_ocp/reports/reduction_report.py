@@ -63,8 +63,9 @@ def write_reduction(test: FlightTest, out: str | Path, spec: ModelSpec,
             "test": test.name,
             "parameters": {n: {"value": guess[n], "unit": units[n]}
                            for n in units if model.parameter(n).estimable},
-            "stage_scale": red.stage_scale,
-            "stage_windows_s": {k: list(v) for k, v in red.stage_windows.items()},
+            "stage_groups": [{"stage": g.stage, "canopies": list(g.canopies),
+                              "window_s": list(g.window), "scale": g.scale}
+                             for g in red.groups],
         }))
         write_figure(reduction_axes(test, red, stage_starts(test, guess), shown).figure, None,
                      tmp / "reduction.png")
@@ -84,9 +85,10 @@ def reduction_axes(test: FlightTest, red: Reduction, starts: dict[tuple[str, str
                 label="risers summed, Eq. 3")
     for k, (name, curve) in enumerate(red.cds_riser.items()):
         ax.plot(red.t, curve * area, lw=0.5, color=f"C{k + 1}", label=f"riser {name}")
-    for stage, (a, b) in red.stage_windows.items():
+    for group in red.groups:
+        a, b = group.window
         ax.axvspan(a, b, color="C2", alpha=0.08)
-        ax.text(0.5 * (a + b), 0.98, f"{stage}\nscale {red.stage_scale[stage]:.3f}",
+        ax.text(0.5 * (a + b), 0.98, f"{group.label}\nscale {group.scale:.3f}",
                 transform=ax.get_xaxis_transform(), ha="center", va="top", fontsize=8)
     for t0 in starts.values():
         ax.axvline(t0, color="C2", lw=0.6, ls="--")

@@ -50,6 +50,13 @@ def test_reduce_writes_curves_guess_and_plot(drogue_folder, tmp_path, capsys):
     for stage in ("stage1", "stage2", "stage3"):
         name = f"drag_scale[{stage}]"
         assert abs(guess["parameters"][name]["value"] / truth[name] - 1) < SCALE_TOLERANCE, name
+    # The two Drogues, mortared 0.1 s apart, open every stage as one cluster.
+    groups = guess["stage_groups"]
+    assert [(g["stage"], g["canopies"]) for g in groups] == [
+        (s, ["drogue1", "drogue2"]) for s in ("stage1", "stage2", "stage3")]
+    assert all(g["window_s"][0] < g["window_s"][1] for g in groups)
+    assert [g["scale"] for g in groups] == [guess["parameters"][f"drag_scale[{g['stage']}]"]
+                                            ["value"] for g in groups]
 
 
 def test_reduce_refuses_a_foreign_folder(drogue_folder, tmp_path, capsys):

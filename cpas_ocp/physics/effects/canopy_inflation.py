@@ -50,7 +50,7 @@ from cpas_ocp.physics.inflation import (
 from cpas_ocp.physics.parameters import Parameter, param_name, split_name
 
 if TYPE_CHECKING:
-    from cpas_ocp.physics.flight_test import FlightTest, Parachute
+    from cpas_ocp.physics.flight_test import Event, FlightTest, Parachute
     from cpas_ocp.physics.model_context import ModelContext
 
 # Delay from mortar fire to inflation start used only when no bag-strip or
@@ -191,23 +191,28 @@ class CanopyInflation(Effect):
                 for c in test.parachutes if not c.open_at_start for s in c.stages]
 
     @staticmethod
-    def observed_start(test: FlightTest, chute: Parachute, k: int) -> float:
-        """The observed time a stage starts inflating: bag strip / line stretch or disreef."""
-        stage = chute.stages[k]
+    def start_event(test: FlightTest, chute: Parachute, k: int) -> Event | None:
+        """The observed event that seeds the start of `chute`'s stage k: its bag strip or
+        line stretch (else its mortar fire) for the first stage, its disreef for a later
+        one; None where the test holds none of them."""
         if k == 0:
-            for name in ("bag_strip", "line_stretch"):
+            for name in ("bag_strip", "line_stretch", "mortar_fire"):
                 event = test.event(name, chute.name)
                 if event is not None:
-                    return event.time
-            event = test.event("mortar_fire", chute.name)
-            if event is not None:
-                return event.time + MORTAR_TO_INFLATION_S
-            expected = "a bag_strip, line_stretch or mortar_fire event"
-        else:
-            event = test.event("disreef", chute.name, stage)
-            if event is not None:
-                return event.time
-            expected = f"a disreef event into {stage}"
+                    return event
+            return None
+        return test.event("disreef", chute.name, chute.stages[k])
+
+    @staticmethod
+    def observed_start(test: FlightTest, chute: Parachute, k: int) -> float:
+        """The observed time a stage starts inflating: bag strip / line stretch or disreef,
+        or MORTAR_TO_INFLATION_S after the mortar fire where only that was observed."""
+        event = CanopyInflation.start_event(test, chute, k)
+        if event is not None:
+            return event.time + (MORTAR_TO_INFLATION_S if event.name == "mortar_fire" else 0.0)
+        stage = chute.stages[k]
+        expected = ("a bag_strip, line_stretch or mortar_fire event" if k == 0
+                    else f"a disreef event into {stage}")
         raise InputError(str(test.path / "manifest.json") if test.path else "manifest",
                          "events", f"{expected} for {chute.name} (it seeds the start time of "
                          f"{stage})")
