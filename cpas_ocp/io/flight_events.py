@@ -69,10 +69,14 @@ DROGUE_WINDOW_S = 5.0  # the drogue's charge comes within this long after apogee
 CLUSTER_GAP_S = 3.0  # spikes closer than this are one ejection (charge, then snatch)
 AFTER_BURNOUT_S = 1.0  # charges are looked for from this long after burnout (s)
 HOLD_S = 3.0  # landed: still for this long (s) ...
-MIN_HOLD_S = 1.5  # ... or, where the log ends sooner, for what is left of it, at least this
+MIN_HOLD_S = 1.0  # ... or, where the log ends sooner, for what is left of it, at least this
+MIN_STILL_SAMPLES = 3  # ... and this many samples (a 1 Hz log's last 2 s)
+NOISE_LAG_S = 0.5  # a filtered altitude's noise is read at lags up to this (s) ...
+MIN_NOISE_DIFFS = 20  # ... where the stretch spans this many lags at least
 STILL_RATE_M_S = 0.5  # ... the altitude's slope within this (m/s)
 STILL_BAND_SIGMAS = 6.0  # ... its range within this many noise sigmas (+ STILL_BAND_M)
 STILL_BAND_M = 1.0
+STILL_TAIL_PCT = 1.0  # ... less its extreme percent either way (a range grows with n)
 REST_ACCEL_M_S2 = 1.0  # ... and the accelerometer's scatter within this (or 3 pad sigmas)
 IMPACT_WINDOW_S = 0.5  # the landing's impact is looked for this close to the baro's touchdown
 GROUND_BAND_M = 20.0  # a jolt this close above the descent's lowest reading is the impact
@@ -90,11 +94,32 @@ class FlightEvent:
     source: str
 
 
-def second_difference_sigma(values: np.ndarray) -> float:
+def second_difference_sigma(values: np.ndarray, lag: int = 1) -> float:
     """White-noise sigma of a smooth signal's samples: 1.4826 MAD of the second
-    differences over sqrt(6) (the second difference of white noise has variance 6 s^2)."""
-    d2 = np.diff(values, 2)
+    differences over sqrt(6) (the second difference of white noise has variance 6 s^2),
+    taken `lag` samples apart (x[k + 2 lag] - 2 x[k + lag] + x[k])."""
+    if values.size <= 2 * lag:
+        return float("nan")
+    d2 = values[2 * lag:] - 2.0 * values[lag:-lag] + values[:-2 * lag]
     return float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / np.sqrt(6.0))
+
+
+def level_noise(t: np.ndarray, h: np.ndarray) -> float:
+    """White-noise sigma (m) of an altitude `h` at times `t` (s) as its level scatters: the
+    largest `second_difference_sigma` at lags of 1, 2, 4, ... samples up to NOISE_LAG_S,
+    each where `h` holds MIN_NOISE_DIFFS of its lags' spans at least (NaN where none does).
+
+    A recorder's filter correlates its output's noise over its time constant, and a
+    quantised reading repeats itself: the differences of neighbouring samples then read a
+    fraction of the scatter (the Lince 2023 CATS filtered export, at rest on the ground:
+    0.05 m one sample apart, 0.3 m 0.1 s apart and beyond, its scatter 0.33 m).  White
+    noise reads the same at every lag."""
+    lags = [1]
+    while 2 * lags[-1] * sample_interval(t) <= NOISE_LAG_S:
+        lags.append(2 * lags[-1])
+    sigmas = [second_difference_sigma(h, lag) for lag in lags
+              if h.size - 2 * lag >= MIN_NOISE_DIFFS * lag]
+    return max(sigmas) if sigmas else float("nan")
 
 
 def sample_interval(t: np.ndarray) -> float:
@@ -272,53 +297,83 @@ def touchdown(tb: np.ndarray, h: np.ndarray, ta: np.ndarray, a: np.ndarray,
               after: float) -> FlightEvent | None:
     """Touchdown after `after` (s), or None where the log ends before the vehicle is down.
 
-    Landed: the altitude's slope within STILL_RATE_M_S (or STILL_SLOPE_SIGMAS of the
-    noise's slope sigma over the window, where that is larger: a GNSS's metres of noise)
-    and its range within STILL_BAND_SIGMAS noise sigmas (+ STILL_BAND_M) over HOLD_S and
-    HOLD_SAMPLES samples (or to the log's end, where that comes sooner but after
-    MIN_HOLD_S), and the accelerometer's scatter there within REST_ACCEL_M_S2 (or three
-    times the pad's).  The touchdown time is where the line through the last 2 s (four
-    samples at least) of the descent above the ground's noise meets the ground level (the
-    median altitude while still); where the accelerometer shows the impact within
-    IMPACT_WINDOW_S of it, the impact's sample.  Sigma: one sample interval of the
-    sensor that timed it, or the noise over the descent rate.  `tb`, `h`: the altitude
-    channel's times (s) and heights (m): the barometer's, or a GNSS's at 1-10 Hz."""
-    noise = max(second_difference_sigma(h), 0.05)
-    band = STILL_BAND_SIGMAS * noise + STILL_BAND_M
+    The ground: the first stretch after `after` where the altitude stays still.  Still:
+    its slope within STILL_RATE_M_S (or STILL_SLOPE_SIGMAS of the noise's slope sigma over
+    the stretch, where that is larger: a GNSS's metres of noise), its range (but its
+    STILL_TAIL_PCT extreme percent either way: the range of n samples of noise grows with
+    n, 7.4 sigmas for a 1 kHz log's 3000) within STILL_BAND_SIGMAS noise sigmas (+
+    STILL_BAND_M), over HOLD_S and HOLD_SAMPLES samples;
+    where the log ends sooner, over what is left of it, at least MIN_HOLD_S and
+    MIN_STILL_SAMPLES samples, and then the slope's bound (its value and
+    STILL_SLOPE_SIGMAS of its sigma) below the descent's rate: a short stretch must tell
+    the rest from the descent before it.  The accelerometer's scatter there is within
+    REST_ACCEL_M_S2 (or three times the pad's).  The noise is the still stretch's own
+    (`level_noise`: a filter's correlated scatter counted), at least the whole channel's
+    `second_difference_sigma` (a quantised reading at rest repeats itself).
+
+    The ground's level is the still stretch's median altitude, and the descent ends where
+    it first comes down to that level (within three noise sigmas and 0.5 m) after it was
+    last GROUND_BAND_M (or two such margins) above it: a descent does not climb back metres
+    from the ground, so what a recorder's filter does after its impact (an overshoot below
+    the ground and a rebound of metres above it) is not the descent's.  The touchdown time
+    is where the line through the last 2 s (four samples at least) of the descent before
+    that meets the ground level; where the accelerometer shows the impact within
+    IMPACT_WINDOW_S of it, the impact's sample.  Sigma: one sample interval of the sensor
+    that timed it, or the noise over the descent rate.  `tb`, `h`: the altitude channel's
+    times (s) and heights (m): the barometer's, or a GNSS's at 1-10 Hz."""
+    descent = tb > after
+    floor = max(second_difference_sigma(h), 0.05)
     rest_a = (max(REST_ACCEL_M_S2, 3.0 * float(np.std(a[: max(10, ta.size // 20)])))
               if ta.size > 20 else np.inf)
     dtb = sample_interval(tb)
-    hold_s, min_hold_s = max(HOLD_S, HOLD_SAMPLES * dtb), max(MIN_HOLD_S,
-                                                               (HOLD_SAMPLES - 1) * dtb)
+    hold_s = max(HOLD_S, HOLD_SAMPLES * dtb)
+    min_hold_s = max(MIN_HOLD_S, (MIN_STILL_SAMPLES - 1) * dtb)
     step = max(1, round(0.1 / dtb))
-    candidates = np.flatnonzero(tb > after)[::step]
-    for i in candidates:
+    for i in np.flatnonzero(descent)[::step]:
         # A log that ends soon after landing holds still for what is left, MIN_HOLD_S at least.
         hold = min(hold_s, float(tb[-1] - tb[i]))
-        w = (tb >= tb[i]) & (tb <= tb[i] + hold)
-        if hold < min_hold_s or w.sum() < HOLD_SAMPLES:
+        if hold < min_hold_s - 1e-9:
             return None
+        short = hold < hold_s
+        w = (tb >= tb[i]) & (tb <= tb[i] + hold)
+        if w.sum() < (MIN_STILL_SAMPLES if short else HOLD_SAMPLES):
+            continue
         hw, tw = h[w], tb[w] - tb[i]
-        still_rate = max(STILL_RATE_M_S, STILL_SLOPE_SIGMAS * noise
-                         / float(np.sqrt(np.sum((tw - tw.mean()) ** 2))))
-        if np.ptp(hw) > band or abs(np.polyfit(tw, hw, 1)[0]) > still_rate:
+        # The noise at rest, a filter's correlated scatter counted.
+        noise = max(np.nan_to_num(level_noise(tw, hw)), floor)
+        band = STILL_BAND_SIGMAS * noise + STILL_BAND_M
+        margin = 3.0 * noise + 0.5  # a sample this close above the ground's level reads it
+        slope_sigma = noise / float(np.sqrt(np.sum((tw - tw.mean()) ** 2)))
+        still_rate = max(STILL_RATE_M_S, STILL_SLOPE_SIGMAS * slope_sigma)
+        still_slope = float(np.polyfit(tw, hw, 1)[0])
+        spread = np.subtract(*np.percentile(hw, [100.0 - STILL_TAIL_PCT, STILL_TAIL_PCT]))
+        if spread > band or abs(still_slope) > still_rate:
             continue
         wa = (ta >= tb[i]) & (ta <= tb[i] + hold)
         if wa.sum() >= 5 and np.std(a[wa]) > rest_a:
             continue
         ground = float(np.median(hw))
-        above = np.flatnonzero((tb < tb[i] + hold) & (h > ground + 3.0 * noise + 0.5)
-                               & (tb > after))
-        if above.size == 0:
+        # The descent's end: its first reading at the ground's level since it was last
+        # well above it.
+        k_first = int(np.flatnonzero(descent)[0])
+        high = np.flatnonzero(descent & (tb < tb[i])
+                              & (h > ground + max(GROUND_BAND_M, 2.0 * margin)))
+        start = int(high[-1]) if high.size else k_first
+        reached = start + int(np.argmax(h[start:] <= ground + margin))
+        if reached <= k_first:
             return FlightEvent(float(tb[i]), _step_at(tb, tb[i]), "altimeter")
-        t_c = tb[above[-1]]
-        fit = (tb >= t_c - max(2.0, 3.0 * dtb)) & (tb <= t_c) & (tb > after)
+        t_c = float(tb[reached - 1])
+        fit = (tb >= t_c - max(2.0, 3.0 * dtb)) & (tb <= t_c) & descent
         if fit.sum() < 4:
-            return FlightEvent(float(t_c), _step_at(tb, t_c), "altimeter")
+            if short:
+                continue  # too few samples of the descent to tell the rest from it
+            return FlightEvent(t_c, _step_at(tb, t_c), "altimeter")
         slope, icpt = np.polyfit(tb[fit] - t_c, h[fit], 1)
-        # The ground lies within the noise's band below the last sample above it, at most
-        # twice the time the descent takes across that band (a second at least).
-        reach = max(1.0, 2.0 * (3.0 * noise + 0.5) / abs(slope)) if slope < 0 else 0.0
+        if short and abs(still_slope) + STILL_SLOPE_SIGMAS * slope_sigma >= abs(slope):
+            continue
+        # The ground lies within the margin below the last sample above it, at most twice
+        # the time the descent takes across that margin (a second at least).
+        reach = max(1.0, 2.0 * margin / abs(slope)) if slope < 0 else 0.0
         t_down = t_c + (float(np.clip((ground - icpt) / slope, 0.0, reach)) if slope < 0 else 0.0)
         step_c = _step_at(tb, t_c)
         sigma = max(step_c, noise / abs(slope)) if slope < 0 else step_c

@@ -28,6 +28,7 @@ R_AIR = 287.05287  # specific gas constant of dry air, J/(kg K)
 ISA_T0_K = 288.15
 ISA_P0_PA = 101325.0
 ISA_LAPSE_K_M = 0.0065
+ISA_TROPOPAUSE_K = 216.65  # the standard atmosphere's isothermal lower stratosphere
 
 
 def pressure_altitude(p: ca.SX | ca.MX | float | np.ndarray) -> ca.SX | ca.MX | np.ndarray:
@@ -62,7 +63,7 @@ class StandardAtmosphere:
     def pressure(self, h: ca.SX | ca.MX | float) -> ca.SX | ca.MX:
         h11 = 11000.0
         p_trop = _troposphere_pressure(ca.fmin(h, h11), 0.0, ISA_P0_PA, ISA_T0_K, ISA_LAPSE_K_M)
-        return p_trop * ca.exp(-G0 / (R_AIR * 216.65) * ca.fmax(h - h11, 0.0))
+        return p_trop * ca.exp(-G0 / (R_AIR * ISA_TROPOPAUSE_K) * ca.fmax(h - h11, 0.0))
 
     def altitude_at_pressure(self, p: np.ndarray | float) -> np.ndarray:
         """Altitude (m) at pressure `p` (Pa): the pressure altitude (troposphere only)."""
@@ -240,8 +241,13 @@ class SiteAtmosphere:
     T0 (K); temperature falls at `lapse_rate` (K/m) with height, and pressure
     and density follow hydrostatically:
     T = T0 - L (h - h0), p = p0 (T/T0)^(g0/(R L)), rho = p/(R T).
-    Valid within the troposphere; a sunny desert afternoon has lapse rates
-    between the standard 6.5 K/km and the dry adiabat's 9.8 K/km.  No wind.
+    A sunny desert afternoon has lapse rates between the standard 6.5 K/km and
+    the dry adiabat's 9.8 K/km.  Above its tropopause, where T falls to the
+    standard's 216.65 K (11 km for the standard's air), the air is isothermal as
+    the standard's lower stratosphere: p = p_t exp(-g0 (h - h_t) / (R T_t)), so
+    that a height a solver's iterate wanders to reads finite air (the linear
+    temperature alone reaches zero 44 km above a 288 K site at 6.5 K/km, and
+    its pressure and density are NaN beyond).  No wind.
     """
 
     elevation_m: float
@@ -250,12 +256,30 @@ class SiteAtmosphere:
     lapse_rate_k_m: float = ISA_LAPSE_K_M
     name: str = "site"
 
+    @property
+    def tropopause_m(self) -> float:
+        """Height (m) where the temperature falls to ISA_TROPOPAUSE_K (the site's elevation
+        where its air is colder)."""
+        return self.elevation_m + max(self.temperature_k - ISA_TROPOPAUSE_K, 0.0) \
+            / self.lapse_rate_k_m
+
+    def _below_tropopause(self, h: ca.SX | ca.MX | float) -> ca.SX | ca.MX | np.ndarray:
+        if isinstance(h, ca.SX | ca.MX | ca.DM):
+            return ca.fmin(h, self.tropopause_m)
+        return np.minimum(h, self.tropopause_m)
+
     def temperature(self, h: ca.SX | ca.MX | float) -> ca.SX | ca.MX:
-        return self.temperature_k - self.lapse_rate_k_m * (h - self.elevation_m)
+        return self.temperature_k - self.lapse_rate_k_m * (self._below_tropopause(h)
+                                                           - self.elevation_m)
 
     def pressure(self, h: ca.SX | ca.MX | float) -> ca.SX | ca.MX:
-        return _troposphere_pressure(h, self.elevation_m, self.pressure_pa, self.temperature_k,
-                                     self.lapse_rate_k_m)
+        below = self._below_tropopause(h)
+        p_trop = _troposphere_pressure(below, self.elevation_m, self.pressure_pa,
+                                       self.temperature_k, self.lapse_rate_k_m)
+        # Isothermal above the tropopause: exp(-(h - h_t) g0 / (R T_t)); 1 below it.
+        scale = -G0 / (R_AIR * min(self.temperature_k, ISA_TROPOPAUSE_K))
+        exp = ca.exp if isinstance(h, ca.SX | ca.MX | ca.DM) else np.exp
+        return p_trop * exp(scale * (h - below))
 
     def density(self, h: ca.SX | ca.MX | float) -> ca.SX | ca.MX:
         return self.pressure(h) / (R_AIR * self.temperature(h))
@@ -266,8 +290,14 @@ class SiteAtmosphere:
     def altitude_at_pressure(self, p: np.ndarray | float) -> np.ndarray:
         """Geometric altitude (m) at which this atmosphere has pressure `p` (Pa)."""
         expo = R_AIR * self.lapse_rate_k_m / G0
-        return self.elevation_m + self.temperature_k / self.lapse_rate_k_m * (
-            1.0 - (np.asarray(p, dtype=float) / self.pressure_pa) ** expo)
+        p = np.asarray(p, dtype=float)
+        h_t = self.tropopause_m
+        p_t = float(_troposphere_pressure(h_t, self.elevation_m, self.pressure_pa,
+                                          self.temperature_k, self.lapse_rate_k_m))
+        t_t = min(self.temperature_k, ISA_TROPOPAUSE_K)
+        below = self.elevation_m + self.temperature_k / self.lapse_rate_k_m * (
+            1.0 - (np.maximum(p, p_t) / self.pressure_pa) ** expo)
+        return np.where(p >= p_t, below, h_t + R_AIR * t_t / G0 * np.log(p_t / p))
 
     @classmethod
     def from_surface_density(cls, elevation_m: float, pressure_pa: float, density_kg_m3: float,

@@ -127,3 +127,29 @@ def fly_recovery(seed: int, chutes: dict[str, Chute], body_cds: float = BODY_CDS
             k = int(np.searchsorted(times, events[name]))
             height[k:k + 2] += (60.0, 25.0)  # the charge's gas at the static port
     return Recovery(times, height, accel, truth, events)
+
+
+FILTER_OMEGA, FILTER_ZETA = 2.0, 0.2  # a recorder's altitude filter: rad/s, damping ratio
+FILTER_STEP_M = 0.084  # its exported altitude's resolution (m)
+
+
+def filtered_altitude(t: np.ndarray, z: np.ndarray, omega: float = FILTER_OMEGA,
+                      zeta: float = FILTER_ZETA, step_m: float = FILTER_STEP_M) -> np.ndarray:
+    """What a flight computer's filtered export writes of the altitude readings `z` (m) at
+    times `t` (s): a position-velocity tracker (alpha-beta, alpha = 2 zeta omega dt, beta =
+    (omega dt)^2: a second-order loop of natural frequency `omega` rad/s and damping
+    `zeta`), rounded to `step_m`.  It follows a steady descent without lag; where the
+    vehicle stops at its impact, the estimate's speed carries it below the ground by about
+    the descent rate over omega and rebounds above it, and its noise is correlated over
+    about 1/omega s."""
+    x, v = float(z[0]), 0.0
+    out = np.empty_like(z)
+    out[0] = x
+    for k in range(1, z.size):
+        dt = t[k] - t[k - 1]
+        x_pred = x + v * dt
+        r = z[k] - x_pred
+        x = x_pred + 2.0 * zeta * omega * dt * r
+        v = v + omega**2 * dt * r
+        out[k] = x
+    return np.round(out / step_m) * step_m

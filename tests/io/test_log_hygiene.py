@@ -49,6 +49,15 @@ def test_a_clean_end_is_kept(seed: int) -> None:
     assert damaged_end(*_descent(6.0, 300.0, 2.0, seed)) is None
 
 
+def test_a_1_khz_log_s_noise_is_no_damage() -> None:
+    """At 1 kHz, 0.3 m of noise reads 420 m/s from one sample to the next, faster than any
+    canopy descends: noise, not a damaged end (it was reported as one of no samples)."""
+    t = np.arange(0.0, 20.0, 1e-3)
+    for seed in range(5):
+        h = 1200.0 - 6.0 * t + np.random.default_rng(seed).normal(0.0, 0.3, t.size)
+        assert damaged_end(t, h) is None, seed
+
+
 def test_an_impact_pulse_before_the_ground_is_cut_alone() -> None:
     """One sample of an impact's pressure pulse, then the vehicle rests on the ground: only
     the pulse is not flight."""

@@ -121,6 +121,17 @@ def test_lince_s_main_took_hold_8_s_after_its_charge(tmp_path: Path) -> None:
         main["t_open_s"], abs=1e-3)
 
 
+def test_lince_s_touchdown_is_its_impact_not_its_filter_s_rebound(tmp_path: Path) -> None:
+    """The filtered altitude comes down to the ground (about -5 m) near 432.0 s, overshoots
+    to -8 m and rebounds 3 m above the ground at 432.5 s: touchdown is where the descent
+    first reaches the ground, not where the rebound settles (434.91 s, which left 2.4 s on
+    the ground inside the phase), and the phase ends before it."""
+    report = _import("lince_2023", tmp_path / "test")
+    landed = report["flight_events"]["landed"]
+    assert 431.9 < landed["time_s"] < 432.2 and landed["sigma_s"] < 0.1
+    assert load_test(tmp_path / "test").t_end < 431.9
+
+
 def test_andromeda_s_garbage_end_is_cut_and_its_main_is_past_the_log(tmp_path: Path) -> None:
     """The last two rows fall 216 and 175 m in half a second each: cut.  The log then ends
     1084 m above the pad, before the card's 500 m main, which the fit leaves out; the
