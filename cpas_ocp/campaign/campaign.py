@@ -29,6 +29,8 @@ import pandas as pd
 
 from cpas_ocp.campaign.parallel import run_tasks
 from cpas_ocp.errors import InputError, PluginError, SolverFailure
+from cpas_ocp.estimation.reduction import stage_starts
+from cpas_ocp.estimation.stage_groups import clusters
 from cpas_ocp.io.flight_test import MANIFEST
 from cpas_ocp.physics.flight_test import Parachute
 from cpas_ocp.physics.parameters import param_name, split_name
@@ -112,6 +114,10 @@ def reconstruct_folder(folder: str) -> TestOutcome:
                            f"{where.lineno})", wall_s=time.perf_counter() - t0)
     std = cov.std
     chutes = {c.name: c for c in test.parachutes}
+    # A cluster is the canopies opened together (`stage_groups.clusters`, from the fitted
+    # starts): a rocket's drogue and main, tens of seconds apart, each fly alone.
+    cluster_of = {c.name: len(group) for group in clusters(
+        test, stage_starts(test, fit.parameters)) for c in group}
     stages = {s for c in test.parachutes for s in c.stages}
     rows = []
     for pname in fit.free:
@@ -121,7 +127,7 @@ def reconstruct_folder(folder: str) -> TestOutcome:
         rows.append({"test": test.name, "parameter": base, "name": pname,
                      "parachute": chute.name if chute else "", "type": chute.type if chute else "",
                      "stage": stage, "forebody": test.vehicle.name,
-                     "cluster_size": len(test.parachutes),
+                     "cluster_size": cluster_of[chute.name] if chute else len(test.parachutes),
                      "line_length": _line_length(chute),
                      "value": fit.parameters[pname],
                      "std": std.get(pname, np.nan), "unit": fit.model.parameter(pname).unit})
