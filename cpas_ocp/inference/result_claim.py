@@ -29,6 +29,13 @@ exceed their noise (chi-square/dof = s^2 > 1), every score statistic is
 inflated by s^2, so T is divided by s^2 (quasi-likelihood): a real flight
 that misfits its noise by 3x is not flagged for the misfit alone.
 
+*A drag area its descent contradicts.*  For an imported flight log, each opened
+canopy's fitted drag area is set beside the drag area its own settled descent needs (the
+import's forensics, 2 m g / (rho v^2) less the canopies open before it, its sigma
+counting the vertical air's); beyond the two-sided family-wise 1 % level the data that set
+the fit's value (an opening's shape pressed on a bound, a diameter's cap) and the descent
+rate disagree, and the fit is no result for that canopy (`descent_disagreements`).
+
 *A chi-square beyond the noise.*  P(chi^2_dof > chi^2) below ALPHA says the
 model or the stated noise is wrong somewhere; the covariance's sigmas then
 assume a noise the residuals do not show and are too small by about
@@ -113,8 +120,11 @@ from cpas_ocp.inference.restarts import Restart
 from cpas_ocp.io.import_reports import import_deployments
 from cpas_ocp.io.model_spec import ModelSpec
 from cpas_ocp.physics.effects.canopy_inflation import CanopyInflation
-from cpas_ocp.physics.parameters import split_name
+from cpas_ocp.physics.parameters import param_name, split_name
 
+# Two-sided family-wise level at which a fitted drag area and its settled descent's disagree
+# (`descent_disagreements`), the level of the import's deployment forensics.
+DESCENT_LEVEL = 0.01
 # Level of both tests.  A fit with a parameter on a guessed bound the data do not press
 # against is flagged with at most this probability; so is a fit whose model and noise are
 # right, for its chi-square.
@@ -470,6 +480,41 @@ def deployment_findings(fit: Fit) -> tuple[list[str], list[str]]:
     return failed, notes
 
 
+def descent_disagreements(fit: Fit, std: dict[str, float]) -> list[str]:
+    """Each opened canopy of an imported flight log whose fitted drag area (its last
+    stage's, `std` its sigma) lies beyond the two-sided family-wise level
+    `DESCENT_LEVEL` (Bonferroni over the canopies compared) from the drag area its own
+    settled descent needs, 2 m g / (rho v^2) less the canopies open before it, as the
+    import's forensics measured it (``import.json`` ``deployments[...]["own"]``, its sigma
+    counting the rate's and the vertical air's): a sentence each.  Such a fit is no result
+    for that canopy: the data that set its drag area (an opening's shape, a bound, a
+    diameter's cap) and the descent rate say different things."""
+    found = import_deployments(fit.test.path)
+    pairs = []
+    for chute in fit.test.parachutes:
+        entry = found.get(chute.name, {})
+        own = entry.get("own")
+        name = param_name("CdS", chute.name, chute.stages[-1])
+        if (entry.get("verdict") != "opened" or entry.get("above_diameter") or not own
+                or name not in fit.free or not std.get(name, 0.0) > 0.0):
+            continue
+        pairs.append((chute.name, name, fit.parameters[name], std[name],
+                      float(own["value_m2"]), float(own["sigma_m2"])))
+    if not pairs:
+        return []
+    limit = float(norm.isf(DESCENT_LEVEL / (2.0 * len(pairs))))
+    out = []
+    for canopy, name, value, sigma, needed, needed_sigma in pairs:
+        z = (value - needed) / float(np.hypot(sigma, needed_sigma))
+        if abs(z) > limit:
+            out.append(f"the {canopy}'s fitted drag area {name} = {value:.3g} ± {sigma:.2g} "
+                       f"m^2 lies {z:+.1f} sigma from the {needed:.3g} ± {needed_sigma:.2g} "
+                       "m^2 its settled descent needs: the data that set it and the descent "
+                       "rate disagree (the report's \"Drag areas from the steady descent\" "
+                       "names the channel)")
+    return out
+
+
 def check_claim(est: Estimator, fit: Fit, alpha: float = ALPHA) -> Claim:
     """The claim `fit` (of `est`) may make (see the module docstring)."""
     model = fit.model
@@ -484,6 +529,8 @@ def check_claim(est: Estimator, fit: Fit, alpha: float = ALPHA) -> Claim:
                   departures=process_departures(fit), process_misfits=process_misfits(fit, alpha))
     claim.worst_sensor, claim.worst_sensor_rms = worst_sensor(fit)
     claim.failed_deployments, claim.deployment_notes = deployment_findings(fit)
+    if import_deployments(fit.test.path):
+        claim.failed_deployments += descent_disagreements(fit, est.covariance(fit).std)
     guessed = [h for h in held if not h.physical]
     if not guessed:
         return claim

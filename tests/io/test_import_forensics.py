@@ -140,3 +140,37 @@ def test_a_ground_impact_at_the_log_s_end_is_no_charge(tmp_path: Path,
     assert any("the impact on the ground, not an ejection charge" in n
                for n in report["notes"])
     assert report["deployments"]["drogue"]["verdict"] == "not_opened"
+
+
+def test_a_drag_area_its_descent_contradicts_is_no_result(tmp_path: Path) -> None:
+    """A fitted drag area beside what its settled descent needs (the import's forensics):
+    within the family-wise 1 % level it stands; beyond it (a main pinned at 13.8 m^2 by its
+    opening's shape where its descent needs 31.9 +- 1.0) the claim refuses, naming both."""
+    from scipy.stats import norm
+
+    from cpas_ocp.inference.result_claim import DESCENT_LEVEL, descent_disagreements
+    opened = {"verdict": "opened", "sentence": "s", "above_diameter": False}
+    deployments = {"drogue": {**opened, "own": {"value_m2": 0.593, "sigma_m2": 0.038}},
+                   "main": {**opened, "own": {"value_m2": 31.9, "sigma_m2": 1.0}}}
+    fit = _fit_of(tmp_path, deployments, free=("CdS[drogue,open]", "CdS[main,open]"))
+    for chute in fit.test.parachutes:
+        chute.stages = ["open"]
+    std = {"CdS[drogue,open]": 0.015, "CdS[main,open]": 2.7}
+    limit = norm.isf(DESCENT_LEVEL / 4)  # two canopies compared, two-sided
+    # The main 0.9 of the limit below what its descent needs: it stands.
+    main_ok = 31.9 - 0.9 * limit * np.hypot(2.7, 1.0)
+    fit.parameters = {"CdS[drogue,open]": 0.598, "CdS[main,open]": main_ok}
+    assert descent_disagreements(fit, std) == []  # type: ignore[arg-type]
+    # 1.1 of the limit: refused, with both numbers.
+    fit.parameters["CdS[main,open]"] = 31.9 - 1.1 * limit * np.hypot(2.7, 1.0)
+    [sentence] = descent_disagreements(fit, std)  # type: ignore[arg-type]
+    assert sentence.startswith("the main's fitted drag area CdS[main,open]")
+    assert "31.9 ± 1 m^2 its settled descent needs" in sentence
+    # A canopy that did not open, or one needing more than its diameter gives, is judged
+    # by its own sentence, not this one.
+    deployments["main"] = {**deployments["main"], "above_diameter": True}
+    fit = _fit_of(tmp_path, deployments, free=("CdS[drogue,open]", "CdS[main,open]"))
+    for chute in fit.test.parachutes:
+        chute.stages = ["open"]
+    fit.parameters = {"CdS[drogue,open]": 0.598, "CdS[main,open]": 13.8}
+    assert descent_disagreements(fit, std) == []  # type: ignore[arg-type]
