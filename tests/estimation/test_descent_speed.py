@@ -140,6 +140,13 @@ def test_altimeter_only_rocket_fit_starts_inside_the_bounds_and_converges(
 
 
 @pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason=(
+    "this log's first fit no longer stalls after its failed feasible descent (iteration "
+    "144; it did before the import merged series and the reduction grouped clusters by "
+    "their starts): Ipopt goes on, "
+    "meets NaN in the objective and ends Diverging_Iterates at iteration 207 (a failure "
+    "reported with its status and count, which the restarts take over); the stop rule "
+    "itself is tested in tests/estimation/test_feasible_descent.py"))
 def test_a_2_hz_altimeter_fit_that_stalls_after_its_descent_stops_there(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """At 2 Hz the altimeter barely sees the drogue's opening at apogee, and the fit from
