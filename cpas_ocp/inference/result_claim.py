@@ -106,6 +106,7 @@ still pressed after MAX_WINDOW_MOVES moves is not a result.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -480,26 +481,30 @@ def deployment_findings(fit: Fit) -> tuple[list[str], list[str]]:
     return failed, notes
 
 
-def descent_disagreements(fit: Fit, std: dict[str, float]) -> list[str]:
+def descent_disagreements(fit: Fit, std_of: Callable[[], dict[str, float]]) -> list[str]:
     """Each opened canopy of an imported flight log whose fitted drag area (its last
-    stage's, `std` its sigma) lies beyond the two-sided family-wise level
-    `DESCENT_LEVEL` (Bonferroni over the canopies compared) from the drag area its own
-    settled descent needs, 2 m g / (rho v^2) less the canopies open before it, as the
-    import's forensics measured it (``import.json`` ``deployments[...]["own"]``, its sigma
-    counting the rate's and the vertical air's): a sentence each.  Such a fit is no result
-    for that canopy: the data that set its drag area (an opening's shape, a bound, a
-    diameter's cap) and the descent rate say different things."""
+    stage's, its sigma from `std_of`, called only where a canopy can be compared) lies
+    beyond the two-sided family-wise level `DESCENT_LEVEL` (Bonferroni over the canopies
+    compared) from the drag area its own settled descent needs, 2 m g / (rho v^2) less
+    the canopies open before it, as the import's forensics measured it (``import.json``
+    ``deployments[...]["own"]``, its sigma counting the rate's and the vertical air's): a
+    sentence each.  Such a fit is no result for that canopy: the data that set its drag
+    area (an opening's shape, a bound, a diameter's cap) and the descent rate say
+    different things."""
     found = import_deployments(fit.test.path)
-    pairs = []
+    candidates = []
     for chute in fit.test.parachutes:
         entry = found.get(chute.name, {})
-        own = entry.get("own")
         name = param_name("CdS", chute.name, chute.stages[-1])
-        if (entry.get("verdict") != "opened" or entry.get("above_diameter") or not own
-                or name not in fit.free or not std.get(name, 0.0) > 0.0):
-            continue
-        pairs.append((chute.name, name, fit.parameters[name], std[name],
-                      float(own["value_m2"]), float(own["sigma_m2"])))
+        if (entry.get("verdict") == "opened" and not entry.get("above_diameter")
+                and entry.get("own") and name in fit.free):
+            candidates.append((chute.name, name, entry["own"]))
+    if not candidates:
+        return []
+    std = std_of()
+    pairs = [(canopy, name, fit.parameters[name], std[name], float(own["value_m2"]),
+              float(own["sigma_m2"])) for canopy, name, own in candidates
+             if std.get(name, 0.0) > 0.0]
     if not pairs:
         return []
     limit = float(norm.isf(DESCENT_LEVEL / (2.0 * len(pairs))))
@@ -529,8 +534,7 @@ def check_claim(est: Estimator, fit: Fit, alpha: float = ALPHA) -> Claim:
                   departures=process_departures(fit), process_misfits=process_misfits(fit, alpha))
     claim.worst_sensor, claim.worst_sensor_rms = worst_sensor(fit)
     claim.failed_deployments, claim.deployment_notes = deployment_findings(fit)
-    if import_deployments(fit.test.path):
-        claim.failed_deployments += descent_disagreements(fit, est.covariance(fit).std)
+    claim.failed_deployments += descent_disagreements(fit, lambda: est.covariance(fit).std)
     guessed = [h for h in held if not h.physical]
     if not guessed:
         return claim

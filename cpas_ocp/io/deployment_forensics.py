@@ -461,17 +461,21 @@ def rate_change_time(t: np.ndarray, height: np.ndarray, t_charge: float, t_to: f
     corners = ts[(ts >= t_charge) & (ts <= t_to - 1.0)]
     if ts.size < MIN_DESCENT_SAMPLES or corners.size < 3:
         return None
-    def hinge_rss(c: float) -> float:
+    def hinge_residuals(c: float) -> np.ndarray:
+        """The heights less their least-squares hinge with its corner at `c` (s)."""
         design = np.c_[np.ones_like(ts), np.minimum(ts - c, 0.0), np.maximum(ts - c, 0.0)]
-        r = hs - design @ np.linalg.lstsq(design, hs, rcond=None)[0]
+        return hs - design @ np.linalg.lstsq(design, hs, rcond=None)[0]
+
+    def hinge_rss(c: float) -> float:
+        r = hinge_residuals(c)
         return float(np.dot(r, r))
 
     # Every sample of a fast log is a corner to try: on a grid CORNER_STEP_S apart first,
     # then every sample within two of its steps of the best (a 4 kHz log's 100,000 corners
     # each refitted to 100,000 samples would take minutes).
-    stride = max(1, int(CORNER_STEP_S / float(np.median(np.diff(ts)))))
-    tried = dict.fromkeys(range(0, corners.size, stride))
-    rss_of = {i: hinge_rss(corners[i]) for i in tried}
+    step = float(np.median(np.diff(ts)))
+    stride = max(1, int(CORNER_STEP_S / step))
+    rss_of = {i: hinge_rss(corners[i]) for i in range(0, corners.size, stride)}
     best = min(rss_of, key=rss_of.__getitem__)
     for i in range(max(0, best - 2 * stride), min(corners.size, best + 2 * stride + 1)):
         if i not in rss_of:
@@ -480,11 +484,8 @@ def rate_change_time(t: np.ndarray, height: np.ndarray, t_charge: float, t_to: f
     corners, rss = corners[order], np.array([rss_of[i] for i in order])
     k = int(np.argmin(rss))
     c = corners[k]
-    design = np.c_[np.ones_like(ts), np.minimum(ts - c, 0.0), np.maximum(ts - c, 0.0)]
-    r = hs - design @ np.linalg.lstsq(design, hs, rcond=None)[0]
-    noise = rss[k] / max(1, ts.size - 3) * max(1.0, integrated_time(r))
+    noise = rss[k] / max(1, ts.size - 3) * max(1.0, integrated_time(hinge_residuals(c)))
     near = corners[rss - rss[k] <= noise]
-    step = float(np.median(np.diff(ts)))
     return float(c), max(step, 0.5 * float(near.max() - near.min()))
 
 

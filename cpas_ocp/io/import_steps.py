@@ -99,7 +99,13 @@ from cpas_ocp.io.plausibility import (
     check_speed,
     check_steady_accelerometer,
 )
-from cpas_ocp.io.rocket_model import held_closed, held_openings, late_openings, rocket_model
+from cpas_ocp.io.rocket_model import (
+    effect_names,
+    held_closed,
+    held_openings,
+    late_openings,
+    rocket_model,
+)
 from cpas_ocp.io.site_air import LAPSE_BOUNDS_K_M, fit_lapse_rate, pad_pressure
 from cpas_ocp.physics.atmosphere import ISA_LAPSE_K_M, SiteAtmosphere, pressure_altitude
 from cpas_ocp.physics.effects.canopy_inflation import MORTAR_TO_INFLATION_S
@@ -464,8 +470,7 @@ def site_air(d: LogImport) -> None:
     d.notes.append(d.t0_note)
     if d.site is not None:
         return
-    lapse_spec = card.site.get("lapse_rate", {"value": 1e3 * ISA_LAPSE_K_M, "unit": "K/km"})
-    if lapse_spec == "gps":
+    if card.site.get("lapse_rate") == "gps":
         fixes = d.record.gps_fixes()
         descent = fixes[(fixes["time"] >= d.t_begin) & (fixes["time"] <= d.t_down)]
         if len(descent) < 10:
@@ -804,9 +809,8 @@ def model_block(d: LogImport) -> None:
                               held_openings(d.deploy, d.events), d.deploy_sigma, d.still_air,
                               d.openings_read()),
     }
-    effects = d.manifest["model"].get("effects", [])
-    named = {e if isinstance(e, str) else e.get("effect") for e in effects}
-    if d.carrier == "gps_altitude" and "gps_altitude" not in named:
+    if d.carrier == "gps_altitude" and "gps_altitude" not in effect_names(d.manifest["model"]):
+        effects = d.manifest["model"].get("effects", [])
         d.manifest["model"] = {**d.manifest["model"], "effects": [*effects, "gps_altitude"]}
         d.notes.append("the card's model lists no gps_altitude effect, which the descent the "
                        "GNSS carries needs: added")

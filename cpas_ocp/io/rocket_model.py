@@ -113,12 +113,8 @@ def held_closed(model: dict[str, Any], vehicle: dict[str, Any], closed: dict[str
             # left to the data, which then say nothing of it)
             fix |= {f"n[{key}]": HELD_FILL_CONSTANT, f"expopen[{key}]": HELD_EXPOPEN}
     model = {**model, "fix": {**fix, **model.get("fix", {})}}
-    named = {e if isinstance(e, str) else e.get("effect") for e in model.get("effects", ())}
-    if first in closed and "forebody_drag" in named:
-        model["free"] = [*dict.fromkeys([*model.get("free", []), "CdS_V"])]
-        if not vehicle.get("forebody_cds", {}).get("value"):
-            vehicle = {**vehicle, "forebody_cds": {"value": round(airframe_m2, 6),
-                                                   "unit": "m^2"}}
+    if first in closed:
+        model, vehicle = airframe_estimated(model, vehicle, airframe_m2)
     return model, vehicle
 
 
@@ -147,11 +143,23 @@ def late_openings(model: dict[str, Any], vehicle: dict[str, Any], late: dict[str
             entry["start_shifts"] = {**shifts, **entry.get("start_shifts", {})}
             e = entry
         effects.append(e)
-    model = {**model, "effects": effects}
-    named = {e if isinstance(e, str) else e.get("effect") for e in effects}
-    if "forebody_drag" in named:
-        model["free"] = [*dict.fromkeys([*model.get("free", []), "CdS_V"])]
-        if not vehicle.get("forebody_cds", {}).get("value"):
-            vehicle = {**vehicle, "forebody_cds": {"value": round(fall_m2, 6),
-                                                   "unit": "m^2"}}
+    return airframe_estimated({**model, "effects": effects}, vehicle, fall_m2)
+
+
+def effect_names(model: dict[str, Any]) -> set[str]:
+    """The names of the effects a manifest's model block lists (a name, or an entry with
+    its ``effect``)."""
+    return {e if isinstance(e, str) else e.get("effect") for e in model.get("effects", ())}
+
+
+def airframe_estimated(model: dict[str, Any], vehicle: dict[str, Any], guess_m2: float
+                       ) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The model with the airframe's drag area CdS_V freed, where it has
+    ``forebody_drag``, and the vehicle's ``forebody_cds`` starting it at `guess_m2` (m^2)
+    where the card gives none."""
+    if "forebody_drag" not in effect_names(model):
+        return model, vehicle
+    model = {**model, "free": [*dict.fromkeys([*model.get("free", []), "CdS_V"])]}
+    if not vehicle.get("forebody_cds", {}).get("value"):
+        vehicle = {**vehicle, "forebody_cds": {"value": round(guess_m2, 6), "unit": "m^2"}}
     return model, vehicle

@@ -160,10 +160,10 @@ def test_a_drag_area_its_descent_contradicts_is_no_result(tmp_path: Path) -> Non
     # The main 0.9 of the limit below what its descent needs: it stands.
     main_ok = 31.9 - 0.9 * limit * np.hypot(2.7, 1.0)
     fit.parameters = {"CdS[drogue,open]": 0.598, "CdS[main,open]": main_ok}
-    assert descent_disagreements(fit, std) == []  # type: ignore[arg-type]
+    assert descent_disagreements(fit, lambda: std) == []  # type: ignore[arg-type]
     # 1.1 of the limit: refused, with both numbers.
     fit.parameters["CdS[main,open]"] = 31.9 - 1.1 * limit * np.hypot(2.7, 1.0)
-    [sentence] = descent_disagreements(fit, std)  # type: ignore[arg-type]
+    [sentence] = descent_disagreements(fit, lambda: std)  # type: ignore[arg-type]
     assert sentence.startswith("the main's fitted drag area CdS[main,open]")
     assert "31.9 ± 1 m^2 its settled descent needs" in sentence
     # A canopy that did not open, or one needing more than its diameter gives, is judged
@@ -173,4 +173,4 @@ def test_a_drag_area_its_descent_contradicts_is_no_result(tmp_path: Path) -> Non
     for chute in fit.test.parachutes:
         chute.stages = ["open"]
     fit.parameters = {"CdS[drogue,open]": 0.598, "CdS[main,open]": 13.8}
-    assert descent_disagreements(fit, std) == []  # type: ignore[arg-type]
+    assert descent_disagreements(fit, lambda: std) == []  # type: ignore[arg-type]
