@@ -48,12 +48,11 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from functools import cache
 
 import numpy as np
 from scipy import optimize, stats
-from threadpoolctl import ThreadpoolController
 
+from cpas_ocp.blas_threads import one_thread
 from cpas_ocp.errors import SolverFailure
 
 # A between-test standard deviation this small against the estimates' own spread is
@@ -456,17 +455,10 @@ def fit_population(data: PopulationData, full_omega: bool = True, reml: bool = T
     BLAS runs on one thread here: the matrices are a few rows wide, and with L-BFGS-B's
     vector operations on a pool of threads `cpas-ocp population` of a campaign of 20
     tests took 30 s against 6.7 s on one (2 cores busy with other work)."""
-    with _blas().limit(limits=1):
+    with one_thread():
         return _fit_population(data, full_omega, reml, intervals, level, tau_intervals,
                                start)
 
-
-@cache
-def _blas() -> ThreadpoolController:
-    """The process's BLAS and OpenMP pools, found once: `threadpool_limits` looks them up
-    at every call, a third of a grouping test's 124 fits of a small campaign (1.10 s
-    against 0.73 s, `benchmarks/population_cost.py`)."""
-    return ThreadpoolController()
 
 
 def _fit_population(data: PopulationData, full_omega: bool, reml: bool, intervals: bool,

@@ -102,7 +102,8 @@ def free_reduction(lin: Linearisation, problem: DescentProblem) -> ReducedProble
 
 
 def descend(z: np.ndarray, chi2: float, problem: DescentProblem, tol: float,
-            max_steps: int, learn: bool = True) -> DescentEnd:
+            max_steps: int, learn: bool = True,
+            step_taken: Callable[[int, float], None] | None = None) -> DescentEnd:
     """Gauss-Newton steps from the feasible point `z` (chi-square `chi2`) through feasible
     points, for at most `max_steps` steps, until the measured decrement is below `tol`.
 
@@ -112,7 +113,7 @@ def descend(z: np.ndarray, chi2: float, problem: DescentProblem, tol: float,
     not fall sets the next from the feasible curve's parabola (`feasible_curvature`),
     two trials on one parabola whose least value lies within `tol` below the point
     ending the descent there; without, Gauss-Newton steps are halved where they fail
-    (the earlier path)."""
+    (the earlier path).  `step_taken(k, chi2)` is told of every step taken (progress)."""
     idx = problem.param_index
     decrement = np.inf
     secant = StructuredSecant() if learn else None
@@ -144,6 +145,8 @@ def descend(z: np.ndarray, chi2: float, problem: DescentProblem, tol: float,
             found = problem.feasible_point(trial)
             if found is not None and found[1] < chi2:
                 z, chi2 = found
+                if step_taken is not None:
+                    step_taken(k + 1, chi2)
                 break
             if not learn:
                 length *= 0.5

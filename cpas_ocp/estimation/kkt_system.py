@@ -18,15 +18,24 @@ covariance (`uncertainty`) both start here.
 from __future__ import annotations
 
 from collections.abc import Callable
+from contextlib import nullcontext
 from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
+from cpas_ocp.blas_threads import one_thread
+
 # Smallest to largest curvature (in the scaled coordinates) below which the
 # data are taken not to determine a combination of the free coordinates.
 SINGULAR_RATIO = 1e-13
+
+# The forward substitution through the shooting gaps runs with BLAS on one thread: its
+# work is thousands of products a few rows wide, which a pool of spinning threads only
+# delays, by minutes where another process holds a core (`blas_threads`).  False runs it
+# on the pools as loaded (the earlier path, `benchmarks/chain_solve_threads.py`).
+CHAIN_SOLVE_ON_ONE_THREAD = True
 
 
 @dataclass
@@ -125,8 +134,9 @@ def reduce_linearisation(lin: Linearisation) -> ReducedProblem:
         # Shooting gaps x_{k+1} - F(x_k) are unit lower-triangular in (x_1 .. x_N):
         # a natural-order LU has no fill and needs no pivoting.
         lu = splu(AD, permc_spec="NATURAL", diag_pivot_thresh=0.0)
-        Z[dep] = lu.solve(-(chain[:, free].toarray()))
-        dz_p[dep] = lu.solve(-lin.c[:lin.chain_rows])
+        with one_thread() if CHAIN_SOLVE_ON_ONE_THREAD else nullcontext():
+            Z[dep] = lu.solve(-(chain[:, free].toarray()))
+            dz_p[dep] = lu.solve(-lin.c[:lin.chain_rows])
     rest = A[lin.chain_rows:]
     B = np.asarray(rest @ Z)
     b = lin.c[lin.chain_rows:] + rest @ dz_p

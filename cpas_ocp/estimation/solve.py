@@ -170,12 +170,15 @@ class IterationMonitor(ca.Callback):
         if self._outside >= self.OUTSIDE_PERSISTS and self.left_at is None:
             self.left_at = np.array(z, dtype=float)
 
-    def _show(self, chi2: float) -> None:
-        """The iteration's progress on stderr: redrawn in place on a terminal, else a line
-        once PIPED_PROGRESS_S seconds have passed since the last (or the run's start)."""
-        text = f"  iteration {self._done + self._k:4d}   chi-square {chi2:14.6g}"
-        if self._tty:
-            sys.stderr.write(f"\r{text}")
+    def show(self, iteration: int, chi2: float, what: str = "iteration") -> None:
+        """Progress on stderr where the run shows it: `what` and its number, and
+        chi-square; redrawn in place on a terminal, else a line once PIPED_PROGRESS_S
+        seconds have passed since the last (or the run's start)."""
+        if not self.progress:
+            return
+        text = f"  {what} {iteration:4d}   chi-square {chi2:14.6g}"
+        if self._tty:  # padded: a longer line of the other kind may stand there
+            sys.stderr.write(f"\r{text:<64}")
         else:
             now = time.monotonic()
             if now - self._said < PIPED_PROGRESS_S:
@@ -233,8 +236,7 @@ class IterationMonitor(ca.Callback):
             return [1]
         if self.damping is not None:
             self.damping.observe(np.asarray(arg[0]).ravel())
-        if self.progress:
-            self._show(chi2)
+        self.show(self._done + self._k, chi2)
         improved, self._chi2 = self._chi2 - chi2, chi2
         if self._tol is None or improved >= self._tol or self._k - self._last_test < self._gap:
             return [0]
@@ -587,7 +589,9 @@ class Solver:
         lower, upper = bounds
         problem = DescentProblem(self._linearisations.linearise, self._starts.feasible_point,
                                  self.nlp.points.residual_value, idx, lower[idx], upper[idx])
-        return descend(*start, problem, tol, min(self.settings.descent_steps, left))
+        return descend(*start, problem, tol, min(self.settings.descent_steps, left),
+                       step_taken=lambda k, chi2: self._monitor.show(
+                           k, chi2, "feasible Gauss-Newton step"))
 
     @property
     def best_iterate(self) -> np.ndarray | None:

@@ -3,6 +3,8 @@ rule that hands a creeping Ipopt run to it (`estimation.IterationMonitor`)."""
 
 from __future__ import annotations
 
+from itertools import pairwise
+
 import casadi as ca
 import numpy as np
 import pytest
@@ -51,6 +53,20 @@ def test_descent_follows_a_curved_valley_to_its_minimum() -> None:
     assert end.converged and end.decrement < 1e-8
     np.testing.assert_allclose(end.z, [1.0, 1.0], atol=1e-4)
     assert end.chi2 < 1e-8
+
+
+def test_every_step_taken_is_told_with_its_lower_chi_square() -> None:
+    """The progress a long descent shows: one call per step, numbered, chi-square falling."""
+    problem = _unconstrained(_rosenbrock, np.full(2, -5.0), np.full(2, 5.0))
+    z0 = np.array([-1.2, 1.0])
+    told: list[tuple[int, float]] = []
+    start = problem.feasible_point(z0)[1]
+    end = descend(z0, start, problem, tol=1e-8, max_steps=200,
+                  step_taken=lambda k, chi2: told.append((k, chi2)))
+    assert [k for k, _ in told] == list(range(1, end.steps + 1))
+    chi2 = [start] + [c for _, c in told]
+    assert all(b < a for a, b in pairwise(chi2))
+    assert told[-1][1] == end.chi2
 
 
 def test_descent_holds_a_parameter_on_the_bound_it_presses_against() -> None:
