@@ -335,8 +335,9 @@ def touchdown(tb: np.ndarray, h: np.ndarray, ta: np.ndarray, a: np.ndarray,
         if hold < min_hold_s - 1e-9:
             return None
         short = hold < hold_s
-        w = (tb >= tb[i]) & (tb <= tb[i] + hold)
-        if w.sum() < (MIN_STILL_SAMPLES if short else HOLD_SAMPLES):
+        w = slice(int(np.searchsorted(tb, tb[i], side="left")),
+                  int(np.searchsorted(tb, tb[i] + hold, side="right")))  # tb increases
+        if w.stop - w.start < (MIN_STILL_SAMPLES if short else HOLD_SAMPLES):
             continue
         hw, tw = h[w], tb[w] - tb[i]
         # The noise at rest, a filter's correlated scatter counted.

@@ -107,19 +107,16 @@ def damaged_end(t: np.ndarray, h: np.ndarray) -> DamagedEnd | None:
     noise = max(second_difference_sigma(h), 0.05)
     k_top = int(np.argmax(h))
     first = max(k_top + 1, int(np.searchsorted(t, t[-1] - TAIL_S)), 2)
-    for i in range(first, t.size):
-        dt = t[i] - t[i - 1]
-        if not dt > 0.0:
-            continue
-        before = (t >= t[i - 1] - RATE_BEFORE_S) & (t <= t[i - 1])
-        if before.sum() < 3:
-            continue
-        rate = float(np.polyfit(t[before] - t[i - 1], h[before], 1)[0])
-        step = (h[i] - h[i - 1]) / dt
+    rows = np.arange(first, t.size)
+    count, rates = rates_before(t, h, rows - 1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        dt = t[rows] - t[rows - 1]
+        step = (h[rows] - h[rows - 1]) / dt
         step_noise = TAIL_SIGMAS * np.sqrt(2.0) * noise / dt
-        reach = G0 * dt + step_noise
-        if not (step < rate - reach or abs(step) > MAX_DESCENT_M_S + step_noise):
-            continue
+        damaged = (dt > 0.0) & (count >= 3) & (
+            (step < rates - (G0 * dt + step_noise))
+            | (np.abs(step) > MAX_DESCENT_M_S + step_noise))
+    for i, rate in zip(rows[damaged], rates[damaged], strict=True):
         # Back within reach of the flight from the last good sample: the damage ends there.
         later = np.arange(i, t.size)
         lag = t[later] - t[i - 1]
@@ -130,6 +127,34 @@ def damaged_end(t: np.ndarray, h: np.ndarray) -> DamagedEnd | None:
         end = int(later[back[0]]) if back.size else t.size
         return DamagedEnd(np.arange(i, end), float(t[i]), end == t.size)
     return None
+
+
+def rates_before(t: np.ndarray, h: np.ndarray, ends: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """The least-squares rate (m/s) of `h` (m) against `t` (s, increasing) over the
+    RATE_BEFORE_S up to and including each sample of `ends` (indices), and how many
+    samples that span holds: running sums over the span of every window, with times and
+    heights taken from its start (the sums stay small whatever the log's clock and datum
+    read)."""
+    if not ends.size:
+        return np.zeros(0, dtype=int), np.zeros(0)
+    lo = np.searchsorted(t, t[ends] - RATE_BEFORE_S, side="left")
+    start = int(lo.min())
+    x = t[start:int(ends.max()) + 1] - t[start]
+    y = h[start:int(ends.max()) + 1] - h[start]
+
+    def running(v: np.ndarray) -> np.ndarray:
+        return np.concatenate([[0.0], np.cumsum(v)])
+
+    sx, sy, sxx, sxy = running(x), running(y), running(x * x), running(x * y)
+    a, b = lo - start, ends - start + 1
+    n = (b - a).astype(float)
+    mx, my = (sx[b] - sx[a]) / np.maximum(n, 1.0), (sy[b] - sy[a]) / np.maximum(n, 1.0)
+    cxx = sxx[b] - sxx[a] - n * mx * mx
+    cxy = sxy[b] - sxy[a] - n * mx * my
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rate = np.where(cxx > 0.0, cxy / cxx, np.nan)
+    return b - a, rate
 
 
 def charge_swing(t: np.ndarray, h: np.ndarray, t_charge: float) -> tuple[float, float] | None:

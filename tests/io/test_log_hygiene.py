@@ -148,3 +148,20 @@ def test_a_glitch_under_the_canopies_is_named_a_transient_not_a_unit(
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1
     assert "a transient" in err[0] and "is the unit" not in err[0]
+
+
+def test_the_rate_before_each_sample_is_the_least_squares_slope_over_its_window() -> None:
+    """The running sums give np.polyfit's slope over every window, on a clock far from zero
+    and a noisy descent at 1 kHz, and count the samples each window holds."""
+    from cpas_ocp.io.log_hygiene import RATE_BEFORE_S, rates_before
+
+    rng = np.random.default_rng(5)
+    t = 86_400.0 + np.cumsum(rng.uniform(0.5e-3, 1.5e-3, 9000))
+    h = 3000.0 - 25.0 * (t - t[0]) + rng.normal(0.0, 0.3, t.size)
+    ends = np.arange(2, t.size, 97)
+    count, rate = rates_before(t, h, ends)
+    for e, n, r in zip(ends, count, rate, strict=True):
+        window = (t >= t[e] - RATE_BEFORE_S) & (t <= t[e])
+        assert n == window.sum()
+        expected = np.polyfit(t[window] - t[e], h[window], 1)[0]
+        assert r == pytest.approx(expected, rel=1e-9, abs=1e-9)
