@@ -15,10 +15,12 @@ from cpas_ocp.estimation.feasible_descent import DescentProblem, bounded_step, d
 from cpas_ocp.estimation.kkt_system import linearise
 from cpas_ocp.estimation.solve import (
     AFTER_DESCENT_STALLS,
+    MAX_DESCENTS,
     STALL_GAIN,
     STALL_ITERATIONS,
     STALL_SHARE,
     IterationMonitor,
+    _Run,
 )
 from cpas_ocp.estimation.structured_secant import StructuredSecant
 
@@ -246,3 +248,16 @@ def test_a_step_along_a_steep_feasible_curve_ends_where_the_curve_offers_nothing
     np.testing.assert_array_equal(learnt.z, z0)
     halved = descend(z0, 1.0, steep, tol=1e-3, max_steps=10, learn=False)
     assert not halved.converged and halved.steps == 0
+
+
+def test_a_run_descends_again_only_where_it_has_gone_lower_since_the_last_descent() -> None:
+    """The first stall descends; a stall after a descent that did not finish the run
+    descends again only from STALL_GAIN below where that descent left it, and at most
+    MAX_DESCENTS times in all."""
+    run = _Run()
+    assert run.may_descend(2689.0)
+    run.stalls, run.after_descent_chi2 = 1, 2656.68
+    assert not run.may_descend(2656.68 - 0.5 * STALL_GAIN)
+    assert run.may_descend(2648.24)
+    run.stalls = MAX_DESCENTS
+    assert not run.may_descend(1.0)
