@@ -118,7 +118,7 @@ from cpas_ocp.estimation.uncertainty import Covariance
 from cpas_ocp.inference.diagnostics import sensor_summary
 from cpas_ocp.inference.hypothesis_tests import chi_bar_square_sf, cone_statistic
 from cpas_ocp.inference.restarts import Restart
-from cpas_ocp.io.import_reports import import_deployments
+from cpas_ocp.io.import_reports import import_deployments, import_turned_over
 from cpas_ocp.io.model_spec import ModelSpec
 from cpas_ocp.physics.effects.canopy_inflation import CanopyInflation
 from cpas_ocp.physics.parameters import param_name, split_name
@@ -184,6 +184,11 @@ class WindowMove(Restart):
                 f"(chi-square {self.chi_square_before:.1f} -> {self.chi_square_after:.1f})")
 
 
+# A process's departure this close (s) to where the body turned over is put to it: the
+# rocket default's wind knots are 4 s apart, and a knot's B-spline reaches one spacing.
+TURNED_REACH_S = 4.0
+
+
 @dataclass(frozen=True)
 class ProcessDeparture:
     """Where an effect's stochastic process departs from its stated prior: a knot whose
@@ -245,6 +250,8 @@ class Claim:
     # out of the fit, beside others that did; one that opened in part).
     failed_deployments: list[str] = field(default_factory=list)
     deployment_notes: list[str] = field(default_factory=list)
+    # Where the import found the body turned over: (first, last) times (s).
+    turned_over: list[tuple[float, float]] = field(default_factory=list)
 
     @property
     def pressed(self) -> list[HeldBound]:
@@ -291,6 +298,19 @@ class Claim:
         return (f"; the worst sensor is {self.worst_sensor} (normalised RMS "
                 f"{self.worst_sensor_rms:.2f})" if self.worst_sensor else "")
 
+    def _lacks(self, departure: ProcessDeparture) -> str:
+        """What a process's departure may stand for: a stretch where the body turned over
+        (the import's) within TURNED_REACH_S of it, else a late opening or a wrong sigma."""
+        near = [(a, b) for a, b in self.turned_over if departure.kind != "block"
+                and a - TURNED_REACH_S <= departure.t <= b + TURNED_REACH_S]
+        if not near:
+            return " (a late opening, a wrong sigma): check the events and the model"
+        a, b = min(near, key=lambda span: max(span[0] - departure.t, departure.t - span[1], 0.0))
+        return (f": the body turned over from {a:.2f} to {b:.2f} s (the import's note), "
+                "where the axial accelerometer reads the drag reversed and no canopy's drag "
+                "follows it; the fit is about the canopies only without that stretch of "
+                "accelerometer.csv")
+
     def problems(self) -> list[str]:
         """One line per reason the fit is less than a plain result (empty when none); those
         that make it no result first."""
@@ -311,8 +331,7 @@ class Claim:
             more = len(self.departures) - 1
             out.append(f"a process departs from its prior beyond {PROCESS_SIGMAS:g} sigma: "
                        f"{worst}" + (f" (and {more} more)" if more else "")
-                       + "; it has absorbed something the model lacks (a late opening, a "
-                         "wrong sigma): check the events and the model")
+                       + "; it has absorbed something the model lacks" + self._lacks(worst))
         for text in self.undetermined_drag_areas:
             out.append(f"the data do not determine the drag area {text}")
         if not self.fits_noise and not self.beyond_noise:
@@ -534,6 +553,7 @@ def check_claim(est: Estimator, fit: Fit, alpha: float = ALPHA) -> Claim:
                   departures=process_departures(fit), process_misfits=process_misfits(fit, alpha))
     claim.worst_sensor, claim.worst_sensor_rms = worst_sensor(fit)
     claim.failed_deployments, claim.deployment_notes = deployment_findings(fit)
+    claim.turned_over = import_turned_over(fit.test.path)
     claim.failed_deployments += descent_disagreements(fit, lambda: est.covariance(fit).std)
     guessed = [h for h in held if not h.physical]
     if not guessed:

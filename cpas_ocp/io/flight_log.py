@@ -118,7 +118,7 @@ def import_flight(log: FlightRecord | AltusLog, card: FlightCard, out: str | Pat
         {**record.dropped, **d.dropped},
         d.accel_sigmas, d.snatches, d.events, [*record.notes, *d.notes], card.nominal,
         {} if d.forensics is None else {c.name: c.as_dict() for c in d.forensics.canopies},
-        d.carrier, d.gnss_sigma if d.carrier == "gps_altitude" else None)
+        d.carrier, d.gnss_sigma if d.carrier == "gps_altitude" else None, d.turned_over)
     _write_folder(Path(out), d.manifest, d.files, summary, card.source, d.source)
     return summary
 

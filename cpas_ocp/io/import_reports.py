@@ -85,6 +85,17 @@ def import_deployments(folder: Path | None) -> dict[str, dict[str, Any]]:
             and isinstance(entry.get("verdict"), str) and isinstance(entry.get("sentence"), str)}
 
 
+def import_turned_over(folder: Path | None) -> list[tuple[float, float]]:
+    """Where the import of the test folder `folder` found the body turned over (its
+    ``import.json``'s ``turned_over_s``): (first, last) times (s); empty where it found
+    none, or the folder was not imported."""
+    found = _import_report(folder, "turned_over_s")
+    try:
+        return [(float(a), float(b)) for a, b in found]
+    except (TypeError, ValueError):
+        return []
+
+
 def import_flight_events(folder: Path | None) -> dict[str, FlightEvent]:
     """The flight events an import found for the test folder `folder` (its ``import.json``:
     apogee, the charges, touchdown, each with its time and sigma in s); empty for a folder
@@ -119,6 +130,8 @@ class ImportSummary:
     # barometer's file stops in the air), and the GNSS altitude's sigma (m) where it does.
     descent_channel: str = "baro"
     gnss_sigma_m: float | None = None
+    # Where the axial accelerometer reads the body turned over: (first, last) times (s).
+    turned_over: list[tuple[float, float]] = field(default_factory=list)
 
     def to_dict(self) -> dict[str, Any]:
         return {"recorder": self.recorder, "phase_s": list(self.phase), "events_s": self.events,
@@ -135,4 +148,5 @@ class ImportSummary:
                                   for k, e in self.flight_events.items()},
                 "notes": self.notes, "samples": self.samples, "dropped": self.dropped,
                 "nominal": self.nominal, "deployments": self.deployments,
-                "descent_channel": self.descent_channel, "gnss_sigma_m": self.gnss_sigma_m}
+                "descent_channel": self.descent_channel, "gnss_sigma_m": self.gnss_sigma_m,
+                "turned_over_s": [list(span) for span in self.turned_over]}

@@ -75,7 +75,7 @@ from cpas_ocp.io.import_events import (
     flight_events,
 )
 from cpas_ocp.io.import_reports import Snatch
-from cpas_ocp.io.log_hygiene import charge_swing, damaged_end
+from cpas_ocp.io.log_hygiene import charge_swing, damaged_end, flagged_stretches, turned_over
 from cpas_ocp.io.log_noise import (
     MERGE_SPAN_S,
     MIN_DESCENT_SAMPLES,
@@ -109,6 +109,7 @@ from cpas_ocp.io.rocket_model import (
 from cpas_ocp.io.site_air import LAPSE_BOUNDS_K_M, fit_lapse_rate, pad_pressure
 from cpas_ocp.physics.atmosphere import ISA_LAPSE_K_M, SiteAtmosphere, pressure_altitude
 from cpas_ocp.physics.effects.canopy_inflation import MORTAR_TO_INFLATION_S
+from cpas_ocp.physics.units import G0
 
 TOUCHDOWN_MARGIN_S = 0.5  # phase ends this long before the detected touchdown (s) ...
 
@@ -189,6 +190,9 @@ class LogImport:
     accel_sigmas: list[float] = field(default_factory=list)
     snatches: dict[str, Snatch] = field(default_factory=dict)
     full_open: dict[str, tuple[float, float]] = field(default_factory=dict)
+    # Where the axial accelerometer reads the body turned over (`log_hygiene.turned_over`):
+    # (first, last) sample times (s) of each stretch, kept with the samples.
+    turned_over: list[tuple[float, float]] = field(default_factory=list)
     # every series step: the folder's files and its sensors
     files: dict[str, pd.DataFrame] = field(default_factory=dict)
     sensors: list[dict[str, Any]] = field(default_factory=list)
@@ -625,6 +629,14 @@ def accelerometer_series(d: LogImport) -> None:
     charge = d.charge_windows(accel["time"])
     d.dropped["ejection_charge_accelerometer_samples"] = int(charge.sum())
     accel = accel[~charge]
+    # The series is the body's acceleration (gravity taken out): its specific force adds g.
+    d.turned_over = flagged_stretches(accel["time"].to_numpy(),
+                                      turned_over(accel["time"].to_numpy(),
+                                                  accel["acceleration"].to_numpy() + G0))
+    for first, last in d.turned_over:
+        d.notes.append(f"the body turned over from {first:.2f} to {last:.2f} s: the axial "
+                       "accelerometer reads the drag reversed there, which no canopy's "
+                       "drag makes (a tumble, or the rocket hanging nose down?)")
     t_baro, h_baro = d.altitude_phase["time"].to_numpy(), d.altitude_phase["altitude"].to_numpy()
     density = np.asarray(d.site.density(d.site.altitude_at_pressure(
         d.altitude_phase["pressure"].to_numpy())), dtype=float).ravel()

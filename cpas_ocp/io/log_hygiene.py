@@ -197,3 +197,12 @@ def turned_over(t: np.ndarray, specific_force: np.ndarray) -> np.ndarray:
     before = np.abs(t - over[np.clip(k - 1, 0, over.size - 1)])
     after = np.abs(over[np.clip(k, 0, over.size - 1)] - t)
     return np.minimum(before, after) <= TURNED_MARGIN_S
+
+
+def flagged_stretches(t: np.ndarray, flagged: np.ndarray) -> list[tuple[float, float]]:
+    """The (first, last) times (s) of each run of consecutive `flagged` samples at times
+    `t`."""
+    edges = np.diff(np.concatenate([[0], flagged.astype(np.int8), [0]]))
+    return [(float(t[a]), float(t[b - 1]))
+            for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1),
+                            strict=True)]

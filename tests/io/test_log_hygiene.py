@@ -165,3 +165,44 @@ def test_the_rate_before_each_sample_is_the_least_squares_slope_over_its_window(
         assert n == window.sum()
         expected = np.polyfit(t[window] - t[e], h[window], 1)[0]
         assert r == pytest.approx(expected, rel=1e-9, abs=1e-9)
+
+
+def test_a_log_whose_body_tumbles_under_its_canopies_says_where(tmp_path: Path) -> None:
+    """A mapped log whose axial accelerometer reads -1.5 g for 4 s under the canopies (the
+    body tumbling: its specific force reversed) imports with that stretch in its report
+    and a note; the samples stay in the folder."""
+    flight = fly()
+    write_mapped(flight, tmp_path / "log.csv", seed=4)
+    log = pd.read_csv(tmp_path / "log.csv")
+    t = 1e-3 * log["t_ms"].to_numpy()
+    t_tumble = flight.events["drogue"] + 20.0
+    tumble = (t >= t_tumble) & (t < t_tumble + 4.0)
+    rng = np.random.default_rng(9)
+    log.loc[tumble, "ay_g"] = np.round(1.5 + rng.normal(0.0, 0.05, tumble.sum()), 4)  # -1.5 g
+    log.to_csv(tmp_path / "log.csv", index=False, float_format="%.7g")
+    accel = {**COLUMN_MAP["acceleration"], "axis": "-y"}
+    (tmp_path / "map.json").write_text(json.dumps({**COLUMN_MAP, "acceleration": accel}))
+    (tmp_path / "card.json").write_text(json.dumps(CARD))
+    assert main(["import", str(tmp_path / "log.csv"), "--columns", str(tmp_path / "map.json"),
+                 "--card", str(tmp_path / "card.json"), "--out", str(tmp_path / "test"),
+                 "--still-air"]) == 0
+    report = json.loads((tmp_path / "test" / "import.json").read_text())
+    [(first, last)] = report["turned_over_s"]
+    assert t_tumble - 0.6 <= first <= t_tumble + 0.1
+    assert t_tumble + 3.9 <= last <= t_tumble + 4.6
+    assert any(n.startswith("the body turned over from") for n in report["notes"])
+
+
+def test_a_clean_flight_has_no_turned_over_stretch(tmp_path: Path) -> None:
+    """The same flight without the tumble: its boost, coast, charges and openings are no
+    turned-over stretch."""
+    flight = fly()
+    write_mapped(flight, tmp_path / "log.csv", seed=4)
+    accel = {**COLUMN_MAP["acceleration"], "axis": "-y"}
+    (tmp_path / "map.json").write_text(json.dumps({**COLUMN_MAP, "acceleration": accel}))
+    (tmp_path / "card.json").write_text(json.dumps(CARD))
+    assert main(["import", str(tmp_path / "log.csv"), "--columns", str(tmp_path / "map.json"),
+                 "--card", str(tmp_path / "card.json"), "--out", str(tmp_path / "test"),
+                 "--still-air"]) == 0
+    report = json.loads((tmp_path / "test" / "import.json").read_text())
+    assert report["turned_over_s"] == []
