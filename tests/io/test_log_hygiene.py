@@ -84,6 +84,18 @@ def test_a_filtered_charge_swing_is_found_and_an_opening_is_not() -> None:
     assert charge_swing(t, h_open, 10.0) is None
 
 
+def _imported(folder: Path) -> dict:
+    """`folder`'s log.csv imported in still air through the standard map (its axial axis
+    -y) and card into `folder`/test; the import report."""
+    accel = {**COLUMN_MAP["acceleration"], "axis": "-y"}
+    (folder / "map.json").write_text(json.dumps({**COLUMN_MAP, "acceleration": accel}))
+    (folder / "card.json").write_text(json.dumps(CARD))
+    assert main(["import", str(folder / "log.csv"), "--columns", str(folder / "map.json"),
+                 "--card", str(folder / "card.json"), "--out", str(folder / "test"),
+                 "--still-air"]) == 0
+    return json.loads((folder / "test" / "import.json").read_text())
+
+
 def test_a_log_with_garbage_at_its_end_imports_without_it(tmp_path: Path) -> None:
     """A mapped log whose last two rows read 300 m below the descent (a recorder writing its
     buffer out badly) imports, says so, and writes no altimeter sample after the damage."""
@@ -92,13 +104,7 @@ def test_a_log_with_garbage_at_its_end_imports_without_it(tmp_path: Path) -> Non
     log = pd.read_csv(tmp_path / "log.csv")
     log.loc[log.index[-2:], "press_hPa"] += 35.0  # about 300 m lower
     log.to_csv(tmp_path / "log.csv", index=False, float_format="%.7g")
-    accel = {**COLUMN_MAP["acceleration"], "axis": "-y"}
-    (tmp_path / "map.json").write_text(json.dumps({**COLUMN_MAP, "acceleration": accel}))
-    (tmp_path / "card.json").write_text(json.dumps(CARD))
-    assert main(["import", str(tmp_path / "log.csv"), "--columns", str(tmp_path / "map.json"),
-                 "--card", str(tmp_path / "card.json"), "--out", str(tmp_path / "test"),
-                 "--still-air"]) == 0
-    report = json.loads((tmp_path / "test" / "import.json").read_text())
+    report = _imported(tmp_path)
     assert report["dropped"]["damaged_end_samples"] == 2
     assert any("left out: no descent falls that way" in n for n in report["notes"])
     t_damage = 1e-3 * float(log["t_ms"].iloc[-2])
@@ -180,13 +186,7 @@ def test_a_log_whose_body_tumbles_under_its_canopies_says_where(tmp_path: Path) 
     rng = np.random.default_rng(9)
     log.loc[tumble, "ay_g"] = np.round(1.5 + rng.normal(0.0, 0.05, tumble.sum()), 4)  # -1.5 g
     log.to_csv(tmp_path / "log.csv", index=False, float_format="%.7g")
-    accel = {**COLUMN_MAP["acceleration"], "axis": "-y"}
-    (tmp_path / "map.json").write_text(json.dumps({**COLUMN_MAP, "acceleration": accel}))
-    (tmp_path / "card.json").write_text(json.dumps(CARD))
-    assert main(["import", str(tmp_path / "log.csv"), "--columns", str(tmp_path / "map.json"),
-                 "--card", str(tmp_path / "card.json"), "--out", str(tmp_path / "test"),
-                 "--still-air"]) == 0
-    report = json.loads((tmp_path / "test" / "import.json").read_text())
+    report = _imported(tmp_path)
     [(first, last)] = report["turned_over_s"]
     assert t_tumble - 0.6 <= first <= t_tumble + 0.1
     assert t_tumble + 3.9 <= last <= t_tumble + 4.6
@@ -198,11 +198,5 @@ def test_a_clean_flight_has_no_turned_over_stretch(tmp_path: Path) -> None:
     turned-over stretch."""
     flight = fly()
     write_mapped(flight, tmp_path / "log.csv", seed=4)
-    accel = {**COLUMN_MAP["acceleration"], "axis": "-y"}
-    (tmp_path / "map.json").write_text(json.dumps({**COLUMN_MAP, "acceleration": accel}))
-    (tmp_path / "card.json").write_text(json.dumps(CARD))
-    assert main(["import", str(tmp_path / "log.csv"), "--columns", str(tmp_path / "map.json"),
-                 "--card", str(tmp_path / "card.json"), "--out", str(tmp_path / "test"),
-                 "--still-air"]) == 0
-    report = json.loads((tmp_path / "test" / "import.json").read_text())
+    report = _imported(tmp_path)
     assert report["turned_over_s"] == []
