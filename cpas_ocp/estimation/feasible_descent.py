@@ -73,6 +73,12 @@ class DescentProblem:
     upper: np.ndarray
 
 
+# A step with parameters held on their bounds takes its reduction from the free one's
+# columns (`ReducedProblem.holding`) rather than a forward substitution of its own; False
+# is the earlier path (`benchmarks/descent_reductions.py`).
+HELD_FROM_FREE_REDUCTION = True
+
+
 def bounded_step(lin: Linearisation, problem: DescentProblem,
                  curvature: tuple[np.ndarray, np.ndarray] | None = None,
                  red: ReducedProblem | None = None) -> GaussNewtonStep:
@@ -83,7 +89,9 @@ def bounded_step(lin: Linearisation, problem: DescentProblem,
     already reduced with only its states held (`free_reduction`)."""
     idx = problem.param_index
     states_held = np.setdiff1d(lin.held, idx)
-    free = gauss_newton(replace(lin, held=states_held), red, curvature)
+    unheld = replace(lin, held=states_held)
+    red = red or reduce_linearisation(unheld)
+    free = gauss_newton(unheld, red, curvature)
     values, span = lin.z[idx], problem.upper - problem.lower
     move = free.step[idx]
     hold = ((values <= problem.lower + ON_BOUND * span) & (move < 0.0)) \
@@ -92,7 +100,8 @@ def bounded_step(lin: Linearisation, problem: DescentProblem,
     if not hold.any():
         return free
     return gauss_newton(replace(lin, held=np.union1d(states_held, idx[hold])),
-                        curvature=curvature)
+                        red.holding(idx[hold]) if HELD_FROM_FREE_REDUCTION else None,
+                        curvature)
 
 
 def free_reduction(lin: Linearisation, problem: DescentProblem) -> ReducedProblem:

@@ -115,6 +115,15 @@ class ReducedProblem:
     B: np.ndarray
     b: np.ndarray
 
+    def holding(self, columns: np.ndarray) -> ReducedProblem:
+        """The same linearisation reduced with `columns` (of the decision vector) held too:
+        each column of Z is its own forward substitution, so holding a coordinate drops
+        its column of Z, JZ and B and leaves the rest as they are (`reduce_linearisation`
+        with those columns held gives the same, at the cost of the chain's solve)."""
+        keep = ~np.isin(self.free, columns)
+        return ReducedProblem(self.free[keep], self.Z[:, keep], self.dz_p, self.JZ[:, keep],
+                              self.r, self.B[:, keep], self.b)
+
 
 def reduce_linearisation(lin: Linearisation) -> ReducedProblem:
     """Eliminate the `dependent` columns through the first `chain_rows` constraints."""

@@ -205,3 +205,22 @@ def test_a_tied_combination_reads_the_same_whatever_the_rounding(ulp: float) -> 
     # The pivot row of a tied subspace is the first by name, not the one rounding favours.
     P = np.array([[a * (1.0 + ulp)], [-a], [0.1]])
     assert _leading_rows(P, ["p2", "p1", "p3"])[0] == 1
+
+
+@pytest.mark.parametrize("held", [[0], [1], [0, 1]])
+def test_holding_coordinates_of_a_reduction_is_reducing_with_them_held(held: list[int]) -> None:
+    """`ReducedProblem.holding` drops the held coordinates' columns of one forward
+    substitution: the same reduced problem, and the same Gauss-Newton step, as reducing
+    the linearisation with them held."""
+    from cpas_ocp.estimation.kkt_system import reduce_linearisation
+
+    lin, params = _chain_problem(17)
+    columns = params[held]
+    derived = reduce_linearisation(lin).holding(columns)
+    direct = reduce_linearisation(replace(lin, held=columns))
+    for name in ("free", "Z", "dz_p", "JZ", "r", "B", "b"):
+        np.testing.assert_allclose(getattr(derived, name), getattr(direct, name),
+                                   rtol=1e-12, atol=1e-14, err_msg=name)
+    heldlin = replace(lin, held=columns)
+    np.testing.assert_allclose(gauss_newton(heldlin, derived).step,
+                               gauss_newton(heldlin).step, rtol=1e-10, atol=1e-14)
