@@ -18,7 +18,6 @@ from __future__ import annotations
 import statistics
 import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -26,10 +25,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import harness  # noqa: E402
-from long_log import write_log  # noqa: E402
+from long_log import imported_estimator  # noqa: E402
 
-from cpas_ocp.api.reconstruction import as_test, build, model_of  # noqa: E402
-from cpas_ocp.cli import main as cli  # noqa: E402
 from cpas_ocp.estimation import kkt_system  # noqa: E402
 
 # A second process of numerical work: small products on its own BLAS pool, whose threads
@@ -56,15 +53,7 @@ def main() -> None:
     parser = harness.parser(__doc__, seed=1, seed_help="seed of the log's sensor noise")
     parser.add_argument("--repeat", type=int, default=3, help="reductions per side")
     args = parser.parse_args()
-    with tempfile.TemporaryDirectory() as tmp:
-        folder = Path(tmp)
-        write_log(folder, {"baro", "accel"}, args.seed)
-        code = cli(["import", str(folder / "log.csv"), "--columns", str(folder / "map.json"),
-                    "--card", str(folder / "card.json"), "--out", str(folder / "test")])
-        if code:
-            raise SystemExit(f"the import failed (exit {code})")
-        test = as_test(folder / "test")
-        est = build(test, model_of(test))
+    est = imported_estimator(args.seed)
     lin = est.linearisations.linearise(est.starts.initial_point())
     print(f"{lin.z.size} variables, {lin.dependent.size} shooting states eliminated")
     results = {"alone": timings(lin, args.repeat)}

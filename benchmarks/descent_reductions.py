@@ -12,7 +12,6 @@ agree), and the ratio earlier / now.
 from __future__ import annotations
 
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -20,25 +19,15 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import harness  # noqa: E402
-from long_log import write_log  # noqa: E402
+from long_log import imported_estimator  # noqa: E402
 
-from cpas_ocp.api.reconstruction import as_test, build, model_of  # noqa: E402
-from cpas_ocp.cli import main as cli  # noqa: E402
 from cpas_ocp.estimation import feasible_descent  # noqa: E402
 
 
 def main() -> None:
     args = harness.parser(__doc__, seed=1, seed_help="seed of the log's sensor noise") \
         .parse_args()
-    with tempfile.TemporaryDirectory() as tmp:
-        folder = Path(tmp)
-        write_log(folder, {"baro", "accel"}, args.seed)
-        code = cli(["import", str(folder / "log.csv"), "--columns", str(folder / "map.json"),
-                    "--card", str(folder / "card.json"), "--out", str(folder / "test")])
-        if code:
-            raise SystemExit(f"the import failed (exit {code})")
-        test = as_test(folder / "test")
-        est = build(test, model_of(test))
+    est = imported_estimator(args.seed)
     results = {}
     for side, derived in (("earlier", False), ("now", True)):
         feasible_descent.HELD_FROM_FREE_REDUCTION = derived

@@ -45,6 +45,7 @@ import pandas as pd  # noqa: E402
 
 from benchmarks import harness  # noqa: E402
 from benchmarks.revisions import PRELUDE, code_at  # noqa: E402
+from cpas_ocp.estimation.estimator import Estimator  # noqa: E402
 from tests.io.test_rocket_log_import import (  # noqa: E402
     A_NOISE,
     CARD,
@@ -102,6 +103,24 @@ def write_log(folder: Path, channels: set[str], seed: int, diameter: bool = True
     (folder / "map.json").write_text(json.dumps(column_map))
     (folder / "card.json").write_text(json.dumps(card))
     return flight.events
+
+
+def imported_estimator(seed: int, channels: frozenset[str] = frozenset({"baro", "accel"})
+                       ) -> Estimator:
+    """The log of `write_log` with `channels`, imported by `cpas-ocp import` in this
+    process into a temporary folder, and its estimator under the model the import
+    wrote (the rocket default)."""
+    from cpas_ocp.api.reconstruction import as_test, build, model_of
+    from cpas_ocp.cli import main as cli
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        write_log(folder, set(channels), seed)
+        code = cli(["import", str(folder / "log.csv"), "--columns", str(folder / "map.json"),
+                    "--card", str(folder / "card.json"), "--out", str(folder / "test")])
+        if code:
+            raise SystemExit(f"the import failed (exit {code})")
+        test = as_test(folder / "test")
+        return build(test, model_of(test))
 
 
 # A command of the code tree given first (`revisions.PRELUDE`), then its arguments.
