@@ -386,8 +386,8 @@ def fresh_fit(test: FlightTest, spec: ModelSpec, settings: Settings, max_iter: i
     own shape and start-time restarts), on `settings` without the nested fit's grid,
     guesses, freed or held parameters and limits, with the iteration limit `max_iter`;
     None where it does not converge."""
-    settings = dataclasses.replace(settings, nodes=None, guess={}, free=None, fixed={},
-                                   limits={}, max_iter=max_iter)
+    settings = dataclasses.replace(settings, nodes=None, interval_steps=None, guess={},
+                                   free=None, fixed={}, limits={}, max_iter=max_iter)
     try:
         est = Estimator(test, spec, settings)
         return est, solve_with_continuation(est, progress)

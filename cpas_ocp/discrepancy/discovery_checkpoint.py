@@ -148,8 +148,9 @@ def _settings_json(settings: Settings) -> dict[str, Any]:
 def _settings(data: Mapping[str, Any]) -> Settings:
     """Settings from `_settings_json`'s JSON (tuples come back as lists)."""
     values = dict(data)
-    if values.get("nodes") is not None:
-        values["nodes"] = tuple(values["nodes"])
+    for key in ("nodes", "interval_steps"):
+        if values.get(key) is not None:
+            values[key] = tuple(values[key])
     values["limits"] = {n: tuple(v) for n, v in values.get("limits", {}).items()}
     return Settings(**values)
 

@@ -29,7 +29,10 @@ class Settings:
     nodes: the grid's nodes (s) as given; an estimator records its grid here,
     so that a model built from its settings (a nested or extended fit, a
     profile) shares it;
-    substeps: RK4 steps per interval;
+    interval_steps: the RK4 sub-steps of each interval of `nodes` (an estimator
+    records its grid's here; None: from the intervals' lengths,
+    `shooting_grid.substeps_of`);
+    substeps: RK4 steps per sub-step (a multiplier on every interval's);
     chi2_step_tol: stop once the Gauss-Newton step would lower chi-square by
     less than this (0.01: every parameter within 0.1 sigma of the optimum the
     fit is heading for; None: only Ipopt's own tests end the run);
@@ -91,6 +94,7 @@ class Settings:
 
     grid_step: float | None = None
     nodes: tuple[float, ...] | None = None
+    interval_steps: tuple[int, ...] | None = None
     substeps: int = 1
     max_iter: int = 500
     tol: float = 1e-6

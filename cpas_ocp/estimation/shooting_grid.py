@@ -3,13 +3,9 @@ steady descent.
 
 Every node lies on the fine lattice t_0 + i h (h the sensor-rate step of
 `estimation.default_grid_step`), and every interval is h times a power of
-two, at most MAX_INTERVAL_S.  An interval longer than MAX_STEP_S is
-integrated in RK4 sub-steps of at most MAX_STEP_S (`substeps_of`), and a
-sample inside it is predicted by cubic Hermite interpolation between its
-nodes (states and their derivatives), not by stepping from the node before.
-The model is simulated once from the offline reduction's values on the
-lattice, and an interval of length H <= MAX_STEP_S may start at lattice
-point i (a multiple of H / h) where
+two, at most MAX_INTERVAL_S.  The model is simulated once from the offline
+reduction's values on the lattice, and a single RK4 step of length H <=
+MAX_STEP_S may start at lattice point i (a multiple of H / h) where
 
 * **accuracy**: one RK4 step of length H from the simulated state lands
   within ERROR_PER_SECOND * H state scales of where the lattice's steps
@@ -21,21 +17,35 @@ point i (a multiple of H / h) where
   about 2.8; at 0.5 its error in the fastest mode is 2e-4 per step, so
   that mode may stiffen fivefold during the fit before RK4 loses it).
 
-A longer interval (seconds in a steady descent under a canopy, whose drag
-relaxes the speed to its terminal value in v / 2g, a few tenths of a
-second: stiff for one RK4 step, slow for the motion) may stand where every
-lattice interval it covers allows the longest single step, its sub-steps
-land within ERROR_PER_SECOND * H state scales of the lattice's end, and the
-Hermite interpolant lies within the longest single step's ERROR_PER_SECOND *
-MAX_STEP_S of the lattice's states at every lattice point inside it (at the
-altitude's 1,000 m scale, 2.5 mm: a hundredth of a barometric altimeter's
-noise).
+A shooting interval may be longer than its RK4 steps: it is integrated in
+sub-steps of the longest single step every lattice interval it covers allows
+(at most MAX_SUBSTEPS of them; `ShootingGrid.steps`), and a sample inside it
+is predicted by cubic Hermite interpolation between its nodes (states and
+their derivatives), not by stepping from the node before.  Such an interval
+stands where its sub-steps land within ERROR_PER_SECOND * H state scales of
+the lattice's end and the Hermite interpolant lies within one sub-step's
+ERROR_PER_SECOND * (its length) of the lattice's states at every lattice
+point inside it (for a 0.25 s sub-step at the altitude's 1,000 m scale, 2.5
+mm: a hundredth of a barometric altimeter's noise).
 
-Not with a process of the air's motion (`wind_process`): its knots start at
-rest, so the simulation from the guesses cannot show how fast the descent
-will follow the air the fit puts in.  On the Prometheus TeleMega log (wind
-knots every 4 s, 58 parameters) intervals of 3.2 s took 42 iterations at 1.9
-s each where the one-step grid takes 16 at 0.46 s.
+A steady descent under a canopy is where a flight spends most of its time.
+Under a fast drogue every lattice interval allows the longest single step,
+and intervals of seconds stand.  Under a slow canopy the drag relaxes the
+speed to its terminal value in 1 / rho = v / 2g, a few tenths of a second:
+stability bounds one RK4 step to a fraction of that, and an interval of
+such sub-steps spans at most one relaxation time (H rho <= SPAN), so that
+the response to whatever the fit changes there (a gust, a drag area) lies
+within the nodes, which Gauss-Newton moves one by one.  The same span holds
+beside a process of the air's motion (`wind_process`), whose knots start at
+rest, so that the simulation from the guesses cannot show how fast the
+descent will follow the air the fit puts in.  On the 10-minute log of
+`benchmarks/long_log.py` (a drogue at 6 m/s, the air's process; seeds 1-3)
+the one-step grid had 7,517 nodes and this one about 3,900; intervals of
+0.4 s, a relaxation time and a third, ended in local minima 1.4-27 above
+the one-step grid's chi-square, those of 0.2 s in the same minima or lower
+on two seeds of the three (4.4 above on the third).  On the Prometheus
+TeleMega log (knots every 4 s, 58 parameters) intervals of 3.2 s took 42
+iterations at 1.9 s each where the one-step grid took 16 at 0.46 s.
 
 An inflation happens where its start time ends up, not where the reduction
 guessed it: every fine demand after a free start time's guess is repeated
@@ -53,6 +63,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from cpas_ocp.estimation.fit import Fit
 from cpas_ocp.estimation.simulate import Trajectory, rk4_step, simulate
 from cpas_ocp.physics.model import Model
 
@@ -60,6 +71,8 @@ MAX_STEP_S = 0.25  # longest RK4 step (s): of an interval, or of its sub-steps
 MAX_INTERVAL_S = 4.0  # longest shooting interval (s), integrated in sub-steps
 ERROR_PER_SECOND = 1e-5  # RK4 step error per second of flight, in state scales (1/s)
 STABILITY = 0.5  # largest |lambda| H of the dynamics on an interval of length H
+MAX_SUBSTEPS = 16  # most RK4 sub-steps of one shooting interval
+SPAN = 1.0  # largest |lambda| H of a stiff interval, or of any beside a process of the air
 SUPPORT = 3  # fine intervals either side of a capture time's window (the B-spline's support)
 
 
@@ -72,18 +85,26 @@ class TimeWindow:
     guess: float
 
 
+@dataclass(frozen=True)
+class ShootingGrid:
+    """A shooting grid: its nodes (s) and the RK4 sub-steps of each interval."""
+
+    nodes: np.ndarray
+    steps: np.ndarray
+
+
 def dynamics_grid(model: Model, values: dict[str, float], x0: np.ndarray, t0: float,
-                  t1: float, fine_step: float, windows: Sequence[TimeWindow]) -> np.ndarray:
-    """The nodes (s) of a shooting grid on [t0, t1] for `model` (see the module docstring).
+                  t1: float, fine_step: float, windows: Sequence[TimeWindow]) -> ShootingGrid:
+    """The shooting grid on [t0, t1] for `model` (see the module docstring).
 
     `values` are the parameters' first guesses (SI), `x0` the state at t0,
     `fine_step` the lattice step h (s).
     """
     traj = _lattice_trajectory(model, values, x0, t0, t1, fine_step)
-    levels = _accuracy_levels(model, values, traj.x, traj.t, traj.captures, fine_step)
-    levels = np.minimum(levels, _stability_levels(model, values, traj.x, traj.t,
+    single = _accuracy_levels(model, values, traj.x, traj.t, traj.captures, fine_step)
+    single = np.minimum(single, _stability_levels(model, values, traj.x, traj.t,
                                                   traj.captures, fine_step))
-    levels = _long_levels(model, values, traj, fine_step, levels)
+    levels = _long_levels(model, values, traj, fine_step, single)
     n = len(levels)
     demanded = levels.copy()
     for w in windows:
@@ -98,13 +119,15 @@ def dynamics_grid(model: Model, values: dict[str, float], x0: np.ndarray, t0: fl
                 demanded[shift:] = np.minimum(demanded[shift:], after[:n - shift])
             elif shift < 0:
                 demanded[:n + shift] = np.minimum(demanded[:n + shift], after[-shift:])
-    return t0 + fine_step * _nodes(demanded)
+    index = _nodes(demanded)
+    return ShootingGrid(t0 + fine_step * index, _interval_steps(index, single))
 
 
-def stable_refinement(nodes: np.ndarray, model: Model, values: dict[str, float],
-                      x0: np.ndarray, fine_step: float) -> np.ndarray:
-    """`nodes` (s, on the lattice of `fine_step` from nodes[0]) with whatever nodes the
-    stability rule adds for `model`.
+def stable_refinement(grid: ShootingGrid, model: Model, values: dict[str, float],
+                      x0: np.ndarray, fine_step: float) -> ShootingGrid:
+    """`grid` (its nodes on the lattice of `fine_step` from its first) with whatever nodes the
+    stability rule adds for `model`, each interval in sub-steps no longer than the
+    grid's own there.
 
     A grid chosen for one model serves the models built from its fit (a
     score test's extension, a confirming refit, a comparison), so that their
@@ -113,23 +136,37 @@ def stable_refinement(nodes: np.ndarray, model: Model, values: dict[str, float],
     on which RK4 at the fit's coarse steps would blow up.  There the grid is
     refined; elsewhere it is kept.
     """
+    nodes = np.asarray(grid.nodes, dtype=float)
     t0 = float(nodes[0])
     traj = _lattice_trajectory(model, values, x0, t0, float(nodes[-1]), fine_step)
-    stable = _nodes(_stability_levels(model, values, traj.x, traj.t, traj.captures,
-                                      fine_step))
-    given = np.rint((np.asarray(nodes) - t0) / fine_step).astype(int)
-    return t0 + fine_step * np.union1d(given, stable)
+    single = _stability_levels(model, values, traj.x, traj.t, traj.captures, fine_step)
+    given = np.rint((nodes - t0) / fine_step).astype(int)
+    index = np.union1d(given, _nodes(single))
+    # Each new interval's sub-steps: no longer than the given interval's about it, nor
+    # than the longest stable single step it covers.
+    owner = np.clip(np.searchsorted(given, index[:-1], side="right") - 1, 0, len(given) - 2)
+    given_sub = np.diff(given)[owner] // np.asarray(grid.steps)[owner]
+    stable_sub = 2 ** np.minimum.reduceat(single, index[:-1])
+    sub = np.maximum(np.minimum(given_sub, stable_sub), 1)
+    return ShootingGrid(t0 + fine_step * index, np.maximum(np.diff(index) // sub, 1))
 
 
 def substeps_of(t: np.ndarray) -> np.ndarray:
-    """RK4 sub-steps of each interval of the grid `t` (s): one for an interval of at most
-    MAX_STEP_S, else the least power of two that cuts it into steps of at most MAX_STEP_S
-    (the steps the grid's accuracy and stability rules checked)."""
+    """RK4 sub-steps of each interval of a grid `t` (s) given without its own: one for an
+    interval of at most MAX_STEP_S, else the least power of two that cuts it into steps
+    of at most MAX_STEP_S."""
     ratio = np.diff(np.asarray(t, dtype=float)) / MAX_STEP_S
     out = np.ones(ratio.size, dtype=int)
     long = ratio > 1.0 + 1e-9
     out[long] = 2 ** np.ceil(np.log2(ratio[long] - 1e-9)).astype(int)
     return out
+
+
+def fitted_steps(fit: Fit) -> np.ndarray:
+    """The RK4 sub-steps of each interval of `fit`'s grid: as its estimator recorded them, or
+    from the intervals' lengths (`substeps_of`) for a fit made without them."""
+    steps = fit.settings.interval_steps
+    return substeps_of(fit.t) if steps is None else np.asarray(steps, dtype=int)
 
 
 def hermite_state(x_a: Any, x_b: Any, f_a: Any, f_b: Any, length: Any, dt: Any) -> Any:
@@ -153,54 +190,74 @@ def _rhs_function(model: Model) -> ca.Function:
 
 def _long_levels(model: Model, values: dict[str, float], traj: Trajectory, fine_step: float,
                  levels: np.ndarray) -> np.ndarray:
-    """`levels` raised, per lattice interval, to the largest j <= the MAX_INTERVAL_S level
-    at which an interval of 2^j h made of `substeps_of` RK4 steps is accurate and its
-    Hermite interpolant too, at every level up to j (module docstring), where every
-    lattice interval it covers allows the longest single step."""
-    top = _max_level(fine_step)
-    last = max(top, int(np.floor(np.log2(MAX_INTERVAL_S / fine_step + 1e-9))))
+    """`levels` (each lattice interval's longest accurate and stable single step, as a
+    power of two of h) raised, per lattice interval, to the largest j <= the
+    MAX_INTERVAL_S level at which an interval of 2^j h made of RK4 sub-steps of 2^s h (s
+    the least single-step level it covers, at most MAX_SUBSTEPS of them) is accurate and
+    its Hermite interpolant too, at every level up to j (module docstring)."""
+    last = int(np.floor(np.log2(MAX_INTERVAL_S / fine_step + 1e-9)))
     n = len(levels)
     out = levels.copy()
-    allowed = levels >= top
-    if last == top or not allowed.any():
+    if last <= 0 or n == 0:
         return out
-    if any(prm.process_knot for prm in model.parameters):
-        return out  # the air held still at the guesses: its motion's time scale is unseen
     x, t = traj.x, traj.t
+    # An interval of sub-steps shorter than the longest single step (a stiff descent), or
+    # beside a process of the air, spans at most one relaxation time (SPAN).
+    top = _max_level(fine_step)
+    process = bool(model.series)
+    span_limit = _stability_levels(model, values, x, t, traj.captures, fine_step, bound=SPAN,
+                                   top=last)
     p, c = model.parameter_vector(values), model.capture_vector(traj.captures)
     scale = model.state_scales()
     with np.errstate(all="ignore"):
         f = np.asarray(_rhs_function(model).map(len(t))(x.T, t, p, c)).T
     step = rk4_step(model)
-    sub = 2**top
-    for j in range(top + 1, last + 1):
+    most = int(np.log2(MAX_SUBSTEPS))
+    good = np.ones(n, dtype=bool)  # lattice intervals an interval of the last level covers
+    for j in range(1, last + 1):
         span = 2**j
         starts = np.arange(0, n - span + 1, span)
+        cut = starts.size * span  # the lattice intervals whole intervals of 2^j h cover
+        sub = levels[:cut].reshape(-1, span).min(axis=1)  # their sub-steps' level
+        covered = good[:cut].reshape(-1, span).all(axis=1)
+        spans = span_limit[:cut].reshape(-1, span).min(axis=1)
+        single = sub >= j  # one RK4 step already spans it
+        tried = covered & ~single & (j - sub <= most) & (
+            (j <= spans) | ((sub >= top) & (not process)))
+        ok = single & covered
+        for level in np.unique(sub[tried]):
+            pick = tried & (sub == level)
+            ok[pick] = _substeps_accurate(step, f, x, t, starts[pick], span, 2**int(level),
+                                          fine_step, p, c, scale)
         good = np.zeros(n, dtype=bool)
-        cover = np.array([allowed[i:i + span].all() for i in starts], dtype=bool)
-        starts = starts[cover]
-        if starts.size:
-            xe = x[starts].T
-            for k in range(span // sub):
-                xe = step.map(starts.size)(xe, t[starts + k * sub], sub * fine_step, p, c)
-            with np.errstate(all="ignore"):
-                error = np.max(np.abs(np.asarray(xe) - x[starts + span].T) / scale[:, None],
-                               axis=0)
-                inner = starts[:, None] + np.arange(1, span)[None, :]
-                guess = hermite_state(x[starts][:, None, :], x[starts + span][:, None, :],
-                                      f[starts][:, None, :], f[starts + span][:, None, :],
-                                      span * fine_step,
-                                      (np.arange(1, span) * fine_step)[None, :, None])
-                between = np.max(np.abs(guess - x[inner]) / scale, axis=(1, 2))
-            # The sub-steps' error grows with the interval as the lattice's would; the
-            # interpolant's may not exceed one longest single step's.
-            ok = ((error <= ERROR_PER_SECOND * span * fine_step)
-                  & (between <= ERROR_PER_SECOND * sub * fine_step))
-            for i in starts[ok]:
-                good[i:i + span] = True
-        out[good] = j
-        allowed = good
+        for i in starts[ok]:
+            good[i:i + span] = True
+        raise_to = good & (out < j)
+        out[raise_to] = j
     return out
+
+
+def _substeps_accurate(step: ca.Function, f: np.ndarray, x: np.ndarray, t: np.ndarray,
+                       starts: np.ndarray, span: int, sub: int, fine_step: float,
+                       p: np.ndarray, c: np.ndarray, scale: np.ndarray) -> np.ndarray:
+    """Per start (lattice index), whether an interval of `span` lattice steps from it, made of
+    RK4 sub-steps of `sub` lattice steps, lands within ERROR_PER_SECOND times its length
+    (state scales) of the lattice's state at its end, and its Hermite interpolant lies
+    within one sub-step's ERROR_PER_SECOND * sub * h of the lattice's states inside it:
+    the sub-steps' error grows with the interval as the lattice's would; the
+    interpolant's may not exceed one sub-step's."""
+    xe = x[starts].T
+    for k in range(span // sub):
+        xe = step.map(starts.size)(xe, t[starts + k * sub], sub * fine_step, p, c)
+    with np.errstate(all="ignore"):
+        error = np.max(np.abs(np.asarray(xe) - x[starts + span].T) / scale[:, None], axis=0)
+        inner = starts[:, None] + np.arange(1, span)[None, :]
+        guess = hermite_state(x[starts][:, None, :], x[starts + span][:, None, :],
+                              f[starts][:, None, :], f[starts + span][:, None, :],
+                              span * fine_step, (np.arange(1, span) * fine_step)[None, :, None])
+        between = np.max(np.abs(guess - x[inner]) / scale, axis=(1, 2))
+    return ((error <= ERROR_PER_SECOND * span * fine_step)
+            & (between <= ERROR_PER_SECOND * sub * fine_step))
 
 
 def _lattice_trajectory(model: Model, values: dict[str, float], x0: np.ndarray, t0: float,
@@ -241,8 +298,10 @@ def _accuracy_levels(model: Model, values: dict[str, float], x: np.ndarray, t: n
 
 
 def _stability_levels(model: Model, values: dict[str, float], x: np.ndarray, t: np.ndarray,
-                      captures: dict[str, float], fine_step: float) -> np.ndarray:
-    """Per lattice interval, the largest j with 2^j h rho <= STABILITY at both its ends."""
+                      captures: dict[str, float], fine_step: float,
+                      bound: float = STABILITY, top: int | None = None) -> np.ndarray:
+    """Per lattice interval, the largest j <= `top` (default: the MAX_STEP_S level) with
+    2^j h rho <= `bound` at both its ends."""
     xs = ca.SX.sym("x", model.nx)
     ts = ca.SX.sym("t")
     ps = ca.SX.sym("p", len(model.parameters))
@@ -257,10 +316,18 @@ def _stability_levels(model: Model, values: dict[str, float], x: np.ndarray, t: 
     if np.any(finite):
         rho[finite] = np.max(np.abs(np.linalg.eigvals(blocks[finite])), axis=1)
     with np.errstate(divide="ignore"):
-        node = np.floor(np.log2(STABILITY / (np.maximum(rho, 1e-12) * fine_step)))
+        node = np.floor(np.log2(bound / (np.maximum(rho, 1e-12) * fine_step)))
     node[~np.isfinite(node)] = 0
-    node = np.clip(node, 0, _max_level(fine_step)).astype(int)
+    node = np.clip(node, 0, _max_level(fine_step) if top is None else top).astype(int)
     return np.minimum(node[:-1], node[1:])
+
+
+def _interval_steps(index: np.ndarray, single: np.ndarray) -> np.ndarray:
+    """RK4 sub-steps of each interval between the lattice indices `index`: its length over
+    the longest single step (2^level h) that every lattice interval it covers allows
+    (`single`), at least one."""
+    sub = 2 ** np.minimum.reduceat(single, index[:-1]).astype(int)
+    return np.maximum(np.diff(index) // sub, 1)
 
 
 def _nodes(levels: np.ndarray) -> np.ndarray:

@@ -18,7 +18,7 @@ import numpy as np
 from cpas_ocp.estimation.fit import STOP_CONSTRAINT_TOL, Fit
 from cpas_ocp.estimation.kinematic_track import effect_state_guesses, guessed_states
 from cpas_ocp.estimation.linearisation import Linearisations
-from cpas_ocp.estimation.shooting_grid import substeps_of
+from cpas_ocp.estimation.shooting_grid import fitted_steps
 from cpas_ocp.estimation.simulate import rk4_step, simulate
 from cpas_ocp.estimation.transcription import Transcription
 
@@ -144,7 +144,7 @@ class StartingPoints:
         if np.any(between):
             step = rk4_step(fit.model).map(int(between.sum()))
             # Within a long interval of the fit, in its sub-steps' length at the most.
-            count = int(np.max(substeps_of(fit.t)[k[between]]))
+            count = int(np.max(fitted_steps(fit)[k[between]]))
             xb, tb = fit.x[k[between]].T, fit.t[k[between]]
             for j in range(count):
                 xb = step(xb, tb + j * dt[between] / count, dt[between] / count,
@@ -171,7 +171,7 @@ class StartingPoints:
         _, pfull, Cp = nlp.unpack(z)
         rows = np.concatenate([np.arange(nx)[m.state_slice(name)] for name in states])
         ends = np.asarray(self._sweep(tuple(int(r) for r in rows))(
-            X[:, 0], X[:, :n], nlp.t[:n], np.diff(nlp.t), substeps_of(nlp.t), pfull, Cp))
+            X[:, 0], X[:, :n], nlp.t[:n], np.diff(nlp.t), nlp.steps, pfull, Cp))
         X[rows, 1:] = ends[rows]
         out = z.copy()
         out[:nx * (n + 1)] = (X / nlp.xscale[:, None]).ravel(order="F")
@@ -198,7 +198,7 @@ class StartingPoints:
         kept = set(rows)
         x = ca.vertcat(*[carried[i] if i in kept else node[i] for i in range(m.nx)])
         steps = sub * count
-        for j in range(sub * int(np.max(substeps_of(nlp.t), initial=1))):
+        for j in range(sub * int(np.max(nlp.steps, initial=1))):
             x = nlp.step(x, t + j * h / steps, ca.if_else(j < steps, h / steps, 0.0), p, c)
         interval = ca.Function("sweep_interval", [carried, node, t, h, count, p, c], [x])
         self._sweeps[rows] = interval.mapaccum("sweep", len(nlp.t) - 1)

@@ -33,6 +33,7 @@ from cpas_ocp.estimation.nlp_functions import MarquardtDamping, PointEvaluations
 from cpas_ocp.estimation.reduction import initial_guess
 from cpas_ocp.estimation.series_slots import SeriesSlots, offset_reach, series_slots
 from cpas_ocp.estimation.shooting_grid import (
+    ShootingGrid,
     TimeWindow,
     dynamics_grid,
     hermite_state,
@@ -221,27 +222,36 @@ class Transcription:
 
         if s.nodes is not None:
             self.t = np.asarray(s.nodes, dtype=float)
+            self.steps = (substeps_of(self.t) if s.interval_steps is None
+                          else np.asarray(s.interval_steps, dtype=int))
+            if self.steps.shape != (len(self.t) - 1,):
+                raise ValueError(f"{self.steps.size} intervals' sub-steps for "
+                                 f"{len(self.t) - 1} intervals")
             if len(m.states) > len(CORE_STATES):  # an effect's states: maybe a fast mode
-                self.t = self._stable_grid(self.t)
+                self.t, self.steps = self._stable_grid(ShootingGrid(self.t, self.steps))
         elif s.grid_step is not None:
             n = int(np.floor((test.t_end - test.t_start) / s.grid_step + 1e-9))
             self.t = test.t_start + s.grid_step * np.arange(n + 1)
+            self.steps = substeps_of(self.t)
         else:
-            self.t = self._dynamics_grid(default_grid_step(test))
-        self.settings = replace(s, nodes=tuple(self.t))
+            grid = self._dynamics_grid(default_grid_step(test))
+            self.t, self.steps = grid.nodes, grid.steps
+        self.settings = replace(s, nodes=tuple(self.t),
+                                interval_steps=tuple(int(k) for k in self.steps))
         # The finest interval, rounded to the microsecond: the B-spline's spacing.
         self.fine_step = float(np.round(np.min(np.diff(self.t)), 6))
         self._build(len(self.t) - 1, self.fine_step)
 
-    def _stable_grid(self, nodes: np.ndarray) -> np.ndarray:
-        """Given nodes, refined where this model's own states need finer steps for RK4 to
-        stay stable (`shooting_grid.stable_refinement`)."""
-        fine_step = float(np.round(np.min(np.diff(nodes)), 6))
-        return stable_refinement(nodes, self.model, self.values, self._first_state(fine_step),
-                                 fine_step)
+    def _stable_grid(self, grid: ShootingGrid) -> tuple[np.ndarray, np.ndarray]:
+        """A given grid, refined where this model's own states need finer steps for RK4 to
+        stay stable (`shooting_grid.stable_refinement`): its nodes and sub-steps."""
+        fine_step = float(np.round(np.min(np.diff(grid.nodes)), 6))
+        out = stable_refinement(grid, self.model, self.values, self._first_state(fine_step),
+                                fine_step)
+        return out.nodes, out.steps
 
-    def _dynamics_grid(self, fine_step: float) -> np.ndarray:
-        """The nodes chosen from the model's dynamics at the first guesses (`shooting_grid`)."""
+    def _dynamics_grid(self, fine_step: float) -> ShootingGrid:
+        """The grid chosen from the model's dynamics at the first guesses (`shooting_grid`)."""
         m, test = self.model, self.test
         windows = []
         for cap in m.captures:
@@ -305,7 +315,7 @@ class Transcription:
     def _interval_end(self, x: ca.SX, t: ca.SX, dt: ca.SX, p: ca.SX, c: ca.SX,
                       substeps: int) -> ca.SX:
         """The state one shooting interval of length dt (s) after `x` at `t`: `substeps`
-        (the interval's, `shooting_grid.substeps_of`) times `settings.substeps` RK4 steps."""
+        (the interval's, `self.steps`) times `settings.substeps` RK4 steps."""
         m = substeps * self.settings.substeps
         for j in range(m):
             x = self.step(x, t + j * dt / m, dt / m, p, c)
@@ -317,7 +327,7 @@ class Transcription:
         with its Jacobian (sensors sampled between nodes are predicted one partial RK4
         step after the node before the sample)."""
         y = nlp.syms
-        counts = substeps_of(self.t)
+        counts = self.steps
         pieces = self._model_pieces()
         local = self.slots is not None
         if counts.max() > 1:  # long intervals: samples inside them need the dynamics
@@ -692,7 +702,7 @@ class Transcription:
             else:
                 same.append(number)
         blocks, destinations = [], []
-        long = substeps_of(self.t) > 1  # intervals integrated in sub-steps
+        long = self.steps > 1  # intervals integrated in sub-steps
         x1s, lengths = ca.SX.sym("x1", m.nx), ca.SX.sym("H")
         rhs = ca.Function("rhs", [xs, ts, ps, cs], [m.rhs(xs, ts, ps, cs)])
         for tsamp, members in groups:

@@ -179,7 +179,8 @@ def _moved(est: Estimator, fit: Fit, claim: Claim, failure: SolverFailure | None
                   f"is not a plain result: moving the windows and fitting again ...",
                   file=sys.stderr, flush=True)
         # The grid follows the windows: its fine intervals cover each start time's window.
-        moved = Estimator(est.test, spec, dataclasses.replace(est.settings, nodes=None))
+        moved = Estimator(est.test, spec, dataclasses.replace(est.settings, nodes=None,
+                                                                     interval_steps=None))
         try:
             refit = solve(moved, progress)
         except SolverFailure:

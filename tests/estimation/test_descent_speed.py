@@ -18,6 +18,7 @@ import dataclasses
 import json
 from pathlib import Path
 
+import casadi as ca
 import numpy as np
 import pytest
 
@@ -25,11 +26,14 @@ from cpas_ocp.api import reconstruct
 from cpas_ocp.estimation.fit import default_grid_step
 from cpas_ocp.estimation.reduction import initial_guess
 from cpas_ocp.estimation.shooting_grid import (
+    MAX_STEP_S,
+    SPAN,
+    STABILITY,
+    ShootingGrid,
     TimeWindow,
     _rhs_function,
     dynamics_grid,
     hermite_state,
-    substeps_of,
 )
 from cpas_ocp.estimation.simulate import rk4_step, simulate, simulate_problem
 from cpas_ocp.estimation.stage_curve_fit import inside_bounds
@@ -37,6 +41,7 @@ from cpas_ocp.io.flight_test import load_test
 from cpas_ocp.io.model_spec import spec_of_test
 from cpas_ocp.io.problems import load_problem
 from cpas_ocp.physics.flight_test import FlightTest
+from cpas_ocp.physics.model import Model
 from tests.rocket_logs import altimeter_log
 
 START_ALTITUDE_M = 9000.0  # m MSL, under the drogue at 40 m/s
@@ -59,24 +64,61 @@ def long_steady(tmp_path_factory: pytest.TempPathFactory) -> tuple[FlightTest, d
     return load_test(folder), truth
 
 
-def test_long_intervals_stay_within_a_hundredth_of_the_altimeter_noise(long_steady) -> None:
-    """The grid chosen at the true values has intervals of seconds under the drogue; from
-    the reference states at their nodes, their sub-steps end, and the Hermite
-    interpolant meets every altimeter sample inside them, within 1 cm of a 1 ms RK4
-    reference (the altimeter's sigma is 1 m)."""
+@pytest.fixture(scope="module")
+def true_grid(long_steady) -> tuple[Model, dict[str, float], np.ndarray, ShootingGrid]:
+    """The model of the long descent, its true values, its start state and the grid chosen
+    at the true values."""
     test, truth = long_steady
     model = spec_of_test(test).model(test)
     values = {p.name: p.default for p in model.parameters} | truth
     x0 = np.array([0.0, 0.0, START_ALTITUDE_M, 0.0, 0.0, -40.0])
     start = model.parameter("t_start[main,stage2]")
-    nodes = dynamics_grid(model, values, x0, test.t_start, test.t_end, default_grid_step(test),
-                          [TimeWindow(start.lower, start.upper, MAIN_START_S)])
+    grid = dynamics_grid(model, values, x0, test.t_start, test.t_end, default_grid_step(test),
+                         [TimeWindow(start.lower, start.upper, MAIN_START_S)])
+    return model, values, x0, grid
+
+
+def test_a_stiff_descent_takes_intervals_of_stable_sub_steps_within_a_relaxation_time(
+        long_steady, true_grid) -> None:
+    """Under the main (about 6 m/s: its drag relaxes the speed in a third of a second, so
+    stability bounds one RK4 step), the settled descent's intervals hold several
+    sub-steps, each within the stability rule, and span at most one relaxation time."""
+    test, _ = long_steady
+    model, values, x0, grid = true_grid
+    ref = simulate(model, values, x0, test.t_start, test.t_end, step=1e-3)
+    settled = np.flatnonzero(grid.nodes[:-1] > MAIN_START_S + 10.0)
+    assert np.mean(grid.steps[settled] > 1) > 0.9
+    xs, ts = ca.SX.sym("x", model.nx), ca.SX.sym("t")
+    ps, cs = ca.SX.sym("p", len(model.parameters)), ca.SX.sym("c", len(model.captures))
+    jac = ca.Function("state_jacobian", [xs, ts, ps, cs],
+                      [ca.densify(ca.jacobian(model.rhs(xs, ts, ps, cs), xs))])
+    p, c = model.parameter_vector(values), model.capture_vector(ref.captures)
+    length = np.diff(grid.nodes)[settled]
+    for end in (settled, settled + 1):
+        x = np.column_stack([np.interp(grid.nodes[end], ref.t, ref.x[:, i])
+                             for i in range(model.nx)])
+        rho = np.array([np.max(np.abs(np.linalg.eigvals(np.asarray(jac(xi, float(ti), p, c)))))
+                        for xi, ti in zip(x, grid.nodes[end], strict=True)])
+        assert np.all(length / grid.steps[settled] * rho <= STABILITY + 1e-9)
+        assert np.all(length * rho <= SPAN + 1e-9)
+    assert MAX_STEP_S * np.median(rho) > STABILITY  # one longest step would not be stable
+
+
+def test_long_intervals_stay_within_a_hundredth_of_the_altimeter_noise(long_steady,
+                                                                       true_grid) -> None:
+    """The grid chosen at the true values has intervals of seconds under the drogue and
+    of sub-steps under the main; from the reference states at their nodes, their
+    sub-steps end, and the Hermite interpolant meets every altimeter sample inside them,
+    within 1 cm of a 1 ms RK4 reference (the altimeter's sigma is 1 m)."""
+    test, _ = long_steady
+    model, values, x0, grid = true_grid
+    nodes = grid.nodes
     ref = simulate(model, values, x0, test.t_start, test.t_end, step=1e-3)
 
     def at(times: np.ndarray) -> np.ndarray:
         return np.column_stack([np.interp(times, ref.t, ref.x[:, i]) for i in range(model.nx)])
 
-    counts = substeps_of(nodes)
+    counts = grid.steps
     long = np.flatnonzero(counts > 1)
     assert np.diff(nodes)[long].max() >= 2.0
     assert np.diff(nodes)[long].sum() > 0.8 * (MAIN_START_S - test.t_start)

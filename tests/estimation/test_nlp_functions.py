@@ -97,7 +97,8 @@ def test_windows_leave_out_only_zeros_and_keep_their_promise(drogue_folder) -> N
     pattern's solve ends."""
     test = load_test(drogue_folder(1))
     whole = Estimator(test, settings=Settings(window_margin=None))
-    est = Estimator(test, settings=Settings(nodes=whole.settings.nodes))
+    est = Estimator(test, settings=Settings(nodes=whole.settings.nodes,
+                                            interval_steps=whole.settings.interval_steps))
     z = whole.initial_point()
     est.solver.fit_windows(z)
     lam = np.random.default_rng(4).standard_normal(est.transcription.g.numel())

@@ -71,11 +71,14 @@ def test_a_stiffer_model_refines_the_fits_grid_and_starts_on_its_motion(drogue_g
     effects = tuple(riser if e.name == "rigid_riser" else e for e in spec.effects)
     null = riser.null_values(dynamic.test)
     extended = Estimator(dynamic.test, dataclasses.replace(spec, effects=effects),
-                         Settings(nodes=fit.settings.nodes, compile=False, fixed=null))
+                         Settings(nodes=fit.settings.nodes,
+                                  interval_steps=fit.settings.interval_steps, compile=False,
+                                  fixed=null))
     assert set(np.round(fit.t, 6)) <= set(np.round(extended.t, 6))
     assert np.max(np.diff(extended.t)) * 2 * np.pi * 25.0 <= 2.8  # RK4's stability limit
     assert np.max(np.diff(extended.t)) < np.max(np.diff(fit.t))
-    rigid = Estimator(dynamic.test, spec, Settings(nodes=tuple(extended.t), compile=False))
+    rigid = Estimator(dynamic.test, spec, Settings(
+        nodes=tuple(extended.t), interval_steps=extended.settings.interval_steps, compile=False))
     chi2, violation = rigid.evaluate(rigid.point_from(fit))
     assert violation < 1e-6
     assert chi2 == pytest.approx(fit.chi_square, abs=0.05)
