@@ -25,7 +25,7 @@ import harness
 
 ROOT = Path(__file__).resolve().parents[1]
 TESTS = ["tests/estimation/test_kkt.py", "tests/estimation/test_identifiability.py",
-         "tests/studies/test_coverage.py", "tests/estimation/test_stopping.py",
+         "benchmarks/studies/test_coverage.py", "tests/estimation/test_stopping.py",
          "tests/estimation/test_feasible_descent.py", "tests/estimation/test_exact_hessian.py"]
 
 
