@@ -6,6 +6,7 @@ every test here skips with the reason.
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -22,6 +23,7 @@ from cpas_ocp.io.flight_card import load_card
 from cpas_ocp.io.flight_log import import_flight
 from cpas_ocp.io.flight_test import load_test
 from cpas_ocp.io.model_spec import spec_of_test
+from cpas_ocp.io.opening_loads import OPENING_WINDOW_S
 from cpas_ocp.io.recorder_clocks import clock_offset
 from cpas_ocp.reports.flight_report import (
     descent_rates,
@@ -85,25 +87,40 @@ def mega_still(tmp_path_factory: pytest.TempPathFactory):
     return _reconstruct(tmp_path_factory, MEGA, still=True)
 
 
+def _full_open(fit) -> tuple[float, float]:
+    """The import's reading of the main's opening peak (s): its time (``import.json``
+    ``events_s``) and, as its sigma, the accelerometer's median sample interval within
+    the window the import searched (`OPENING_WINDOW_S` after the charge).  With an
+    accelerometer in the folder the peak is not a ``full_open`` event: the fit reads the
+    opening from the samples themselves."""
+    peak = json.loads((fit.test.path / "import.json").read_text())["events_s"]["main full open"]
+    charge = fit.test.event("mortar_fire", "main").time
+    t = fit.test.sensors_of("axial_accelerometer")[0].time
+    inside = t[(t >= charge) & (t <= charge + OPENING_WINDOW_S)]
+    return float(peak), float(np.median(np.diff(inside)))
+
+
 def _opening(fit) -> tuple[float, float]:
-    """The main's opening as the import segments the accelerometer's noise (s): from its
-    charge to the start of the settled main's sigma."""
-    accel = fit.test.sensors_of("axial_accelerometer")[0]
-    times = sorted(t for t, _ in accel.sigma_changes)
-    return times[0], times[1]
+    """The main's opening (s): from its charge through the window in which the import looks
+    for its load peak (`OPENING_WINDOW_S`)."""
+    charge = fit.test.event("mortar_fire", "main").time
+    return charge, charge + OPENING_WINDOW_S
 
 
 def test_both_logs_fit_their_noise_with_the_air_motion_and_the_accelerometer(
         mega_fit, metrum_fit) -> None:
     """With the wind process and the accelerometer in the model, each log fits its sensors
     to chi2/dof <= 1.5 (sigmas from the import's scatter rule, not scaled), and the
-    accelerometer, a fitted sensor, fits the main's opening to a normalised RMS <= 1.5."""
+    accelerometer, a fitted sensor, fits the main's opening to a normalised RMS <= 1.5
+    (with 5 values its square exceeds 2.25 by chance with probability 0.05)."""
     for fit, _ in (mega_fit, metrum_fit):
         assert fit.chi_square / fit.dof <= 1.5
         accel = next(r for r in fit.residuals if r.sensor == "accelerometer")
         lo, hi = _opening(fit)
         opening = (accel.t >= lo) & (accel.t < hi)
-        assert opening.sum() >= 20
+        # The import merges straight stretches into means (each worth several 10 Hz
+        # samples): the window holds a few of them, enough for an RMS to test.
+        assert opening.sum() >= 5
         assert np.sqrt(np.mean(accel.normalised[opening] ** 2)) <= 1.5
 
 
@@ -134,18 +151,19 @@ def test_reconstruction_matches_the_descent(mega_fit) -> None:
     # its ejection charge and before that, off both bounds, so with a two-sided sigma; the
     # fill constant (expopen held at 1) is off its bounds too.
     charge = fit.test.event("mortar_fire", "main")
-    full = fit.test.event("full_open", "main")
-    assert full is not None and charge.time < full.time < charge.time + 3.0
+    full, full_sigma = _full_open(fit)
+    assert charge.time < full < charge.time + OPENING_WINDOW_S
     start = "t_start[main,stage2]"
     assert start not in cov.at_bound and cov.std[start] > 0.0
-    assert charge.time - charge.sigma < fit.parameters[start] < full.time
+    assert charge.time - charge.sigma < fit.parameters[start] < full
     n = fit.model.parameter("n[main,stage2]")
     assert "n[main,stage2]" not in cov.at_bound
     assert n.lower < fit.parameters["n[main,stage2]"] < n.upper
     assert cov.std["n[main,stage2]"] > 0.0
-    # The model is full open when the accelerometer says, within 3 of the event's sigma.
+    # An opening's load peaks at or before full open (the riser's snatch mid-fill, or the
+    # drag at full area): the model's fill ends no earlier than the peak, less its sigma.
     rise = fit.quantities()["rise_end[main,stage2]"][0]
-    assert abs(rise - full.time) < 3.0 * full.sigma
+    assert rise > full - full_sigma
 
 
 def test_report_profiles_the_held_expopen(mega_still) -> None:
@@ -202,7 +220,8 @@ def test_report_of_the_opening_and_of_what_remains(mega_fit) -> None:
     fit, cov = mega_fit
     text = flight_text(fit, cov, load_card("prometheus").nominal)
     assert "## Opening of the main" in text and "fill time" in text
-    assert "full open observed at" in text and "riser's snatch" in text
+    # Beside the accelerometer's samples the peak is not read as the fill's end.
+    assert "riser's snatch" in text and "full open observed at" not in text
     assert "- the altitude sensors against each other:" in text
     assert "count the air's vertical motion" in text
 
