@@ -32,6 +32,10 @@ chi-square surface becomes rippled in the parameters that move those corners
 four 100 Hz samples the load stays smooth to the data, and it remains short
 against the fill times (0.1-0.5 s).
 
+How the air mass grows through the fill is the least known part of the law:
+the option `size_exponent` e makes it rho (r_p D_o)^3 (CdS / CdS_o)^(e/2), the
+D^3 law at e = 3 (the default), later growth above it.
+
 Quantities written: ``added_mass[P]`` (kg) and ``added_momentum_rate[P]``
 (N, 3-vector, d(m_A)/dt v_air).  Riser models read both.  A canopy on
 an elastic riser (listed before this effect) keeps its air mass in its own
@@ -64,13 +68,29 @@ K_APPARENT = 0.5
 PROJECTED_RATIO = 0.7
 # Keeps d(CdS^1.5)/dCdS finite where a canopy has no drag area yet (m^2).
 CDS_FLOOR = 1e-4
+# Largest growth exponent of the air mass in the canopy's size (rho D^e; 3 is the D^3 law).
+MAX_SIZE_EXPONENT = 12.0
 # Averaging window of the added-mass growth rate (s), well below the fill times (0.1-1 s).
 RATE_WINDOW_S = 0.04
 
 
 @dataclass(frozen=True)
 class AddedMass(Effect):
+    """Added mass of each canopy: enclosed plus apparent air mass, growing with the canopy.
+
+    `size_exponent` e: the air mass grows as (CdS / CdS_o)^(e / 2) through the fill, 3
+    for the rho D^3 law (above 3 the air gathers late in the fill, as where the enclosed
+    mass fills only once the mouth is round); see the module docstring."""
+
+    size_exponent: float = 3.0
     name: str = "added_mass"
+
+    def __post_init__(self) -> None:
+        e = self.size_exponent
+        if isinstance(e, bool) or not (isinstance(e, int | float) and math.isfinite(e)
+                                       and 0.0 < e <= MAX_SIZE_EXPONENT):
+            raise ValueError(f"size_exponent must be a number in (0, {MAX_SIZE_EXPONENT:g}]; "
+                             f"got {e!r}")
 
     def parameters(self, test: FlightTest) -> list[Parameter]:
         return [Parameter(param_name("added_mass_factor", c.name), "1", 1.0, 0.0, 5.0,
@@ -91,9 +111,11 @@ class AddedMass(Effect):
             # the start (steady, possibly banded in altitude).
             cds_o = cds if chute.open_at_start else ctx.p[param_name("CdS", chute.name,
                                                                      chute.stages[-1])]
-            diameter = PROJECTED_RATIO * chute.diameter * ca.sqrt((cds + CDS_FLOOR) / cds_o)
+            # (D / D_full)^e with D = r_p D_o sqrt(CdS / CdS_o): the rho D^3 law at e = 3.
+            growth = ((cds + CDS_FLOOR) / cds_o) ** (0.5 * self.size_exponent)
             m_a = (ctx.p[param_name("added_mass_factor", chute.name)] * ctx.q["density"]
-                   * math.pi * diameter**3 * (K_ENCLOSED / 12.0 + K_APPARENT / 8.0))
+                   * math.pi * (PROJECTED_RATIO * chute.diameter)**3 * growth
+                   * (K_ENCLOSED / 12.0 + K_APPARENT / 8.0))
             rate = _box_rate(m_a, ctx.t, r, v)
             momentum_rate = rate * v_air
             ctx.q[param_name("added_mass", chute.name)] = m_a
