@@ -50,8 +50,9 @@ PLUGINS = Path(__file__).parents[1] / "tests" / "plugins"
 PEAK_LOAD_N = 45_000.0
 
 
-def _plugin(name: str, **options: float) -> Effect:
-    path = PLUGINS / f"{name}.py"
+def plugin(name: str, folder: Path = PLUGINS, **options: float) -> Effect:
+    """The effect of the plug-in file `folder`/`name`.py built with `options`."""
+    path = folder / f"{name}.py"
     return next(iter(load_plugin(path).values())).build(options, str(path), "benchmark")
 
 
@@ -65,12 +66,12 @@ def cases() -> dict[str, tuple[list[Effect], dict[str, float]]]:
         "imu_bias": ([*base, SensorBias.imu()], {"bias[imu,load_factor]": 0.03}),
         "loadcell_bias": ([*base, SensorBias.load_cell()],
                           {f"bias[riser_{c},tension]": 1000.0 for c in DROGUES}),
-        "breathing": ([base[0], _plugin("breathing", frequency=1.5), *base[1:]],
+        "breathing": ([base[0], plugin("breathing", frequency=1.5), *base[1:]],
                       {"breathing_frequency": 1.5,
                        **{f"breathing_cos[{c}]": 0.04 for c in DROGUES}}),
-        "tension_loss": ([*base, _plugin("tension_loss")],
+        "tension_loss": ([*base, plugin("tension_loss")],
                          {f"tension_loss[{c}]": 0.15 / PEAK_LOAD_N for c in DROGUES}),
-        "wind_shear": ([_plugin("wind_shear"), *base], {"shear_rate": 0.03}),
+        "wind_shear": ([plugin("wind_shear"), *base], {"shear_rate": 0.03}),
         "gps_lag+added_mass": ([*base, AddedMass(), SensorLag.gps()],
                                {"lag[gps]": 0.1,
                                 **{f"added_mass_factor[{c}]": 1.4 for c in DROGUES}}),
@@ -83,18 +84,22 @@ WRITTEN_AS = {"breathing": "drag_area_modulation", "tension_loss": "tension_gain
               "wind_shear": "wind_profile"}
 
 
-def false_effects(case: str, found: Discovery) -> list[str]:
-    """The effects the chain's last model keeps beyond the baseline that the truth lacks
-    (a plug-in written for a hidden effect counts as that effect)."""
+Cases = dict[str, tuple[list[Effect], dict[str, float]]]
+
+
+def false_effects(truth: list[Effect], found: Discovery,
+                  written_as: dict[str, str] = WRITTEN_AS) -> list[str]:
+    """The effects the chain's last model keeps beyond the baseline that the `truth` lacks
+    (a plug-in written for a hidden effect counts as that effect, `written_as`)."""
     base = {e.name for e in baseline()}
-    truth = {WRITTEN_AS.get(e.name, e.name) for e in cases()[case][0]} - base
-    return sorted(set(found.steps[-1].spec.effect_names) - base - truth)
+    named = {written_as.get(e.name, e.name) for e in truth} - base
+    return sorted(set(found.steps[-1].spec.effect_names) - base - named)
 
 
-def run(case: str, seed: int, root: Path) -> tuple[Discovery, list[float], float]:
-    """The discovery of one case, the wall time of each step's diagnosis (s), and the
-    baseline fit's (s)."""
-    effects, values = cases()[case]
+def run(case: str, effects: list[Effect], values: dict[str, float], seed: int, root: Path
+        ) -> tuple[Discovery, list[float], float]:
+    """The discovery of one case (`drogue` simulated with `effects` at the true `values`),
+    the wall time of each step's diagnosis (s), and the baseline fit's (s)."""
     fit, t_fit = simulated_fit(effects, values, seed, root / case)
     print(f"[{case}] baseline fit {t_fit:.1f} s, chi-square/dof "
           f"{fit.chi_square / fit.dof:.3f}", flush=True)
@@ -113,9 +118,12 @@ def run(case: str, seed: int, root: Path) -> tuple[Discovery, list[float], float
     return found, times, t_fit
 
 
-def main() -> None:
-    parser = harness.parser(__doc__, seed=1, seed_help="seed of the simulated drogue tests")
-    parser.add_argument("--cases", nargs="+", default=list(cases()), choices=list(cases()))
+def main(table: Cases | None = None, written_as: dict[str, str] = WRITTEN_AS,
+         doc: str = __doc__, name: str = "hidden_effects") -> None:
+    """Run `discover` on each case of `table` (default `cases()`) and print the table."""
+    table = cases() if table is None else table
+    parser = harness.parser(doc, seed=1, seed_help="seed of the simulated drogue tests")
+    parser.add_argument("--cases", nargs="+", default=list(table), choices=list(table))
     parser.add_argument("--stop-at-stand-ins", action="store_true",
                         help="refit only the leading score tests (the earlier diagnosis)")
     args = parser.parse_args()
@@ -125,11 +133,13 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         for case in args.cases:
             timer = harness.Timer()
-            found, times, t_fit = run(case, args.seed, Path(tmp))
+            effects, values = table[case]
+            found, times, t_fit = run(case, effects, values, args.seed, Path(tmp))
             last = found.steps[-1].fit
             rows.append((case, " > ".join(s.label for s in found.steps[1:]) or "-",
                          last.chi_square / last.dof, float(chi2.sf(last.chi_square, last.dof)),
-                         found.state, ", ".join(false_effects(case, found)) or "none",
+                         found.state, ", ".join(false_effects(effects, found, written_as))
+                         or "none",
                          t_fit, float(np.max(times)) if times else 0.0, timer.elapsed()))
     peak_gb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6
     print(f"\n{'case':20s} {'chain':44s} {'chi2/dof':>8s} {'tail p':>7s} {'fit':>7s} "
@@ -140,7 +150,7 @@ def main() -> None:
     print(f"peak memory of the process {peak_gb:.2f} GB")
     fields = ("case", "chain", "chi2_dof", "tail_p", "state", "kept_not_in_truth", "fit_s",
               "longest_step_s", "total_s")
-    harness.report("hidden_effects", stop_at_stand_ins=args.stop_at_stand_ins,
+    harness.report(name, stop_at_stand_ins=args.stop_at_stand_ins,
                    cases=[dict(zip(fields, row, strict=True)) for row in rows],
                    peak_gb=peak_gb)
 

@@ -56,6 +56,32 @@ def test_added_mass_of_a_full_open_canopy(runs) -> None:
     assert 20.0 < float(np.median(expected)) < 150.0
 
 
+def test_a_size_exponent_grows_the_air_mass_as_that_power_through_the_fill(runs) -> None:
+    """With `size_exponent` e the air mass at drag area CdS is the full-open one times
+    (CdS / CdS_o)^(e / 2): at e = 6, during the first stage (CdS about a third of the
+    last stage's), the ratio of the two laws' masses is (CdS / CdS_o)^(3/2), a few
+    tenths; once full open the two are equal."""
+    test, truth, _ = runs
+    problem = load_problem("drogue")
+    sim = problem.simulation
+    model = Model(test, [*baseline_effects(), AddedMass(size_exponent=6.0)])
+    traj = simulate(model, truth, initial_state(model, sim), float(sim["t_begin"]),
+                    float(sim["t_end"]), 1e-3)
+    q = model.quantities_along(traj.t, traj.x, truth, traj.captures)
+    chute = test.parachutes[0]
+    cds = q[param_name("cds", chute.name)]
+    cds_o = truth[param_name("CdS", chute.name, chute.stages[-1])]
+    full = (FACTOR * q["density"] * math.pi * (PROJECTED_RATIO * chute.diameter)**3
+            * (K_ENCLOSED / 12 + K_APPARENT / 8))
+    expected = full * ((cds + 1e-4) / cds_o) ** 3.0
+    np.testing.assert_allclose(q[param_name("added_mass", chute.name)], expected, rtol=1e-9)
+    first = (traj.t > truth[param_name("t_start", chute.name, chute.stages[1])] - 1.0) \
+        & (traj.t < truth[param_name("t_start", chute.name, chute.stages[1])])
+    assert np.all(expected[first] < 0.5 * full[first] * ((cds[first] + 1e-4) / cds_o) ** 1.5)
+    with pytest.raises(ValueError, match="size_exponent"):
+        AddedMass(size_exponent=0.0)
+
+
 def test_riser_gathers_the_air_while_the_canopy_grows(runs) -> None:
     test, truth, out = runs
     chute = test.parachutes[0]

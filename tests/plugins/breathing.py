@@ -8,8 +8,9 @@ effect vanishes at a = b = 0 (its score test's null) and the fit needs no
 phase search.  The frequency ``breathing_frequency`` (Hz, shared by the
 canopies) starts at the option `frequency`, read off the diagnosis's
 periodogram, and is estimated with the rest; the score test holds it there
-(under the null it has no effect).  List the effect after canopy_inflation,
-before the riser effects.
+(under the null it has no effect).  With the option `onset_s` the pulsing
+starts at that time (s), over a tanh ramp of ONSET_RAMP_S.  List the effect
+after canopy_inflation, before the riser effects.
 """
 
 from __future__ import annotations
@@ -22,12 +23,15 @@ import casadi as ca
 from cpas_ocp.physics.effects import Effect
 from cpas_ocp.physics.parameters import Parameter, param_name
 
+ONSET_RAMP_S = 0.2  # the pulsing's rise at `onset_s` (s)
+
 
 @dataclass(frozen=True)
 class Breathing(Effect):
     """Drag-area oscillation at `frequency` Hz, amplitudes ``breathing_cos/sin[P]``."""
 
     frequency: float = 3.0
+    onset_s: float | None = None
     name: str = "breathing"
 
     def parameters(self, test) -> list[Parameter]:
@@ -44,7 +48,10 @@ class Breathing(Effect):
 
     def forces(self, ctx) -> None:
         phase = 2.0 * math.pi * ctx.p["breathing_frequency"] * ctx.t
+        gate = 1.0 if self.onset_s is None else \
+            0.5 * (1.0 + ca.tanh((ctx.t - self.onset_s) / ONSET_RAMP_S))
         for chute in ctx.test.parachutes:
-            factor = (1.0 + ctx.p[param_name("breathing_cos", chute.name)] * ca.cos(phase)
-                      + ctx.p[param_name("breathing_sin", chute.name)] * ca.sin(phase))
+            factor = (1.0 + gate * (ctx.p[param_name("breathing_cos", chute.name)] * ca.cos(phase)
+                                    + ctx.p[param_name("breathing_sin", chute.name)]
+                                    * ca.sin(phase)))
             ctx.scale_drag(chute.name, factor, self.name, ("axial_fraction", "riser_force"))
