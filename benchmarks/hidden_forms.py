@@ -30,13 +30,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from hidden_effects import DROGUES, WRITTEN_AS, Cases, main, plugin
+from hidden_effects import DROGUES, PLUGINS, WRITTEN_AS, Cases, main, plugin
 
 from cpas_ocp.physics.effects import AddedMass
 from cpas_ocp.physics.effects import baseline_effects as baseline
 
 FORMS = Path(__file__).parent / "hidden_forms"
-PLUGINS = Path(__file__).parents[1] / "tests" / "plugins"
 
 
 def forms() -> Cases:

@@ -101,10 +101,11 @@ def dynamics_grid(model: Model, values: dict[str, float], x0: np.ndarray, t0: fl
     `fine_step` the lattice step h (s).
     """
     traj = _lattice_trajectory(model, values, x0, t0, t1, fine_step)
-    single = _accuracy_levels(model, values, traj.x, traj.t, traj.captures, fine_step)
-    single = np.minimum(single, _stability_levels(model, values, traj.x, traj.t,
-                                                  traj.captures, fine_step))
-    levels = _long_levels(model, values, traj, fine_step, single)
+    rho = _spectral_radii(model, values, traj.x, traj.t, traj.captures)
+    single = np.minimum(
+        _accuracy_levels(model, values, traj.x, traj.t, traj.captures, fine_step),
+        _levels_within(rho, fine_step, STABILITY, _max_level(fine_step)))
+    levels = _long_levels(model, values, traj, fine_step, single, rho)
     n = len(levels)
     demanded = levels.copy()
     for w in windows:
@@ -189,12 +190,13 @@ def _rhs_function(model: Model) -> ca.Function:
 
 
 def _long_levels(model: Model, values: dict[str, float], traj: Trajectory, fine_step: float,
-                 levels: np.ndarray) -> np.ndarray:
+                 levels: np.ndarray, rho: np.ndarray) -> np.ndarray:
     """`levels` (each lattice interval's longest accurate and stable single step, as a
     power of two of h) raised, per lattice interval, to the largest j <= the
     MAX_INTERVAL_S level at which an interval of 2^j h made of RK4 sub-steps of 2^s h (s
     the least single-step level it covers, at most MAX_SUBSTEPS of them) is accurate and
-    its Hermite interpolant too, at every level up to j (module docstring)."""
+    its Hermite interpolant too, at every level up to j (module docstring); `rho` the
+    spectral radius at each lattice point (`_spectral_radii`)."""
     last = int(np.floor(np.log2(MAX_INTERVAL_S / fine_step + 1e-9)))
     n = len(levels)
     out = levels.copy()
@@ -205,8 +207,7 @@ def _long_levels(model: Model, values: dict[str, float], traj: Trajectory, fine_
     # beside a process of the air, spans at most one relaxation time (SPAN).
     top = _max_level(fine_step)
     process = bool(model.series)
-    span_limit = _stability_levels(model, values, x, t, traj.captures, fine_step, bound=SPAN,
-                                   top=last)
+    span_limit = _levels_within(rho, fine_step, SPAN, last)
     p, c = model.parameter_vector(values), model.capture_vector(traj.captures)
     scale = model.state_scales()
     with np.errstate(all="ignore"):
@@ -230,8 +231,7 @@ def _long_levels(model: Model, values: dict[str, float], traj: Trajectory, fine_
             ok[pick] = _substeps_accurate(step, f, x, t, starts[pick], span, 2**int(level),
                                           fine_step, p, c, scale)
         good = np.zeros(n, dtype=bool)
-        for i in starts[ok]:
-            good[i:i + span] = True
+        good[:cut] = np.repeat(ok, span)
         raise_to = good & (out < j)
         out[raise_to] = j
     return out
@@ -298,10 +298,17 @@ def _accuracy_levels(model: Model, values: dict[str, float], x: np.ndarray, t: n
 
 
 def _stability_levels(model: Model, values: dict[str, float], x: np.ndarray, t: np.ndarray,
-                      captures: dict[str, float], fine_step: float,
-                      bound: float = STABILITY, top: int | None = None) -> np.ndarray:
-    """Per lattice interval, the largest j <= `top` (default: the MAX_STEP_S level) with
-    2^j h rho <= `bound` at both its ends."""
+                      captures: dict[str, float], fine_step: float) -> np.ndarray:
+    """Per lattice interval, the largest j <= the MAX_STEP_S level with 2^j h rho <=
+    STABILITY at both its ends (`_levels_within`)."""
+    return _levels_within(_spectral_radii(model, values, x, t, captures), fine_step,
+                          STABILITY, _max_level(fine_step))
+
+
+def _spectral_radii(model: Model, values: dict[str, float], x: np.ndarray, t: np.ndarray,
+                    captures: dict[str, float]) -> np.ndarray:
+    """rho (1/s) at each lattice point: the spectral radius of the dynamics' Jacobian
+    d f / d x at the states `x`; inf where the simulation blew up."""
     xs = ca.SX.sym("x", model.nx)
     ts = ca.SX.sym("t")
     ps = ca.SX.sym("p", len(model.parameters))
@@ -315,10 +322,16 @@ def _stability_levels(model: Model, values: dict[str, float], x: np.ndarray, t: 
     rho = np.full(len(t), np.inf)  # a blown-up simulation knows no time scale: fine there
     if np.any(finite):
         rho[finite] = np.max(np.abs(np.linalg.eigvals(blocks[finite])), axis=1)
+    return rho
+
+
+def _levels_within(rho: np.ndarray, fine_step: float, bound: float, top: int) -> np.ndarray:
+    """Per lattice interval, the largest j <= `top` with 2^j h rho <= `bound` at both its
+    ends (0 where rho is unknown)."""
     with np.errstate(divide="ignore"):
         node = np.floor(np.log2(bound / (np.maximum(rho, 1e-12) * fine_step)))
     node[~np.isfinite(node)] = 0
-    node = np.clip(node, 0, _max_level(fine_step) if top is None else top).astype(int)
+    node = np.clip(node, 0, top).astype(int)
     return np.minimum(node[:-1], node[1:])
 
 

@@ -221,34 +221,33 @@ class Transcription:
         self.values = {**self.guess, **fixed}
 
         if s.nodes is not None:
-            self.t = np.asarray(s.nodes, dtype=float)
-            self.steps = (substeps_of(self.t) if s.interval_steps is None
-                          else np.asarray(s.interval_steps, dtype=int))
-            if self.steps.shape != (len(self.t) - 1,):
-                raise ValueError(f"{self.steps.size} intervals' sub-steps for "
-                                 f"{len(self.t) - 1} intervals")
+            nodes = np.asarray(s.nodes, dtype=float)
+            grid = ShootingGrid(nodes, substeps_of(nodes) if s.interval_steps is None
+                                else np.asarray(s.interval_steps, dtype=int))
+            if grid.steps.shape != (len(nodes) - 1,):
+                raise ValueError(f"{grid.steps.size} intervals' sub-steps for "
+                                 f"{len(nodes) - 1} intervals")
             if len(m.states) > len(CORE_STATES):  # an effect's states: maybe a fast mode
-                self.t, self.steps = self._stable_grid(ShootingGrid(self.t, self.steps))
+                grid = self._stable_grid(grid)
         elif s.grid_step is not None:
             n = int(np.floor((test.t_end - test.t_start) / s.grid_step + 1e-9))
-            self.t = test.t_start + s.grid_step * np.arange(n + 1)
-            self.steps = substeps_of(self.t)
+            nodes = test.t_start + s.grid_step * np.arange(n + 1)
+            grid = ShootingGrid(nodes, substeps_of(nodes))
         else:
             grid = self._dynamics_grid(default_grid_step(test))
-            self.t, self.steps = grid.nodes, grid.steps
+        self.t, self.steps = grid.nodes, grid.steps
         self.settings = replace(s, nodes=tuple(self.t),
                                 interval_steps=tuple(int(k) for k in self.steps))
         # The finest interval, rounded to the microsecond: the B-spline's spacing.
         self.fine_step = float(np.round(np.min(np.diff(self.t)), 6))
         self._build(len(self.t) - 1, self.fine_step)
 
-    def _stable_grid(self, grid: ShootingGrid) -> tuple[np.ndarray, np.ndarray]:
+    def _stable_grid(self, grid: ShootingGrid) -> ShootingGrid:
         """A given grid, refined where this model's own states need finer steps for RK4 to
-        stay stable (`shooting_grid.stable_refinement`): its nodes and sub-steps."""
+        stay stable (`shooting_grid.stable_refinement`)."""
         fine_step = float(np.round(np.min(np.diff(grid.nodes)), 6))
-        out = stable_refinement(grid, self.model, self.values, self._first_state(fine_step),
-                                fine_step)
-        return out.nodes, out.steps
+        return stable_refinement(grid, self.model, self.values, self._first_state(fine_step),
+                                 fine_step)
 
     def _dynamics_grid(self, fine_step: float) -> ShootingGrid:
         """The grid chosen from the model's dynamics at the first guesses (`shooting_grid`)."""
