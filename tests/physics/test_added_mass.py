@@ -59,8 +59,8 @@ def test_added_mass_of_a_full_open_canopy(runs) -> None:
 def test_a_size_exponent_grows_the_air_mass_as_that_power_through_the_fill(runs) -> None:
     """With `size_exponent` e the air mass at drag area CdS is the full-open one times
     (CdS / CdS_o)^(e / 2): at e = 6, during the first stage (CdS about a third of the
-    last stage's), the ratio of the two laws' masses is (CdS / CdS_o)^(3/2), a few
-    tenths; once full open the two are equal."""
+    last stage's), under half the D^3 law's; once full open the same (to the 2 % the
+    two runs' densities may differ by)."""
     test, truth, _ = runs
     problem = load_problem("drogue")
     sim = problem.simulation
@@ -75,9 +75,15 @@ def test_a_size_exponent_grows_the_air_mass_as_that_power_through_the_fill(runs)
             * (K_ENCLOSED / 12 + K_APPARENT / 8))
     expected = full * ((cds + 1e-4) / cds_o) ** 3.0
     np.testing.assert_allclose(q[param_name("added_mass", chute.name)], expected, rtol=1e-9)
+    # Against the D^3 law's air mass along its own run (the same clock): far smaller while
+    # the canopy is a third open, the same once full open.
+    d3 = runs[2]["added"][1][param_name("added_mass", chute.name)]
     first = (traj.t > truth[param_name("t_start", chute.name, chute.stages[1])] - 1.0) \
         & (traj.t < truth[param_name("t_start", chute.name, chute.stages[1])])
-    assert np.all(expected[first] < 0.5 * full[first] * ((cds[first] + 1e-4) / cds_o) ** 1.5)
+    assert np.all(q[param_name("added_mass", chute.name)][first] < 0.5 * d3[first])
+    steady = traj.t > truth[param_name("t_start", chute.name, chute.stages[-1])] + 2.0
+    np.testing.assert_allclose(q[param_name("added_mass", chute.name)][steady], d3[steady],
+                               rtol=0.02)
     with pytest.raises(ValueError, match="size_exponent"):
         AddedMass(size_exponent=0.0)
 
