@@ -188,16 +188,15 @@ def _wrap(text: str, width: int = 76) -> str:
     return "\n".join([*lines, line])
 
 
-_HEADER = '''from __future__ import annotations
 
-import math
-from dataclasses import dataclass
 
-import casadi as ca
+def _header(dataclass_names: str = "dataclass", effect_names: str = "Effect") -> str:
+    """A plug-in file's imports, with the names it takes from dataclasses and effects."""
+    return (f"from __future__ import annotations\n\nimport math\nfrom dataclasses import "
+            f"{dataclass_names}\n\nimport casadi as ca\n\nfrom cpas_ocp.physics.effects "
+            f"import {effect_names}\nfrom cpas_ocp.physics.parameters import Parameter, "
+            "param_name\n")
 
-from cpas_ocp.physics.effects import Effect
-from cpas_ocp.physics.parameters import Parameter, param_name
-'''
 
 _PERIODIC = Template('''"""Drag-area modulation at the residual's frequency (proposed by cpas-ocp).
 
@@ -212,11 +211,15 @@ before the window's end where that is finite): each canopy's window is where
 the line was seen in its own phases.  The in-phase and quadrature amplitudes
 ``modulation_cos[P]`` and
 ``modulation_sin[P]`` (fractions of CdS) enter linearly and vanish at the null;
-``modulation_frequency`` (Hz) starts at FREQUENCY_HZ and is estimated.  Edit
+``modulation_frequency`` (Hz) starts at FREQUENCY_HZ and is estimated.  With
+the option ``free_start`` each canopy's gate start is estimated too
+(``modulation_start[P]``, s, from its window's start; the phase keeps its
+reference there): where the oscillation begins is known only to within the
+windows the residual was tested in, and the data may say otherwise.  Edit
 the window or the gate to fit what you know; list the effect after
 canopy_inflation, before the riser effects.
 """
-''' + _HEADER + '''
+''' + _header("dataclass, replace", "Effect, Refinement") + '''
 FREQUENCY_HZ = $frequency  # the residual's line (Hz)
 # Each canopy's window (s): where the line was first and last seen in its own phases
 # (math.inf: to the phase's end).
@@ -235,27 +238,57 @@ def gate(t, start, end):
 
 @dataclass(frozen=True)
 class DragAreaModulation(Effect):
-    """Drag-area oscillation at ``modulation_frequency`` (Hz), amplitudes per canopy."""
+    """Drag-area oscillation at ``modulation_frequency`` (Hz), amplitudes per canopy;
+    `free_start`: each canopy's gate start estimated (``modulation_start[P]``, s)."""
 
+    free_start: bool = False
     name: str = "drag_area_modulation"
 
     def parameters(self, test):
-        return [Parameter("modulation_frequency", "Hz", FREQUENCY_HZ, 0.5 * FREQUENCY_HZ,
-                          1.5 * FREQUENCY_HZ, scale=FREQUENCY_HZ,
-                          description="drag-area modulation frequency"),
-                *(Parameter(param_name(base, c.name), "1", 0.0, -0.3, 0.3, scale=0.05,
-                            description=f"{part} drag-area modulation amplitude")
-                  for c in test.parachutes
-                  for base, part in (("modulation_cos", "in-phase"),
-                                     ("modulation_sin", "quadrature")))]
+        out = [Parameter("modulation_frequency", "Hz", FREQUENCY_HZ, 0.5 * FREQUENCY_HZ,
+                         1.5 * FREQUENCY_HZ, scale=FREQUENCY_HZ,
+                         description="drag-area modulation frequency"),
+               *(Parameter(param_name(base, c.name), "1", 0.0, -0.3, 0.3, scale=0.05,
+                           description=f"{part} drag-area modulation amplitude")
+                 for c in test.parachutes
+                 for base, part in (("modulation_cos", "in-phase"),
+                                    ("modulation_sin", "quadrature")))]
+        if self.free_start:
+            out += [Parameter(param_name("modulation_start", c.name), "s",
+                              WINDOWS_S[c.name][0], float(test.t_start),
+                              min(WINDOWS_S[c.name][1], float(test.t_end)) - RAMP_S,
+                              scale=1.0, description="drag-area modulation's start")
+                    for c in test.parachutes]
+        return out
 
     def null_values(self, test):
-        return {p.name: 0.0 for p in self.parameters(test)[1:]}
+        return {p.name: 0.0 for p in self.parameters(test)[1:]
+                if p.name.startswith("modulation_cos") or p.name.startswith("modulation_sin")}
+
+    def refinements(self, test):
+        """Each canopy's gate start estimated, null at its window's start, refitted from
+        there and from a quarter and half of the way through the window (where the
+        oscillation begins within it is not known)."""
+        if self.free_start:
+            return []
+
+        def at(share):
+            starts = {}
+            for c in test.parachutes:
+                start, end = WINDOWS_S[c.name]
+                last = min(end, float(test.t_end)) - RAMP_S
+                starts[param_name("modulation_start", c.name)] = start + share * (last - start)
+            return starts
+
+        return [Refinement(replace(self, free_start=True), "each canopy's start estimated",
+                           at(0.0), (at(0.25), at(0.5)))]
 
     def forces(self, ctx):
         for chute in ctx.test.parachutes:
             start, end = WINDOWS_S[chute.name]
             phase = 2.0 * math.pi * ctx.p["modulation_frequency"] * (ctx.t - start)
+            if self.free_start:
+                start = ctx.p[param_name("modulation_start", chute.name)]
             g = gate(ctx.t, start, end)
             a = ctx.p[param_name("modulation_cos", chute.name)]
             b = ctx.p[param_name("modulation_sin", chute.name)]
@@ -274,7 +307,7 @@ change of gain at T_REF_N, the phase's peak tension (k = -0.1: the peak reads
 10 % low); it vanishes at the null.  Edit the law (a square, a saturation) to
 fit what you know; list the effect after the load-cell sensor.
 """
-''' + _HEADER + '''
+''' + _header() + '''
 T_REF_N = $t_ref  # the phase's peak tension, rounded up (N)
 
 
@@ -317,7 +350,7 @@ changes through a layer (tanh-like) is not a straight line, and a straight
 line leaves the rest for other effects to take up.  Edit the profile (layers,
 a power law) to fit what you know; list the effect first, before any drag.
 """
-''' + _HEADER + '''
+''' + _header() + '''
 H_MID_M = $middle  # the middle of the phase's altitude span (m)
 HALF_SPAN_M = $half_span  # half the phase's altitude span (m)
 LIMIT_MS = 30.0  # bound on each coefficient (m/s)

@@ -63,7 +63,14 @@ import numpy as np
 from scipy.stats import norm
 
 from cpas_ocp.discrepancy.candidate_plugins import Proposal, propose
-from cpas_ocp.discrepancy.diagnosis import ALPHA, CONFIRM_TOP, Diagnosis, diagnose
+from cpas_ocp.discrepancy.diagnosis import (
+    ALPHA,
+    CONFIRM_TOP,
+    Diagnosis,
+    confirm_at_misfit,
+    diagnose,
+)
+from cpas_ocp.discrepancy.refinement import RefinementTrial, best_kept, refine
 from cpas_ocp.discrepancy.score_test import CONFIRM_MAX_ITER, ScoreTest, confirm, score_test
 from cpas_ocp.errors import InputError, SolverFailure
 from cpas_ocp.estimation.estimator import Estimator, Fit, Settings
@@ -110,6 +117,10 @@ class DiscoveryStep:
     stand_in: list[str] = field(default_factory=list)
     # The stand-in this step drops from the model before it (None where it adds one).
     dropped: str | None = None
+    # The effect this step refines (`Refinement`: a structural constant freed), and how;
+    # None where it adds or drops one.
+    refined: str | None = None
+    refinement: str = ""
     # The estimator of `fit` (for its covariance), where the chain kept it.
     estimator: Estimator | None = field(default=None, repr=False)
     # Which start the step's fit came from, where more than one was tried (`best_start`).
@@ -129,6 +140,8 @@ class DiscoveryStep:
         """What the step did: the effect it added, "without X" where it dropped X."""
         if self.dropped is not None:
             return f"without {self.dropped}"
+        if self.refined is not None:
+            return f"{self.refined} refined"
         return self.added or "start"
 
     @property
@@ -147,7 +160,9 @@ class DiscoveryStep:
         `shown` windows that departed from the noise most."""
         if self.dropped is not None:
             return [f"{self.dropped} dropped: with the effects added after it, {self.admitted_by}"]
-        lines = [f"{self.added} removes {100 * self.explained:.0f} % of the excess "
+        what = (self.added if self.refined is None
+                else f"{self.refined} refined ({self.refinement})")
+        lines = [f"{what} removes {100 * self.explained:.0f} % of the excess "
                  "chi-square" + (", and only partly explains it (a stand-in?)" if self.stand_in
                                 else "")]
         lines += [f"  {w.sensor}.{w.channel} {w.window}: {100 * share:.0f} % of its excess "
@@ -210,6 +225,8 @@ class Discovery:
     notes: list[str] = field(default_factory=list)
     proposals: list[ProposalTrial] = field(default_factory=list)
     plugins: dict[str, EffectType] = field(default_factory=dict)
+    # The refinements tried of effects the chain added, with their tests (`refinement`).
+    refinements: list[RefinementTrial] = field(default_factory=list)
     # How the chain ended: "consistent" (the last fit's chi-square not above the noise),
     # "below the noise" (in its lower tail), "misfit" (nothing left is confirmed and the
     # chi-square lies above the noise) or "stopped early" (the step limit, or a refit that
@@ -514,7 +531,7 @@ def _chain(out: Discovery, candidates: Mapping[str, EffectType] | None, max_step
                     on_whole(out)
                 began = time.perf_counter()
                 step.diagnosis = diagnose(step.fit, step.spec, candidates, confirm_top, alpha,
-                                          progress, frozenset(out.dropped))
+                                          progress, frozenset(out.dropped), at_misfit=False)
                 step.diagnosed_s += time.perf_counter() - began
                 clock = time.perf_counter()
                 if on_step is not None:
@@ -522,6 +539,14 @@ def _chain(out: Discovery, candidates: Mapping[str, EffectType] | None, max_step
                 if on_whole is not None:
                     on_whole(out)
             found = next_step(step.diagnosis, progress)
+            if isinstance(found, str) and not step.diagnosis.consistent_with_noise \
+                    and out.added < max_steps:
+                # Nothing named, above the noise: the effects added, in other forms; then
+                # every effect tested, refitted whatever its score.
+                found = _refined_step(out, step, _unrefined(out), alpha, progress) or (
+                    next_step(step.diagnosis, progress)
+                    if confirm_top > 0 and confirm_at_misfit(step.diagnosis, progress)
+                    else found)
             if isinstance(found, str) and _unexplained(step.diagnosis) \
                     and out.added < max_steps:
                 tried = len(out.proposals)
@@ -546,6 +571,14 @@ def _chain(out: Discovery, candidates: Mapping[str, EffectType] | None, max_step
                     continue
                 out.state = "stopped early"
                 return out
+            if found.stand_in and found.added is not None and out.added < max_steps:
+                # An effect that leaves its own windows off the noise: its other forms
+                # first, before anything else is asked to take up the rest.
+                began = time.perf_counter()
+                refined = _refined_step(out, found, [found.added], alpha, progress)
+                if refined is not None:
+                    refined.found_s = time.perf_counter() - began
+                    _extend(out, found, refined, max_steps)
             _drop_stand_ins(out, alpha, progress)
 
 
@@ -566,6 +599,32 @@ def _restarted_last(out: Discovery, step: DiscoveryStep, progress: bool) -> bool
     return True
 
 
+def _unrefined(out: Discovery) -> list[str]:
+    """The effects the chain added that its last model holds and no refinement was tried of."""
+    last = out.steps[-1].spec.effect_names
+    tried = {t.effect for t in out.refinements}
+    return [s.added for s in out.steps[1:] if s.added is not None and s.added in last
+            and s.added not in tried and s.added not in out.dropped]
+
+
+def _refined_step(out: Discovery, step: DiscoveryStep, names: list[str], alpha: float,
+                  progress: bool) -> DiscoveryStep | None:
+    """The step that refines one of the effects `names` of `step`'s model: every refinement
+    of them tried (`refinement.refine`, recorded in `out`), the most significant kept at
+    the family-wise level; None where none is kept."""
+    if not names:
+        return None
+    index = next(k for k, s in enumerate(out.steps) if s is step)
+    trials = refine(step.fit, step.spec, names, index, alpha, progress)
+    out.refinements += trials
+    best = best_kept(trials)
+    if best is None or best.refitted is None or best.spec is None:
+        return None
+    est, fit = best.refitted
+    return DiscoveryStep(None, best.spec, fit, str(best.lr), estimator=est,
+                         refined=best.effect, refinement=best.change)
+
+
 def _unexplained(diag: Diagnosis) -> bool:
     """Whether the residual of the diagnosed fit keeps significant structure that no library
     effect explains with a plausible estimate (and the air's motion is not named)."""
@@ -583,8 +642,10 @@ def _extend(out: Discovery, step: DiscoveryStep, found: DiscoveryStep, max_steps
                        f"diagnosis confirms {found.added} too")
         return False
     found.explained = explained_share(step.fit.chi_square, step.fit.dof, found.fit.chi_square)
-    found.windows_explained = excess_removed(
-        step.diagnosis.statistics, window_statistics(found.fit, step.diagnosis.windows))
+    diag = step.diagnosis
+    windows = diag.windows if diag is not None else phase_windows(step.fit)
+    before = diag.statistics if diag is not None else window_statistics(step.fit, windows)
+    found.windows_explained = excess_removed(before, window_statistics(found.fit, windows))
     out.steps.append(found)
     return True
 

@@ -27,6 +27,7 @@ import numpy as np
 
 from cpas_ocp.discrepancy.candidate_plugins import Proposal
 from cpas_ocp.discrepancy.discovery import Discovery, DiscoveryStep, ProposalTrial
+from cpas_ocp.discrepancy.refinement import RefinementTrial
 from cpas_ocp.discrepancy.score_test import ScoreTest
 from cpas_ocp.errors import InputError
 from cpas_ocp.estimation.estimator import Estimator
@@ -56,7 +57,8 @@ def write_checkpoint(discovery: Discovery, folder: Path, context: Mapping[str, A
         np.savez(folder / fit_file(k), z=s.fit.z, multipliers=np.asarray(s.fit.multipliers))
         worst = s.worst_window
         steps.append({
-            "added": s.added, "dropped": s.dropped, "admitted_by": s.admitted_by,
+            "added": s.added, "dropped": s.dropped, "refined": s.refined,
+            "refinement": s.refinement, "admitted_by": s.admitted_by,
             "explained": s.explained, "stand_in": s.stand_in, "start": s.start,
             "searched": s.searched, "found_s": s.found_s, "diagnosed_s": s.diagnosed_s,
             "windows_explained": [[dataclasses.asdict(a), dataclasses.asdict(b), share]
@@ -70,7 +72,8 @@ def write_checkpoint(discovery: Discovery, folder: Path, context: Mapping[str, A
             "notes": discovery.notes, "steps": steps,
             "proposals": [{"step": t.step, "tried": t.tried, "confirmed": t.confirmed,
                            "name": t.proposal.name, "reason": t.proposal.reason,
-                           "test": t.test.as_dict()} for t in discovery.proposals]}
+                           "test": t.test.as_dict()} for t in discovery.proposals],
+            "refinements": [t.as_dict() for t in discovery.refinements]}
     (folder / RESUME_FILE).write_text(json_text(data))
 
 
@@ -96,6 +99,7 @@ def read_checkpoint(folder: Path, test: FlightTest,
                                                                    source),
                                            _score_test(item["test"]), item["tried"],
                                            item["confirmed"]))
+    out.refinements = [RefinementTrial.from_dict(t) for t in data.get("refinements", [])]
     for k, item in enumerate(data["steps"]):
         spec = load_model_file(folder / f"step_{k}.json", registry, allow_external=True)
         stored = np.load(folder / fit_file(k))
@@ -110,7 +114,8 @@ def read_checkpoint(folder: Path, test: FlightTest,
             item["added"], spec, fit, item["admitted_by"], explained=_number(item["explained"]),
             windows_explained=[(_window(a), _window(b), _number(share))
                                for a, b, share in item["windows_explained"]],
-            stand_in=list(item["stand_in"]), dropped=item["dropped"], estimator=est,
+            stand_in=list(item["stand_in"]), dropped=item["dropped"],
+            refined=item.get("refined"), refinement=item.get("refinement", ""), estimator=est,
             start=item["start"], searched=item["searched"], found_s=item["found_s"],
             diagnosed_s=item["diagnosed_s"], recorded_verdict=item["verdict"],
             recorded_worst=None if item["worst_window"] is None

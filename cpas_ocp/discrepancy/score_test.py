@@ -64,6 +64,7 @@ from cpas_ocp.estimation.estimator import POLISH_CONSTRAINT_TOL, STOP_CONSTRAINT
 from cpas_ocp.estimation.kkt_system import NonFiniteCurvature
 from cpas_ocp.inference.hypothesis_tests import chi_bar_square_sf, cone_statistic
 from cpas_ocp.inference.model_comparison import LikelihoodRatio, nested_start, nested_values
+from cpas_ocp.inference.restarts import IMPROVEMENT_CHI2
 from cpas_ocp.io.model_spec import RISER_MODELS, ModelSpec
 from cpas_ocp.physics.effects.base import Effect
 from cpas_ocp.physics.effects.registry import BUILTIN, EffectType
@@ -283,9 +284,12 @@ NULL_POINT_MAX_ITER = 100
 CONFIRM_MAX_ITER = 150
 
 
-def confirm(fit: Fit, result: ScoreTest, progress: bool = False) -> None:
+def confirm(fit: Fit, result: ScoreTest, progress: bool = False,
+            defaults_too: bool = False) -> None:
     """Refit the model with `result`'s effect, starting from `fit`, and record the
-    likelihood-ratio test against `fit` (in place).
+    likelihood-ratio test against `fit` (in place).  `defaults_too`: try the effect's
+    defaults as well wherever the refit from the score step converged (below), and keep
+    that fit where it is lower by more than IMPROVEMENT_CHI2.
 
     The effect's parameters start at their linearised estimates where those
     lie inside the bounds, else just inside the bound at the null value.
@@ -339,6 +343,15 @@ def confirm(fit: Fit, result: ScoreTest, progress: bool = False) -> None:
         except SolverFailure as exc:
             failure = exc
     origin = tried = ""
+    if refitted is not None and defaults_too and retry is None \
+            and refitted.chi_square <= fit.chi_square:
+        # A full dose of the effect, beside the score step's small one.
+        retry = _retry_from_defaults(est, fit, model, result, start, progress)
+        if retry[0] is not None \
+                and retry[0].chi_square < refitted.chi_square - IMPROVEMENT_CHI2:
+            origin = (f" from the effect's defaults (the refit from the score step ended at "
+                      f"chi-square {refitted.chi_square:.1f})")
+            refitted = retry[0]
     if refitted is None or refitted.chi_square > fit.chi_square:
         # Not converged, or converged to a stationary point above the fit it extends.
         retried, tried, retry_failure = retry or _retry_from_defaults(est, fit, model, result,

@@ -281,7 +281,8 @@ def write_discovery(discovery: Discovery, out: str | Path,
         rms.columns = [f"{k}: {label}" for k, label in enumerate(labels)]
         result = {
             "test": steps[0].fit.test.name,
-            "steps": [{"added": s.added, "dropped": s.dropped, "admitted_by": s.admitted_by,
+            "steps": [{"added": s.added, "dropped": s.dropped, "refined": s.refined,
+                       "refinement": s.refinement or None, "admitted_by": s.admitted_by,
                        "model_file": f"step_{k}.json", "chi_square": s.fit.chi_square,
                        "dof": s.fit.dof, "aic": s.criteria.aic, "bic": s.criteria.bic,
                        "channel_normalised_rms": s.channel_rms,
@@ -306,6 +307,7 @@ def write_discovery(discovery: Discovery, out: str | Path,
                            "chi_square": None if t.test.refitted is None
                            else t.test.refitted[1].chi_square}
                           for t in discovery.proposals],
+            "refinements": [t.as_dict() for t in discovery.refinements],
             "stopped": discovery.stopped,
             "ending": {"state": discovery.state, "text": discovery.ending(),
                        "noise_test": discovery.noise.as_dict()},

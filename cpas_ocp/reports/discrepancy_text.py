@@ -62,6 +62,10 @@ def discovery_text(chain: Discovery) -> str:
     if chain.proposals:
         lines += ["", "plug-ins proposed from the residual's signature, tested as written:"]
         lines += [f"  {t}" for t in chain.proposals]
+    if chain.refinements:
+        lines += ["", "refinements of the effects added (a structural constant freed), tested "
+                      "against the effect as it was:"]
+        lines += [f"  {t}" for t in chain.refinements]
     lines += ["", f"ending: {chain.ending()}"] + [f"note: {n}" for n in chain.notes]
     last = chain.steps[-1].diagnosis if chain.steps else None
     if last is not None:

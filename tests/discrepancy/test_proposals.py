@@ -10,13 +10,17 @@ from __future__ import annotations
 import math
 import runpy
 
+import numpy as np
+
 from cpas_ocp.discrepancy.candidate_plugins import propose
 from cpas_ocp.discrepancy.diagnosis import Diagnosis
 from cpas_ocp.discrepancy.residual_diagnosis import PERIODICITY, Finding
 from cpas_ocp.discrepancy.signatures import Correlation
 from cpas_ocp.inference.phase_windows import phase_windows
 from cpas_ocp.io.model_spec import baseline_spec
+from cpas_ocp.physics.effects import baseline_effects
 from cpas_ocp.physics.effects.registry import load_plugin
+from cpas_ocp.physics.model import Model
 
 
 def _finding(sensor: str, channel: str, window, rejected: tuple[str, ...],
@@ -114,3 +118,46 @@ def test_what_a_chain_says_it_proposes_is_written(drogue_fit, tmp_path) -> None:
         else:
             assert "`discover` wrote none" in verdict, verdict
             assert not (out / "proposed").exists()
+
+
+def test_a_proposed_modulation_refines_to_its_own_start_and_is_itself_at_the_null(
+        drogue_fit, tmp_path) -> None:
+    """The written modulation offers one refinement: each canopy's start estimated, null at
+    its window's start.  At the null the refined riser tensions are the written plug-in's;
+    with a start 1 s later the tensions are unmodulated over that second and the same after
+    (the phase keeps its reference at the window's start)."""
+    fit, _, _ = drogue_fit(1)
+    windows = {w.name: w for w in phase_windows(fit)}
+    last = {w.parachute: w for w in sorted((w for w in windows.values() if w.kind == "steady"),
+                                           key=lambda w: (w.parachute, w.t0))}
+    findings = [_finding(f"riser_{c}", "tension", w, (PERIODICITY,)) for c, w in last.items()]
+    proposal = next(p for p in propose(_diagnosis(fit, findings), baseline_spec())
+                    if p.name == "drag_area_modulation")
+    path = tmp_path / proposal.file_name
+    path.write_text(proposal.source)
+    written = load_plugin(path)["drag_area_modulation"].build({}, str(path), "test")
+    (refinement,) = written.refinements(fit.test)
+    assert refinement.effect.refinements(fit.test) == []
+    assert refinement.null == {f"modulation_start[{c}]": round(w.t0, 3) for c, w in last.items()}
+    base = baseline_effects()
+    values = {**fit.parameters, **{f"modulation_{part}[{c}]": 0.05 for c in last
+                                   for part in ("cos", "sin")}, "modulation_frequency": 1.6}
+    plain = Model(fit.test, [base[0], written, *base[1:]])
+    refined = Model(fit.test, [base[0], refinement.effect, *base[1:]])
+    at = plain.quantities_along(fit.t, fit.x, values, fit.captures)
+    at_null = refined.quantities_along(fit.t, fit.x, {**values, **refinement.null},
+                                       fit.captures)
+    later = {n: v + 1.0 for n, v in refinement.null.items()}
+    delayed = refined.quantities_along(fit.t, fit.x, {**values, **later}, fit.captures)
+    still = plain.quantities_along(fit.t, fit.x, {**values, **{
+        n: 0.0 for n in values if n.startswith(("modulation_cos", "modulation_sin"))}},
+        fit.captures)
+    for canopy, w in last.items():
+        load = f"tension[{canopy}]"
+        np.testing.assert_allclose(at_null[load], at[load], rtol=1e-12)
+        start = round(w.t0, 3)
+        gap = (fit.t > start + 0.2) & (fit.t < start + 0.8)
+        after = fit.t > start + 1.3
+        assert np.max(np.abs(at[load][gap] - still[load][gap])) > 1e-3 * np.max(at[load][gap])
+        np.testing.assert_allclose(delayed[load][gap], still[load][gap], rtol=1e-6)
+        np.testing.assert_allclose(delayed[load][after], at[load][after], rtol=1e-9)

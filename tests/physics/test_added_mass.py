@@ -14,7 +14,12 @@ from cpas_ocp.estimation.simulate import initial_state, simulate, simulate_probl
 from cpas_ocp.io.flight_test import load_test
 from cpas_ocp.io.problems import load_problem
 from cpas_ocp.physics.effects import AddedMass, baseline_effects
-from cpas_ocp.physics.effects.added_mass import K_APPARENT, K_ENCLOSED, PROJECTED_RATIO
+from cpas_ocp.physics.effects.added_mass import (
+    EXPONENT,
+    K_APPARENT,
+    K_ENCLOSED,
+    PROJECTED_RATIO,
+)
 from cpas_ocp.physics.model import Model
 from cpas_ocp.physics.parameters import param_name
 from tests.conftest import START_GUESS_OFFSET_S, offset_events
@@ -86,6 +91,31 @@ def test_a_size_exponent_grows_the_air_mass_as_that_power_through_the_fill(runs)
                                rtol=0.02)
     with pytest.raises(ValueError, match="size_exponent"):
         AddedMass(size_exponent=0.0)
+
+
+def test_the_refined_law_is_the_fixed_one_at_its_null_and_grows_as_its_exponent(runs
+                                                                                   ) -> None:
+    """The refinement frees the exponent (``added_mass_exponent``) with its null at the
+    fixed law's value: there the air mass along the D^3 run is the D^3 law's exactly; at
+    6 it is the D^6 law's.  A refined effect offers no refinement of its own."""
+    test, truth, out = runs
+    traj, q = out["added"]
+    fixed = AddedMass()
+    (refinement,) = fixed.refinements(test)
+    assert refinement.null == {EXPONENT: 3.0}
+    assert refinement.effect.refinements(test) == []
+    model = Model(test, [*baseline_effects(), refinement.effect])
+    assert EXPONENT in model.parameter_names
+    chute = test.parachutes[0]
+    name = param_name("added_mass", chute.name)
+    at_null = model.quantities_along(traj.t, traj.x, {**truth, **refinement.null},
+                                     traj.captures)
+    np.testing.assert_allclose(at_null[name], q[name], rtol=1e-12)
+    at_six = model.quantities_along(traj.t, traj.x, {**truth, EXPONENT: 6.0}, traj.captures)
+    d6 = Model(test, [*baseline_effects(), AddedMass(size_exponent=6.0)]).quantities_along(
+        traj.t, traj.x, truth, traj.captures)
+    np.testing.assert_allclose(at_six[name], d6[name], rtol=1e-12)
+    assert not np.allclose(at_six[name], q[name], rtol=1e-3)
 
 
 def test_riser_gathers_the_air_while_the_canopy_grows(runs) -> None:

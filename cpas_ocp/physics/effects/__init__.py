@@ -12,7 +12,14 @@ riser model of a Pilot phase, from mortar fire to Main bag strip.
 """
 
 from cpas_ocp.physics.effects.added_mass import AddedMass
-from cpas_ocp.physics.effects.base import Capture, Constraint, Effect, EventTiming, State
+from cpas_ocp.physics.effects.base import (
+    Capture,
+    Constraint,
+    Effect,
+    EventTiming,
+    Refinement,
+    State,
+)
 from cpas_ocp.physics.effects.canopy_inflation import CanopyInflation
 from cpas_ocp.physics.effects.deployment_load import DeploymentLoad
 from cpas_ocp.physics.effects.drag_scale import DragScale
@@ -58,6 +65,7 @@ __all__ = [
     "LoadCellScale",
     "LoadCellSensor",
     "PilotDeployment",
+    "Refinement",
     "RigidRiser",
     "SensorBias",
     "SensorLag",

@@ -34,7 +34,12 @@ against the fill times (0.1-0.5 s).
 
 How the air mass grows through the fill is the least known part of the law:
 the option `size_exponent` e makes it rho (r_p D_o)^3 (CdS / CdS_o)^(e/2), the
-D^3 law at e = 3 (the default), later growth above it.
+D^3 law at e = 3 (the default), later growth above it.  With `exponent_free`
+the exponent is a parameter, ``added_mass_exponent``, shared by the canopies
+(how air gathers is a property of the canopy design and the fill, like k_A);
+it starts at `size_exponent`, the value at which the refined law is the
+fixed one (`refinements`: what `discover` tries where the fixed law leaves
+the inflation windows off the noise).
 
 Quantities written: ``added_mass[P]`` (kg) and ``added_momentum_rate[P]``
 (N, 3-vector, d(m_A)/dt v_air).  Riser models read both.  A canopy on
@@ -50,12 +55,12 @@ reduction's guess in 11-15 iterations with sigma 0.09; on `drogue`
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 import casadi as ca
 
-from cpas_ocp.physics.effects.base import Effect
+from cpas_ocp.physics.effects.base import Effect, Refinement
 from cpas_ocp.physics.parameters import Parameter, param_name
 from cpas_ocp.physics.units import G0
 
@@ -70,6 +75,9 @@ PROJECTED_RATIO = 0.7
 CDS_FLOOR = 1e-4
 # Largest growth exponent of the air mass in the canopy's size (rho D^e; 3 is the D^3 law).
 MAX_SIZE_EXPONENT = 12.0
+# Smallest fitted exponent: below it the air mass is nearly all there at the fill's start.
+MIN_SIZE_EXPONENT = 0.5
+EXPONENT = "added_mass_exponent"
 # Averaging window of the added-mass growth rate (s), well below the fill times (0.1-1 s).
 RATE_WINDOW_S = 0.04
 
@@ -80,9 +88,11 @@ class AddedMass(Effect):
 
     `size_exponent` e: the air mass grows as (CdS / CdS_o)^(e / 2) through the fill, 3
     for the rho D^3 law (above 3 the air gathers late in the fill, as where the enclosed
-    mass fills only once the mouth is round); see the module docstring."""
+    mass fills only once the mouth is round); `exponent_free`: e is estimated
+    (``added_mass_exponent``), starting at `size_exponent`; see the module docstring."""
 
     size_exponent: float = 3.0
+    exponent_free: bool = False
     name: str = "added_mass"
 
     def __post_init__(self) -> None:
@@ -91,12 +101,33 @@ class AddedMass(Effect):
                                        and 0.0 < e <= MAX_SIZE_EXPONENT):
             raise ValueError(f"size_exponent must be a number in (0, {MAX_SIZE_EXPONENT:g}]; "
                              f"got {e!r}")
+        if not isinstance(self.exponent_free, bool):
+            raise ValueError(f"exponent_free must be true or false; got {self.exponent_free!r}")
 
     def parameters(self, test: FlightTest) -> list[Parameter]:
-        return [Parameter(param_name("added_mass_factor", c.name), "1", 1.0, 0.0, 5.0,
-                          description="added mass over its nominal value", scale=1.0,
-                          physical_lower=True)
-                for c in test.parachutes]
+        factors = [Parameter(param_name("added_mass_factor", c.name), "1", 1.0, 0.0, 5.0,
+                             description="added mass over its nominal value", scale=1.0,
+                             physical_lower=True)
+                   for c in test.parachutes]
+        if not self.exponent_free:
+            return factors
+        start = min(max(self.size_exponent, MIN_SIZE_EXPONENT), MAX_SIZE_EXPONENT)
+        return [*factors, Parameter(EXPONENT, "1", start, MIN_SIZE_EXPONENT,
+                                    MAX_SIZE_EXPONENT, scale=1.0,
+                                    description="growth exponent of the air mass in the "
+                                                "canopy's projected diameter (3: rho D^3)")]
+
+    def refinements(self, test: FlightTest) -> list[Refinement]:
+        """The law with its growth exponent estimated, null at `size_exponent`, refitted
+        from there and from half and twice it (within the exponent's bounds)."""
+        e = self.size_exponent
+        if self.exponent_free or e < MIN_SIZE_EXPONENT:
+            return []
+        starts = tuple({EXPONENT: s} for s in (0.5 * e, 2.0 * e)
+                       if MIN_SIZE_EXPONENT <= s <= MAX_SIZE_EXPONENT)
+        return [Refinement(replace(self, exponent_free=True),
+                           f"its growth exponent in the canopy's size freed (D^e, e = {e:g} "
+                           "fixed)", {EXPONENT: e}, starts)]
 
     def null_values(self, test: FlightTest) -> dict[str, float]:
         """No air mass: k_A = 0 (on the lower bound; the alternative is k_A > 0)."""
@@ -112,7 +143,8 @@ class AddedMass(Effect):
             cds_o = cds if chute.open_at_start else ctx.p[param_name("CdS", chute.name,
                                                                      chute.stages[-1])]
             # (D / D_full)^e with D = r_p D_o sqrt(CdS / CdS_o): the rho D^3 law at e = 3.
-            growth = ((cds + CDS_FLOOR) / cds_o) ** (0.5 * self.size_exponent)
+            exponent = ctx.p[EXPONENT] if self.exponent_free else self.size_exponent
+            growth = ((cds + CDS_FLOOR) / cds_o) ** (0.5 * exponent)
             m_a = (ctx.p[param_name("added_mass_factor", chute.name)] * ctx.q["density"]
                    * math.pi * (PROJECTED_RATIO * chute.diameter)**3 * growth
                    * (K_ENCLOSED / 12.0 + K_APPARENT / 8.0))

@@ -95,6 +95,26 @@ class EventTiming:
 
 
 @dataclass(frozen=True)
+class Refinement:
+    """A generalisation of an effect: the same physics with a structural constant freed as a
+    parameter (a growth exponent, a start time), for `discover` to test against the
+    effect as it is.
+
+    `effect` is the refined effect (the same `name`, so it takes the original's place in
+    a model); `change` says in a few words what was freed; `null` gives the freed
+    parameters' values at which the refined effect is the original (the null of the
+    likelihood ratio, inside their bounds: a two-sided test on len(null) degrees of
+    freedom); `starts` other values of them to refit from besides the null (a freed
+    constant's chi-square can have several minima: the fit being refined has bent its
+    other parameters to the constant's fixed value)."""
+
+    effect: Effect
+    change: str
+    null: dict[str, float]
+    starts: tuple[dict[str, float], ...] = ()
+
+
+@dataclass(frozen=True)
 class Constraint:
     """A constraint lower <= expr <= upper declared by an effect; expr is a function of
     the parameters and the captured values (``ctx.p``, ``ctx.c``)."""
@@ -171,6 +191,11 @@ class Effect:
         not describe (a GPS lag of -0.06 s: the receiver would report before the event).
         Parameters not named have no such range."""
         return {}
+
+    def refinements(self, test: FlightTest) -> list[Refinement]:
+        """Generalisations of this effect that free one of its structural constants
+        (`Refinement`); none by default.  A refined effect has none of its own."""
+        return []
 
     def null_values(self, test: FlightTest) -> dict[str, float] | None:
         """Values of this effect's parameters at which it changes no prediction: the model
