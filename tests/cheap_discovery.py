@@ -21,11 +21,12 @@ _SPECS: list[Any] = []  # the spec of each fit diagnosed
 
 
 def _diagnose(fit: Any, spec: Any, candidates: Any, confirm_top: int, alpha: float,
-              progress: bool, exclude: frozenset[str]) -> Any:
+              progress: bool, exclude: frozenset[str], at_misfit: bool = True) -> Any:
     """The diagnosis with one score test (an IMU bias) and no refits."""
     _SPECS.append(spec)
     others = frozenset(candidate_effects(candidates)) - {"imu_bias"}
-    return REAL_DIAGNOSE(fit, spec, candidates, 0, alpha, progress, exclude | others)
+    return REAL_DIAGNOSE(fit, spec, candidates, 0, alpha, progress, exclude | others,
+                         at_misfit=False)
 
 
 def _next_step(diag: Any, progress: bool = False) -> discovery.DiscoveryStep:

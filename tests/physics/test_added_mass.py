@@ -9,9 +9,12 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
+from cpas_ocp.discrepancy.diagnosis import ALPHA
+from cpas_ocp.discrepancy.refinement import best_kept, refine
 from cpas_ocp.estimation.estimator import STATISTICALLY_CONVERGED, Estimator
 from cpas_ocp.estimation.simulate import initial_state, simulate, simulate_problem
 from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.io.model_spec import spec_from_effects
 from cpas_ocp.io.problems import load_problem
 from cpas_ocp.physics.effects import AddedMass, baseline_effects
 from cpas_ocp.physics.effects.added_mass import (
@@ -184,3 +187,31 @@ def test_fit_without_added_mass_is_rejected(fbcp_with_added_mass) -> None:
     delta = without.chi_square - fit.chi_square
     assert delta > chi2.ppf(0.999, 2), f"delta chi-square {delta:.1f}"
     assert without.chi_square / without.dof > fit.chi_square / fit.dof
+
+
+@pytest.mark.slow  # a refinement refitted from three starts
+def test_the_library_law_is_kept_unrefined_where_it_is_the_truth(fbcp_with_added_mass) -> None:
+    """Data made with the D^3 law and fitted with it: the freed exponent's likelihood
+    ratio does not pass the family-wise level, so the law stays as it is."""
+    _, fit, _, _ = fbcp_with_added_mass
+    spec = spec_from_effects([*baseline_effects(), AddedMass()])
+    (trial,) = refine(fit, spec, ["added_mass"], 1, ALPHA)
+    assert trial.lr is not None, trial.note
+    assert not trial.kept, str(trial)
+    assert best_kept([trial]) is None
+
+
+@pytest.mark.slow  # a whole phase fitted, then refined
+def test_a_wrong_growth_law_is_refined_to_the_exponent_that_made_the_data(
+        fbcp_with_added_mass) -> None:
+    """The same data fitted with a D^6 law: the refinement frees the exponent, its
+    likelihood ratio passes, and the estimate lies within 4 sigma of the 3 that made
+    the data (sigma from the refined fit's covariance)."""
+    _, fit, _, _ = fbcp_with_added_mass
+    spec = spec_from_effects([*baseline_effects(), AddedMass(size_exponent=6.0)])
+    wrong = Estimator(fit.test, spec).solve()
+    (trial,) = refine(wrong, spec, ["added_mass"], 1, ALPHA)
+    assert trial.kept and trial.refitted is not None, str(trial)
+    est, refined = trial.refitted
+    sigma = est.covariance(refined).std[EXPONENT]
+    assert abs(refined.parameters[EXPONENT] - 3.0) < 4.0 * sigma, str(trial)
