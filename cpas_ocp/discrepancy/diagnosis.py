@@ -12,9 +12,9 @@ unexplained residual looks like.
    p-value is the diagnosis.  Where that effect is implausible (a stand-in),
    the other tested effects are refitted too, in score order, until a
    plausible one is confirmed better (`confirm_past_stand_ins`); where none is
-   confirmed and the fit lies above the noise, every tested effect is refitted
-   (`confirm_at_misfit`: a score test is local, and can miss an effect a full
-   dose of which removes much of the misfit).
+   confirmed and the fit lies above the noise, the others are refitted in score
+   order until one is (`confirm_at_misfit`: a score test is local, and can miss
+   an effect a full dose of which removes much of the misfit).
 3. The air's motion: where an altimeter and a GPS share a slow wander, the
    evidence of a wind process against still air (`wind_evidence`); the
    process is named where its Bayes factor is decisive.
@@ -344,8 +344,10 @@ def diagnose(fit: Fit, spec: ModelSpec, candidates: Mapping[str, EffectType] | N
 
 def confirm_at_misfit(diag: Diagnosis, progress: bool = False) -> bool:
     """Where no score test leads to a confirmed effect and the fit lies above the noise,
-    refit every other tested effect too, whatever its score statistic (in place: `diag`'s
-    ranking is made again, and what was judged of it forgotten).  Whether any was refitted.
+    refit the other tested effects too, in score-test order and whatever their score
+    statistic, until one is confirmed with plausible estimates (as
+    `confirm_past_stand_ins` does past an implausible one; in place: `diag`'s ranking is
+    made again, and what was judged of it forgotten).  Whether any was refitted.
 
     The score test is local: it asks how chi-square falls for an infinitesimal dose
     of the effect, after the model's other parameters have taken up what they can of
@@ -364,15 +366,16 @@ def confirm_at_misfit(diag: Diagnosis, progress: bool = False) -> bool:
             or not diag.noise.above:
         return False
     refitted = False
-    for t in diag.effects:
-        if t.tested and t.refit is None and not t.refit_note:
-            confirm(diag.fit, t, progress, defaults_too=True)
-            release_freed_memory()
-            refitted = True
-    if refitted:
+    for t in [t for t in diag.effects if t.tested and t.refit is None and not t.refit_note]:
+        confirm(diag.fit, t, progress, defaults_too=True)
+        release_freed_memory()
+        refitted = True
         diag.effects = confirmed_ranking(diag.effects)
         diag._stand_in.clear()
         diag._implausible.clear()
+        best = diag.explanation
+        if best is not None and not diag.implausible(best):
+            break
     return refitted
 
 

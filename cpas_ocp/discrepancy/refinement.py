@@ -118,26 +118,38 @@ def _lowest_refit(fit: Fit, spec: ModelSpec, starts: list[dict[str, float]],
     the null): the converged refit with the lowest chi-square, or why none converged.
 
     From a start other than the null the constants are first held there while the
-    rest is refitted, then freed: `fit`'s other parameters are bent to the null, and
-    freed at once the constants slide back to the nearest minimum.  On `drogue` flown
-    with added mass growing as D^6, the refit from the D^3 law's fit with the exponent
-    freed at 6 ended at 3.98 (chi-square 7,548.3); held at 6 and then freed, at 5.72
+    rest is refitted, and freed from the held fit with the lowest chi-square, where
+    that lies below the refit from the null: `fit`'s other parameters are bent to the
+    null, and freed at once the constants slide back to the nearest minimum.  On
+    `drogue` flown with added mass growing as D^6, the refit from the D^3 law's fit
+    with the exponent freed at 6 ended at 3.98 (chi-square 7,548.3); held at 6 the
+    refit reached 7,108.2 (held at 1.5, 8,411.1), and freed from there 5.72
     (7,103.2)."""
-    best: tuple[Estimator, Fit] | None = None
+    found: list[tuple[Estimator, Fit]] = []
     failures = []
-    for k, values in enumerate(starts):
+
+    def attempt(what: str, start: Fit, values: dict[str, float], fixed: bool
+                ) -> tuple[Estimator, Fit] | None:
+        model = dataclasses.replace(spec, fix={**spec.fix, **values}) if fixed else spec
         try:
-            start = fit if k == 0 else refit(
-                fit, dataclasses.replace(spec, fix={**spec.fix, **values}),
-                progress=progress, max_iter=REFINE_MAX_ITER)[1]
-            est, new = refit(start, spec, values=values, progress=progress,
-                             max_iter=REFINE_MAX_ITER)
+            return refit(start, model, values=values, progress=progress,
+                         max_iter=REFINE_MAX_ITER)
         except (SolverFailure, InputError) as exc:
-            failures.append(f"from {_values_text(values)}: {exc}")
-            continue
-        if best is None or new.chi_square < best[1].chi_square:
-            best = (est, new)
-    return best if best is not None else "no refit converged (" + "; ".join(failures) + ")"
+            failures.append(f"{what} {_values_text(values)}: {exc}")
+            return None
+
+    free = attempt("from", fit, starts[0], fixed=False)
+    found += [free] if free is not None else []
+    held = [(h, values) for values in starts[1:]
+            if (h := attempt("held at", fit, values, fixed=True)) is not None]
+    if held:
+        (_, lowest), values = min(held, key=lambda h: h[0][1].chi_square)
+        if free is None or lowest.chi_square < free[1].chi_square:
+            freed = attempt("freed from", lowest, values, fixed=False)
+            found += [freed] if freed is not None else []
+    if not found:
+        return "no refit converged (" + "; ".join(failures) + ")"
+    return min(found, key=lambda f: f[1].chi_square)
 
 
 def _values_text(values: dict[str, float]) -> str:
