@@ -72,6 +72,7 @@ from cpas_ocp.discrepancy.diagnosis import (
 )
 from cpas_ocp.discrepancy.refinement import RefinementTrial, best_kept, refine
 from cpas_ocp.discrepancy.score_test import CONFIRM_MAX_ITER, ScoreTest, confirm, score_test
+from cpas_ocp.discrepancy.sparse_terms import TermSelection, select
 from cpas_ocp.errors import InputError, SolverFailure
 from cpas_ocp.estimation.estimator import Estimator, Fit, Settings
 from cpas_ocp.estimation.fit import FROM_REDUCTION
@@ -227,6 +228,8 @@ class Discovery:
     plugins: dict[str, EffectType] = field(default_factory=dict)
     # The refinements tried of effects the chain added, with their tests (`refinement`).
     refinements: list[RefinementTrial] = field(default_factory=list)
+    # The sparse regressions of a drag law tried (`sparse_terms`), at most one per chain.
+    regressions: list[TermSelection] = field(default_factory=list)
     # How the chain ended: "consistent" (the last fit's chi-square not above the noise),
     # "below the noise" (in its lower tail), "misfit" (nothing left is confirmed and the
     # chi-square lies above the noise) or "stopped early" (the step limit, or a refit that
@@ -553,6 +556,10 @@ def _chain(out: Discovery, candidates: Mapping[str, EffectType] | None, max_step
                 found = _proposed_step(out, step, Path(folder), alpha, progress) or (
                     found + ("; no plug-in proposed from its signature is confirmed (see "
                              "proposed/)" if len(out.proposals) > tried else ""))
+            if isinstance(found, str) and not step.diagnosis.consistent_with_noise \
+                    and out.added < max_steps and confirm_top > 0 and not out.regressions:
+                # Nothing named in any form the library or a template holds: a drag law.
+                found = _regressed_step(out, step, alpha, progress) or found
             if isinstance(found, str):
                 # Before the verdict: the last model from other starts, where its fit is
                 # not at the noise, then every effect the chain added tested again
@@ -623,6 +630,22 @@ def _refined_step(out: Discovery, step: DiscoveryStep, names: list[str], alpha: 
     est, fit = best.refitted
     return DiscoveryStep(None, best.spec, fit, str(best.lr), estimator=est,
                          refined=best.effect, refinement=best.change)
+
+
+def _regressed_step(out: Discovery, step: DiscoveryStep, alpha: float, progress: bool
+                    ) -> DiscoveryStep | None:
+    """The step that adds the drag law a sparse regression selects at `step`'s fit
+    (`sparse_terms.select`, recorded in `out`), or None where it selects no term."""
+    index = next(k for k, s in enumerate(out.steps) if s is step)
+    found = select(step.fit, step.spec, index, alpha, progress)
+    out.regressions.append(found)
+    if not found.found or found.spec is None or found.refitted is None:
+        return None
+    est, fit = found.refitted
+    terms = ", ".join(f"{n} = {v:.3g} ± {s:.2g}" for n, (v, s) in found.selected.items())
+    return DiscoveryStep("drag_law_terms", found.spec, fit,
+                         f"every term against none: {found.gate}; selected {terms}: "
+                         f"{found.lr}", estimator=est)
 
 
 def _unexplained(diag: Diagnosis) -> bool:

@@ -29,6 +29,7 @@ from cpas_ocp.discrepancy.candidate_plugins import Proposal
 from cpas_ocp.discrepancy.discovery import Discovery, DiscoveryStep, ProposalTrial
 from cpas_ocp.discrepancy.refinement import RefinementTrial
 from cpas_ocp.discrepancy.score_test import ScoreTest
+from cpas_ocp.discrepancy.sparse_terms import TermSelection
 from cpas_ocp.errors import InputError
 from cpas_ocp.estimation.estimator import Estimator
 from cpas_ocp.estimation.fit import Settings, SolverStats
@@ -73,7 +74,8 @@ def write_checkpoint(discovery: Discovery, folder: Path, context: Mapping[str, A
             "proposals": [{"step": t.step, "tried": t.tried, "confirmed": t.confirmed,
                            "name": t.proposal.name, "reason": t.proposal.reason,
                            "test": t.test.as_dict()} for t in discovery.proposals],
-            "refinements": [t.as_dict() for t in discovery.refinements]}
+            "refinements": [t.as_dict() for t in discovery.refinements],
+            "regressions": [t.as_dict() for t in discovery.regressions]}
     (folder / RESUME_FILE).write_text(json_text(data))
 
 
@@ -100,6 +102,7 @@ def read_checkpoint(folder: Path, test: FlightTest,
                                            _score_test(item["test"]), item["tried"],
                                            item["confirmed"]))
     out.refinements = [RefinementTrial.from_dict(t) for t in data.get("refinements", [])]
+    out.regressions = [TermSelection.from_dict(t) for t in data.get("regressions", [])]
     for k, item in enumerate(data["steps"]):
         spec = load_model_file(folder / f"step_{k}.json", registry, allow_external=True)
         stored = np.load(folder / fit_file(k))

@@ -308,6 +308,7 @@ def write_discovery(discovery: Discovery, out: str | Path,
                            else t.test.refitted[1].chi_square}
                           for t in discovery.proposals],
             "refinements": [t.as_dict() for t in discovery.refinements],
+            "regressions": [t.as_dict() for t in discovery.regressions],
             "stopped": discovery.stopped,
             "ending": {"state": discovery.state, "text": discovery.ending(),
                        "noise_test": discovery.noise.as_dict()},

@@ -66,6 +66,10 @@ def discovery_text(chain: Discovery) -> str:
         lines += ["", "refinements of the effects added (a structural constant freed), tested "
                       "against the effect as it was:"]
         lines += [f"  {t}" for t in chain.refinements]
+    if chain.regressions:
+        lines += ["", "drag laws by sparse regression (every term against none, then the weakest "
+                      "dropped until each passes):"]
+        lines += [f"  {t}" for t in chain.regressions]
     lines += ["", f"ending: {chain.ending()}"] + [f"note: {n}" for n in chain.notes]
     last = chain.steps[-1].diagnosis if chain.steps else None
     if last is not None:

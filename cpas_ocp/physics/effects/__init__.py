@@ -22,6 +22,7 @@ from cpas_ocp.physics.effects.base import (
 )
 from cpas_ocp.physics.effects.canopy_inflation import CanopyInflation
 from cpas_ocp.physics.effects.deployment_load import DeploymentLoad
+from cpas_ocp.physics.effects.drag_law_terms import DragLawTerms
 from cpas_ocp.physics.effects.drag_scale import DragScale
 from cpas_ocp.physics.effects.elastic_riser import ElasticRiser
 from cpas_ocp.physics.effects.fly_out import FlyOut
@@ -53,6 +54,7 @@ __all__ = [
     "Capture",
     "Constraint",
     "DeploymentLoad",
+    "DragLawTerms",
     "DragScale",
     "Effect",
     "ElasticRiser",

@@ -26,6 +26,7 @@ from cpas_ocp.physics.effects.axial_accelerometer import AxialAccelerometer
 from cpas_ocp.physics.effects.base import Effect
 from cpas_ocp.physics.effects.canopy_inflation import CanopyInflation
 from cpas_ocp.physics.effects.deployment_load import DeploymentLoad
+from cpas_ocp.physics.effects.drag_law_terms import DragLawTerms
 from cpas_ocp.physics.effects.drag_scale import DragScale
 from cpas_ocp.physics.effects.elastic_riser import ElasticRiser
 from cpas_ocp.physics.effects.fly_out import FlyOut
@@ -135,6 +136,7 @@ def _builtin() -> dict[str, EffectType]:
         EffectType("baro_lag", SensorLag, {"kind": "baro", "max_lag": 0.5}),
         EffectType("wind_process", WindProcess, candidate=False),
         EffectType("axial_accelerometer", AxialAccelerometer, candidate=False),
+        EffectType("drag_law_terms", DragLawTerms, candidate=False),
     ]
     return {e.name: e for e in entries}
 
