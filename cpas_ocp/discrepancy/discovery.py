@@ -11,13 +11,26 @@ alone.  `discover` repeats the diagnosis on the model each step ends with:
 2. where it names a missing effect, take the confirming refit (started from
    the fit before, so each step is nested in the last) as the next step's
    fit and model;
-3. where nothing library-made is confirmed but the residuals keep structure,
-   write the plug-ins its signature asks for (`candidate_plugins.propose`: a
-   periodic line, a load-cell residual that follows the load, one that
-   follows altitude), load each from its file and test it as written, like a
-   library effect (score test, confirming refit, likelihood ratio at the
-   family-wise level over the plug-ins proposed); a confirmed one is the next
-   step;
+3. where nothing is named, go past the library's effects as they are
+   (`_beyond_the_library`), cheapest and most specific first:
+   * at a misfit, refine the effects the chain added: free a structural
+     constant of each (an exponent, a start time: `refinement.refine`), kept
+     by its likelihood ratio at the family-wise level over the refinements
+     tried (an added effect whose own windows stay off the noise is refined
+     at once, before anything else is asked to take up the rest);
+   * where the residuals keep structure, write the plug-ins the signature
+     asks for (`candidate_plugins.propose`: a periodic line, a load-cell
+     residual that follows the load, one that follows altitude), load each
+     from its file and test it as written, like a library effect (score
+     test, confirming refit, likelihood ratio at the family-wise level over
+     the plug-ins proposed);
+   * at a misfit, refit every tested effect whatever its score, from its
+     score step and its defaults (`diagnosis.confirm_at_misfit`: the score
+     test is local);
+   * at a misfit, once per chain, a drag law by sparse regression
+     (`sparse_terms.select`: every term against none, then backward
+     elimination at alpha over the terms);
+   the first that makes a step is the next step;
 4. after each step, drop every earlier effect added as a stand-in that the
    model no longer needs (its removal refitted from the last fit, and
    keeping it not significant: `_drop_stand_ins`), a step of its own, and
@@ -542,24 +555,9 @@ def _chain(out: Discovery, candidates: Mapping[str, EffectType] | None, max_step
                 if on_whole is not None:
                     on_whole(out)
             found = next_step(step.diagnosis, progress)
-            if isinstance(found, str) and not step.diagnosis.consistent_with_noise \
-                    and out.added < max_steps:
-                # Nothing named, above the noise: the effects added, in other forms; then
-                # every effect tested, refitted whatever its score.
-                found = _refined_step(out, step, _unrefined(out), alpha, progress) or (
-                    next_step(step.diagnosis, progress)
-                    if confirm_top > 0 and confirm_at_misfit(step.diagnosis, progress)
-                    else found)
-            if isinstance(found, str) and _unexplained(step.diagnosis) \
-                    and out.added < max_steps:
-                tried = len(out.proposals)
-                found = _proposed_step(out, step, Path(folder), alpha, progress) or (
-                    found + ("; no plug-in proposed from its signature is confirmed (see "
-                             "proposed/)" if len(out.proposals) > tried else ""))
-            if isinstance(found, str) and not step.diagnosis.consistent_with_noise \
-                    and out.added < max_steps and confirm_top > 0 and not out.regressions:
-                # Nothing named in any form the library or a template holds: a drag law.
-                found = _regressed_step(out, step, alpha, progress) or found
+            if isinstance(found, str) and out.added < max_steps:
+                found = _beyond_the_library(out, step, found, Path(folder), alpha,
+                                            confirm_top, progress)
             if isinstance(found, str):
                 # Before the verdict: the last model from other starts, where its fit is
                 # not at the noise, then every effect the chain added tested again
@@ -587,6 +585,44 @@ def _chain(out: Discovery, candidates: Mapping[str, EffectType] | None, max_step
                     refined.found_s = time.perf_counter() - began
                     _extend(out, found, refined, max_steps)
             _drop_stand_ins(out, alpha, progress)
+
+
+def _beyond_the_library(out: Discovery, step: DiscoveryStep, found: str, folder: Path,
+                        alpha: float, confirm_top: int, progress: bool
+                        ) -> DiscoveryStep | str:
+    """Where the diagnosis of `step` names nothing (`found` says why), the moves past the
+    library's effects as they are, cheapest and most specific first: where the fit is a
+    misfit, the effects the chain added in other forms (`_refined_step`); where the
+    residual keeps structure nothing explains, the plug-ins its signature asks for
+    (`_proposed_step`); where the fit is a misfit, every tested effect refitted whatever
+    its score (`diagnosis.confirm_at_misfit`), then a drag law by sparse regression
+    (`_regressed_step`, once per chain).  The first step one of them makes, or why
+    there is none."""
+    diag = step.diagnosis
+    assert diag is not None
+    misfit = not diag.consistent_with_noise
+    if misfit:
+        refined = _refined_step(out, step, _unrefined(out), alpha, progress)
+        if refined is not None:
+            return refined
+    note = ""
+    if _unexplained(diag):
+        tried = len(out.proposals)
+        proposed = _proposed_step(out, step, folder, alpha, progress)
+        if proposed is not None:
+            return proposed
+        if len(out.proposals) > tried:
+            note = "; no plug-in proposed from its signature is confirmed (see proposed/)"
+    if misfit and confirm_top > 0 and confirm_at_misfit(diag, progress):
+        again = next_step(diag, progress)
+        if not isinstance(again, str):
+            return again
+        found = again
+    if misfit and confirm_top > 0 and not out.regressions:
+        regressed = _regressed_step(out, step, alpha, progress)
+        if regressed is not None:
+            return regressed
+    return found + note
 
 
 def _restarted_last(out: Discovery, step: DiscoveryStep, progress: bool) -> bool:
