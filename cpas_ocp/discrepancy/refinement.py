@@ -124,9 +124,9 @@ def _lowest_refit(fit: Fit, spec: ModelSpec, starts: list[dict[str, float]],
     with the exponent freed at 6 ended at 3.98 (chi-square 7,548.3); held at 6 the
     refit reached 7,108.2, and freed from there 5.72 (7,103.2).  Every held start is
     freed, not only the lowest: a held fit is a constrained one.  On late canopy
-    breathing both held starts of the modulation ended above the refit freed from
+    breathing the lowest held start of the modulation ended above the refit freed from
     the null (which had stopped 0.76 s early, at chi-square/dof 1.056), and yet,
-    freed, they reached the truth's 14.5 s (0.994)."""
+    freed, the refits from them reached the truth's 14.5 s (0.994)."""
     found: list[tuple[Estimator, Fit]] = []
     failures = []
 
