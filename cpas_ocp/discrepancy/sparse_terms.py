@@ -75,7 +75,7 @@ class TermSelection:
         parts = [f"every term against none: {self.gate}"]
         if self.dropped:
             parts.append("dropped " + ", ".join(self.dropped))
-        if self.found:
+        if self.selected and self.lr is not None:  # a record read back has no refit
             terms = ", ".join(f"{n} = {v:.4g} ± {s:.2g}" for n, (v, s) in self.selected.items())
             parts.append(f"kept {terms}; {self.lr}")
         if self.note:
