@@ -113,8 +113,8 @@ def run(case: str, effects: list[Effect], values: dict[str, float], seed: int, r
 
     found = discover(fit, baseline_spec(), on_step=said)
     print(f"[{case}] ending: {found.ending()}")
-    for trial in [*found.proposals, *found.refinements]:
-        print(f"[{case}]   {str(trial)[:300]}")
+    for trial in [*found.proposals, *found.refinements, *found.regressions]:
+        print(f"[{case}]   {str(trial)[:400]}")
     return found, times, t_fit
 
 

@@ -58,5 +58,5 @@ def forms() -> Cases:
 
 
 if __name__ == "__main__":
-    main(forms(), {**WRITTEN_AS, "pressure_flattening": "drag_area_modulation",
+    main(forms(), {**WRITTEN_AS, "pressure_flattening": "drag_law_terms",
                    "saturating_load_cell": "tension_gain"}, __doc__, "hidden_forms")
