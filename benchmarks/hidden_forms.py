@@ -17,7 +17,10 @@ library effects with other options; the estimator never sees them):
 * `saturating_load_cell`: each load cell reading T_sat tanh(T / T_sat), T_sat
   = 80 kN (odd in the tension, where the proposed gain is quadratic);
 * `added_mass_d3`: the library's own form (factor 1.4), the control: a
-  refinement must leave it as it is.
+  refinement must leave it as it is;
+* `added_mass_d45`: the added mass growing as D^4.5, added after the
+  refinements' starts were chosen (half and twice the fixed exponent, so 6
+  is one of them): the exponent must be found away from a start.
 
 Printed per case as `hidden_effects.py` prints: the chain, its chi-square/dof
 and tail probability, how it ended, what the last model keeps that the truth
@@ -54,6 +57,8 @@ def forms() -> Cases:
                                  {f"saturation_tension[{c}]": 80_000.0 for c in DROGUES}),
         "added_mass_d3": ([*base, AddedMass()],
                           {f"added_mass_factor[{c}]": 1.4 for c in DROGUES}),
+        "added_mass_d45": ([*base, AddedMass(size_exponent=4.5)],
+                           {f"added_mass_factor[{c}]": 1.4 for c in DROGUES}),
     }
 
 
