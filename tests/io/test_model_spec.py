@@ -11,8 +11,8 @@ import pytest
 from cpas_ocp.cli import main
 from cpas_ocp.errors import InputError
 from cpas_ocp.io.flight_test import load_test
-from cpas_ocp.io.model_spec import load_model_file, spec_of_test
-from cpas_ocp.physics.effects import ElasticRiser
+from cpas_ocp.io.model_spec import load_model_file, model_block, spec_from_effects, spec_of_test
+from cpas_ocp.physics.effects import AddedMass, DragLawTerms, ElasticRiser, baseline_effects
 from cpas_ocp.physics.effects.registry import BASELINE
 from cpas_ocp.physics.units import FT
 
@@ -167,3 +167,19 @@ def test_an_external_plug_in_runs_only_when_allowed(problem_folder, tmp_path, ca
     assert main(command) == 2
     assert "--allow-external-plugins" in capsys.readouterr().err
     assert main([*command, "--allow-external-plugins"]) == 0
+
+
+def test_a_refined_step_is_a_model_file_that_builds_it_again(tmp_path) -> None:
+    """A discovery step's model file (`model_block`) names a refined or regressed effect with
+    the options that make it so, and reading the file back builds the same effects."""
+    base = baseline_effects()
+    spec = spec_from_effects([base[0], DragLawTerms(terms=("log_dynamic_pressure",),
+                                                    reference_pa=812.5), *base[1:],
+                              AddedMass(exponent_free=True)])
+    block = model_block(spec)
+    assert {"effect": "added_mass", "exponent_free": True} in block["effects"]
+    assert {"effect": "drag_law_terms", "terms": ["log_dynamic_pressure"],
+            "reference_pa": 812.5} in block["effects"]
+    path = tmp_path / "step_1.json"
+    path.write_text(json.dumps(block))
+    assert load_model_file(path).effects == spec.effects
