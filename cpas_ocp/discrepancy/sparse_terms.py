@@ -18,9 +18,9 @@ least squares (SINDy's STLSQ) does, with the NLP as its least-squares step:
    covariance) is dropped where that ratio lies below the two-sided normal
    quantile at alpha / K (each term kept is then significant at the
    family-wise level over the K), and the rest refitted from there; again
-   until every term left passes.  A term on its bound has no sigma and goes
-   first: on `fbcp` flown through a wind shear layer the density's term ran
-   to its bound, standing in for the wind's change with altitude;
+   until every term left passes.  A term with no sigma (on its bound, or
+   undetermined) goes first: on `fbcp` flown through a wind shear layer the
+   density's term had none, standing in for the wind's change with altitude;
 3. the terms left, with their estimates and sigma, are the drag law; their
    likelihood ratio against the fit without them is reported beside the gate.
 
@@ -133,14 +133,14 @@ def select(fit: Fit, spec: ModelSpec, step: int, alpha: float, progress: bool = 
         except NonFiniteCurvature:
             out.note = f"the covariance with terms {', '.join(terms)} is not finite"
             return out
-        # A term on its bound has no sigma (the covariance leaves active bounds out): it
-        # stands in for more than its feature describes, and goes first.
+        # A term with no sigma (on its bound, or undetermined: `Covariance.std`) is tested
+        # by nothing, and goes first.
         z = {t: abs(current.parameters[term_name(t)]) / std[term_name(t)]
              if term_name(t) in std else 0.0 for t in terms}
         weakest = min(terms, key=lambda t: z[t])
         if z[weakest] >= threshold:
             break
-        out.dropped.append(f"{weakest} (on its bound)" if term_name(weakest) not in std
+        out.dropped.append(f"{weakest} (no sigma)" if term_name(weakest) not in std
                            else f"{weakest} (|z| {z[weakest]:.1f})")
         terms.remove(weakest)
         if not terms:
