@@ -639,8 +639,9 @@ def _against_a_drag_law(out: Discovery, step: DiscoveryStep, found: DiscoverySte
                         alpha: float, progress: bool) -> DiscoveryStep:
     """`found`, an effect that only partly explains the misfit at `step` (a stand-in), or
     the drag law a sparse regression selects there (`_regressed_step`, once per chain)
-    where that is the more significant step: the smaller p-value of its likelihood
-    ratio against `step`'s fit, chi-square on the parameters each adds.
+    where that leaves the fit within the noise's reach (not `far_from_noise`) and is
+    the more significant step: the smaller p-value of its likelihood ratio against
+    `step`'s fit, chi-square on the parameters each adds.
 
     A misfit the library does not describe is partly taken up by effects it does: on
     `drogue` flown with every drag area times (q / 1 kPa)^-0.1, an IMU bias, then added
@@ -648,7 +649,10 @@ def _against_a_drag_law(out: Discovery, step: DiscoveryStep, found: DiscoverySte
     and 14) and used up the chain's steps, while the drag law the regression selects
     at the first fit removes 1,008 of chi-square with one term."""
     regressed = _regressed_step(out, step, alpha, progress)
-    if regressed is None:
+    if regressed is None or far_from_noise(regressed.fit, alpha):
+        # A drag law that leaves the fit a misfit is one more stand-in: on `fbcp` flown
+        # through a wind shear layer it took the place of a GPS lag, and the wind profile
+        # the residual's altitude signature asks for was never written.
         return found
 
     def p_value(s: DiscoveryStep) -> float:
