@@ -649,17 +649,24 @@ def _against_a_drag_law(out: Discovery, step: DiscoveryStep, found: DiscoverySte
     and 14) and used up the chain's steps, while the drag law the regression selects
     at the first fit removes 1,008 of chi-square with one term."""
     regressed = _regressed_step(out, step, alpha, progress)
-    if regressed is None or far_from_noise(regressed.fit, alpha):
-        # A drag law that leaves the fit a misfit is one more stand-in: on `fbcp` flown
-        # through a wind shear layer it took the place of a GPS lag, and the wind profile
-        # the residual's altitude signature asks for was never written.
+    if regressed is None:
         return found
 
     def p_value(s: DiscoveryStep) -> float:
         gain = step.fit.chi_square - s.fit.chi_square
         return float(chi2.sf(max(gain, 0.0), max(len(s.fit.free) - len(step.fit.free), 1)))
 
-    return regressed if p_value(regressed) < p_value(found) else found
+    # A drag law that leaves the fit a misfit is one more stand-in: on `fbcp` flown
+    # through a wind shear layer it took the place of a GPS lag, and the wind profile
+    # the residual's altitude signature asks for was never written.
+    if far_from_noise(regressed.fit, alpha):
+        out.regressions[-1].note = (f"not taken in place of {found.added}: it leaves the fit "
+                                    "far from the noise")
+        return found
+    if p_value(regressed) >= p_value(found):
+        out.regressions[-1].note = f"not taken: {found.added} is the more significant step"
+        return found
+    return regressed
 
 
 def _restarted_last(out: Discovery, step: DiscoveryStep, progress: bool) -> bool:
