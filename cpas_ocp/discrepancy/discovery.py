@@ -285,6 +285,10 @@ class Discovery:
         return (f"{head}: {noise}; {self.stopped} ({len(self.steps) - 1} step(s), "
                 f"{self.seconds:.0f} s)")
 
+    def index(self, step: DiscoveryStep) -> int:
+        """The position of `step` in the chain (by identity: steps hold fits)."""
+        return next(k for k, s in enumerate(self.steps) if s is step)
+
     @property
     def added(self) -> int:
         """Steps that added an effect."""
@@ -701,7 +705,7 @@ def _refined_step(out: Discovery, step: DiscoveryStep, names: list[str], alpha: 
     the family-wise level; None where none is kept."""
     if not names:
         return None
-    index = next(k for k, s in enumerate(out.steps) if s is step)
+    index = out.index(step)
     trials = refine(step.fit, step.spec, names, index, alpha, progress)
     out.refinements += trials
     best = best_kept(trials)
@@ -716,7 +720,7 @@ def _regressed_step(out: Discovery, step: DiscoveryStep, alpha: float, progress:
                     ) -> DiscoveryStep | None:
     """The step that adds the drag law a sparse regression selects at `step`'s fit
     (`sparse_terms.select`, recorded in `out`), or None where it selects no term."""
-    index = next(k for k, s in enumerate(out.steps) if s is step)
+    index = out.index(step)
     found = select(step.fit, step.spec, index, alpha, progress)
     out.regressions.append(found)
     if not found.found or found.spec is None or found.refitted is None:

@@ -174,8 +174,5 @@ def _score_test(data: Mapping[str, Any]) -> ScoreTest:
     for name in ("estimate", "std"):  # an estimate beyond the bounds is stored as null
         values[name] = {n: float("nan") if v is None else v
                         for n, v in (values.get(name) or {}).items()}
-    refit = values.get("refit")
-    if refit is not None:
-        values["refit"] = LikelihoodRatio(refit["statistic"], refit["dof"], refit["one_sided"],
-                                          refit["lower_bound"])
+    values["refit"] = LikelihoodRatio.from_dict(values.get("refit"))
     return ScoreTest(**values)

@@ -68,16 +68,13 @@ class RefinementTrial:
         return {"step": self.step, "effect": self.effect, "change": self.change,
                 "tried": self.tried, "kept": self.kept, "note": self.note,
                 "estimates": self.estimates,
-                "lr": None if self.lr is None else {**dataclasses.asdict(self.lr),
-                                                     "p_value": self.lr.p_value}}
+                "lr": None if self.lr is None else self.lr.as_dict()}
 
     @classmethod
     def from_dict(cls, data: dict) -> RefinementTrial:
-        lr = data["lr"]
         return cls(data["step"], data["effect"], data["change"], data["tried"],
-                   None if lr is None else LikelihoodRatio(lr["statistic"], lr["dof"],
-                                                           lr["one_sided"], lr["lower_bound"]),
-                   dict(data["estimates"]), data["note"], data["kept"])
+                   LikelihoodRatio.from_dict(data["lr"]), dict(data["estimates"]),
+                   data["note"], data["kept"])
 
 
 def refinements_of(spec: ModelSpec, fit: Fit, names: list[str]

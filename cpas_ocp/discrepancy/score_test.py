@@ -155,8 +155,7 @@ class ScoreTest:
             if f.name in ("estimate", "std"):  # an estimate beyond the bounds is none
                 value = {n: None if n in self.beyond else v for n, v in value.items()}
             if f.name == "refit":
-                value = None if value is None else {**dataclasses.asdict(value),
-                                                    "p_value": value.p_value}
+                value = None if value is None else value.as_dict()
             out[f.name] = None if isinstance(value, float) and math.isnan(value) else value
         return out
 

@@ -86,23 +86,19 @@ class TermSelection:
 
     def as_dict(self) -> dict:
         """The selection as JSON holds it (the refit's spec and fit left out)."""
-        def ratio(lr: LikelihoodRatio | None) -> dict | None:
-            return None if lr is None else {**dataclasses.asdict(lr), "p_value": lr.p_value}
-
-        return {"step": self.step, "features": list(FEATURES), "gate": ratio(self.gate),
+        return {"step": self.step, "features": list(FEATURES),
+                "gate": None if self.gate is None else self.gate.as_dict(),
                 "selected": {n: {"estimate": v, "sigma": s}
                              for n, (v, s) in self.selected.items()},
-                "likelihood_ratio": ratio(self.lr), "dropped": self.dropped, "note": self.note}
+                "likelihood_ratio": None if self.lr is None else self.lr.as_dict(),
+                "dropped": self.dropped, "note": self.note}
 
     @classmethod
     def from_dict(cls, data: dict) -> TermSelection:
-        def ratio(d: dict | None) -> LikelihoodRatio | None:
-            return None if d is None else LikelihoodRatio(d["statistic"], d["dof"],
-                                                          d["one_sided"], d["lower_bound"])
-
-        return cls(data["step"], ratio(data["gate"]),
+        return cls(data["step"], LikelihoodRatio.from_dict(data["gate"]),
                    {n: (v["estimate"], v["sigma"]) for n, v in data["selected"].items()},
-                   ratio(data["likelihood_ratio"]), list(data["dropped"]), data["note"])
+                   LikelihoodRatio.from_dict(data["likelihood_ratio"]), list(data["dropped"]),
+                   data["note"])
 
 
 def select(fit: Fit, spec: ModelSpec, step: int, alpha: float, progress: bool = False

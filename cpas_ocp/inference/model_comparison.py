@@ -21,8 +21,9 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -79,6 +80,17 @@ class LikelihoodRatio:
     def p_value(self) -> float:
         return chi_bar_square_sf(max(self.statistic, 0.0), self.dof - self.one_sided,
                                  self.one_sided)
+
+    def as_dict(self) -> dict[str, Any]:
+        """The test as JSON holds it, with its p-value (which `from_dict` recomputes)."""
+        return {**dataclasses.asdict(self), "p_value": self.p_value}
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any] | None) -> LikelihoodRatio | None:
+        """The test `as_dict` wrote (None for None)."""
+        if data is None:
+            return None
+        return cls(data["statistic"], data["dof"], data["one_sided"], data["lower_bound"])
 
     def __str__(self) -> str:
         sided = f", {self.one_sided} one-sided" if self.one_sided else ""
