@@ -56,16 +56,21 @@ from cpas_ocp.reports.study_reports import write_campaign, write_dispersions, wr
 
 def population(campaign: str | Path, parameters: Sequence[str] | None = None,
                covariates: Sequence[str] = (), pool: Sequence[Sequence[tuple[str, str]]] = (),
-               full_omega: bool = True, alpha: float = 0.05, seed: int = 0) -> Population:
+               full_omega: bool = True, alpha: float = 0.05, seed: int = 0,
+               by_position: bool = True) -> Population:
     """The population of each canopy type and stage of a campaign folder (`cpas-ocp
-    campaign`): mu with the `covariates`' effects, Omega, each opening's shrunken
-    estimate and pull, and the grouping tests (`campaign.population_study`; their
-    bootstrap drawn with `seed`).  Each list in `pool` names (type, stage) pairs fitted as
-    one population."""
+    campaign`): mu with the `covariates`' effects (any column of the campaign's table,
+    the manifests' covariates among them), Omega, each opening's shrunken estimate and
+    pull, the share of the between-test variance each covariate explains, and the
+    grouping tests (`campaign.population_study`; their bootstrap drawn with `seed`).
+    Each list in `pool` names (type, stage) pairs fitted as one population.  With
+    `by_position`, a type flown in two or more positions of its cluster takes the
+    position as a covariate."""
     table = with_line_length_ratio(read_parameter_table(campaign), read_stage_table(campaign))
     covariances = read_covariance_table(campaign)
     groups, skipped = population_groups(table, covariances, str(campaign), parameters,
-                                        covariates, pool, full_omega, alpha, seed)
+                                        covariates, pool, full_omega, alpha, seed,
+                                        by_position)
     if not groups:
         raise InputError(str(campaign), "(table)", "a canopy type and stage with enough "
                          "openings for a population; " + "; ".join(skipped or ["none"]))

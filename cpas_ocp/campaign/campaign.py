@@ -31,13 +31,12 @@ from cpas_ocp.campaign.parallel import run_tasks
 from cpas_ocp.errors import InputError, PluginError, SolverFailure
 from cpas_ocp.estimation.reduction import stage_starts
 from cpas_ocp.estimation.stage_groups import clusters
-from cpas_ocp.io.flight_test import MANIFEST
+from cpas_ocp.io.flight_test import MANIFEST, TABLE_COLUMNS, canopy_covariates
 from cpas_ocp.physics.flight_test import Parachute
 from cpas_ocp.physics.parameters import param_name, split_name
 from cpas_ocp.progress import progress_line
 
-COLUMNS = ["test", "parameter", "name", "parachute", "type", "stage", "forebody",
-           "cluster_size", "line_length", "value", "std", "unit"]
+COLUMNS = list(TABLE_COLUMNS)
 # Per test, canopy and stage: what drawing the stage's drag-area curve needs beyond its
 # parameters (order, inflation law, fill-length form, D_o in m, start airspeed V_i in m/s).
 STAGE_COLUMNS = ["test", "parachute", "type", "stage", "stage_index", "inflation",
@@ -119,6 +118,7 @@ def reconstruct_folder(folder: str) -> TestOutcome:
     cluster_of = {c.name: len(group) for group in clusters(
         test, stage_starts(test, fit.parameters)) for c in group}
     stages = {s for c in test.parachutes for s in c.stages}
+    covariates = canopy_covariates(test.manifest) if test.manifest else {}
     rows = []
     for pname in fit.free:
         base, index = split_name(pname)
@@ -129,6 +129,10 @@ def reconstruct_folder(folder: str) -> TestOutcome:
                      "stage": stage, "forebody": test.vehicle.name,
                      "cluster_size": cluster_of[chute.name] if chute else len(test.parachutes),
                      "line_length": _line_length(chute),
+                     "position": covariates.get(chute.name, {}).get("position", chute.name)
+                     if chute else "",
+                     **({k: v for k, v in covariates.get(chute.name, {}).items()
+                         if k != "position"} if chute else {}),
                      "value": fit.parameters[pname],
                      "std": std.get(pname, np.nan), "unit": fit.model.parameter(pname).unit})
     stage_rows = [{"test": test.name, "parachute": c.name, "type": c.type, "stage": s,
@@ -169,9 +173,12 @@ def run_campaign(folders: Sequence[str | Path], workers: int = 2, scheduler: str
 
 
 def parameter_table(outcomes: Sequence[TestOutcome]) -> pd.DataFrame:
-    """One row per test and estimated parameter (SI), in the columns of COLUMNS."""
+    """One row per test and estimated parameter (SI), in the columns of COLUMNS, then a
+    column per covariate the manifests name (`flight_test.canopy_covariates`; blank where
+    a test's manifest does not give it)."""
     rows = [r for o in outcomes if o.ok for r in o.rows]
-    return pd.DataFrame(rows, columns=COLUMNS)
+    extra = list(dict.fromkeys(k for r in rows for k in r if k not in COLUMNS))
+    return pd.DataFrame(rows, columns=COLUMNS + extra)
 
 
 def stage_table(outcomes: Sequence[TestOutcome]) -> pd.DataFrame:

@@ -253,6 +253,8 @@ def read_parameter_table(path: str | Path) -> pd.DataFrame:
     table = _read_table(path, "a campaign's parameter table")
     if "line_length" not in table.columns:  # tables written before the column existed
         table["line_length"] = np.nan
+    if "position" not in table.columns and "parachute" in table.columns:  # the same
+        table["position"] = table["parachute"]
     missing = [c for c in COLUMNS if c not in table.columns]
     if missing:
         raise InputError(str(path), ", ".join(missing), "the columns of a campaign's table")
@@ -276,4 +278,7 @@ def read_parameter_table(path: str | Path) -> pd.DataFrame:
                   "where none", missing=True, positive=True)
     table["stage"] = table["stage"].fillna("").astype(str)
     table["parachute"] = table["parachute"].fillna("").astype(str)
+    # A position read back as a number ("1" as 1.0) is the label it was written as.
+    table["position"] = ["" if pd.isna(v) else str(int(v)) if isinstance(v, float)
+                         and v.is_integer() else str(v) for v in table["position"]]
     return table

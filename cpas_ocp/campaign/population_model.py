@@ -409,6 +409,12 @@ class PopulationFit:
         """Free parameters of the model: B's coefficients and Omega's."""
         return self.beta.size + OmegaForm(self.data.k, self.full_omega).size
 
+    @property
+    def tau_at_floor(self) -> np.ndarray:
+        """Per parameter: whether tau is at the optimiser's floor, where the likelihood is
+        flat (no between-test spread)."""
+        return self.theta[: self.data.k] <= np.log(_floor(self.data)) + 1e-6
+
     def shrunken(self) -> tuple[np.ndarray, np.ndarray]:
         """Each opening's best linear unbiased predictor of theta_i (n, k) and its
         covariance (n, k, k)."""
@@ -503,7 +509,7 @@ def tau_interval(fit: PopulationFit, j: int, level: float = LEVEL) -> Interval:
         return fit.log_likelihood - ll - limit
 
     lower = 0.0
-    if fit.theta[j] > floor + 1e-6 and drop(floor) > 0.0:
+    if not fit.tau_at_floor[j] and drop(floor) > 0.0:
         lower = float(np.exp(optimize.brentq(drop, floor, fit.theta[j], xtol=1e-4)))
     hi = fit.theta[j] + np.log(2.0)
     for _ in range(40):
@@ -511,7 +517,7 @@ def tau_interval(fit: PopulationFit, j: int, level: float = LEVEL) -> Interval:
             break
         hi += np.log(2.0)
     upper = float(np.exp(optimize.brentq(drop, fit.theta[j], hi, xtol=1e-4)))
-    return Interval(tau_hat if fit.theta[j] > floor + 1e-6 else 0.0, lower, upper)
+    return Interval(0.0 if fit.tau_at_floor[j] else tau_hat, lower, upper)
 
 
 @dataclass(frozen=True)

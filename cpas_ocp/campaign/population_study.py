@@ -46,10 +46,21 @@ from cpas_ocp.campaign.population_model import (
     grouping_test,
 )
 from cpas_ocp.errors import InputError
+from cpas_ocp.io.flight_test import RESERVED_COLUMNS
 
 # The columns of the parameter table a population may be grouped or regressed on (the
-# line-length ratio L_s / D_o where the campaign's stages table gives each D_o).
-COVARIATE_COLUMNS = ("type", "forebody", "cluster_size", "line_length", "line_length_ratio")
+# line-length ratio L_s / D_o where the campaign's stages table gives each D_o, the
+# canopy's position in the cluster); the covariates the manifests name follow them in
+# the table (`covariate_columns`).
+COVARIATE_COLUMNS = ("type", "forebody", "cluster_size", "line_length", "line_length_ratio",
+                     "position")
+
+
+def covariate_columns(table: pd.DataFrame) -> tuple[str, ...]:
+    """The columns of `table` a population may be regressed on or grouped by: the built-in
+    ones, then every column the manifests' covariates added (`flight_test.canopy_covariates`)."""
+    extra = [c for c in table.columns if c not in RESERVED_COLUMNS]
+    return (*COVARIATE_COLUMNS, *extra)
 
 
 def with_line_length_ratio(table: pd.DataFrame, stages: pd.DataFrame | None) -> pd.DataFrame:
@@ -90,6 +101,9 @@ class PopulationGroup:
     units: dict[str, str] = field(default_factory=dict)  # parameter -> its SI unit
     # A row per opening (in the order of `data.openings`): its test and table columns.
     covariates: pd.DataFrame = field(default_factory=pd.DataFrame)
+    # Per covariate of the mean, per parameter: the share of the between-test variance it
+    # explains (`explained_spread`).
+    explained: dict[str, np.ndarray] = field(default_factory=dict)
 
     @property
     def data(self) -> PopulationData:
@@ -142,7 +156,8 @@ def _opening_covariance(names: Sequence[str], stds: Sequence[float],
 def _design(openings: pd.DataFrame, covariates: Sequence[str], where: str
             ) -> tuple[np.ndarray, tuple[str, ...]]:
     """The design matrix: an intercept, each numeric covariate about its mean, each other
-    covariate as indicators of its values after the first (sorted)."""
+    covariate as indicators of its values after the first (sorted); each column named
+    after its covariate (`covariate_of`)."""
     columns, names = [np.ones(len(openings))], ["intercept"]
     for c in covariates:
         values = openings[c]
@@ -162,6 +177,11 @@ def _design(openings: pd.DataFrame, covariates: Sequence[str], where: str
                 columns.append((values == level).to_numpy(float))
                 names.append(f"{c}={level}")
     return np.column_stack(columns), tuple(names)
+
+
+def covariate_of(column: str) -> str:
+    """The covariate a design column belongs to: `c` of "c=level" or "c (per unit, ...)"."""
+    return column.split("=")[0].split(" (per unit")[0]
 
 
 def _gather(rows: pd.DataFrame, parameters: Sequence[str] | None
@@ -190,10 +210,12 @@ def _gather(rows: pd.DataFrame, parameters: Sequence[str] | None
 
 def population_data(rows: pd.DataFrame, covariances: pd.DataFrame | None,
                     parameters: Sequence[str] | None, covariates: Sequence[str],
-                    where: str) -> tuple[PopulationData, pd.DataFrame, list[str]]:
+                    where: str, by_position: bool = False
+                    ) -> tuple[PopulationData, pd.DataFrame, list[str]]:
     """The openings of `rows` (parameter-table rows of the population) as PopulationData,
     positive parameters in log space; their covariate columns (a row per opening); and
-    notes on what was left out."""
+    notes on what was left out.  With `by_position`, the canopy's position joins the
+    covariates where the openings fly in two or more positions (`_with_position`)."""
     kept_rows, names, notes = _gather(rows, parameters)
     if not names:
         raise InputError(where, "parameter", "a canopy parameter determined in most openings")
@@ -212,8 +234,8 @@ def population_data(rows: pd.DataFrame, covariances: pd.DataFrame | None,
         ys.append(g["value"].to_numpy(float))
         Vs.append(V)
         labels.append(f"{test} {chute}")
-        openings.append({c: g[c].iloc[0] if c in g else np.nan for c in COVARIATE_COLUMNS}
-                        | {"test": test})
+        openings.append({c: g[c].iloc[0] if c in g else np.nan
+                         for c in covariate_columns(rows)} | {"test": test})
     y, V = np.array(ys), np.array(Vs)
     log = tuple(bool((y[:, j] > 0).all()) for j in range(len(names)))
     for j, is_log in enumerate(log):
@@ -226,6 +248,9 @@ def population_data(rows: pd.DataFrame, covariances: pd.DataFrame | None,
         raise TooFewOpenings(f"{len(ys)} openings with every parameter determined; a "
                              f"population with {len(covariates)} covariate(s) needs at "
                              f"least {len(covariates) + 3}")
+    if by_position and "position" not in covariates:
+        covariates, note = _with_position(frame, covariates, len(names))
+        notes += [note] if note else []
     X, columns = _design(frame, covariates, where)
     if covariances is None:
         notes.append("covariances.csv not found: each test's parameters taken as "
@@ -237,18 +262,49 @@ def population_data(rows: pd.DataFrame, covariances: pd.DataFrame | None,
     return data, frame, notes
 
 
+def _with_position(frame: pd.DataFrame, covariates: Sequence[str], k: int
+                   ) -> tuple[list[str], str]:
+    """`covariates` with the canopy's position added where the openings (a row each in
+    `frame`) fly in two or more positions, each position held by two or more openings and
+    the design still of full rank with k + 2 openings to spare; and a note saying so, or
+    why not.  Canopies in fixed places of a cluster differ by fixed amounts (a position
+    in the wake of another, a riser's length): left out of the mean, that difference
+    would be read as between-test spread."""
+    positions = frame["position"].fillna("").astype(str)
+    levels = positions.value_counts()
+    if len(levels) < 2 or (positions == "").any():
+        return list(covariates), ""
+    if levels.min() < 2:
+        return list(covariates), (f"position not taken as a covariate: {levels.idxmin()} "
+                                  f"has {levels.min()} opening")
+    with_position = [*covariates, "position"]
+    X, _ = _design(frame.assign(position=positions), with_position, "")
+    if np.linalg.matrix_rank(X) < X.shape[1] or len(frame) < X.shape[1] + 2:
+        return list(covariates), ("position not taken as a covariate: it does not vary "
+                                  "apart from the other covariates")
+    return with_position, ("position taken as a covariate: the openings fly in "
+                           f"{len(levels)} positions ({', '.join(sorted(levels.index))})")
+
+
 def population_groups(table: pd.DataFrame, covariances: pd.DataFrame | None, where: str,
                       parameters: Sequence[str] | None = None, covariates: Sequence[str] = (),
                       pool: Sequence[Sequence[tuple[str, str]]] = (), full_omega: bool = True,
-                      alpha: float = 0.05, seed: int = 0
+                      alpha: float = 0.05, seed: int = 0, by_position: bool = True
                       ) -> tuple[list[PopulationGroup], list[str]]:
     """A fitted population per canopy type and stage (each set in `pool` fitted as one), with
-    its grouping tests (their bootstrap drawn with `seed`); and a note per type and stage
-    left out."""
+    its grouping tests (their bootstrap drawn with `seed`) and the share of each
+    parameter's between-test variance each covariate explains; and a note per type and
+    stage left out.  With `by_position`, a type flown in two or more positions takes its
+    position as a covariate (`_with_position`)."""
     tests = table.test.nunique()
     if tests < 2:
         raise InputError(where, "test", f"a campaign of two or more reconstructed tests; "
                          f"it holds {tests}")
+    known = covariate_columns(table)
+    unknown = [c for c in covariates if c not in known]
+    if unknown:
+        raise InputError(where, f"covariate {unknown[0]}", "a column of the campaign's "
+                         f"table: {', '.join(known)}")
     rows = table[(table.parachute != "") & table.parameter.isin(parameters or DISPERSED)]
     members_of = {m: tuple(p) for p in pool for m in p}
     kinds = sorted({(str(t), str(s)) for t, s in zip(rows.type, rows.stage, strict=True)})
@@ -262,8 +318,9 @@ def population_groups(table: pd.DataFrame, covariances: pd.DataFrame | None, whe
         label = " + ".join(f"{t} {s}" for t, s in members)
         part = rows[[(t, s) in members for t, s in zip(rows.type, rows.stage, strict=True)]]
         try:
-            data, frame, notes = population_data(part, covariances, parameters, covariates,
-                                                 where)
+            data, frame, notes = population_data(
+                part, covariances, parameters, covariates, where,
+                by_position and len({t for t, _ in members}) == 1)
         except TooFewOpenings as exc:
             skipped.append(f"{label}: {exc}")
             continue
@@ -272,12 +329,32 @@ def population_groups(table: pd.DataFrame, covariances: pd.DataFrame | None, whe
         spread = (data.y - data.X @ coef).std(axis=0, ddof=data.p)
         group = PopulationGroup(label, members, fit, spread, notes=notes,
                                 units=dict(zip(part.parameter, part.unit, strict=True)),
-                                covariates=frame)
+                                covariates=frame, explained=explained_spread(fit))
         group.groupings, more = _groupings(frame, data, full_omega, alpha, len(members) > 1,
                                            seed)
         group.notes += more
         groups.append(group)
     return groups, skipped
+
+
+def explained_spread(fit: PopulationFit) -> dict[str, np.ndarray]:
+    """Per covariate of the fit's mean, per parameter: the share of the between-test
+    variance the covariate explains, 1 - tau^2 / tau0^2 with tau0 the between-test
+    standard deviation fitted without it (Raudenbush's R^2 of a meta-regression), held
+    within [0, 1]; NaN where the fit without it finds no spread to explain (tau0's
+    profile interval reaches 0: a share of a spread that may be nothing is noise)."""
+    data = fit.data
+    out = {}
+    for covariate in dict.fromkeys(covariate_of(c) for c in data.columns[1:]):
+        keep = [i for i, c in enumerate(data.columns) if covariate_of(c) != covariate]
+        without = fit_population(data.subset(np.arange(data.n), keep), fit.full_omega,
+                                 fit.reml)
+        spread = np.array([without.tau[n].lower > 0.0 for n in data.names])
+        tau2, tau2_without = np.diag(fit.omega), np.diag(without.omega)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            out[covariate] = np.where(spread, np.clip(1.0 - tau2 / tau2_without, 0.0, 1.0),
+                                      np.nan)
+    return out
 
 
 def _groupings(frame: pd.DataFrame, data: PopulationData, full_omega: bool, alpha: float,
@@ -288,7 +365,7 @@ def _groupings(frame: pd.DataFrame, data: PopulationData, full_omega: bool, alph
     again."""
     intercept = data.subset(np.arange(data.n), keep_columns=[0])
     tests, notes, seen = [], [], set()
-    for column in COVARIATE_COLUMNS:
+    for column in [c for c in frame.columns if c != "test"]:
         if column == "type" and not pooled:
             continue
         values = frame[column]
@@ -300,6 +377,8 @@ def _groupings(frame: pd.DataFrame, data: PopulationData, full_omega: bool, alph
         seen.add(partition)
         counts = values.value_counts()
         if counts.min() < data.k + 2:
+            if column not in COVARIATE_COLUMNS:  # a manifest's covariate, a date say
+                continue
             notes.append(f"{column}: not tested as a grouping; {counts.idxmin()} has "
                          f"{counts.min()} openings, fewer than {data.k + 2}")
             continue

@@ -19,8 +19,9 @@ from cpas_ocp.cli.argument_types import (
 )
 
 DESCRIPTION = "The `cpas-ocp` command line."
-# The test table's columns a population's mean may depend on (population_study).
-COVARIATES = ("type", "forebody", "cluster_size", "line_length", "line_length_ratio")
+# The test table's built-in columns a population's mean may depend on (population_study).
+COVARIATES = ("type", "forebody", "cluster_size", "line_length", "line_length_ratio",
+              "position")
 
 
 def parser() -> argparse.ArgumentParser:
@@ -120,8 +121,12 @@ def parser() -> argparse.ArgumentParser:
                    help="a canopy parameter to include (repeatable; default: CdS, Ck, n_p, "
                         "n, expopen, t_k where determined)")
     s.add_argument("--covariate", action="append", dest="covariates", default=[],
-                   choices=COVARIATES, help="a column of the test table the mean depends on "
-                                            "(repeatable)")
+                   help="a column of the campaign's table the mean depends on: "
+                        f"{', '.join(COVARIATES)} or a covariate the manifests name "
+                        "(repeatable)")
+    s.add_argument("--no-position", action="store_true",
+                   help="no position covariate by default for a type flown in two or more "
+                        "positions of its cluster")
     s.add_argument("--pool", action="append", default=[], type=pooled,
                    help="canopy types and stages fitted as one population, e.g. "
                         "fbcp/stage1+drogue/stage1 (repeatable)")

@@ -212,11 +212,11 @@ def population(args: argparse.Namespace) -> int:
     if not 0.0 < args.alpha < 1.0:
         raise InputError("(command line)", "--alpha", f"a level in (0, 1); got {args.alpha:g}")
     pop = api.population(args.campaign, args.parameters, args.covariates, args.pool,
-                         not args.diagonal, args.alpha, args.seed)
+                         not args.diagonal, args.alpha, args.seed, not args.no_position)
     out = pop.report(args.out)
     print(pop.summary())
     print(f"\npopulations written to {out} (population.md, population.csv, openings.csv, "
-          "groupings.csv, population.json, report.html)")
+          "explained.csv, groupings.csv, population.json, report.html)")
     return 0
 
 

@@ -44,14 +44,8 @@ def validate_manifest(manifest: Any, file: str = MANIFEST) -> None:
 
 
 # Data a sensor may have beyond the window all sensors share, at the phase's start or end,
-
-
 # before the phase must be trimmed explicitly (s; at least 3 of the coarsest sampling
-
-
 # intervals).
-
-
 COVERAGE_SLACK_S = 1.0
 
 
@@ -175,6 +169,7 @@ def flight_test_from_manifest(manifest: dict[str, Any], folder: Path,
                                     si_value(p["line_length"], "length") if "line_length" in p
                                     else None, is_open, bands))
     _unique(mfile, "parachutes", [p.name for p in parachutes])
+    canopy_covariates(manifest, mfile)
     banded = [i for i, p in enumerate(parachutes) if p.altitude_bands]
     if len(banded) > 1:
         raise InputError(mfile, f"parachutes[{banded[1]}].altitude_bands", "altitude bands on "
@@ -293,3 +288,37 @@ def _sigmas(mfile: str, where: str, kind: str, given: dict[str, Any], required: 
         for c in channels:
             sigma[c] = si_value(q, dim)
     return sigma
+
+
+# The columns of a campaign's parameter table (`campaign.parameter_table`; the canopies'
+# covariates follow them), and one a population derives from them: no covariate is named
+# as one.
+TABLE_COLUMNS = ("test", "parameter", "name", "parachute", "type", "stage", "forebody",
+                 "cluster_size", "line_length", "position", "value", "std", "unit")
+RESERVED_COLUMNS = (*TABLE_COLUMNS, "line_length_ratio")
+
+
+def canopy_covariates(manifest: dict[str, Any], file: str = MANIFEST
+                      ) -> dict[str, dict[str, str | float]]:
+    """Per canopy name, what a campaign's population may be regressed on or grouped by
+    beyond the canopy's type, line length and vehicle: its `position` in the cluster (its
+    name where the manifest gives none), the test's `covariates` and the canopy's own.
+    None of it enters the model.  InputError where a covariate is named as a column of the
+    parameter table or given at both the test's and the canopy's level."""
+    shared = dict(manifest.get("covariates", {}))
+    clash = [n for n in shared if n in RESERVED_COLUMNS]
+    if clash:
+        raise InputError(file, f"covariates.{clash[0]}", "a covariate name other than the "
+                         f"parameter table's columns ({', '.join(RESERVED_COLUMNS)})")
+    out = {}
+    for i, chute in enumerate(manifest["parachutes"]):
+        own = dict(chute.get("covariates", {}))
+        for name in own:
+            if name in RESERVED_COLUMNS or name in shared:
+                raise InputError(file, f"parachutes[{i}].covariates.{name}",
+                                 "a covariate name other than the parameter table's columns "
+                                 "and the test's covariates")
+        out[chute["name"]] = {"position": str(chute.get("position", chute["name"])),
+                              **shared, **own}
+    return out
+

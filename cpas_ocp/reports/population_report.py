@@ -3,10 +3,11 @@
 `population_text` is what `cpas-ocp population` prints; `write_population`
 writes population.md, population.json, population.csv (per population and
 parameter: median, tau, I^2, the point-estimate spread), openings.csv (per
-opening: estimate, its sigma, shrunken estimate, pull), groupings.csv (the
-grouping tests) and report.html, whose forest plots show each opening's
-estimate with its own 95 % interval, its shrunken estimate and the population
-band mu +- 1.96 tau.
+opening: estimate, its sigma, shrunken estimate, pull), explained.csv (per
+covariate and parameter: the share of the between-test variance it explains),
+groupings.csv (the grouping tests, a header alone where none was tested) and
+report.html, whose forest plots show each opening's estimate with its own 95 %
+interval, its shrunken estimate and the population band mu +- 1.96 tau.
 
 Figures in log space are shown as the median exp(mu) and as tau, the
 between-test coefficient of variation to first order.
@@ -78,9 +79,34 @@ def opening_frame(group: PopulationGroup) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+GROUPING_COLUMNS = ["population", "covariate", "levels", "statistic", "dof", "bartlett",
+                    "bootstrap", "p_value", "verdict", "parameter", "shift", "shift_lower",
+                    "shift_upper"]
+
+
+def explained_frame(group: PopulationGroup) -> pd.DataFrame:
+    """One row per covariate of the mean and parameter: the share of the between-test
+    variance it explains (`population_study.explained_spread`; blank where there is no
+    spread without it either)."""
+    return pd.DataFrame([{"population": group.label, "covariate": covariate,
+                          "parameter": name, "explained": float(share[j])}
+                         for covariate, share in group.explained.items()
+                         for j, name in enumerate(group.data.names)],
+                        columns=["population", "covariate", "parameter", "explained"])
+
+
+def _explained_line(group: PopulationGroup, covariate: str) -> str:
+    shares = group.explained[covariate]
+    return (f"{covariate} explains of the between-test variance: "
+            + ", ".join(f"{n} {'-' if np.isnan(s) else f'{s:.0%}'}"
+                        for n, s in zip(group.data.names, shares, strict=True))
+            + (" (-: no spread without it either)" if np.isnan(shares).any() else ""))
+
+
 def grouping_frame(groups: Sequence[PopulationGroup]) -> pd.DataFrame:
     """One row per grouping test and parameter: the levels, the likelihood ratio, its
-    p-value and verdict, and the second level's shift of the parameter's mean."""
+    p-value and verdict, and the second level's shift of the parameter's mean (the
+    columns of GROUPING_COLUMNS, a header alone where nothing was tested)."""
     rows = []
     for group in groups:
         for test in group.groupings:
@@ -92,7 +118,15 @@ def grouping_frame(groups: Sequence[PopulationGroup]) -> pd.DataFrame:
                              "verdict": "separate" if test.separate else "pooled",
                              "parameter": name, "shift": shift.value,
                              "shift_lower": shift.lower, "shift_upper": shift.upper})
-    return pd.DataFrame(rows)
+    return pd.DataFrame(rows, columns=GROUPING_COLUMNS)
+
+
+def no_grouping_line(group: PopulationGroup) -> str | None:
+    """Where no grouping was tested, a sentence saying so; None otherwise."""
+    if group.groupings:
+        return None
+    return ("no grouping tested: no column of the campaign's table takes two or more "
+            "values over these openings with enough openings at each")
 
 
 def _interval(iv: Interval, log: bool) -> str:
@@ -133,6 +167,7 @@ def group_text(group: PopulationGroup) -> str:
                             f"[{fit.coefficients[(n, column)].lower:+.3g}, "
                             f"{fit.coefficients[(n, column)].upper:+.3g}]" for n in data.names)
         lines.append(f"  effect of {column}: {effects}")
+    lines += [f"  {_explained_line(group, c)}" for c in group.explained]
     corr = fit.correlation()
     strong = [(data.names[a], data.names[b], corr[a, b]) for a in range(data.k)
               for b in range(a) if np.isfinite(corr[a, b]) and abs(corr[a, b]) >= 0.5]
@@ -145,6 +180,7 @@ def group_text(group: PopulationGroup) -> str:
     lines.append(f"  openings pulled beyond {PULL_FLAG:g} sigma: "
                  + (", ".join(f"{o} ({n})" for o, n, _ in flagged) if flagged else "none"))
     lines += ["  grouping " + grouping_line(t) for t in group.groupings]
+    lines += [f"  {line}" for line in [no_grouping_line(group)] if line]
     lines += [f"  note: {n}" for n in group.notes]
     return "\n".join(lines)
 
@@ -203,8 +239,12 @@ def population_page(groups: Sequence[PopulationGroup], skipped: Sequence[str],
                      f"{r.median_upper:.4g}]", r.tau, f"[{r.tau_lower:.3g}, {r.tau_upper:.3g}]",
                      r.i_squared, r.point_sd] for r in frame.itertuples()])
         page.figure(forest_figure(group), rows=1, time_axis=False)
+        for covariate in group.explained:
+            page.paragraph(_explained_line(group, covariate))
         for test in group.groupings:
             page.paragraph(grouping_line(test))
+        if no_grouping_line(group):
+            page.paragraph(no_grouping_line(group), "note")
         for note in group.notes:
             page.paragraph(note, "note")
     if skipped:
@@ -226,6 +266,7 @@ def population_summary(groups: Sequence[PopulationGroup]) -> list[dict[str, Any]
                     "beta": fit.beta.tolist(), "omega": fit.omega.tolist(),
                     "full_omega": fit.full_omega, "log_likelihood": fit.log_likelihood,
                     "table": parameter_frame(g).to_dict("records"),
+                    "explained": explained_frame(g).to_dict("records"),
                     "groupings": grouping_frame([g]).to_dict("records"), "notes": g.notes})
     return out
 
@@ -239,6 +280,8 @@ def write_population(groups: Sequence[PopulationGroup], skipped: Sequence[str],
         pd.concat([opening_frame(g) for g in groups]).to_csv(tmp / "openings.csv",
                                                              index=False)
         grouping_frame(groups).to_csv(tmp / "groupings.csv", index=False)
+        pd.concat([explained_frame(g) for g in groups]).to_csv(tmp / "explained.csv",
+                                                               index=False)
         (tmp / MARKER).write_text(json_text({"populations": population_summary(groups),
                                              "skipped": list(skipped)}))
         (tmp / "population.md").write_text(
