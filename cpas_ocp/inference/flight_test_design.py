@@ -204,9 +204,12 @@ def design(plan: TestPlan) -> TestDesign:
 def sigma_removed(base: Prediction, new: Prediction, names: list[str]) -> dict[str, float]:
     """Per name, the fraction of `base`'s sigma that `new` removes: 1 - new/base; 1 where
     `new` determines what `base` did not, -inf where it loses what `base` determined, 0
-    where neither determines it."""
+    where neither determines it.  A name `new` does not hold at all (the scale of a load
+    cell the change removes) is left out: it leaves with its instrument, it is not lost."""
     out = {}
     for n in names:
+        if n not in new.covariance.names:
+            continue
         a, b = base.sigma(n), new.sigma(n)
         if a is None:
             out[n] = 1.0 if b is not None else 0.0

@@ -189,3 +189,29 @@ def test_the_command_line_names_the_built_in_covariates() -> None:
     from cpas_ocp.campaign.population_study import COVARIATE_COLUMNS
     from cpas_ocp.cli.arguments import COVARIATES
     assert COVARIATES == COVARIATE_COLUMNS
+
+
+def test_a_population_fit_that_did_not_converge_exits_3(tmp_path, capsys, monkeypatch) -> None:
+    """L-BFGS-B ending away from a stationary point (its line search abandoned at a point
+    whose gradient is large) is a solver failure: exit 3, one line with the optimiser's
+    message and iterations, no folder."""
+    from scipy.optimize import OptimizeResult
+
+    from cpas_ocp.campaign import population_model
+
+    def stuck(fun, x0, jac, method, bounds):
+        return OptimizeResult(success=False, message="ABNORMAL_TERMINATION_IN_LNSRCH", nit=4,
+                              x=np.asarray(x0), fun=fun(np.asarray(x0))[0],
+                              jac=np.full(len(x0), 5.0))
+
+    monkeypatch.setattr(population_model.optimize, "minimize", stuck)
+    folder = tmp_path / "campaign"
+    folder.mkdir()
+    table, cov = campaign_rows(seed=16)
+    table.to_csv(folder / "parameters.csv", index=False)
+    cov.to_csv(folder / "covariances.csv", index=False)
+    assert main(["population", str(folder), "--out", str(tmp_path / "o")]) == 3
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1
+    assert "ABNORMAL_TERMINATION_IN_LNSRCH" in err and "after 4 iterations" in err
+    assert not (tmp_path / "o").exists()

@@ -129,6 +129,16 @@ def test_sigma_removed_counts_gains_losses_and_parameters_made_determinable() ->
         pytest.approx(0.75)
 
 
+def test_a_parameter_that_leaves_with_its_instrument_is_not_lost() -> None:
+    """Removing a load cell removes its own scale from the model: the change ranks by what
+    it does to the parameters that remain, as the failures table reports it."""
+    base = _prediction({"a": 0.2, "loadcell_scale[x]": 0.01})
+    new = _prediction({"a": 0.3})
+    removed = sigma_removed(base, new, ["a", "loadcell_scale[x]"])
+    assert removed == {"a": pytest.approx(-0.5)}
+    assert np.isfinite(RankedChange(Change("without x"), new, removed).score)
+
+
 def test_a_change_replaces_its_sensor_in_place_and_defaults_cover_every_sensor(fbcp) -> None:
     _, base = fbcp
     changes = default_changes(base)
