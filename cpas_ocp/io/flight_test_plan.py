@@ -162,13 +162,8 @@ def _planned_problem(raw: dict[str, Any], path: Path) -> Problem:
             raise InputError(str(path), "problem", exc.expectation) from None
     where = path.parent / raw["problem_file"]
     body = read_json(where, "a problem file (manifest, simulation, truth)")
-    for key in ("manifest", "simulation", "truth"):
-        if not isinstance(body, dict) or not isinstance(body.get(key), dict):
-            raise InputError(str(where), key, "an object (a problem file holds manifest, "
-                             "simulation and truth)")
-    truth = body["truth"].get("parameters")
-    if not isinstance(truth, dict):
-        raise InputError(str(where), "truth.parameters", "the nominal parameter values (SI)")
+    validate_block(body, "problem.schema.json", str(where))
+    truth = body["truth"]["parameters"]
     return Problem(str(body.get("name", where.stem)), str(body.get("title", where.stem)),
                    str(body.get("label", "")), body["manifest"], body["simulation"], truth)
 

@@ -18,7 +18,8 @@ import referencing
 from cpas_ocp.errors import InputError
 
 SCHEMAS = ("manifest.schema.json", "series.schema.json", "model.schema.json",
-           "flight_card.schema.json", "column_map.schema.json", "test_plan.schema.json")
+           "flight_card.schema.json", "column_map.schema.json", "test_plan.schema.json",
+           "problem.schema.json")
 
 
 @cache
