@@ -46,7 +46,7 @@ typical within-test variance (n - 1) sum w / ((sum w)^2 - sum w^2), w = 1/V_i,jj
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -309,49 +309,104 @@ def _moment_start(data: PopulationData) -> np.ndarray:
     return (U * w) @ U.T
 
 
-def _maximise(data: PopulationData, form: OmegaForm, reml: bool, start: np.ndarray,
-              fixed: dict[int, float] | None = None, second_start: bool = True
-              ) -> tuple[np.ndarray, float]:
-    """The vector theta (see OmegaForm) maximising the likelihood, coordinates in `fixed`
-    held; and the maximum.  With `second_start`, also from every free tau at a tenth of
-    `start`'s (the likelihood may have a mode on the boundary)."""
+# A log-likelihood of Omega's parameters: its value and gradient (raises LinAlgError where
+# a covariance is not positive definite).
+LogLikelihood = Callable[[np.ndarray], tuple[float, np.ndarray]]
+
+
+def bounded_maximum(loglik: LogLikelihood, start: np.ndarray,
+                    bounds: Sequence[tuple[float, float]], fixed: dict[int, float] | None = None,
+                    lowered: Sequence[int] = ()) -> tuple[np.ndarray, float]:
+    """The parameters maximising `loglik` within `bounds`, the coordinates in `fixed` held,
+    and the maximum, by L-BFGS-B; where `lowered` names coordinates (log standard
+    deviations), also from a second start with each of them ln 10 lower (the likelihood
+    may have a mode on the boundary).  SolverFailure where the maximisation ended neither
+    converged nor stationary (`_check_converged`)."""
     fixed = fixed or {}
-    floor = np.log(_floor(data))
-    ceiling = np.log(100.0 * _spread(data))
-    free = [i for i in range(form.size) if i not in fixed]
-    bounds = [(floor[i], ceiling[i]) if i < form.k else (-CORRELATION_BOUND, CORRELATION_BOUND)
-              for i in free]
+    size = len(start)
+    free = [i for i in range(size) if i not in fixed]
+    free_bounds = [bounds[i] for i in free]
+    lower, upper = np.array(free_bounds).T if free else (np.empty(0), np.empty(0))
 
     def full(x: np.ndarray) -> np.ndarray:
-        theta = np.empty(form.size)
+        theta = np.empty(size)
         theta[free] = x
         for i, v in fixed.items():
             theta[i] = v
         return theta
 
     def objective(x: np.ndarray) -> tuple[float, np.ndarray]:
-        theta = full(x)
         try:
-            ev = evaluate(data, form.omega(theta), reml)
+            value, grad = loglik(full(x))
         except np.linalg.LinAlgError:
             return 1e30, np.zeros(len(x))
-        dtheta = form.jacobian(theta)[:, :, free]  # (k, k, free)
-        grad = np.einsum("jl,jlm->m", omega_gradient(data, ev, reml), dtheta)
-        return -ev.log_likelihood, -grad
+        return -value, -grad[free]
 
-    x0 = np.clip(start[free], [b[0] for b in bounds], [b[1] for b in bounds])
+    x0 = np.clip(np.asarray(start, dtype=float)[free], lower, upper)
     if not free:
         return full(x0), -objective(x0)[0]
-    best = optimize.minimize(objective, x0, jac=True, method="L-BFGS-B", bounds=bounds)
-    if second_start:
+    best = optimize.minimize(objective, x0, jac=True, method="L-BFGS-B", bounds=free_bounds)
+    down = [j for j, i in enumerate(free) if i in set(lowered)]
+    if down:
         x1 = x0.copy()
-        x1[[j for j, i in enumerate(free) if i < form.k]] -= np.log(10.0)
-        x1 = np.clip(x1, [b[0] for b in bounds], [b[1] for b in bounds])
-        other = optimize.minimize(objective, x1, jac=True, method="L-BFGS-B", bounds=bounds)
+        x1[down] -= np.log(10.0)
+        other = optimize.minimize(objective, np.clip(x1, lower, upper), jac=True,
+                                  method="L-BFGS-B", bounds=free_bounds)
         if other.fun < best.fun:
             best = other
-    _check_converged(best, bounds)
+    _check_converged(best, free_bounds)
     return full(best.x), -float(best.fun)
+
+
+def profile_interval(maximum: Callable[[dict[int, float]], float], theta: np.ndarray,
+                     log_likelihood: float, j: int, floor: float, level: float = LEVEL
+                     ) -> Interval:
+    """The profile-likelihood interval of the standard deviation whose log is coordinate
+    `j` of `theta` (the maximum, of value `log_likelihood`): the values whose profile,
+    `maximum({j: value})` with every other coordinate re-estimated, lies within
+    chi-square(1, level) / 2 of the maximum.  `floor` (log) is where the likelihood is
+    flat; an estimate there is 0 and the interval starts at 0."""
+    limit = stats.chi2.ppf(level, 1) / 2.0
+    at_floor = theta[j] <= floor + 1e-6
+
+    def drop(log_sd: float) -> float:
+        return log_likelihood - maximum({j: log_sd}) - limit
+
+    lower = 0.0
+    if not at_floor and drop(floor) > 0.0:
+        lower = float(np.exp(optimize.brentq(drop, floor, theta[j], xtol=1e-4)))
+    hi = theta[j] + np.log(2.0)
+    for _ in range(40):
+        if drop(hi) > 0.0:
+            break
+        hi += np.log(2.0)
+    upper = float(np.exp(optimize.brentq(drop, theta[j], hi, xtol=1e-4)))
+    return Interval(0.0 if at_floor else float(np.exp(theta[j])), lower, upper)
+
+
+def omega_bounds(form: OmegaForm, floor: np.ndarray, ceiling: np.ndarray
+                 ) -> list[tuple[float, float]]:
+    """Bounds of Omega's parameters: log tau within [log floor, log ceiling], each partial
+    correlation's atanh within +-CORRELATION_BOUND."""
+    return [(float(np.log(floor[i])), float(np.log(ceiling[i]))) if i < form.k
+            else (-CORRELATION_BOUND, CORRELATION_BOUND) for i in range(form.size)]
+
+
+def _maximise(data: PopulationData, form: OmegaForm, reml: bool, start: np.ndarray,
+              fixed: dict[int, float] | None = None, second_start: bool = True
+              ) -> tuple[np.ndarray, float]:
+    """The vector theta (see OmegaForm) maximising the likelihood, coordinates in `fixed`
+    held; and the maximum.  With `second_start`, also from every free tau at a tenth of
+    `start`'s (the likelihood may have a mode on the boundary)."""
+
+    def loglik(theta: np.ndarray) -> tuple[float, np.ndarray]:
+        ev = evaluate(data, form.omega(theta), reml)
+        grad = np.einsum("jl,jlm->m", omega_gradient(data, ev, reml), form.jacobian(theta))
+        return ev.log_likelihood, grad
+
+    bounds = omega_bounds(form, _floor(data), 100.0 * _spread(data))
+    return bounded_maximum(loglik, start, bounds, fixed,
+                           range(form.k) if second_start else ())
 
 
 def _check_converged(result: optimize.OptimizeResult, bounds: list[tuple[float, float]]
@@ -500,24 +555,12 @@ def tau_interval(fit: PopulationFit, j: int, level: float = LEVEL) -> Interval:
     maximum."""
     data = fit.data
     form = OmegaForm(data.k, fit.full_omega)
-    limit = stats.chi2.ppf(level, 1) / 2.0
-    floor = float(np.log(_floor(data)[j]))
-    tau_hat = float(np.exp(fit.theta[j]))
 
-    def drop(log_tau: float) -> float:
-        _, ll = _maximise(data, form, fit.reml, fit.theta, {j: log_tau}, second_start=False)
-        return fit.log_likelihood - ll - limit
+    def maximum(fixed: dict[int, float]) -> float:
+        return _maximise(data, form, fit.reml, fit.theta, fixed, second_start=False)[1]
 
-    lower = 0.0
-    if not fit.tau_at_floor[j] and drop(floor) > 0.0:
-        lower = float(np.exp(optimize.brentq(drop, floor, fit.theta[j], xtol=1e-4)))
-    hi = fit.theta[j] + np.log(2.0)
-    for _ in range(40):
-        if drop(hi) > 0.0:
-            break
-        hi += np.log(2.0)
-    upper = float(np.exp(optimize.brentq(drop, fit.theta[j], hi, xtol=1e-4)))
-    return Interval(0.0 if fit.tau_at_floor[j] else tau_hat, lower, upper)
+    return profile_interval(maximum, fit.theta, fit.log_likelihood, j,
+                            float(np.log(_floor(data)[j])), level)
 
 
 @dataclass(frozen=True)

@@ -37,6 +37,7 @@ from cpas_ocp.campaign.dispersion_study import (
     check_numbers,
 )
 from cpas_ocp.campaign.distributions import generator
+from cpas_ocp.campaign.nested_population import NestedData, NestedFit, fit_nested
 from cpas_ocp.campaign.population_model import (
     GroupingTest,
     PopulationData,
@@ -104,6 +105,9 @@ class PopulationGroup:
     # Per covariate of the mean, per parameter: the share of the between-test variance it
     # explains (`explained_spread`).
     explained: dict[str, np.ndarray] = field(default_factory=dict)
+    # Where tests fly two or more of its canopies: the spread split into the test's and
+    # the canopy's (`nested_population`), each test's canopies one observation.
+    nested: NestedFit | None = None
 
     @property
     def data(self) -> PopulationData:
@@ -211,21 +215,25 @@ def _gather(rows: pd.DataFrame, parameters: Sequence[str] | None
 def population_data(rows: pd.DataFrame, covariances: pd.DataFrame | None,
                     parameters: Sequence[str] | None, covariates: Sequence[str],
                     where: str, by_position: bool = False
-                    ) -> tuple[PopulationData, pd.DataFrame, list[str]]:
+                    ) -> tuple[PopulationData, pd.DataFrame, list[str],
+                               dict[str, np.ndarray] | None]:
     """The openings of `rows` (parameter-table rows of the population) as PopulationData,
-    positive parameters in log space; their covariate columns (a row per opening); and
-    notes on what was left out.  With `by_position`, the canopy's position joins the
-    covariates where the openings fly in two or more positions (`_with_position`)."""
+    positive parameters in log space; their covariate columns (a row per opening); notes
+    on what was left out; and per test the covariance of all its openings' estimates in
+    the same space (`_test_blocks`; None without every pair in covariances.csv).  With
+    `by_position`, the canopy's position joins the covariates where the openings fly in
+    two or more positions (`_with_position`)."""
     kept_rows, names, notes = _gather(rows, parameters)
     if not names:
         raise InputError(where, "parameter", "a canopy parameter determined in most openings")
     by_test = None if covariances is None else {
         t: {(a, b): c for a, b, c in zip(g.name_a, g.name_b, g.covariance, strict=True)}
         for t, g in covariances.groupby("test")}
-    ys, Vs, labels, openings = [], [], [], []
+    ys, Vs, labels, openings, fulls = [], [], [], [], []
     for (test, chute), g in kept_rows.groupby(["test", "parachute"], sort=True):
         g = g.set_index("parameter").loc[names]
         full = list(g["name"])
+        fulls.append(full)
         V = _opening_covariance(full, g["std"].to_numpy(float),
                                 None if by_test is None else by_test.get(test, {}))
         if not np.isfinite(V).all():
@@ -238,6 +246,8 @@ def population_data(rows: pd.DataFrame, covariances: pd.DataFrame | None,
                          for c in covariate_columns(rows)} | {"test": test})
     y, V = np.array(ys), np.array(Vs)
     log = tuple(bool((y[:, j] > 0).all()) for j in range(len(names)))
+    blocks = None if by_test is None else _test_blocks(
+        [o["test"] for o in openings], fulls, y, V, log, by_test)
     for j, is_log in enumerate(log):
         if is_log:
             V[:, j, :] /= y[:, j, None]
@@ -259,7 +269,37 @@ def population_data(rows: pd.DataFrame, covariances: pd.DataFrame | None,
         data = PopulationData(tuple(names), tuple(labels), y, V, X, columns, log)
     except PopulationInputError as exc:
         raise InputError(where, "openings", str(exc)) from None
-    return data, frame, notes
+    return data, frame, notes, blocks
+
+
+def _test_blocks(tests: Sequence[str], fulls: Sequence[Sequence[str]], y: np.ndarray,
+                 V: np.ndarray, log: Sequence[bool],
+                 pairs: dict[str, dict[tuple[str, str], float]]
+                 ) -> dict[str, np.ndarray] | None:
+    """Per test, the covariance (SI `V` and `y`, one row per opening, before the change to
+    log space) of all its openings' estimates, opening by opening: each opening's own
+    block from `V`, the blocks between its canopies from the test's `pairs`; divided by
+    the estimates where `log`.  None where a pair between two canopies is missing."""
+    scale = np.where(np.array(log), y, 1.0)
+    out = {}
+    for test in dict.fromkeys(tests):
+        rows = [i for i, u in enumerate(tests) if u == test]
+        k = y.shape[1]
+        block = np.zeros((len(rows) * k, len(rows) * k))
+        for a, i in enumerate(rows):
+            for b, j in enumerate(rows):
+                if i == j:
+                    cross = V[i]
+                else:
+                    found = pairs.get(test, {})
+                    cross = np.array([[found.get((p, q), found.get((q, p), np.nan))
+                                       for q in fulls[j]] for p in fulls[i]])
+                    if not np.isfinite(cross).all():
+                        return None
+                block[a * k:(a + 1) * k, b * k:(b + 1) * k] = cross / np.outer(scale[i],
+                                                                               scale[j])
+        out[test] = block
+    return out
 
 
 def _with_position(frame: pd.DataFrame, covariates: Sequence[str], k: int
@@ -318,7 +358,7 @@ def population_groups(table: pd.DataFrame, covariances: pd.DataFrame | None, whe
         label = " + ".join(f"{t} {s}" for t, s in members)
         part = rows[[(t, s) in members for t, s in zip(rows.type, rows.stage, strict=True)]]
         try:
-            data, frame, notes = population_data(
+            data, frame, notes, blocks = population_data(
                 part, covariances, parameters, covariates, where,
                 by_position and len({t for t, _ in members}) == 1)
         except TooFewOpenings as exc:
@@ -330,11 +370,31 @@ def population_groups(table: pd.DataFrame, covariances: pd.DataFrame | None, whe
         group = PopulationGroup(label, members, fit, spread, notes=notes,
                                 units=dict(zip(part.parameter, part.unit, strict=True)),
                                 covariates=frame, explained=explained_spread(fit))
+        group.nested, note = _nested(data, frame, blocks)
+        group.notes += [note] if note else []
         group.groupings, more = _groupings(frame, data, full_omega, alpha, len(members) > 1,
                                            seed)
         group.notes += more
         groups.append(group)
     return groups, skipped
+
+
+def _nested(data: PopulationData, frame: pd.DataFrame, blocks: dict[str, np.ndarray] | None
+            ) -> tuple[NestedFit | None, str]:
+    """The population with test-level and canopy-level spread (`nested_population`) where
+    some test flies two or more of its canopies and every cross-covariance is known; and a
+    note where such tests exist but it was not fitted."""
+    tests = list(frame["test"])
+    if max(tests.count(t) for t in tests) < 2:
+        return None, ""
+    if blocks is None:
+        return None, ("test-level and canopy-level spread not separated: covariances.csv "
+                      "lacks the covariances between a test's canopies")
+    try:
+        nested = NestedData.from_openings(data, tests, blocks)
+    except PopulationInputError as exc:
+        return None, f"test-level and canopy-level spread not separated: {exc}"
+    return fit_nested(nested, full_omega=False), ""
 
 
 def explained_spread(fit: PopulationFit) -> dict[str, np.ndarray]:

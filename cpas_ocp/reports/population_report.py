@@ -53,8 +53,45 @@ def parameter_frame(group: PopulationGroup) -> pd.DataFrame:
                      "median": _back(mu.value, log), "median_lower": _back(mu.lower, log),
                      "median_upper": _back(mu.upper, log), "tau": tau.value,
                      "tau_lower": tau.lower, "tau_upper": tau.upper,
-                     "i_squared": float(i2[j]), "point_sd": float(group.point_spread[j])})
+                     "i_squared": float(i2[j]), "point_sd": float(group.point_spread[j])}
+                    | _levels(group, name))
     return pd.DataFrame(rows)
+
+
+def _levels(group: PopulationGroup, name: str) -> dict[str, float]:
+    """The test-level and canopy-level standard deviations of `name` with their intervals
+    (`nested_population`), NaN where they were not separated."""
+    nested = group.nested
+    out = {}
+    for level in ("test", "canopy"):
+        iv = None if nested is None else getattr(nested, f"tau_{level}").get(name)
+        out |= {f"tau_{level}": np.nan if iv is None else iv.value,
+                f"tau_{level}_lower": np.nan if iv is None else iv.lower,
+                f"tau_{level}_upper": np.nan if iv is None else iv.upper}
+    return out
+
+
+def nested_lines(group: PopulationGroup) -> list[str]:
+    """The spread split into the test's and the canopy's, a line per parameter."""
+    nested = group.nested
+    if nested is None:
+        return []
+    # The test's share of a spread neither level shows is noise: shown where one does.
+    share = np.where([nested.tau_test[n].lower > 0.0 or nested.tau_canopy[n].lower > 0.0
+                      for n in nested.data.names], nested.test_share(), np.nan)
+    lines = [f"test-level and canopy-level spread ({len(nested.data.tests)} tests, each "
+             "test's canopies one observation with their cross-covariances; diagonal "
+             "Omegas, restricted likelihood):",
+             f"  {'parameter':10s} {'tau test':>9s} {'95 % interval':>18s} "
+             f"{'tau canopy':>10s} {'95 % interval':>18s} {'test share':>10s}"]
+    for j, name in enumerate(nested.data.names):
+        a, b = nested.tau_test[name], nested.tau_canopy[name]
+        lines.append(f"  {name:10s} {a.value:9.3g} {f'[{a.lower:.3g}, {a.upper:.3g}]':>18s} "
+                     f"{b.value:10.3g} {f'[{b.lower:.3g}, {b.upper:.3g}]':>18s} "
+                     f"{'-' if np.isnan(share[j]) else f'{share[j]:.0%}':>10s}")
+    lines.append("  (test share: tau test^2 / (tau test^2 + tau canopy^2), '-' where neither "
+                 "interval is clear of 0)")
+    return lines
 
 
 def opening_frame(group: PopulationGroup) -> pd.DataFrame:
@@ -168,6 +205,7 @@ def group_text(group: PopulationGroup) -> str:
                             f"{fit.coefficients[(n, column)].upper:+.3g}]" for n in data.names)
         lines.append(f"  effect of {column}: {effects}")
     lines += [f"  {_explained_line(group, c)}" for c in group.explained]
+    lines += [f"  {line}" for line in nested_lines(group)]
     corr = fit.correlation()
     strong = [(data.names[a], data.names[b], corr[a, b]) for a in range(data.k)
               for b in range(a) if np.isfinite(corr[a, b]) and abs(corr[a, b]) >= 0.5]
@@ -239,6 +277,14 @@ def population_page(groups: Sequence[PopulationGroup], skipped: Sequence[str],
                      f"{r.median_upper:.4g}]", r.tau, f"[{r.tau_lower:.3g}, {r.tau_upper:.3g}]",
                      r.i_squared, r.point_sd] for r in frame.itertuples()])
         page.figure(forest_figure(group), rows=1, time_axis=False)
+        if group.nested is not None:
+            page.paragraph(nested_lines(group)[0])
+            page.table(["parameter", "tau test", "95 % interval", "tau canopy",
+                        "95 % interval"],
+                       [[r.parameter, r.tau_test, f"[{r.tau_test_lower:.3g}, "
+                         f"{r.tau_test_upper:.3g}]", r.tau_canopy,
+                         f"[{r.tau_canopy_lower:.3g}, {r.tau_canopy_upper:.3g}]"]
+                        for r in frame.itertuples()])
         for covariate in group.explained:
             page.paragraph(_explained_line(group, covariate))
         for test in group.groupings:
@@ -267,6 +313,12 @@ def population_summary(groups: Sequence[PopulationGroup]) -> list[dict[str, Any]
                     "full_omega": fit.full_omega, "log_likelihood": fit.log_likelihood,
                     "table": parameter_frame(g).to_dict("records"),
                     "explained": explained_frame(g).to_dict("records"),
+                    "nested": None if g.nested is None else {
+                        "tests": list(g.nested.data.tests),
+                        "beta": g.nested.beta.tolist(),
+                        "omega_test": g.nested.omega_test.tolist(),
+                        "omega_canopy": g.nested.omega_canopy.tolist(),
+                        "log_likelihood": g.nested.log_likelihood},
                     "groupings": grouping_frame([g]).to_dict("records"), "notes": g.notes})
     return out
 

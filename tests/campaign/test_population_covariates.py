@@ -31,21 +31,33 @@ OFFSET = np.array([0.0, 0.04, 0.15])
 NOISE = np.array([0.01, 0.008, 0.02])  # each estimate's sigma, in log
 
 
-def campaign_rows(seed: int, tests: int = 8, tau: float = 0.0, configuration: bool = False
-                  ) -> tuple[pd.DataFrame, pd.DataFrame]:
+def campaign_rows(seed: int, tests: int = 8, tau: float = 0.0, configuration: bool = False,
+                  cross: float | None = None) -> tuple[pd.DataFrame, pd.DataFrame]:
     """A campaign's parameter and covariance tables: `tests` tests of two Drogues in
     positions `left` and `right`, the right one's parameters offset by OFFSET in log, a
     between-test spread `tau` (log) shared by nothing, each estimate's noise NOISE.  With
-    `configuration`, a test covariate alternating A and B of no effect."""
+    `configuration`, a test covariate alternating A and B of no effect.  With `cross`, the
+    covariances between the two canopies' estimates are written too: their CdS
+    correlated `cross` (their noise drawn so), every other pair 0."""
     rng = np.random.default_rng(seed)
     rows, cov = [], []
     for t in range(tests):
         test = f"test{t:02d}"
+        shared = rng.standard_normal()
+        fulls, sds, values = [], [], []
         for chute, position, offset in (("d1", "left", 0.0), ("d2", "right", 1.0)):
             sd = NOISE * rng.uniform(0.7, 1.4, 3)
+            noise = rng.standard_normal(3)
+            if cross is not None:  # CdS's noise: a part shared by the two canopies
+                sign = 1.0 if offset == 0.0 or cross > 0 else -1.0
+                noise[0] = (sign * np.sqrt(abs(cross)) * shared
+                            + np.sqrt(1.0 - abs(cross)) * noise[0])
             value = np.exp(MEDIAN + offset * OFFSET + tau * rng.standard_normal(3)
-                           + sd * rng.standard_normal(3))
+                           + sd * noise)
             full = [f"{n}[{chute},stage1]" for n in NAMES]
+            fulls.append(full)
+            sds.append(sd * value)
+            values.append(value)
             for n, f, v, s, u in zip(NAMES, full, value, sd * value, UNITS, strict=True):
                 rows.append({"test": test, "parameter": n, "name": f, "parachute": chute,
                              "type": "drogue", "stage": "stage1", "forebody": "capsule",
@@ -56,6 +68,12 @@ def campaign_rows(seed: int, tests: int = 8, tau: float = 0.0, configuration: bo
                 for b in range(a + 1):
                     cov.append({"test": test, "name_a": full[a], "name_b": full[b],
                                 "covariance": (sd[a] * value[a]) ** 2 if a == b else 0.0})
+        if cross is not None:
+            for a in range(3):
+                for b in range(3):
+                    cov.append({"test": test, "name_a": fulls[1][a], "name_b": fulls[0][b],
+                                "covariance": cross * sds[0][0] * sds[1][0]
+                                if a == b == 0 else 0.0})
     columns = COLUMNS + (["configuration"] if configuration else [])
     return pd.DataFrame(rows, columns=columns), pd.DataFrame(cov, columns=COVARIANCE_COLUMNS)
 
