@@ -232,7 +232,7 @@ class JointNlp:
     def _curvature(self) -> ca.Function:
         """(z, lam_small) -> the upper triangle of the small constraints' curvature: each
         test's on its diagonal block (the links are linear)."""
-        z = ca.MX.sym("z", self.nz)
+        z = ca.MX.sym("z", int(self.offsets[-1]))  # the tests' decision vectors
         lam = ca.MX.sym("lam_small", self.small_rows.stop - self.small_rows.start)
         blocks, first = [], 0
         for i, est in enumerate(self.estimators):

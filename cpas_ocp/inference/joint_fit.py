@@ -172,7 +172,7 @@ def _estimators(tests: Sequence[FlightTest], share: Mapping[str, str],
     return out
 
 
-def _start_value(link: Link, fits: Sequence[Fit], covs: Sequence[Covariance]) -> float:
+def start_value(link: Link, fits: Sequence[Fit], covs: Sequence[Covariance]) -> float:
     """Where a shared parameter's copies start: the inverse-variance mean of the copies the
     tests determined alone, else the median of their values."""
     values, weights = [], []
@@ -188,14 +188,13 @@ def _start_value(link: Link, fits: Sequence[Fit], covs: Sequence[Covariance]) ->
     return float(np.median(values))
 
 
-def joint_fit(tests: Sequence[FlightTest], share: Mapping[str, str],
-              settings: Settings | None = None, labels: Sequence[str] | None = None,
-              progress: Callable[[str], None] | None = None) -> JointFit:
-    """Reconstruct `tests` in one NLP, the parameters named in `share` held equal across
-    them (module docstring).  Raises SolverFailure where a test's own fit or the joint
-    run fails (its status and iterations), SharingError where nothing is shared."""
-    say = progress or (lambda _: None)
-    labels = list(labels) if labels is not None else [t.name for t in tests]
+def fits_alone(tests: Sequence[FlightTest], share: Mapping[str, str],
+               settings: Settings | None, labels: Sequence[str], say: Callable[[str], None]
+               ) -> tuple[list[Estimator], list[Link], list[Fit], list[Covariance]]:
+    """Each test's estimator (the parameters named in `share` free), the links of their
+    copies across the tests, and each test fitted alone with its covariance: the start of
+    a joint or hierarchical fit.  SharingError where no parameter named in `share` is free
+    in two places."""
     built = _estimators(tests, share, settings)
     ests = [est for est, _ in built]
     links = shared_links(tests, [e.free for e in ests], share)
@@ -210,9 +209,21 @@ def joint_fit(tests: Sequence[FlightTest], share: Mapping[str, str],
         fit = est.solve(bounds={name: (value, value) for name, value in held.items()})
         fits.append(fit)
         covs.append(est.covariance(fit))
+    return ests, links, fits, covs
+
+
+def joint_fit(tests: Sequence[FlightTest], share: Mapping[str, str],
+              settings: Settings | None = None, labels: Sequence[str] | None = None,
+              progress: Callable[[str], None] | None = None) -> JointFit:
+    """Reconstruct `tests` in one NLP, the parameters named in `share` held equal across
+    them (module docstring).  Raises SolverFailure where a test's own fit or the joint
+    run fails (its status and iterations), SharingError where nothing is shared."""
+    say = progress or (lambda _: None)
+    labels = list(labels) if labels is not None else [t.name for t in tests]
+    ests, links, fits, covs = fits_alone(tests, share, settings, labels, say)
     say(f"joint fit of {len(tests)} tests, {len(links)} shared parameters")
     nlp = JointNlp(ests, links)
-    z, stats = nlp.solve(nlp.start(fits, {k.name: _start_value(k, fits, covs) for k in links}))
+    z, stats = nlp.solve(nlp.start(fits, {k.name: start_value(k, fits, covs) for k in links}))
     cov = nlp.covariance(z)
     shared = []
     for link in links:
