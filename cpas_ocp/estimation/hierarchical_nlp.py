@@ -34,7 +34,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from cpas_ocp.estimation.estimator import Estimator
-from cpas_ocp.estimation.fit import Fit
+from cpas_ocp.estimation.fit import Fit, SolverStats
 from cpas_ocp.estimation.joint_nlp import JointNlp, Link
 
 # Bounds of a population mean in its own space (log space: a factor of e^30 either way).
@@ -79,6 +79,13 @@ class HierarchicalNlp(JointNlp):
         for pop in self.populations:
             if pop.tau <= 0.0:
                 raise ValueError(f"{pop.name}: a between-test standard deviation above 0")
+
+    def solve(self, z0: np.ndarray, max_iter: int = 500, verbose: bool = False,
+              statistical_stop: bool = True) -> tuple[np.ndarray, SolverStats]:
+        """`JointNlp.solve`, ended by the statistical test by default: a population whose
+        copies the data hardly fix leaves Gauss-Newton's Hessian far from the exact one
+        along them."""
+        return super().solve(z0, max_iter, verbose, statistical_stop)
 
     def set_tau(self, taus: Sequence[float]) -> None:
         """Each population's tau (the outer loop of a hierarchical fit moves them)."""

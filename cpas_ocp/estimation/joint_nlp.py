@@ -44,7 +44,12 @@ from cpas_ocp.estimation.fit import Fit, SolverStats
 from cpas_ocp.estimation.gauss_newton import gauss_newton_decrement
 from cpas_ocp.estimation.kkt_system import Linearisation, linearise
 from cpas_ocp.estimation.nlp_functions import bound_violations, ipopt_functions, worst_violation
+from cpas_ocp.estimation.solve import STATISTICALLY_CONVERGED
 from cpas_ocp.estimation.uncertainty import Covariance, kkt_covariance
+
+# The largest constraint violation (scaled) at which a run ended by the statistical test
+# counts as feasible.
+STATISTICAL_VIOLATION = 1e-6
 
 
 @dataclass(frozen=True)
@@ -254,14 +259,29 @@ class JointNlp:
             z.append(est.point_from(fit, own))
         return np.concatenate(z)
 
-    def solve(self, z0: np.ndarray, max_iter: int = 500, verbose: bool = False
-              ) -> tuple[np.ndarray, SolverStats]:
+    def solve(self, z0: np.ndarray, max_iter: int = 500, verbose: bool = False,
+              statistical_stop: bool = False) -> tuple[np.ndarray, SolverStats]:
         """Ipopt from `z0`; the solution and its statistics.  Raises SolverFailure (with
-        Ipopt's status and iteration count) where the run did not converge."""
+        Ipopt's status and iteration count) where the run did not converge.
+
+        With `statistical_stop`, a run is also converged where chi-square has changed by
+        less than the statistical tolerance (`Settings.chi2_step_tol`) over Ipopt's
+        acceptable iterations and, at the point it ends, the Gauss-Newton step would
+        lower chi-square by less than that tolerance with the constraints met: the
+        single fit's statistical test (`solve.Solver`), applied at the end of the run.
+        Gauss-Newton's inexact Hessian can leave Ipopt's dual infeasibility circling
+        near 0.1 at the optimum for hundreds of iterations (eight `fbcp` tests whose
+        canopies' split the data hardly fix, tied by a population)."""
         functions = ipopt_functions(self, self._curvature(), self.small_rows, self._windows(),
                                     lambda z, outside: None)
         options = {**self.estimators[0].solver.options, **functions.options,
                    "ipopt.max_iter": max_iter, "ipopt.print_level": 5 if verbose else 0}
+        tol = self.estimators[0].settings.chi2_step_tol or 0.0
+        if statistical_stop and tol > 0.0:
+            r0 = self.residual_value(np.clip(z0, self.lbz, self.ubz))
+            options |= {"ipopt.acceptable_tol": 1e10, "ipopt.acceptable_dual_inf_tol": 1e10,
+                        "ipopt.acceptable_iter": 10,
+                        "ipopt.acceptable_obj_change_tol": 0.1 * tol / max(1.0, r0 @ r0)}
         solver = ca.nlpsol("joint_reconstruction", "ipopt", functions.nlp, options)
         began = time.perf_counter()
         sol = solver(x0=np.clip(z0, self.lbz, self.ubz), lbx=self.lbz, ubx=self.ubz,
@@ -269,13 +289,18 @@ class JointNlp:
         stats = solver.stats()
         z = np.asarray(sol["x"]).ravel()
         r = self.residual_value(z)
-        worst = worst_violation(bound_violations(self.constraint_value(z), self.lbg,
-                                                 self.ubg))
+        violations = bound_violations(self.constraint_value(z), self.lbg, self.ubg)
+        worst = worst_violation(violations)
         status = str(stats["return_status"])
         iterations = int(stats["iter_count"])
-        if not stats["success"]:
+        feasible = float(np.max(violations, initial=0.0)) < STATISTICAL_VIOLATION
+        if not stats["success"] and not (statistical_stop and tol > 0.0 and feasible):
             raise SolverFailure(status, iterations, worst, float(r @ r))
         decrement = gauss_newton_decrement(self.linearise(z))
+        if not stats["success"]:
+            if decrement >= tol:
+                raise SolverFailure(status, iterations, worst, float(r @ r))
+            status = STATISTICALLY_CONVERGED
         return z, SolverStats(status, True, iterations, time.perf_counter() - began,
                               0.5 * float(r @ r), worst, decrement, "each test's own fit")
 

@@ -93,6 +93,35 @@ def _start_tau(values: np.ndarray, variances: np.ndarray) -> float:
     return float(np.clip(tau, *TAU_RANGE))
 
 
+def _downhill(f: Callable[[float], float], x0: float, bounds: np.ndarray,
+              step: float = np.log(2.0)) -> float:
+    """The minimum of `f` within `bounds`, from `x0`: steps of `step` downhill until `f`
+    rises or a bound is reached (each solve warm-started from its neighbour's, a path on
+    which the NLP changes little at a time), then Brent's bounded search within the last
+    bracket."""
+    lo, hi = float(bounds[0]), float(bounds[1])
+    x, fx = x0, f(x0)
+    direction = 1.0
+    nxt = min(x + step, hi)
+    f_next = f(nxt) if nxt > x else np.inf
+    if f_next >= fx:
+        direction, nxt = -1.0, max(x - step, lo)
+        f_next = f(nxt) if nxt < x else np.inf
+    behind = x
+    while f_next < fx:
+        behind, x, fx = x, nxt, f_next
+        nxt = float(np.clip(x + direction * step, lo, hi))
+        if nxt == x:
+            return x
+        f_next = f(nxt)
+    a, b = sorted((behind, nxt))
+    if b - a <= 0.02:
+        return x
+    found = optimize.minimize_scalar(f, bounds=(a, b), method="bounded",
+                                     options={"xatol": 0.02})
+    return float(found.x) if found.fun < fx else x
+
+
 def hierarchical_fit(tests: Sequence[FlightTest], populations: Mapping[str, str],
                      share: Mapping[str, str] | None = None, settings: Settings | None = None,
                      labels: Sequence[str] | None = None,
@@ -148,9 +177,7 @@ def hierarchical_fit(tests: Sequence[FlightTest], populations: Mapping[str, str]
                 trial = log_taus.copy()
                 trial[g] = v
                 return deviance(trial)
-            found = optimize.minimize_scalar(along, bounds=np.log(TAU_RANGE),
-                                             method="bounded", options={"xatol": 0.02})
-            log_taus[g] = found.x
+            log_taus[g] = _downhill(along, float(log_taus[g]), np.log(TAU_RANGE))
     nlp.set_tau(np.exp(log_taus))
     z, solver_stats = nlp.solve(state["z"])
     final = nlp.laplace_deviance(z)
