@@ -69,6 +69,7 @@ if TYPE_CHECKING:
         what_if,
     )
     from cpas_ocp.api.rocketpy_export import RocketPyExport, rocketpy_export
+    from cpas_ocp.inference.hierarchical_fit import hierarchical_fit
     from cpas_ocp.io.flight_test import load_test
     from cpas_ocp.physics.effects import baseline_effects
     from cpas_ocp.progress import Narration, terminal
@@ -91,6 +92,7 @@ _HOMES = {
                      "reconstruct", "what_if"), "cpas_ocp.api.reconstruction"),
     **dict.fromkeys(("RocketPyExport", "rocketpy_export"), "cpas_ocp.api.rocketpy_export"),
     "load_test": "cpas_ocp.io.flight_test",
+    "hierarchical_fit": "cpas_ocp.inference.hierarchical_fit",
     "baseline_effects": "cpas_ocp.physics.effects",
     **dict.fromkeys(("Narration", "terminal"), "cpas_ocp.progress"),
     "summary": "cpas_ocp.reports.summaries",
@@ -115,7 +117,8 @@ __all__ = ["Campaign", "Dispersions", "FitOptions", "Flight", "InitialGuess", "J
            "MonteCarlo", "Narration", "Population", "Reconstruction", "RocketPyExport",
            "baseline_effects", "build",
            "compare", "demo", "design", "diagnose", "discover", "dispersions", "effect",
-           "fit_estimator", "flight", "import_log", "joint", "load_model", "load_test",
+           "fit_estimator", "flight", "hierarchical_fit", "import_log", "joint", "load_model",
+           "load_test",
            "monte_carlo", "population", "reconstruct", "reconstruct_campaign", "reduce",
            "resume_discovery", "rocketpy_export", "simulate", "summary", "terminal",
            "what_if"]

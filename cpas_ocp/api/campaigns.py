@@ -31,6 +31,7 @@ from cpas_ocp.campaign.peak_load_study import (
 )
 from cpas_ocp.campaign.population_study import (
     PopulationGroup,
+    covariate_of,
     population_dispersions,
     population_groups,
     read_covariance_table,
@@ -167,11 +168,16 @@ class Dispersions:
 
 
 def dispersions(campaign: str | Path, out: str | Path, cases: int, seed: int,
-                from_population: bool = False) -> Dispersions:
+                from_population: bool = False, at: Mapping[str, str] | None = None
+                ) -> Dispersions:
     """`cases` Monte Carlo cases per canopy type and stage of a campaign (`cpas-ocp
     dispersions`), from the point estimates' dispersions within the grown hulls, or with
-    `from_population` from each type and stage's fitted population (`population`); the
-    folder written to `out`."""
+    `from_population` from each type and stage's fitted population (`population`), at the
+    configuration `at` (covariate -> value: a position, a line length; the covariates'
+    reference where not given); the folder written to `out`."""
+    if at and not from_population:
+        raise InputError("(command line)", "--at", "a configuration to draw a population "
+                         "at: give --population too")
     table = read_parameter_table(campaign)
     stages = read_stage_table(campaign)
     models, skipped = dispersion_models(table)
@@ -183,7 +189,12 @@ def dispersions(campaign: str | Path, out: str | Path, cases: int, seed: int,
     notes: list[str] = []
     if from_population:
         pop = population(campaign)
-        models, notes = population_dispersions(models, pop.groups)
+        in_mean = {covariate_of(c) for g in pop.groups for c in g.data.columns[1:]}
+        unknown = [c for c in (at or {}) if c not in in_mean]
+        if unknown:
+            raise InputError(str(campaign), f"--at {unknown[0]}", "a covariate of a "
+                             f"population's mean: {', '.join(sorted(in_mean)) or 'none'}")
+        models, notes = population_dispersions(models, pop.groups, at, str(campaign))
         notes += [f"no population: {s}" for s in pop.skipped]
     written = write_dispersions(models, skipped, cases, seed, out, table, stages)
     return Dispersions(models, skipped, notes, stages is not None, written)

@@ -23,7 +23,7 @@ test, not to a canopy, and are left out, as in `dispersion_study`.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -460,11 +460,15 @@ class PopulationDispersion(DispersionModel):
     their point-estimate dispersions, as `DispersionModel` does."""
 
     population: PopulationGroup | None = None
+    # The design row the cases are drawn at (`design_row`); None: the covariates'
+    # reference, the intercept.
+    at: np.ndarray | None = None
 
     @classmethod
-    def of(cls, model: DispersionModel, group: PopulationGroup) -> PopulationDispersion:
+    def of(cls, model: DispersionModel, group: PopulationGroup,
+           at: np.ndarray | None = None) -> PopulationDispersion:
         fields = {f.name: getattr(model, f.name) for f in dataclasses.fields(DispersionModel)}
-        return cls(**fields, population=group)
+        return cls(**fields, population=group, at=at)
 
     def draw(self, n: int, seed: int) -> pd.DataFrame:
         """`n` cases, every parameter a column (SI), reproducible by `seed`."""
@@ -482,7 +486,8 @@ class PopulationDispersion(DispersionModel):
             if drawn > 1000 * n + 100_000:
                 raise RuntimeError(f"{self.label}: fewer than 1 in 1000 population draws fall "
                                    "inside the caps and the hull")
-            z = fit.beta[:, 0] + rng.standard_normal((DRAW_BATCH, data.k)) @ root.T
+            mean = fit.beta[:, 0] if self.at is None else fit.beta @ self.at
+            z = mean + rng.standard_normal((DRAW_BATCH, data.k)) @ root.T
             x = np.where(np.array(data.log), np.exp(z), z)[:, idx]
             ok = np.ones(DRAW_BATCH, dtype=bool)
             for j, p in enumerate(names):
@@ -500,10 +505,43 @@ class PopulationDispersion(DispersionModel):
         return pd.DataFrame(out)[list(self.dispersions)]
 
 
-def population_dispersions(models: Sequence[DispersionModel], groups: Sequence[PopulationGroup]
+def design_row(group: PopulationGroup, at: Mapping[str, str], where: str
+               ) -> tuple[np.ndarray, list[str]]:
+    """The design row of the configuration `at` (covariate -> value) in `group`'s mean: the
+    intercept, each indicator 1 where `at` names its level, each number's value less its
+    mean over the openings; a covariate `at` leaves out at its reference (the first level,
+    or the mean).  The row and what it was drawn at, in words.  InputError where `at`
+    names a level the population has not seen or a number that is not one."""
+    x = np.zeros(group.data.p)
+    x[0] = 1.0
+    for a, column in enumerate(group.data.columns[1:], start=1):
+        covariate = covariate_of(column)
+        if covariate not in at:
+            continue
+        if "=" in column:
+            levels = sorted(str(v) for v in group.covariates[covariate].unique())
+            if str(at[covariate]) not in levels:
+                raise InputError(where, f"--at {covariate}", f"a value the openings of "
+                                 f"{group.label} hold: {', '.join(levels)}; got {at[covariate]}")
+            x[a] = float(column == f"{covariate}={at[covariate]}")
+        else:
+            try:
+                value = float(at[covariate])
+            except ValueError:
+                raise InputError(where, f"--at {covariate}", f"a number; got "
+                                 f"{at[covariate]}") from None
+            x[a] = value - float(group.covariates[covariate].astype(float).mean())
+    used = [c for c in at if any(covariate_of(col) == c for col in group.data.columns[1:])]
+    said = [f"{c}={at[c]}" for c in used]
+    return x, said
+
+
+def population_dispersions(models: Sequence[DispersionModel], groups: Sequence[PopulationGroup],
+                           at: Mapping[str, str] | None = None, where: str = "(command line)"
                            ) -> tuple[list[DispersionModel], list[str]]:
-    """Each model whose type and stage has a population of its own drawn from it; a note per
-    model left with its point-estimate dispersions."""
+    """Each model whose type and stage has a population of its own drawn from it, at the
+    configuration `at` (covariate -> value, `design_row`; the reference where empty); a
+    note per model left with its point-estimate dispersions or drawn at a configuration."""
     own = {g.members[0]: g for g in groups if len(g.members) == 1}
     out, notes = [], []
     for model in models:
@@ -511,6 +549,8 @@ def population_dispersions(models: Sequence[DispersionModel], groups: Sequence[P
         if group is None:
             notes.append(f"{model.label}: no population of its own; point-estimate dispersions")
             out.append(model)
-        else:
-            out.append(PopulationDispersion.of(model, group))
+            continue
+        x, said = design_row(group, at or {}, where)
+        out.append(PopulationDispersion.of(model, group, x))
+        notes += [f"{model.label}: drawn at {', '.join(said)}"] if said else []
     return out, notes

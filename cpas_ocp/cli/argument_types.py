@@ -67,6 +67,15 @@ def pooled(text: str) -> list[tuple[str, str]]:
     return [(str(t), str(s)) for t, s in members]
 
 
+def setting(text: str) -> tuple[str, str]:
+    """`NAME=VALUE` as (name, value); argparse's error (exit 2) where malformed."""
+    name, sep, value = text.partition("=")
+    if not sep or not name or not value:
+        raise argparse.ArgumentTypeError(f"a covariate and its value as NAME=VALUE; got "
+                                         f"{text!r}")
+    return name, value
+
+
 def shared(text: str) -> tuple[str, str]:
     """`BASE` or `BASE:type|vehicle` as (base, over); argparse's error (exit 2) where
     malformed."""

@@ -14,6 +14,7 @@ from cpas_ocp.cli.argument_types import (
     pooled,
     ranged,
     scheduler,
+    setting,
     shared,
     wind_factors,
 )
@@ -158,6 +159,10 @@ def parser() -> argparse.ArgumentParser:
                    help="draw each canopy type and stage from its fitted population (mu, "
                         "Omega: each test's uncertainty taken out of the spread) instead of "
                         "from its point estimates; still within the caps and the grown hull")
+    s.add_argument("--at", action="append", default=[], type=setting, metavar="COVARIATE=VALUE",
+                   help="with --population, draw at this configuration of a covariate of "
+                        "the population's mean, e.g. position=drogue2 (repeatable; the "
+                        "covariates' reference where not given)")
     s.set_defaults(run=commands.dispersions)
 
     s = sub.add_parser("montecarlo", help="reconstruct a test folder and fly the dispersed "

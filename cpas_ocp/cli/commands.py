@@ -222,7 +222,8 @@ def population(args: argparse.Namespace) -> int:
 
 def dispersions(args: argparse.Namespace) -> int:
     from cpas_ocp import api
-    done = api.dispersions(args.campaign, args.out, args.cases, args.seed, args.population)
+    done = api.dispersions(args.campaign, args.out, args.cases, args.seed, args.population,
+                           dict(args.at))
     for model in done.models:
         print(api.summary(model))
     for note in done.skipped:

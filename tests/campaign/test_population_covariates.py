@@ -233,3 +233,40 @@ def test_a_population_fit_that_did_not_converge_exits_3(tmp_path, capsys, monkey
     assert len(err.splitlines()) == 1
     assert "ABNORMAL_TERMINATION_IN_LNSRCH" in err and "after 4 iterations" in err
     assert not (tmp_path / "o").exists()
+
+
+def test_dispersions_are_drawn_at_a_named_position(tmp_path, capsys) -> None:
+    """`cpas-ocp dispersions --population --at position=right`: with no spread beyond the
+    positions' difference, the cases at each position sit at that position's median (the
+    covariate's effect between them, to within the cases' own scatter); a configuration
+    the population cannot draw at is exit 2, naming it."""
+    folder = tmp_path / "campaign"
+    folder.mkdir()
+    table, cov = campaign_rows(seed=17)
+    table.to_csv(folder / "parameters.csv", index=False)
+    cov.to_csv(folder / "covariances.csv", index=False)
+    medians = {}
+    for position in ("left", "right"):
+        out = tmp_path / position
+        assert main(["dispersions", str(folder), "--out", str(out), "--cases", "2000",
+                     "--seed", "3", "--population", "--at", f"position={position}"]) == 0
+        cases = pd.read_parquet(out / "cases_drogue_stage1.parquet")
+        medians[position] = np.log(cases[["CdS", "Ck", "t_k"]].median())
+    printed = capsys.readouterr().out
+    assert "drawn at position=right" in printed
+    (group,), _ = population_groups(table, cov, "campaign", parameters=NAMES)
+    for name in ("CdS", "Ck", "t_k"):
+        effect = group.fit.coefficients[(name, "position=right")].value
+        j = group.data.names.index(name)
+        scatter = np.sqrt(group.fit.omega[j, j])
+        assert abs(medians["right"][name] - medians["left"][name] - effect) < 0.1 * scatter \
+            + 1e-6, name
+    for args, field in ((["--at", "position=right"], "--population"),
+                        (["--population", "--at", "colour=red"], "--at colour"),
+                        (["--population", "--at", "position=centre"], "--at position"),
+                        (["--population", "--at", "position"], "NAME=VALUE")):
+        assert main(["dispersions", str(folder), "--out", str(tmp_path / "bad"), "--cases",
+                     "100", "--seed", "1", *args]) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and field in err, err
+        assert not (tmp_path / "bad").exists()
