@@ -17,7 +17,7 @@ import json
 import math
 import os
 import time
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -139,3 +139,32 @@ def report(name: str, **results: Any) -> dict[str, Any]:
         with path.open("a") as fh:
             fh.write(text + "\n")
     return line
+
+
+def seeds_parser(doc: str | None, seeds: int) -> argparse.ArgumentParser:
+    """`parser` for a script scored over seeds: ``--seeds`` (default `seeds`), ``--first``
+    and ``--workers``; each seed's draws are seeded by the seed itself."""
+    ap = parser(doc, seed=None, seed_help="recorded only: each seed's draws are seeded by "
+                "that seed (--first, --seeds)")
+    ap.add_argument("--seeds", type=int, default=seeds)
+    ap.add_argument("--first", type=int, default=1)
+    ap.add_argument("--workers", type=int, default=2)
+    return ap
+
+
+def run_seeds(run: Callable[[int], dict[str, Any]], args: argparse.Namespace,
+              out: Path | None = None) -> list[dict[str, Any]]:
+    """`run(seed)` for each seed of `args` (`seeds_parser`) on `args.workers` processes, in
+    order; each row printed as JSON as it comes, and appended to `out` where given."""
+    from concurrent.futures import ProcessPoolExecutor
+    seeds = list(range(args.first, args.first + args.seeds))
+    rows = []
+    with ProcessPoolExecutor(args.workers) as pool:
+        for row in pool.map(run, seeds):
+            rows.append(row)
+            print(json.dumps(row), flush=True)
+            if out is not None:
+                with out.open("a") as fh:
+                    fh.write(json.dumps(row) + "\n")
+    return rows
+

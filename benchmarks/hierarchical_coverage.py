@@ -33,7 +33,6 @@ import dataclasses
 import json
 import sys
 import tempfile
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import harness
@@ -147,18 +146,8 @@ def summarise(rows: list[dict]) -> dict:
 
 
 def main() -> None:
-    ap = harness.parser(__doc__, seed=None, seed_help="recorded only: each seed's draws are "
-                        "seeded by that seed (--first, --seeds)")
-    ap.add_argument("--seeds", type=int, default=20)
-    ap.add_argument("--first", type=int, default=1)
-    ap.add_argument("--workers", type=int, default=2)
-    args = ap.parse_args()
-    seeds = list(range(args.first, args.first + args.seeds))
-    rows = []
-    with ProcessPoolExecutor(args.workers) as pool:
-        for row in pool.map(run_seed, seeds):
-            rows.append(row)
-            print(json.dumps(row), flush=True)
+    args = harness.seeds_parser(__doc__, seeds=20).parse_args()
+    rows = harness.run_seeds(run_seed, args)
     harness.report("hierarchical_coverage", first=args.first, **summarise(rows))
 
 

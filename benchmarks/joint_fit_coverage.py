@@ -35,7 +35,6 @@ import dataclasses
 import json
 import sys
 import tempfile
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import harness
@@ -172,22 +171,10 @@ def summarise(rows: list[dict]) -> dict:
 
 
 def main() -> None:
-    ap = harness.parser(__doc__, seed=None, seed_help="recorded only: each seed's draws are "
-                        "seeded by that seed (--first, --seeds)")
-    ap.add_argument("--seeds", type=int, default=30)
-    ap.add_argument("--first", type=int, default=1)
-    ap.add_argument("--workers", type=int, default=2)
+    ap = harness.seeds_parser(__doc__, seeds=30)
     ap.add_argument("--out", type=Path, help="a JSON-lines file of each seed's scores")
     args = ap.parse_args()
-    seeds = list(range(args.first, args.first + args.seeds))
-    rows = []
-    with ProcessPoolExecutor(args.workers) as pool:
-        for row in pool.map(run_seed, seeds):
-            rows.append(row)
-            print(json.dumps(row), flush=True)
-            if args.out is not None:
-                with args.out.open("a") as fh:
-                    fh.write(json.dumps(row) + "\n")
+    rows = harness.run_seeds(run_seed, args, args.out)
     harness.report("joint_fit_coverage", first=args.first, **summarise(rows))
     return None
 

@@ -373,7 +373,7 @@ def population_groups(table: pd.DataFrame, covariances: pd.DataFrame | None, whe
         group.nested, note = _nested(data, frame, blocks)
         group.notes += [note] if note else []
         group.groupings, more = _groupings(frame, data, full_omega, alpha, len(members) > 1,
-                                           seed)
+                                           seed, {covariate_of(c) for c in data.columns[1:]})
         group.notes += more
         groups.append(group)
     return groups, skipped
@@ -418,14 +418,16 @@ def explained_spread(fit: PopulationFit) -> dict[str, np.ndarray]:
 
 
 def _groupings(frame: pd.DataFrame, data: PopulationData, full_omega: bool, alpha: float,
-               pooled: bool, seed: int) -> tuple[list[GroupingTest], list[str]]:
+               pooled: bool, seed: int, in_mean: set[str]
+               ) -> tuple[list[GroupingTest], list[str]]:
     """The grouping test of every covariate column of `frame` (a row per opening) taking two
     or more values over the openings, each value held by at least k + 2 of them (k
     parameters); a column splitting the openings as one tested before is not tested
-    again."""
+    again, nor one already in the mean (`in_mean`: its shift is there, with its
+    interval)."""
     intercept = data.subset(np.arange(data.n), keep_columns=[0])
     tests, notes, seen = [], [], set()
-    for column in [c for c in frame.columns if c != "test"]:
+    for column in [c for c in frame.columns if c not in ("test", *in_mean)]:
         if column == "type" and not pooled:
             continue
         values = frame[column]
