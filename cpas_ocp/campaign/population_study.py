@@ -259,7 +259,7 @@ def population_data(rows: pd.DataFrame, covariances: pd.DataFrame | None,
                              f"population with {len(covariates)} covariate(s) needs at "
                              f"least {len(covariates) + 3}")
     if by_position and "position" not in covariates:
-        covariates, note = _with_position(frame, covariates, len(names))
+        covariates, note = _with_position(frame, covariates)
         notes += [note] if note else []
     X, columns = _design(frame, covariates, where)
     if covariances is None:
@@ -302,11 +302,10 @@ def _test_blocks(tests: Sequence[str], fulls: Sequence[Sequence[str]], y: np.nda
     return out
 
 
-def _with_position(frame: pd.DataFrame, covariates: Sequence[str], k: int
-                   ) -> tuple[list[str], str]:
+def _with_position(frame: pd.DataFrame, covariates: Sequence[str]) -> tuple[list[str], str]:
     """`covariates` with the canopy's position added where the openings (a row each in
     `frame`) fly in two or more positions, each position held by two or more openings and
-    the design still of full rank with k + 2 openings to spare; and a note saying so, or
+    the design still of full rank with two openings to spare; and a note saying so, or
     why not.  Canopies in fixed places of a cluster differ by fixed amounts (a position
     in the wake of another, a riser's length): left out of the mean, that difference
     would be read as between-test spread."""
