@@ -38,21 +38,29 @@ def parser() -> argparse.ArgumentParser:
     s.set_defaults(run=commands.effects)
 
     s = sub.add_parser("simulate", help="simulate a built-in problem into a test folder")
-    s.add_argument("name")
-    s.add_argument("--out", required=True, type=Path)
-    s.add_argument("--seed", required=True, type=SEED)
+    s.add_argument("name",
+                   help="a built-in problem (cpas-ocp problems lists them)")
+    s.add_argument("--out", required=True, type=Path,
+                   help="the test folder to write (manifest, series, truth.json)")
+    s.add_argument("--seed", required=True, type=SEED,
+                   help="the seed of the sensor noise's draws")
     s.set_defaults(run=commands.simulate)
 
     s = sub.add_parser("reduce", help="offline drag-area reduction and the initial guess")
-    s.add_argument("test_dir", type=Path)
-    s.add_argument("--out", required=True, type=Path)
+    s.add_argument("test_dir", type=Path,
+                   help="a test folder (manifest.json and its series)")
+    s.add_argument("--out", required=True, type=Path,
+                   help="the folder to write the reduction's tables and figures to")
     _model_option(s)
     _units_option(s)
     s.set_defaults(run=commands.reduce)
 
     s = sub.add_parser("reconstruct", help="reconstruct a test folder")
-    s.add_argument("test_dir", type=Path)
-    s.add_argument("--out", required=True, type=Path)
+    s.add_argument("test_dir", type=Path,
+                   help="a test folder (manifest.json and its series)")
+    s.add_argument("--out", required=True, type=Path,
+                   help="the report folder to write (result.json, parameters.csv, report.md, "
+                        "report.html, figures)")
     s.add_argument("--profile", action="append", default=[], metavar="NAME",
                    help="also profile the likelihood of this free parameter (repeatable)")
     s.add_argument("--profile-span", type=ranged(float, 0.0, low_open=True), default=3.0,
@@ -66,7 +74,8 @@ def parser() -> argparse.ArgumentParser:
     s.set_defaults(run=commands.reconstruct)
 
     s = sub.add_parser("whatif", help="re-solve under constraints and report what they cost")
-    s.add_argument("test_dir", type=Path)
+    s.add_argument("test_dir", type=Path,
+                   help="a test folder (manifest.json and its series)")
     s.add_argument("--constrain", action="append", required=True, metavar="EXPR",
                    help="NAME == VALUE [UNIT], NAME <= VALUE or NAME >= VALUE on a free "
                         "parameter, e.g. 'Ck[drogue1,stage1] == 1', or a peak limit, e.g. "
@@ -95,11 +104,13 @@ def parser() -> argparse.ArgumentParser:
     s.set_defaults(run=commands.discover)
 
     s = sub.add_parser("compare", help="fit two effect sets and test which the data prefer")
-    s.add_argument("test_dir", type=Path)
+    s.add_argument("test_dir", type=Path,
+                   help="a test folder (manifest.json and its series)")
     s.add_argument("--model", type=str, action="append", required=True, metavar="FILE",
                    help="a JSON model block, or 'manifest' for the test's own model; "
                         "give it twice")
-    s.add_argument("--out", required=True, type=Path)
+    s.add_argument("--out", required=True, type=Path,
+                   help="the folder to write the comparison to")
     _plugin_option(s, "a Python file whose effects the model files may name (repeatable)")
     _model_option(s, model=False)
     _solver_options(s)
@@ -108,8 +119,10 @@ def parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("campaign", help="reconstruct every test folder under a folder, in "
                                         "parallel, and write the parameter table")
-    s.add_argument("tests_dir", type=Path)
-    s.add_argument("--out", required=True, type=Path)
+    s.add_argument("tests_dir", type=Path,
+                   help="a folder whose subfolders are test folders")
+    s.add_argument("--out", required=True, type=Path,
+                   help="the campaign folder to write (its tables and report)")
     _parallel_options(s)
     s.set_defaults(run=commands.campaign)
 
@@ -117,7 +130,8 @@ def parser() -> argparse.ArgumentParser:
                                           "campaign: mu, the between-test Omega, each "
                                           "test's shrunken estimate, grouping tests")
     s.add_argument("campaign", type=Path, help="a campaign folder (cpas-ocp campaign)")
-    s.add_argument("--out", required=True, type=Path)
+    s.add_argument("--out", required=True, type=Path,
+                   help="the folder to write the populations to")
     s.add_argument("--parameter", action="append", dest="parameters", default=None,
                    help="a canopy parameter to include (repeatable; default: CdS, Ck, n_p, "
                         "n, expopen, t_k where determined)")
@@ -146,15 +160,19 @@ def parser() -> argparse.ArgumentParser:
                    help="a parameter shared across the tests: its base name, one per canopy "
                         "type and stage (CdS), or BASE:vehicle, one per test vehicle "
                         "(prf:vehicle) (repeatable)")
-    s.add_argument("--out", required=True, type=Path)
+    s.add_argument("--out", required=True, type=Path,
+                   help="the folder to write the joint fit to (joint.md, joint.csv, "
+                        "parameters.csv, joint.json)")
     s.set_defaults(run=commands.joint)
 
     s = sub.add_parser("dispersions", help="Monte Carlo cases per canopy type and stage from "
                                            "a campaign's parameter table")
     s.add_argument("campaign", type=Path, help="a campaign folder or its parameters table")
-    s.add_argument("--out", required=True, type=Path)
+    s.add_argument("--out", required=True, type=Path,
+                   help="the folder to write the cases and their dispersions to")
     s.add_argument("--cases", type=COUNT, default=200_000, help="cases per canopy (200,000)")
-    s.add_argument("--seed", type=SEED, required=True)
+    s.add_argument("--seed", type=SEED, required=True,
+                   help="the seed of the cases' draws")
     s.add_argument("--population", action="store_true",
                    help="draw each canopy type and stage from its fitted population (mu, "
                         "Omega: each test's uncertainty taken out of the spread) instead of "
@@ -167,10 +185,12 @@ def parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("montecarlo", help="reconstruct a test folder and fly the dispersed "
                                           "cases of its canopy stages: peak-load distributions")
-    s.add_argument("test_dir", type=Path)
+    s.add_argument("test_dir", type=Path,
+                   help="a test folder (manifest.json and its series)")
     s.add_argument("--cases", required=True, type=Path, metavar="DISPERSIONS_DIR",
                    help="a cpas-ocp dispersions folder (cases_<type>_<stage>.parquet)")
-    s.add_argument("--out", required=True, type=Path)
+    s.add_argument("--out", required=True, type=Path,
+                   help="the folder to write the dispersed cases' peak loads to")
     s.add_argument("--limit", type=COUNT, default=None, metavar="N",
                    help="fly the first N cases of each file (default: all)")
     _parallel_options(s)
@@ -190,14 +210,16 @@ def parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("import-altus", help="an Altus Metrum (TeleMega, TeleMetrum) CSV log "
                                             "into a test folder (import --format altus)")
-    s.add_argument("log", type=Path)
+    s.add_argument("log", type=Path,
+                   help="the AltOS CSV export")
     _card_options(s)
     s.set_defaults(run=commands.import_log, format="altus", columns=None)
 
     s = sub.add_parser("flight", help="import a real flight's logs, reconstruct each, and "
                                       "compare with the nominal drag areas and the descent")
     s.add_argument("card", metavar="CARD", help="a built-in flight card (prometheus) or a file")
-    s.add_argument("--out", required=True, type=Path)
+    s.add_argument("--out", required=True, type=Path,
+                   help="the folder to write each log's test folder and report to")
     s.add_argument("--data", type=Path, default=None,
                    help="folder holding the card's logs (default: the card's data.folder, "
                         "beside a card file, or under ../shared/data for a built-in card)")
@@ -226,13 +248,17 @@ def parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("design", help="predict the sigma of every parameter under planned "
                        "instrumentations and rank single sensor changes (a plan file)")
-    s.add_argument("plan", type=Path)
-    s.add_argument("--out", required=True, type=Path)
+    s.add_argument("plan", type=Path,
+                   help="a test plan (JSON, data_schemas/test_plan.schema.json)")
+    s.add_argument("--out", required=True, type=Path,
+                   help="the folder to write the design's tables and figures to")
     s.set_defaults(run=commands.design)
 
     s = sub.add_parser("demo", help="simulate the built-in Drogue test and reconstruct it")
-    s.add_argument("--out", type=Path, default=Path("cpas-demo"))
-    s.add_argument("--seed", type=SEED, default=1)
+    s.add_argument("--out", type=Path, default=Path("cpas-demo"),
+                   help="the folder to write the demo's test folder and report to (cpas-demo)")
+    s.add_argument("--seed", type=SEED, default=1,
+                   help="the seed of the demo's sensor noise (1)")
     _solver_options(s)
     _units_option(s)
     s.set_defaults(run=commands.demo)
@@ -297,8 +323,10 @@ def _diagnosis_options(s: argparse.ArgumentParser, resumable: bool = False) -> N
     """The test folder, output folder, plug-ins, confirmation, level, model and solver
     options of a command that diagnoses (`diagnose`, `discover`; with `resumable`, the
     test and output folders may come from --resume instead)."""
-    s.add_argument("test_dir", type=Path, nargs="?" if resumable else None)
-    s.add_argument("--out", required=not resumable, type=Path)
+    s.add_argument("test_dir", type=Path, nargs="?" if resumable else None,
+                   help="a test folder (manifest.json and its series)")
+    s.add_argument("--out", required=not resumable, type=Path,
+                   help="the folder to write the diagnosis or the discovery to")
     _plugin_option(s, "also test the effects this Python file defines (repeatable)")
     s.add_argument("--confirm", type=ranged(int, 0), default=3, metavar="N",
                    help="refit the N leading significant effects to confirm them, and more "
@@ -313,7 +341,8 @@ def _diagnosis_options(s: argparse.ArgumentParser, resumable: bool = False) -> N
 def _card_options(s: argparse.ArgumentParser) -> None:
     s.add_argument("--card", required=True, metavar="CARD",
                    help="a flight card: a built-in name (prometheus) or a JSON file")
-    s.add_argument("--out", required=True, type=Path)
+    s.add_argument("--out", required=True, type=Path,
+                   help="the test folder to write")
     s.add_argument("--still-air", action="store_true",
                    help="where the card gives no model: the rocket default without the air's "
                         "vertical motion (wind_process)")
