@@ -64,3 +64,10 @@ class SolverFailure(RuntimeError):
         super().__init__(
             f"solver failed: status {status} after {iterations} iterations{detail}"
         )
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        """Rebuilt from its fields where it crosses to another process (a worker's
+        failure reported by the process that waits for it); the last iterate stays
+        behind."""
+        return (type(self), (self.status, self.iterations, self.worst_constraint,
+                             self.chi_square))
