@@ -7,8 +7,9 @@ the draws):
 * a population far narrower (tau = 1e-5) ties the copies into the joint fit's one shared
   drag area (the median within a tenth of the joint fit's sigma, which is about 0.1 %:
   each test fixes its two canopies' sum far better than either);
-* tau estimated by the Laplace deviance: inside its search range, and the median's 95 %
-  interval covers the population's median (one draw: a 5 % chance of a miss).
+* tau estimated by the Laplace deviance: inside its search range, the fit a result (within
+  the noise, nothing undetermined or at a bound), and the median's 95 % interval covers
+  the population's median (one draw: a 5 % chance of a miss).
 
 About three minutes."""
 
@@ -68,4 +69,5 @@ def test_tau_estimated_and_the_median_covered(tests) -> None:
     fit = hierarchical_fit(tests, {"CdS": "type"})
     pop = fit.estimate(NAME)
     assert TAU_RANGE[0] < pop.tau < TAU_RANGE[1]
+    assert fit.is_result, fit.problems
     assert pop.lower < 2.0 < pop.upper

@@ -48,6 +48,7 @@ from cpas_ocp.campaign.population_model import (
     bounded_maximum,
     omega_bounds,
     profile_interval,
+    search_scale,
 )
 
 
@@ -148,6 +149,7 @@ class _Evaluation:
     information: np.ndarray  # (k p, k p)
     W: list[np.ndarray]  # per batch (n, m k, m k)
     residuals: list[np.ndarray]  # per batch (n, m k)
+    quad: float  # sum of r' W r over the tests
 
 
 class NestedModel:
@@ -159,10 +161,10 @@ class NestedModel:
         self.data, self.reml = data, reml
         self.form = OmegaForm(data.k, full_omega and data.k > 1)
         self.batches = _batches(data)
-        stacked = np.concatenate([y.reshape(-1, data.k) for y in data.y])
-        typical = np.sqrt(np.median(np.concatenate(
-            [np.diag(v).reshape(-1, data.k) for v in data.V]), axis=0))
-        self.spread = np.maximum(np.maximum(stacked.std(axis=0), typical), 1e-12)
+        # Every canopy's estimates and their variances, one row per canopy.
+        self.estimates = np.concatenate([y.reshape(-1, data.k) for y in data.y])
+        self.variances = np.concatenate([np.diag(v).reshape(-1, data.k) for v in data.V])
+        self.spread = np.maximum(search_scale(self.estimates, self.variances), 1e-12)
         self.floor = TAU_FLOOR * self.spread
 
     @property
@@ -193,7 +195,7 @@ class NestedModel:
         ll = -0.5 * (logdet + quad + self.data.observations * np.log(2.0 * np.pi))
         if self.reml:
             ll += -0.5 * np.linalg.slogdet(info)[1] + 0.5 * k * p * np.log(2.0 * np.pi)
-        return _Evaluation(float(ll), beta, info, Ws, residuals)
+        return _Evaluation(float(ll), beta, info, Ws, residuals, quad)
 
     def log_likelihood(self, theta: np.ndarray) -> tuple[float, np.ndarray]:
         """The log-likelihood at `theta` and its gradient."""
@@ -228,10 +230,9 @@ class NestedModel:
     def start(self) -> np.ndarray:
         """Half the spread of the estimates about their mean, beyond their own variance, to
         each level (a diagonal start)."""
-        stacked = np.concatenate([y.reshape(-1, self.data.k) for y in self.data.y])
-        own = np.mean(np.concatenate([np.diag(v).reshape(-1, self.data.k)
-                                      for v in self.data.V]), axis=0)
-        half = np.maximum(0.5 * (stacked.var(axis=0) - own), (0.05 * self.spread) ** 2)
+        own = self.variances.mean(axis=0)
+        half = np.maximum(0.5 * (self.estimates.var(axis=0) - own),
+                          (0.05 * self.spread) ** 2)
         one = self.form.vector(np.diag(half), self.floor)
         return np.concatenate([one, one])
 
@@ -278,9 +279,7 @@ def fit_nested(data: NestedData, full_omega: bool = False, reml: bool = True,
         theta, ll = model.maximise(model.start())
         ev = model.evaluate(theta)
         k, p = data.k, data.p
-        quad = sum(float(np.einsum("ni,nij,nj->", r, W, r))
-                   for r, W in zip(ev.residuals, ev.W, strict=True))
-        q = quad / max(data.observations - k * p, 1)
+        q = ev.quad / max(data.observations - k * p, 1)
         beta_cov = np.linalg.inv(ev.information) * max(1.0, q)
         omega_t, omega_c = model.omegas(theta)
         fit = NestedFit(data, model.form.full, reml, theta, ll,

@@ -284,11 +284,16 @@ def omega_gradient(data: PopulationData, ev: _Evaluation, reml: bool) -> np.ndar
     return 0.5 * grad
 
 
+def search_scale(y: np.ndarray, variances: np.ndarray) -> np.ndarray:
+    """Per parameter, the larger of the estimates' spread (`y`, one row per opening) and
+    their typical standard deviation (`variances`, each estimate's, the same shape): the
+    scale of tau's search range."""
+    return np.maximum(y.std(axis=0), np.sqrt(np.median(variances, axis=0)))
+
+
 def _spread(data: PopulationData) -> np.ndarray:
-    """Per parameter, the larger of the estimates' spread and their typical standard
-    deviation: the scale of tau's search range."""
-    return np.maximum(data.y.std(axis=0), np.sqrt(np.median(
-        np.diagonal(data.V, axis1=1, axis2=2), axis=0)))
+    """`search_scale` of `data`'s estimates."""
+    return search_scale(data.y, np.diagonal(data.V, axis1=1, axis2=2))
 
 
 def _floor(data: PopulationData) -> np.ndarray:
@@ -463,12 +468,6 @@ class PopulationFit:
     def parameters(self) -> int:
         """Free parameters of the model: B's coefficients and Omega's."""
         return self.beta.size + OmegaForm(self.data.k, self.full_omega).size
-
-    @property
-    def tau_at_floor(self) -> np.ndarray:
-        """Per parameter: whether tau is at the optimiser's floor, where the likelihood is
-        flat (no between-test spread)."""
-        return self.theta[: self.data.k] <= np.log(_floor(self.data)) + 1e-6
 
     def shrunken(self) -> tuple[np.ndarray, np.ndarray]:
         """Each opening's best linear unbiased predictor of theta_i (n, k) and its

@@ -36,6 +36,7 @@ import scipy.sparse as sp
 from cpas_ocp.estimation.estimator import Estimator
 from cpas_ocp.estimation.fit import Fit, SolverStats
 from cpas_ocp.estimation.joint_nlp import JointNlp, Link
+from cpas_ocp.estimation.kkt_system import null_space, reduce_linearisation
 
 # Bounds of a population mean in its own space (log space: a factor of e^30 either way).
 MEAN_BOUND = 30.0
@@ -67,7 +68,6 @@ class HierarchicalNlp(JointNlp):
         self.n_mean = len(self.populations)
         self.nz = self.n_test_z + self.n_mean
         self.mean_columns = self.n_test_z + np.arange(self.n_mean)
-        self.n_test_residuals = self.n_residuals
         self.copies = [(g, self.column(t, n), self.scale(t, n))
                        for g, pop in enumerate(self.populations) for t, n in pop.members]
         self.n_residuals += len(self.copies)
@@ -167,7 +167,6 @@ class HierarchicalNlp(JointNlp):
         Hessian of 0.5 |r|^2 over every free coordinate (the states eliminated, the means
         integrated too: the restricted likelihood), the copies in log space where their
         population is (log det of the scaled one plus 2 sum log z there)."""
-        from cpas_ocp.estimation.kkt_system import null_space, reduce_linearisation
         lin = self.linearise(z)
         ns = null_space(reduce_linearisation(lin))
         eig = ns.H_eigenvalues

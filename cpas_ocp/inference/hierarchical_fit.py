@@ -34,7 +34,13 @@ from cpas_ocp.estimation.estimator import Settings, SolverStats
 from cpas_ocp.estimation.fit import Fit
 from cpas_ocp.estimation.hierarchical_nlp import HierarchicalNlp, Population
 from cpas_ocp.estimation.uncertainty import Covariance
-from cpas_ocp.inference.joint_fit import SharedEstimate, SharingError, fits_alone, start_value
+from cpas_ocp.inference.joint_fit import (
+    SharedEstimate,
+    SharingError,
+    fit_problems,
+    fits_alone,
+    start_value,
+)
 from cpas_ocp.physics.flight_test import FlightTest
 from cpas_ocp.physics.parameters import split_name
 
@@ -44,6 +50,8 @@ TAU_RANGE = (1e-5, 1.0)
 # A tau's start where the copies' own spread says nothing: 5 %.
 TAU_START = 0.05
 LEVEL = 0.95
+# A tau within this (log) of an edge of TAU_RANGE is at it: Brent's tolerance.
+EDGE = 0.02
 
 
 @dataclass(frozen=True)
@@ -58,6 +66,7 @@ class PopulationEstimate:
     mu_std: float
     tau: float
     copies: dict[str, float]
+    tau_estimated: bool = True  # False where the caller held it
 
 
 @dataclass
@@ -74,6 +83,28 @@ class HierarchicalFit:
     stats: SolverStats
     deviance: float
     evaluations: int
+    chi2: float  # every residual at the joint mode, the copies' among them
+    dof: int  # those residuals less the free parameters (each copy and mean counted)
+
+    @property
+    def problems(self) -> list[str]:
+        """Why the fit is not a result (empty where it is): `joint_fit.fit_problems` (a
+        chi-square beyond the noise, a median or shared parameter undetermined, a
+        parameter at a bound), and a tau whose search ended at an edge of TAU_RANGE (not
+        determined within it)."""
+        undetermined = [p.name for p in [*self.populations, *self.shared]
+                        if not np.isfinite(p.mu_std if isinstance(p, PopulationEstimate)
+                                           else p.std)]
+        out = fit_problems(self.chi2, self.dof, undetermined, self.covariance)
+        edge = [p.name for p in self.populations if p.tau_estimated
+                and min(abs(np.log(p.tau / edge)) for edge in TAU_RANGE) < EDGE]
+        if edge:
+            out.append(f"tau at an edge of its search range {TAU_RANGE}: {', '.join(edge)}")
+        return out
+
+    @property
+    def is_result(self) -> bool:
+        return not self.problems
 
     def estimate(self, name: str) -> PopulationEstimate | SharedEstimate:
         """The population or shared parameter `name`'s estimate."""
@@ -190,12 +221,16 @@ def hierarchical_fit(tests: Sequence[FlightTest], populations: Mapping[str, str]
         copies = {f"{t}:{n}": float(z[nlp.column(t, n)] * nlp.scale(t, n))
                   for t, n in pop.members}
         out.append(PopulationEstimate(pop.name, float(np.exp(mu)), float(np.exp(mu - half)),
-                                      float(np.exp(mu + half)), sd, pop.tau, copies))
+                                      float(np.exp(mu + half)), sd, pop.tau, copies,
+                                      g in free))
     shared = []
     for link in held:
         t, name = link.members[0]
         shared.append(SharedEstimate(link.name, float(z[nlp.column(t, name)]
                                                       * nlp.scale(t, name)),
                                      cov.std.get(f"{t}:{name}", np.nan), link.members))
+    r = nlp.residual_value(z)
+    n_free = len(nlp.names) - sum(len(k.members) - 1 for k in held)
     return HierarchicalFit(labels, nlp.fits(z, solver_stats), fits, covs, out, shared, cov,
-                           solver_stats, final, state["evaluations"])
+                           solver_stats, final, state["evaluations"], float(r @ r),
+                           r.size - n_free)

@@ -49,6 +49,25 @@ class SharingError(ValueError):
     """The declaration of what is shared does not fit the tests."""
 
 
+def fit_problems(chi2: float, dof: int, undetermined: Sequence[str], covariance: Covariance
+                 ) -> list[str]:
+    """Why a fit of several tests in one NLP is not a result (empty where it is): a
+    chi-square beyond the tests' noise (p below `result_claim.ALPHA`, the single fit's
+    level), a joint parameter the tests do not determine together (`undetermined`),
+    parameters the `covariance` finds held at a bound."""
+    out = []
+    p_value = float(chi2_law.sf(chi2, max(dof, 1)))
+    if p_value < ALPHA:
+        out.append(f"chi-square {chi2:.1f} on {dof} degrees of freedom (p = {p_value:.2g}) is "
+                   "beyond the tests' noise: the shared parameters may differ between the "
+                   "tests, or the model lacks an effect")
+    if undetermined:
+        out.append(f"the tests together do not determine {', '.join(undetermined)}")
+    if covariance.at_bound:
+        out.append(f"held at a bound: {', '.join(covariance.at_bound)}")
+    return out
+
+
 def shared_key(name: str, test: FlightTest, over: str) -> str:
     """The joint name of a test's parameter `name` shared `over` "type" or "vehicle"."""
     if over not in SHARE_OVER:
@@ -124,20 +143,9 @@ class JointFit:
 
     @property
     def problems(self) -> list[str]:
-        """Why the joint fit is not a result (empty where it is): a chi-square beyond the
-        tests' noise (p below `result_claim.ALPHA`, the single fit's level), a shared
-        parameter the tests do not determine together, parameters held at a bound."""
-        out = []
-        if self.fit_p_value < ALPHA:
-            out.append(f"chi-square {self.chi2:.1f} on {self.dof} degrees of freedom (p = "
-                       f"{self.fit_p_value:.2g}) is beyond the tests' noise: the shared "
-                       "parameters may differ between the tests, or the model lacks an effect")
-        open_ = [s.name for s in self.shared if not s.determined]
-        if open_:
-            out.append(f"the tests together do not determine {', '.join(open_)}")
-        if self.covariance.at_bound:
-            out.append(f"held at a bound: {', '.join(self.covariance.at_bound)}")
-        return out
+        """Why the joint fit is not a result (empty where it is): `fit_problems`."""
+        return fit_problems(self.chi2, self.dof, [s.name for s in self.shared
+                                                  if not s.determined], self.covariance)
 
     @property
     def is_result(self) -> bool:
