@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 from cpas_ocp.api.reconstruction import as_test, model_of, units_of
+from cpas_ocp.campaign.population_design import design_over_population
 from cpas_ocp.errors import InputError
 from cpas_ocp.estimation.simulate import simulate_problem
 from cpas_ocp.inference.flight_test_design import TestDesign
@@ -48,12 +49,18 @@ def simulate(problem: str, out: str | Path, seed: int, effects: Sequence[Effect]
     return simulate_problem(base, out, seed, effects=None if effects is None else list(effects))
 
 
-def design(plan: str | Path, out: str | Path | None = None) -> TestDesign:
+def design(plan: str | Path, out: str | Path | None = None,
+           progress: Callable[[str], None] | None = None) -> TestDesign:
     """The design of the next test from the plan file `plan` (`inference.flight_test_design`): each
     candidate instrumentation's predicted sigma, the single changes ranked by the sigma they
-    remove from the plan's parameters of interest, the failure table; the folder
-    `cpas-ocp design` writes is written to `out` where given."""
-    found = design_test(load_plan(plan))
+    remove from the plan's parameters of interest, the failure table, and where the plan
+    names a population's cases, each candidate's sigma over parameter sets drawn from them
+    (`campaign.population_design`); the folder `cpas-ocp design` writes is written to `out`
+    where given."""
+    planned = load_plan(plan)
+    found = design_test(planned)
+    if planned.population_cases is not None:
+        found.spread = design_over_population(planned, progress)
     if out is not None:
         write_design(found, out)
     return found

@@ -23,6 +23,7 @@ numbers.  A case's result does not depend on the chunk it is flown in.
 from __future__ import annotations
 
 import functools
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -122,22 +123,30 @@ def match_cases(test: FlightTest, folder: str | Path, limit: int | None = None
                 ) -> list[StageCases]:
     """The cases of every canopy stage of `test` whose type and stage have a cases file in
     `folder`; InputError when the folder is missing or nothing matches."""
+    return match_canopies([(c.name, c.type, tuple(c.stages)) for c in test.parachutes],
+                          folder, test.name, limit)
+
+
+def match_canopies(canopies: Sequence[tuple[str, str, tuple[str, ...]]], folder: str | Path,
+                   whose: str, limit: int | None = None) -> list[StageCases]:
+    """The cases of every stage of `canopies` ((name, type, stages), the canopies of the test
+    `whose`) whose type and stage have a cases file in `folder`; InputError when the folder
+    is missing or nothing matches."""
     folder = Path(folder)
     if not folder.is_dir():
         raise InputError(str(folder), "(folder)", "a dispersions folder holding "
                          "cases_<type>_<stage>.parquet (cpas-ocp dispersions)")
     found = []
-    for chute in test.parachutes:
-        for stage in chute.stages:
-            path = folder / cases_file(chute.type, stage)
+    for name, kind, stages in canopies:
+        for stage in stages:
+            path = folder / cases_file(kind, stage)
             if path.is_file():
-                found.append(StageCases(chute.name, chute.type, stage, path,
-                                        read_cases(path, limit)))
+                found.append(StageCases(name, kind, stage, path, read_cases(path, limit)))
     if not found:
-        wanted = sorted({cases_file(c.type, s) for c in test.parachutes for s in c.stages})
+        wanted = sorted({cases_file(kind, s) for _, kind, stages in canopies for s in stages})
         present = sorted(p.name for p in folder.glob("cases_*.parquet")) or ["none"]
         raise InputError(str(folder), "cases_<type>_<stage>.parquet",
-                         f"a cases file for a canopy stage of {test.name} ({', '.join(wanted)}); "
+                         f"a cases file for a canopy stage of {whose} ({', '.join(wanted)}); "
                          f"found {', '.join(present)}")
     return found
 

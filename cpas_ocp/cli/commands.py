@@ -76,9 +76,11 @@ def simulate(args: argparse.Namespace) -> int:
 def design(args: argparse.Namespace) -> int:
     from cpas_ocp import api
     from cpas_ocp.reports.design_report import design_text
-    print(design_text(api.design(args.plan, args.out)))
-    print(f"\ndesign written to {args.out} (design.html, sigma.csv, changes.csv, failures.csv,"
-          f" design.json)")
+    found = api.design(args.plan, args.out, progress=_tell(args).say)
+    print(design_text(found))
+    extra = ", population_sigma.csv" if found.spread is not None else ""
+    print(f"\ndesign written to {args.out} (design.html, sigma.csv, changes.csv, failures.csv"
+          f"{extra}, design.json)")
     return 0
 
 

@@ -160,6 +160,8 @@ class TestDesign:
     failures: list[tuple[str, Prediction]]
     interest: list[str]
     notes: dict[str, str] = field(default_factory=dict)
+    # The candidates' sigma over parameter sets drawn from a population (`predict_over`).
+    spread: SpreadPrediction | None = None
 
     @property
     def baseline(self) -> Prediction:
@@ -199,6 +201,70 @@ def design(plan: TestPlan) -> TestDesign:
              if (note := linearisation_note(n, base.values.get(n, 0.0), base.sigma(n),
                                             plan.problem))}
     return TestDesign(plan, predictions, ranking, failures, interest, notes)
+
+
+@dataclass
+class SpreadPrediction:
+    """Each candidate's predicted sigma at several parameter sets (drawn from a population
+    of the planned canopies) besides the nominal one.
+
+    The Fisher information depends on where it is evaluated: a draggier canopy opens
+    faster and loads its riser harder, and a fill time drawn long spreads the opening's
+    information over more samples.  A plan flown with canopies the population has not
+    yet seen gets, for each parameter, the root-mean-square of its sigma over the draws
+    (the sigma of the estimate averaged over the population, as its variance averages),
+    the smallest and largest, and how many draws leave it undetermined.
+
+    `sigma`: candidate name -> parameter x draw predicted sigma (SI), NaN where that draw
+    leaves the parameter undetermined or on a bound; `source` says where the draws came
+    from, `notes` what was held at its nominal value."""
+
+    sigma: dict[str, pd.DataFrame]
+    source: str
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def draws(self) -> int:
+        return next(iter(self.sigma.values())).shape[1] if self.sigma else 0
+
+    def summary(self) -> pd.DataFrame:
+        """One row per candidate and parameter: rms, lowest and highest sigma over the draws
+        that determine it (SI), and the draws that do not."""
+        rows = []
+        for candidate, frame in self.sigma.items():
+            for name, values in frame.iterrows():
+                v = values.to_numpy(dtype=float)
+                ok = np.isfinite(v)
+                rows.append({"candidate": candidate, "parameter": name,
+                             "rms": float(np.sqrt(np.mean(v[ok] ** 2))) if ok.any() else np.nan,
+                             "lowest": float(v[ok].min()) if ok.any() else np.nan,
+                             "highest": float(v[ok].max()) if ok.any() else np.nan,
+                             "undetermined": int((~ok).sum())})
+        return pd.DataFrame(rows)
+
+
+def predict_over(plan: TestPlan, draws: list[dict[str, float]], source: str,
+                 notes: list[str] | None = None,
+                 progress: Callable[[str], None] | None = None) -> SpreadPrediction:
+    """Every candidate of `plan` predicted at each parameter set of `draws` (name -> SI value,
+    taking the place of the problem's nominal value): the planned test simulated and
+    linearised there as at the nominal values (`predicted_covariance`)."""
+    say = progress or (lambda _: None)
+    columns: dict[str, dict[int, dict[str, float]]] = {c.name: {} for c in plan.candidates}
+    for k, draw in enumerate(draws):
+        say(f"predicting at parameter set {k + 1} of {len(draws)}")
+        planner = Planner(dataclasses.replace(plan.problem,
+                                              truth={**plan.problem.truth, **draw}))
+        for c in plan.candidates:
+            p = planner.predict(c)
+            unknown = [n for n in draw if n not in plan.problem.truth and n not in p.values]
+            if unknown:  # a name the model would ignore, silently predicting at its default
+                raise ValueError(f"parameter set {k}: not parameters of the planned test: "
+                                 f"{', '.join(unknown)}")
+            columns[c.name][k] = {n: (np.nan if p.sigma(n) is None else float(p.sigma(n)))
+                                  for n in p.covariance.names}
+    return SpreadPrediction({c: pd.DataFrame(d) for c, d in columns.items()}, source,
+                            list(notes or []))
 
 
 def sigma_removed(base: Prediction, new: Prediction, names: list[str]) -> dict[str, float]:

@@ -25,6 +25,7 @@ from cpas_ocp.physics.units import FACTORS
 
 PLAN_SCHEMA = "test_plan.schema.json"
 DEPLOYMENT = "deployment"  # the phase before the first canopy's first inflation
+POPULATION_DRAWS = 8  # parameter sets a design over a population predicts at by default
 # SI column units of a sensor kind the problem does not have, by dimension.
 # Events the model times itself, which a plan may add to every canopy stage (a chase camera
 # timing each canopy's peak: full open): unlike the deployment and disreef events, which
@@ -98,6 +99,10 @@ class TestPlan:
     changes: tuple[Change, ...]
     interest: tuple[str, ...] = ()
     failures: bool = True
+    # A folder of Monte Carlo cases (`cpas-ocp dispersions`) to predict over as well, and
+    # the parameter sets to draw from it.
+    population_cases: Path | None = None
+    population_draws: int = POPULATION_DRAWS
 
     @property
     def phases(self) -> tuple[str, ...]:
@@ -128,8 +133,14 @@ def load_plan(path: str | Path) -> TestPlan:
     changes = tuple(_change(c, candidates[0], problem, file, f"changes[{i}]")
                     for i, c in enumerate(raw["changes"])) if "changes" in raw \
         else default_changes(candidates[0])
+    population = raw.get("population", {})
+    cases = path.parent / population["cases"] if population else None
+    if cases is not None and not cases.is_dir():
+        raise InputError(file, "population.cases", f"a folder of Monte Carlo cases written by "
+                         f"cpas-ocp dispersions; {cases} is not a folder")
     plan = TestPlan(file, problem, candidates, changes, tuple(raw.get("interest", [])),
-                    bool(raw.get("failures", True)))
+                    bool(raw.get("failures", True)), cases,
+                    int(population.get("draws", POPULATION_DRAWS)))
     for i, c in enumerate(raw.get("candidates", [])):
         for j, s in enumerate(c.get("sensors", [])):
             _check_phases(plan, s, file, f"candidates[{i}].sensors[{j}].phases")

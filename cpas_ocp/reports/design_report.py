@@ -4,7 +4,8 @@ notes where the linearisation is known to be optimistic.
 
 Written to the output folder all at once: design.json, sigma.csv (parameter x
 candidate, SI; empty where a parameter is not determined), changes.csv,
-failures.csv, and design.html, one self-contained page in the report style.
+failures.csv, population_sigma.csv where the plan names a population's cases, and
+design.html, one self-contained page in the report style.
 """
 
 from __future__ import annotations
@@ -78,6 +79,41 @@ def candidates_text(found: TestDesign) -> str:
     return "\n".join(lines)
 
 
+def spread_frame(found: TestDesign) -> pd.DataFrame:
+    """Per candidate and parameter: the predicted sigma at the nominal values and its rms,
+    lowest and highest over the population's parameter sets (SI), and the sets that leave
+    it undetermined; empty where the plan names no population."""
+    if found.spread is None:
+        return pd.DataFrame(columns=["candidate", "parameter", "nominal_sigma", "rms",
+                                     "lowest", "highest", "undetermined"])
+    frame = found.spread.summary()
+    at = {p.instrumentation.name: p for p in found.predictions}
+    frame.insert(2, "nominal_sigma", [at[c].sigma(n) for c, n in
+                                      zip(frame["candidate"], frame["parameter"], strict=True)])
+    return frame
+
+
+def spread_text(found: TestDesign) -> str:
+    """The candidates' sigma over the population's parameter sets, beside the nominal."""
+    if found.spread is None:
+        return ""
+    frame = spread_frame(found)
+    lines = [f"predicted sigma over {found.spread.draws} parameter sets of the population "
+             f"({found.spread.source}): rms, and the range",
+             f"{'candidate':20s} {'parameter (SI)':28s} {'nominal':>10s} {'rms':>10s} "
+             f"{'lowest':>10s} {'highest':>10s}  undetermined"]
+    for r in frame.itertuples(index=False):
+        lines.append(f"{r.candidate[:20]:20s} {r.parameter:28s} {_g(r.nominal_sigma):>10s} "
+                     f"{_g(r.rms):>10s} {_g(r.lowest):>10s} {_g(r.highest):>10s}  "
+                     f"{r.undetermined}")
+    lines += [f"  {n}" for n in found.spread.notes]
+    return "\n".join(lines)
+
+
+def _g(value: float | None) -> str:
+    return "-" if value is None or not math.isfinite(value) else f"{value:.4g}"
+
+
 def ranking_text(found: TestDesign) -> str:
     """The single changes, best first, with the sigma they remove from each parameter of
     interest."""
@@ -121,7 +157,7 @@ def design_text(found: TestDesign) -> str:
     """What `cpas-ocp design` prints."""
     prob = found.plan.problem
     parts = [f"design of {prob.name}: {prob.title}\n{METHOD}", candidates_text(found),
-             ranking_text(found), failures_text(found), EVENTS_NOTE]
+             spread_text(found), ranking_text(found), failures_text(found), EVENTS_NOTE]
     return "\n\n".join(p for p in parts if p)
 
 
@@ -180,7 +216,11 @@ def design_record(found: TestDesign) -> dict:
                          "prediction": prediction(r.prediction)} for r in found.ranking],
             "failures": [{"failure": label, "prediction": prediction(p)}
                          for label, p in found.failures],
-            "notes": found.notes, "events_note": EVENTS_NOTE}
+            "notes": found.notes, "events_note": EVENTS_NOTE,
+            "population": None if found.spread is None else {
+                "source": found.spread.source, "draws": found.spread.draws,
+                "notes": found.spread.notes,
+                "sigma": spread_frame(found).to_dict(orient="records")}}
 
 
 def design_page(found: TestDesign) -> Page:
@@ -206,6 +246,15 @@ def design_page(found: TestDesign) -> Page:
                [[n, found.baseline.units[n], found.baseline.values[n],
                  *[sigma_cell(p, n) for p in found.predictions], found.notes.get(n, "")]
                 for n in frame.index], [n in found.notes for n in frame.index])
+    if found.spread is not None:
+        page.heading("Predicted sigma over the population (SI)")
+        page.paragraph(spread_text(found).splitlines()[0])
+        spread = spread_frame(found)
+        page.table(list(spread.columns), [[_g(v) if isinstance(v, float) else v for v in row]
+                                          for row in spread.itertuples(index=False)],
+                   [bool(u) for u in spread["undetermined"]])
+        for note in found.spread.notes:
+            page.paragraph(note, "note")
     page.heading("Single changes, ranked")
     page.paragraph(ranking_text(found).splitlines()[0])
     changes = changes_frame(found)
@@ -244,6 +293,8 @@ def write_design(found: TestDesign, out: str | Path) -> Path:
         sigma_frame(found).to_csv(tmp / "sigma.csv")
         changes_frame(found).to_csv(tmp / "changes.csv", index=False)
         failures_frame(found).to_csv(tmp / "failures.csv", index=False)
+        if found.spread is not None:
+            spread_frame(found).to_csv(tmp / "population_sigma.csv", index=False)
         design_page(found).write(tmp / "design.html")
         (tmp / MARKER).write_text(json_text(design_record(found)))
     return out
