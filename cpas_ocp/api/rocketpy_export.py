@@ -47,6 +47,7 @@ from cpas_ocp.io.strict_json import json_text
 from cpas_ocp.physics.atmosphere import SiteAtmosphere, geometric_altitude
 from cpas_ocp.physics.flight_test import FlightTest
 from cpas_ocp.physics.parameters import param_name
+from cpas_ocp.precision import with_sigma
 
 if TYPE_CHECKING:
     from cpas_ocp.api.reconstruction import Reconstruction
@@ -129,8 +130,8 @@ class RocketPyExport:
                  f"{self.sampling_rate_hz:g} Hz):"]
         for c in self.canopies:
             trigger = "at apogee" if c.trigger == "apogee" else f"at {c.trigger:.1f} m AGL"
-            lines.append(f"  {c.name:<12} cd_s {c.cd_s:.5g} ± {c.cd_s_std:.2g} m^2, "
-                         f"trigger {trigger}, lag {c.lag:.3f} ± {c.lag_std:.3f} s")
+            lines.append(f"  {c.name:<12} cd_s {with_sigma(c.cd_s, c.cd_s_std)} m^2, "
+                         f"trigger {trigger}, lag {with_sigma(c.lag, c.lag_std)} s")
             lines += [f"    note: {n}" for n in c.notes]
         return "\n".join(lines)
 

@@ -108,6 +108,7 @@ from cpas_ocp.io.model_spec import ModelSpec
 from cpas_ocp.physics.effects.registry import EffectType, load_plugin
 from cpas_ocp.physics.flight_test import FlightTest
 from cpas_ocp.physics.parameters import split_name
+from cpas_ocp.precision import with_sigma
 
 MAX_STEPS = 4  # effects added at most, by default
 
@@ -726,7 +727,7 @@ def _regressed_step(out: Discovery, step: DiscoveryStep, alpha: float, progress:
     if not found.found or found.spec is None or found.refitted is None:
         return None
     est, fit = found.refitted
-    terms = ", ".join(f"{n} = {v:.3g} ± {s:.2g}" for n, (v, s) in found.selected.items())
+    terms = ", ".join(f"{n} = {with_sigma(v, s)}" for n, (v, s) in found.selected.items())
     return DiscoveryStep("drag_law_terms", found.spec, fit,
                          f"every term against none: {found.gate}; selected {terms}: "
                          f"{found.lr}", estimator=est)

@@ -45,6 +45,7 @@ from cpas_ocp.estimation.kkt_system import NonFiniteCurvature
 from cpas_ocp.inference.model_comparison import LikelihoodRatio, refit
 from cpas_ocp.io.model_spec import ModelSpec
 from cpas_ocp.physics.effects.drag_law_terms import FEATURES, DragLawTerms, term_name
+from cpas_ocp.precision import with_sigma
 
 # Ipopt's iteration limit of each refit of the selection.
 SELECT_MAX_ITER = 150
@@ -78,7 +79,7 @@ class TermSelection:
         if self.dropped:
             parts.append("dropped " + ", ".join(self.dropped))
         if self.selected and self.lr is not None:  # a record read back has no refit
-            terms = ", ".join(f"{n} = {v:.4g} ± {s:.2g}" for n, (v, s) in self.selected.items())
+            terms = ", ".join(f"{n} = {with_sigma(v, s)}" for n, (v, s) in self.selected.items())
             parts.append(f"kept {terms}; {self.lr}")
         if self.note:
             parts.append(self.note)

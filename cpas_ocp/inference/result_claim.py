@@ -122,6 +122,7 @@ from cpas_ocp.io.import_reports import import_deployments, import_turned_over
 from cpas_ocp.io.model_spec import ModelSpec
 from cpas_ocp.physics.effects.canopy_inflation import CanopyInflation
 from cpas_ocp.physics.parameters import param_name, split_name
+from cpas_ocp.precision import with_sigma
 
 # Two-sided family-wise level at which a fitted drag area and its settled descent's disagree
 # (`descent_disagreements`), the level of the import's deployment forensics.
@@ -531,8 +532,8 @@ def descent_disagreements(fit: Fit, std_of: Callable[[], dict[str, float]]) -> l
     for canopy, name, value, sigma, needed, needed_sigma in pairs:
         z = (value - needed) / float(np.hypot(sigma, needed_sigma))
         if abs(z) > limit:
-            out.append(f"the {canopy}'s fitted drag area {name} = {value:.3g} ± {sigma:.2g} "
-                       f"m^2 lies {z:+.1f} sigma from the {needed:.3g} ± {needed_sigma:.2g} "
+            out.append(f"the {canopy}'s fitted drag area {name} = {with_sigma(value, sigma)} "
+                       f"m^2 lies {z:+.1f} sigma from the {with_sigma(needed, needed_sigma)} "
                        "m^2 its settled descent needs: the data that set it and the descent "
                        "rate disagree (the report's \"Drag areas from the steady descent\" "
                        "names the channel)")

@@ -94,6 +94,7 @@ from cpas_ocp.io.log_noise import (
 )
 from cpas_ocp.physics.effects.canopy_inflation import MAX_CD
 from cpas_ocp.physics.units import G0
+from cpas_ocp.precision import rounded, with_sigma
 
 Density = Callable[[np.ndarray], np.ndarray]
 
@@ -253,22 +254,6 @@ class Forensics:
             if c.name == name:
                 return c
         raise KeyError(name)
-
-
-def measured(value: float, sigma: float) -> str:
-    """``value ± sigma`` to the precision the sigma allows: two significant digits of it."""
-    if not (math.isfinite(sigma) and sigma > 0.0):
-        return f"{value:.3g}"
-    decimals = 1 - math.floor(math.log10(sigma))
-    if decimals > 0:
-        return f"{value:.{decimals}f} ± {sigma:.{decimals}f}"
-    step = 10.0 ** (-decimals)
-    return f"{round(value / step) * step:.0f} ± {round(sigma / step) * step:.0f}"
-
-
-def _figure(value: float, sigma: float) -> str:
-    """`value` alone, to the precision its sigma allows."""
-    return measured(value, sigma).split(" ± ")[0]
 
 
 def _rho(density: Density, h: np.ndarray | float) -> np.ndarray:
@@ -648,10 +633,10 @@ def _judge(chute: Canopy, descent: SettledDescent, before: DragArea | None,
     if late is not None:
         why = (f"it took hold {late[0] - float(chute.deploy_time):.1f} s after its charge "  # type: ignore[arg-type]
                f"at {chute.deploy_time:.2f} s (hung in its bag, streaming or tangled?): the "
-               f"fall before at {_figure(late[2], AIR_SIGMA_M_S)} m/s needs "
-               f"{measured(fall.value, fall.sigma)} m^2 (airframe and canopy); then {why}")  # type: ignore[union-attr]
+               f"fall before at {rounded(late[2], AIR_SIGMA_M_S)} m/s needs "
+               f"{with_sigma(fall.value, fall.sigma)} m^2 (airframe and canopy); then {why}")  # type: ignore[union-attr]
     head = {"opened": f"the {name} opened"
-            + (f" at {measured(*t_open)} s" if t_open is not None else ""),
+            + (f" at {with_sigma(*t_open)} s" if t_open is not None else ""),
             "partial": f"the {name} opened only in part (a streamer, or a canopy partly "
                        "open or tangled?)",
             "not_opened": f"the {name} did not "
@@ -669,9 +654,9 @@ def _why(chute: Canopy, verdict: str, descent: SettledDescent, own: DragArea,
          above: bool, bound: float | None, t_open: tuple[float, float] | None,
          already: bool) -> str:
     """The reason a verdict's sentence gives, with the numbers it rests on."""
-    rate = f"{measured(descent.rate, descent.rate_sigma)} m/s"
-    needs = f"{measured(descent.drag_area, descent.drag_area_sigma)} m^2"
-    mine = f"{measured(own.value, own.sigma)} m^2"
+    rate = f"{with_sigma(descent.rate, descent.rate_sigma)} m/s"
+    needs = f"{with_sigma(descent.drag_area, descent.drag_area_sigma)} m^2"
+    mine = f"{with_sigma(own.value, own.sigma)} m^2"
     diam = f"its {chute.diameter:.2f} m diameter" if chute.diameter else ""
     at_floor = ("" if cut is None else
                 f"the {cut:.2g} m^2 {diam} gives at Cd {FLOOR_CD:g}, the least of an open "
@@ -682,14 +667,14 @@ def _why(chute: Canopy, verdict: str, descent: SettledDescent, own: DragArea,
     stayed = f"the descent rate stayed {rate} across {charge}"
     if previous is not None:  # the rate before, in the air the descent after it flew in
         scale = math.sqrt(previous.density / descent.density)
-        stayed += (f" ({measured(previous.rate * scale, previous.rate_sigma * scale)} m/s "
+        stayed += (f" ({with_sigma(previous.rate * scale, previous.rate_sigma * scale)} m/s "
                    "before, scaled to that air)")
     if verdict == "not_opened" and previous is not None and before is not None:
-        return (f"{stayed}: it needs {needs} against {measured(before.value, before.sigma)} "
+        return (f"{stayed}: it needs {needs} against {with_sigma(before.value, before.sigma)} "
                 "m^2 before")
     if verdict == "not_opened" and before is not None:
         return (f"the descent at {rate} needs {needs}, the airframe's own drag area "
-                f"({measured(before.value, before.sigma)} m^2 from the {before.source}, with "
+                f"({with_sigma(before.value, before.sigma)} m^2 from the {before.source}, with "
                 f"a {AIRFRAME_MODEL_REL:.0%} allowance for its attitude)")
     if verdict == "not_opened":
         return (f"the descent at {rate} needs {needs}, far below {at_floor} (the drag area "
@@ -699,7 +684,7 @@ def _why(chute: Canopy, verdict: str, descent: SettledDescent, own: DragArea,
     if verdict == "opened":
         cd = (f" (Cd {own.value / (math.pi * chute.diameter**2 / 4.0):.2g} on {diam})"
               if chute.diameter and before is not None else "")
-        slowed = (f"the descent slowed from {_figure(previous.rate, previous.rate_sigma)} to "
+        slowed = (f"the descent slowed from {rounded(previous.rate, previous.rate_sigma)} to "
                   f"{rate}" if previous is not None else f"the descent at {rate}")
         why = f"{slowed} needs {needs}, its own {mine}{cd}"
         if above:

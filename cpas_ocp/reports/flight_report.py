@@ -49,6 +49,7 @@ from cpas_ocp.physics.effects.wind_process import WindProcess
 from cpas_ocp.physics.flight_test import Event, Parachute
 from cpas_ocp.physics.parameters import param_name, split_name
 from cpas_ocp.physics.units import FACTORS, G0
+from cpas_ocp.precision import with_sigma
 from cpas_ocp.reports.display_units import DisplayUnits, pretty
 
 STEADY_AFTER_S = 10.0  # a canopy phase counts as steady this long after its deployment (s)
@@ -279,9 +280,10 @@ def steady_descent_text(fit: Fit, cov: Covariance, units: DisplayUnits | None = 
         lines.append(f"| no descent rate: {exc} | | | | | | |")
     for r in rates:
         lines.append(f"| {' + '.join(r.canopies)} | {r.band or '-'} | {r.t0:.1f}-{r.t1:.1f} | "
-                     f"{k_length * r.altitude_m:.0f} | {k_speed * r.measured:.2f} ± "
-                     f"{k_speed * r.measured_sigma:.2f} | {k_speed * r.implied:.2f} ± "
-                     f"{k_speed * r.implied_sigma:.2g} | {r.z:+.1f} |")
+                     f"{k_length * r.altitude_m:.0f} | "
+                     f"{with_sigma(k_speed * r.measured, k_speed * r.measured_sigma)} | "
+                     f"{with_sigma(k_speed * r.implied, k_speed * r.implied_sigma)} | "
+                     f"{r.z:+.1f} |")
     lines += ["", "The implied rate is drag equal to weight at the window's mean altitude, "
               "its σ from the drag areas' covariance; the measured one a straight line "
               "through the altimeter's geometric altitude, its σ counting the residuals' "
@@ -391,8 +393,8 @@ def steady_drag_area_section(fit: Fit, cov: Covariance, rates: list[DescentRate]
     worst in the steady window (`window_residuals`), and the fitted air's mean there
     against its prior."""
     areas = steady_drag_areas(fit, cov, rates)
-    rows = [[a.name, f"{a.rate.t0:.1f}-{a.rate.t1:.1f}", f"{a.fitted:.4f} ± "
-             f"{a.fitted_sigma:.2g}", f"{a.steady:.4f} ± {a.steady_sigma:.2g}",
+    rows = [[a.name, f"{a.rate.t0:.1f}-{a.rate.t1:.1f}", with_sigma(a.fitted, a.fitted_sigma),
+             with_sigma(a.steady, a.steady_sigma),
              f"{a.air_sigma:.2f}", f"{a.z:+.1f}"] for a in areas]
     note = ("The steady descent's drag area is drag equal to weight at the measured rate and "
             "the window's mean altitude; its σ counts the rate's and the vertical air's (the "
@@ -583,7 +585,7 @@ def opening_lines(fit: Fit, cov: Covariance, held: dict[str, Profile] | None = N
               f"{v_start:.1f} m/s."]
     full = fit.test.event("full_open", chute.name, stage)
     if full is not None:
-        lines.append(f"- full open observed at {full.time:.2f} ± {full.sigma:.2f} s (the "
+        lines.append(f"- full open observed at {with_sigma(full.time, full.sigma)} s (the "
                      "accelerometer's opening peak, `full_open`), the model's at "
                      f"{rise:.2f} s ({(rise - full.time) / full.sigma:+.1f} σ); with the "
                      "altimeter it fixes the start and the fill constant together.")
@@ -670,8 +672,8 @@ def descent_rate_rows(rates: list[DescentRate]) -> list[list[str]]:
     """One row per steady window (`DESCENT_RATE_HEADER`): the measured descent rate against
     the one the fitted drag areas imply there."""
     return [[" + ".join(r.canopies), f"{r.t0:.1f}-{r.t1:.1f}", f"{r.altitude_m:.0f}",
-             f"{r.measured:.2f} ± {r.measured_sigma:.2f}",
-             f"{r.implied:.2f} ± {r.implied_sigma:.2g}", f"{r.z:+.1f}"] for r in rates]
+             with_sigma(r.measured, r.measured_sigma),
+             with_sigma(r.implied, r.implied_sigma), f"{r.z:+.1f}"] for r in rates]
 
 
 def descent_rate_text(rates: list[DescentRate]) -> str:
@@ -716,10 +718,10 @@ def nominal_section(fit: Fit, cov: Covariance, nominal: dict[str, dict[str, Any]
              *[""] * (len(NOMINAL_HEADER) - 2)] for name in left]
     for c in comps:
         fitted = (f"{c.fitted:.4f} on its bound" if c.at_bound
-                  else f"{c.fitted:.4f} ± {c.sigma:.2g}")
+                  else with_sigma(c.fitted, c.sigma))
         rows.append([c.name, fitted, f"{c.sigma_rate:.2g}", f"{c.nominal:.3f}",
                      f"{c.fitted / c.nominal:.2f}", f"{c.z:+.1f}", f"{c.rate_nominal:.2f}",
-                     f"{c.rate_measured.measured:.2f} ± {c.rate_measured.measured_sigma:.2f}"])
+                     with_sigma(c.rate_measured.measured, c.rate_measured.measured_sigma)])
     if any(isinstance(e, WindProcess) for e in fit.model.effects):
         note = ("The fit's σ count the air's vertical motion (`wind_process`) as well as the "
                 "sensors' noise; the σ that the measured rate's scatter allows is given beside "
@@ -792,9 +794,8 @@ def air_motion_text(still: Fit, still_cov: Covariance, wind: Fit, wind_cov: Cova
         lines.append(f"| {name}, normalised RMS | {value:.2f} | {rms_wind[name]:.2f} |")
     for name in still.free:
         if name in wind.parameters and split_name(name)[0] in ("CdS", "t_start"):
-            lines.append(f"| {name} | {still.parameters[name]:.4g} ± "
-                         f"{still_cov.std.get(name, float('nan')):.2g} | "
-                         f"{wind.parameters[name]:.4g} ± "
-                         f"{wind_cov.std.get(name, float('nan')):.2g} |")
+            lines.append(f"| {name} | "
+                         f"{with_sigma(still.parameters[name], still_cov.std.get(name))} | "
+                         f"{with_sigma(wind.parameters[name], wind_cov.std.get(name))} |")
     lines += ["", f"![the air's vertical motion]({figure})", ""]
     return "\n".join(lines)

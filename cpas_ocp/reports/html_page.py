@@ -20,6 +20,7 @@ import plotly.graph_objects as go
 from plotly.offline import get_plotlyjs
 from plotly.subplots import make_subplots
 
+from cpas_ocp.precision import Measured
 from cpas_ocp.reports.display_units import pretty
 from cpas_ocp.reports.plots import WINDOW_COLOURS, DragAreaCurves
 from cpas_ocp.reports.report_data import ChannelSeries, ParameterRow, Span
@@ -100,9 +101,12 @@ class Page:
 
     def table(self, header: Sequence[str], rows: Sequence[Sequence[object]],
               flagged: Sequence[bool] = ()) -> None:
-        """A table; numbers to 5 significant digits, right-aligned; `flagged` rows
+        """A table; numbers right-aligned, those without a sigma to 5 significant digits
+        (a `precision.Measured` text is already rounded to its sigma); `flagged` rows
         highlighted."""
         def cell(v: object) -> str:
+            if isinstance(v, Measured):
+                return f"<td class=n>{html.escape(v)}"
             if isinstance(v, float | np.floating):
                 return "<td class=n>" + ("—" if not np.isfinite(v) else f"{float(v):.5g}")
             if isinstance(v, int | np.integer):
@@ -160,8 +164,7 @@ class Page:
 def parameter_table(page: Page, rows: Sequence[ParameterRow]) -> None:
     """The free parameters: value, 1 sigma, 95 % interval, unit, initial guess, flag."""
     page.table(["parameter", "value", "± 1σ", "95 % interval", "unit", "initial", "flag"],
-               [[r.name, r.value, float("nan") if r.std is None else r.std,
-                 r.interval,
+               [[r.name, r.value_text, r.std_text, r.interval,
                  pretty(r.unit), r.initial, r.flag] for r in rows],
                flagged=[bool(r.flag) or r.window is not None for r in rows])
 

@@ -7,6 +7,7 @@ import numpy as np
 
 from cpas_ocp.io.import_reports import ImportSummary
 from cpas_ocp.io.recorder_clocks import RecorderEstimates, clock_offset
+from cpas_ocp.precision import with_sigma
 
 
 def import_text(summary: ImportSummary) -> str:
@@ -36,7 +37,7 @@ def import_text(summary: ImportSummary) -> str:
         lines.append(f"{name}'s opening: {snatch}")
     if summary.flight_events:
         lines.append("flight events: " + ", ".join(
-            f"{k} {e.time:.2f} ± {e.sigma:.2f} s ({e.source})"
+            f"{k} {with_sigma(e.time, e.sigma)} s ({e.source})"
             for k, e in summary.flight_events.items()))
     lines.extend(f"deployment: {entry['sentence']}" for entry in summary.deployments.values())
     lines.extend(f"note: {n}" for n in summary.notes)
@@ -50,10 +51,6 @@ def recorders_text(recorders: list[RecorderEstimates]) -> str:
     first, and each shared drag area and start time with its sigma, start times in the
     first recorder's clock, and every difference from the first in units of the
     combined sigma (independent fits)."""
-    def shown(name: str, value: float, std: float) -> str:
-        return f"{value:.3f} ± {std:.3f}" if name.startswith("t_start") else \
-            f"{value:.4g} ± {std:.2g}"
-
     first = recorders[0]
     offsets = [0.0] + [clock_offset(first.log, r.log) for r in recorders[1:]]
     lines = ["## The recorders compared", "",
@@ -65,14 +62,14 @@ def recorders_text(recorders: list[RecorderEstimates]) -> str:
     lines += ["", "| parameter | " + " | ".join(r.log.path.name for r in recorders) +
               " | difference / σ |", "|---" * (len(recorders) + 2) + "|"]
     for name, (value0, std0) in first.estimates.items():
-        cells, z = [shown(name, value0, std0)], []
+        cells, z = [with_sigma(value0, std0)], []
         for r, offset in zip(recorders[1:], offsets[1:], strict=True):
             if name not in r.estimates:
                 cells.append("—")
                 continue
             value, std = r.estimates[name]
             value -= offset if name.startswith("t_start") else 0.0
-            cells.append(shown(name, value, std))
+            cells.append(with_sigma(value, std))
             z.append(f"{(value - value0) / np.hypot(std, std0):+.1f}")
         lines.append(f"| {name} | " + " | ".join(cells) + f" | {', '.join(z)} |")
     return "\n".join(lines) + "\n"

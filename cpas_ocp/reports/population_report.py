@@ -28,6 +28,7 @@ from cpas_ocp.campaign.population_model import GroupingTest, Interval
 from cpas_ocp.campaign.population_study import PopulationGroup
 from cpas_ocp.io.output_folder import atomic_folder
 from cpas_ocp.io.strict_json import json_text
+from cpas_ocp.precision import with_interval
 from cpas_ocp.reports.html_page import MEASURED, MODEL, RESIDUAL, Page
 
 MARKER = "population.json"
@@ -193,8 +194,8 @@ def group_text(group: PopulationGroup) -> str:
              f"  {'parameter':10s} {'median':>10s} {'95 % interval':>22s} {'tau':>7s} "
              f"{'95 % interval':>18s} {'I^2':>5s} {'point SD':>8s}"]
     for row in parameter_frame(group).itertuples():
-        lines.append(f"  {row.parameter:10s} {row.median:10.4g} "
-                     f"{f'[{row.median_lower:.4g}, {row.median_upper:.4g}]':>22s} "
+        median, interval = with_interval(row.median, row.median_lower, row.median_upper)
+        lines.append(f"  {row.parameter:10s} {median:>10s} {interval:>22s} "
                      f"{row.tau:7.3g} {f'[{row.tau_lower:.3g}, {row.tau_upper:.3g}]':>18s} "
                      f"{row.i_squared:5.2f} {row.point_sd:8.3g}")
     lines.append("  (median exp(mu) in SI; tau and the point SD in log space, a coefficient "
@@ -273,8 +274,9 @@ def population_page(groups: Sequence[PopulationGroup], skipped: Sequence[str],
         frame = parameter_frame(group)
         page.table(["parameter", "space", "median", "95 % interval", "tau", "95 % interval",
                     "I²", "point SD"],
-                   [[r.parameter, r.space, r.median, f"[{r.median_lower:.4g}, "
-                     f"{r.median_upper:.4g}]", r.tau, f"[{r.tau_lower:.3g}, {r.tau_upper:.3g}]",
+                   [[r.parameter, r.space,
+                     *with_interval(r.median, r.median_lower, r.median_upper),
+                     r.tau, f"[{r.tau_lower:.3g}, {r.tau_upper:.3g}]",
                      r.i_squared, r.point_sd] for r in frame.itertuples()])
         page.figure(forest_figure(group), rows=1, time_axis=False)
         if group.nested is not None:

@@ -179,8 +179,8 @@ def parameter_table(fit: Fit, cov: Covariance | None, units: DisplayUnits | None
     lines = [f"{'parameter':30s} {'value':>11s} {'± 1σ':>10s} {'95 % interval':>{width}s}  "
              f"{'unit':6s} {'initial':>10s}"]
     for row in rows:
-        s = f"{'—':>10s}" if row.std is None else f"{row.std:10.4g}"
-        lines.append(f"{row.name:30s} {row.value:11.5g} {s} {row.interval:>{width}s}  "
+        lines.append(f"{row.name:30s} {row.value_text:>11s} {row.std_text:>10s} "
+                     f"{row.interval:>{width}s}  "
                      f"{row.unit:6s} {row.initial:10.4g}" + (f"  {row.flag}" if row.flag else ""))
     if cov is not None:
         lines.append(correlation_line(cov))

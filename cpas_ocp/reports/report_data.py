@@ -7,14 +7,12 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.stats import norm
 
 from cpas_ocp.estimation.estimator import EVENTS, Fit
 from cpas_ocp.estimation.uncertainty import Covariance
 from cpas_ocp.inference.phase_windows import PhaseWindow, windows_for_sensor
+from cpas_ocp.precision import Z95, Measured, interval_text, rounded, sigma_text
 from cpas_ocp.reports.display_units import DisplayUnits
-
-Z95 = float(norm.ppf(0.975))  # two-sided 95 % quantile of the standard normal
 
 
 @dataclass(frozen=True)
@@ -65,8 +63,18 @@ class ParameterRow:
         if self.window is not None:
             what = "window" if self.unit == "s" else "bounds"
             return (f"undetermined within its {what} "
-                    f"[{self.window[0]:.5g}, {self.window[1]:.5g}]")
-        return "—" if self.ci95 is None else f"[{self.ci95[0]:.5g}, {self.ci95[1]:.5g}]"
+                    f"[{self.window[0]:.4g}, {self.window[1]:.4g}]")
+        return "—" if self.ci95 is None else interval_text(*self.ci95, self.std)
+
+    @property
+    def value_text(self) -> Measured:
+        """The value to the decimal place of its sigma (`precision`)."""
+        return rounded(self.value, self.std)
+
+    @property
+    def std_text(self) -> Measured:
+        """The sigma to two significant digits, "—" without one."""
+        return sigma_text(self.std)
 
 
 def channel_series(fit: Fit, units: DisplayUnits) -> list[ChannelSeries]:

@@ -38,7 +38,7 @@ def test_a_term_selection_reads_back_as_written() -> None:
     assert back.gate == found.gate and back.lr == found.lr
     assert back.selected == found.selected and back.dropped == found.dropped
     text = str(back)
-    assert "drag_term[log_dynamic_pressure] = -0.09727 ± 0.0031" in text
+    assert "drag_term[log_dynamic_pressure] = -0.0973 ± 0.0031" in text  # to its sigma
     assert "dropped log_dynamic_pressure_squared (|z| 0.4), log_density (|z| 1.4)" in text
     none = TermSelection(3, LikelihoodRatio(2.1, 3), note="no term is needed")
     assert not none.found and str(none).endswith("no term is needed")

@@ -24,6 +24,7 @@ from cpas_ocp.io.flight_test import load_test
 from cpas_ocp.io.problems import load_problem
 from cpas_ocp.physics.atmosphere import density_at
 from cpas_ocp.physics.units import G0
+from cpas_ocp.precision import with_sigma
 from cpas_ocp.reports.flight_report import descent_rates, nominal_comparisons, nominal_text
 
 NOMINAL = {"CdS[drogue,stage1]": {"value": 0.6, "unit": "m^2", "source": "a design value"},
@@ -99,8 +100,9 @@ def test_the_page_tables_the_drag_areas_against_their_nominal_values(steady) -> 
     assert section.startswith("<table><thead><tr><th>parameter</th><th>fitted (m²)</th>"
                               "<th>σ from the measured rate (m²)</th>"), section[:400]
     for name in NOMINAL:
-        value = f"{fit.parameters[name]:.4f} ± {cov.std[name]:.2g}"
-        assert f"<td>{name}</td><td>{value}</td>" in section
+        # the value to the decimal place of two digits of its sigma, aligned as a number
+        value = with_sigma(fit.parameters[name], cov.std[name])
+        assert f"<td>{name}</td><td class=n>{value}</td>" in section
         assert f"<p>{name}: with the nominal" in section
     assert "|---" not in page and "| parameter |" not in page
     assert not any("nominal" in pre for pre in re.findall(r"<pre>(.*?)</pre>", page, re.S))

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import math
 import shutil
 from pathlib import Path
 from typing import Any
@@ -16,6 +15,7 @@ import pytest
 from cpas_ocp.cli import main
 from cpas_ocp.io.problems import load_problem
 from cpas_ocp.physics.units import FACTORS, FT, LB, LBF, dimension_of
+from cpas_ocp.precision import rounded, sigma_text
 from cpas_ocp.reports.display_units import (
     US_CUSTOMARY,
     DisplayUnits,
@@ -107,11 +107,11 @@ def test_us_table_converts_the_si_values(drogue_fit) -> None:
     table = parameter_table(fit, cov, DisplayUnits("us"))
     name = "CdS[drogue1,stage1]"
     row = next(line for line in table.splitlines() if line.startswith(name))
-    value, std = float(row.split()[1]), float(row.split()[2])
+    value, std = row.split()[1:3]
     assert " ft^2 " in row
-    assert value == pytest.approx(fit.parameters[name] / FT**2, rel=1e-4)
-    assert std == pytest.approx(cov.std[name] / FT**2, rel=1e-3)
-    assert math.isfinite(value)
+    # converted, then rounded to two digits of the converted sigma
+    assert std == sigma_text(cov.std[name] / FT**2)
+    assert value == rounded(fit.parameters[name] / FT**2, cov.std[name] / FT**2)
 
 
 @pytest.mark.slow
