@@ -136,7 +136,13 @@ def table_fields(text: str) -> list[str]:
 
 def blocks() -> list[tuple[list[str], str]]:
     """(info-string words, body) of every fenced block on the page."""
-    return [(m["info"].split(), m["body"]) for m in FENCE.finditer(PAGE.read_text())]
+    return [(_words(m["info"]), m["body"]) for m in FENCE.finditer(PAGE.read_text())]
+
+
+def _words(info: str) -> list[str]:
+    """A fence's info string as words: ``json`` or the classes of ``{.json .card .example-a}``
+    (the attribute form Markdown renders with the tags kept)."""
+    return [w.lstrip(".") for w in info.strip().strip("{}").split()]
 
 
 def example(kind: str, tag: str) -> str:

@@ -1,0 +1,27 @@
+"""mkdocs-gen-files script: writes the generated pages (`pages.py`) into the site."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import mkdocs_gen_files
+
+sys.path.insert(0, str(Path(__file__).parent))
+import pages
+
+with mkdocs_gen_files.open("commands.md", "w") as fh:
+    fh.write(pages.command_reference())
+
+schemas = sorted(pages.SCHEMAS.glob("*.schema.json"))
+with mkdocs_gen_files.open("formats/index.md", "w") as fh:
+    fh.write(pages.format_index(schemas))
+for path in schemas:
+    with mkdocs_gen_files.open(f"formats/{path.stem.replace('.schema', '')}.md", "w") as fh:
+        fh.write(pages.format_page(path))
+
+for path in sorted(pages.TUTORIALS.glob("*.py")):
+    with mkdocs_gen_files.open(f"tutorials/{path.stem}.md", "w") as fh:
+        fh.write(pages.tutorial_page(path))
+with mkdocs_gen_files.open("tutorials/discovery.md", "w") as fh:
+    fh.write(pages.tutorial_page(pages.ROOT / "docs" / "notebook.py"))

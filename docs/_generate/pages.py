@@ -1,0 +1,158 @@
+"""The documentation site's generated pages: the command reference from the argument parser,
+the file formats from the JSON Schemas in data_schemas/, and each tutorial page from its
+script (jupytext percent format, run by the suite).  `gen_pages.py` writes them into the
+site at build time (mkdocs-gen-files); nothing generated is kept in the repository."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any
+
+from cpas_ocp.cli import arguments
+
+ROOT = Path(__file__).resolve().parents[2]
+SCHEMAS = ROOT / "data_schemas"
+TUTORIALS = ROOT / "docs" / "tutorials"
+
+
+def _cell(text: object) -> str:
+    """`text` fit for one cell of a markdown table."""
+    return str(text).replace("|", "\\|").replace("\n", " ")
+
+
+def _subcommands(parser: argparse.ArgumentParser) -> dict[str, argparse.ArgumentParser]:
+    action = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    return dict(action.choices)
+
+
+def _summaries(parser: argparse.ArgumentParser) -> dict[str, str]:
+    action = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    return {c.dest: c.help or "" for c in action._choices_actions}
+
+
+def command_reference() -> str:
+    """One section per command: what it does, its usage line and a table of its arguments
+    (name, what it is, default), all from `cpas_ocp.cli.arguments.parser`."""
+    parser = arguments.parser()
+    summaries = _summaries(parser)
+    out = ["# Command reference", "",
+           "Generated from the command line's own parser: what `cpas-ocp COMMAND --help` "
+           "prints, every command on one page. Bad input exits 2 with one line naming the "
+           "file, the field and the expectation; a fit that is not a result exits 4.", ""]
+    for name, sub in _subcommands(parser).items():
+        usage = " ".join(sub.format_usage().split())
+        usage = usage.removeprefix("usage: ")
+        out += [f"## `{name}`", "", summaries.get(name, "").rstrip(".") + ".", "",
+                f"```\n{usage}\n```", ""]
+        rows = []
+        for action in sub._actions:
+            if isinstance(action, argparse._HelpAction):
+                continue
+            flags = ", ".join(f"`{f}`" for f in action.option_strings) or f"`{action.dest}`"
+            default = action.default
+            shown = ("" if default in (None, False, [], argparse.SUPPRESS)
+                     or action.required or not action.option_strings else f"`{default}`")
+            rows.append(f"| {flags} | {_cell(action.help or '')} | {shown} |")
+        if rows:
+            out += ["| argument | what it is | default |", "|---|---|---|", *rows, ""]
+    return "\n".join(out) + "\n"
+
+
+def _link(ref: str) -> str:
+    """A schema reference as a link: to a definition of this page ("#/$defs/length"), to
+    another format's page ("model.schema.json"), or to a definition there."""
+    where, _, pointer = ref.partition("#")
+    name = pointer.rsplit("/", 1)[-1] if pointer else ""
+    page = where.rsplit("/", 1)[-1].replace(".schema.json", ".md") if where else ""
+    label = name or page.removesuffix(".md")
+    return f"[{label}]({page}{'#' + name.lower() if name else ''})"
+
+
+def _type(schema: dict[str, Any]) -> str:
+    if "$ref" in schema:
+        return _link(schema["$ref"])
+    if "const" in schema:
+        return f"`{json.dumps(schema['const'])}`"
+    if "enum" in schema:
+        return "one of " + ", ".join(f"`{json.dumps(v)}`" for v in schema["enum"])
+    kind = schema.get("type", "")
+    if isinstance(kind, list):
+        kind = " or ".join(kind)
+    if kind == "array" and isinstance(schema.get("items"), dict):
+        return f"array of {_type(schema['items'])}"
+    if not kind and ("oneOf" in schema or "anyOf" in schema):
+        return " or ".join(_type(s) for s in schema.get("oneOf", schema.get("anyOf", [])))
+    return kind or "any"
+
+
+def _properties(schema: dict[str, Any], level: int, title: str) -> list[str]:
+    """A table of `schema`'s properties, then a section per object property that has
+    properties of its own."""
+    props = schema.get("properties", {})
+    if not props:
+        return []
+    required = set(schema.get("required", []))
+    out = [f"{'#' * level} {title}", ""]
+    if schema.get("description") and level > 2:
+        out += [schema["description"], ""]
+    out += ["| field | type | required | what it is |", "|---|---|---|---|"]
+    nested = []
+    for name, sub in props.items():
+        out.append(f"| `{name}` | {_cell(_type(sub))} | {'yes' if name in required else ''} "
+                   f"| {_cell(sub.get('description', ''))} |")
+        if sub.get("type") == "object" and sub.get("properties"):
+            nested.append((name, sub))
+        elif isinstance(sub.get("items"), dict) and sub["items"].get("properties"):
+            nested.append((f"{name}[]", sub["items"]))
+    out.append("")
+    for name, sub in nested:
+        out += _properties(sub, min(level + 1, 4), f"`{title.strip('`')}.{name}`"
+                           if level > 2 else f"`{name}`")
+    return out
+
+
+def format_page(path: Path) -> str:
+    """The format of one schema of data_schemas/: its title and description, its fields
+    (type, required, what each is), nested objects and shared definitions."""
+    schema = json.loads(path.read_text())
+    out = [f"# {schema.get('title', path.stem)}", "",
+           f"Schema `data_schemas/{path.name}` (JSON Schema, generated page).", ""]
+    if schema.get("description"):
+        out += [schema["description"], ""]
+    out += _properties(schema, 2, "Fields")
+    for name, sub in schema.get("$defs", {}).items():
+        if sub.get("properties"):
+            out += _properties({**sub, "description": sub.get("description", "")}, 2, name)
+        else:
+            out += [f"## {name}", "", f"{_type(sub)}. {sub.get('description', '')}", ""]
+    return "\n".join(out) + "\n"
+
+
+def format_index(paths: list[Path]) -> str:
+    """The list of formats, each with its schema's title."""
+    rows = [f"- [{json.loads(p.read_text()).get('title', p.stem)}]"
+            f"({p.stem.replace('.schema', '')}.md) (`{p.name}`)" for p in paths]
+    return "\n".join(["# File formats", "",
+                      "Every input file cpas-ocp reads is checked against a JSON Schema in "
+                      "`data_schemas/`; these pages are generated from them.", "", *rows]) + "\n"
+
+
+def tutorial_page(path: Path) -> str:
+    """The page of a tutorial script in jupytext's percent format: its markdown cells as
+    text, its code cells as Python blocks (the header block left out)."""
+    text = path.read_text()
+    if text.startswith("# ---"):
+        text = text.split("# ---", 2)[2]
+    out = []
+    for cell in text.split("# %%")[1:]:
+        head, _, body = cell.partition("\n")
+        if head.strip() == "[markdown]":
+            out.append("\n".join(line[2:] if line.startswith("# ") else line.lstrip("#")
+                                 for line in body.strip().splitlines()))
+        elif body.strip():
+            out.append(f"```python\n{body.strip()}\n```")
+    name = path.relative_to(ROOT).as_posix()
+    out.append(f"*This page is the script `{name}`; the suite runs it as printed.*")
+    return "\n\n".join(out) + "\n"

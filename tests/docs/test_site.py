@@ -1,0 +1,87 @@
+"""The documentation site's generated pages (docs/_generate/pages.py): the command reference
+holds every command and every option of the parser, each format page every field of its
+schema, and each tutorial page its script's text and code; the tutorial scripts run as
+printed.  The site itself is built in strict mode by CI (`mkdocs build --strict`)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import runpy
+import sys
+import tempfile
+from pathlib import Path
+
+import pytest
+
+from cpas_ocp.cli import arguments
+
+ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT / "docs" / "_generate"))
+import pages  # noqa: E402
+
+
+def test_the_command_reference_holds_every_command_and_option() -> None:
+    page = pages.command_reference()
+    parser = arguments.parser()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    for name, command in sub.choices.items():
+        assert f"## `{name}`" in page, name
+        for action in command._actions:
+            if isinstance(action, argparse._HelpAction):
+                continue
+            for flag in action.option_strings:
+                assert f"`{flag}`" in page, (name, flag)
+            if action.help:
+                assert action.help.replace("|", "\\|") in page, (name, action.dest)
+
+
+def _fields(schema: dict, prefix: str = "") -> list[str]:
+    out = []
+    for name, sub in schema.get("properties", {}).items():
+        out.append(name)
+        out += _fields(sub)
+        if isinstance(sub.get("items"), dict):
+            out += _fields(sub["items"])
+    for sub in schema.get("$defs", {}).values():
+        out += _fields(sub)
+    return out
+
+
+@pytest.mark.parametrize("path", sorted(pages.SCHEMAS.glob("*.schema.json")),
+                         ids=lambda p: p.name)
+def test_each_format_page_holds_every_field_of_its_schema(path: Path) -> None:
+    page = pages.format_page(path)
+    schema = json.loads(path.read_text())
+    missing = [f for f in _fields(schema) if f"`{f}`" not in page]
+    assert not missing, missing
+    assert schema.get("title", path.stem) in page
+
+
+def test_a_tutorial_page_is_its_script() -> None:
+    page = pages.tutorial_page(ROOT / "docs" / "tutorials" / "drop_test.py")
+    assert page.startswith("# A drop test, end to end\n")
+    assert "```python\nimport tempfile" in page
+    assert "rec = co.reconstruct(test)" in page
+    assert "docs/tutorials/drop_test.py" in page
+    assert "# %%" not in page and "\n# The legacy process's" not in page  # markdown unwrapped
+
+
+TUTORIALS = sorted((ROOT / "docs" / "tutorials").glob("*.py"))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("script", TUTORIALS, ids=lambda p: p.stem)
+def test_each_tutorial_runs_as_printed(script: Path, monkeypatch, tmp_path, capsys) -> None:
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    ns = runpy.run_path(str(script), run_name="__main__")
+    printed = capsys.readouterr().out
+    if script.stem == "drop_test":
+        assert ns["rec"].is_result and "holding Ck at 1.0 costs" in printed
+        assert (ns["work"] / "report" / "report.html").is_file()
+    elif script.stem == "planning":
+        assert ns["design"].ranking and "%" in printed
+    elif script.stem == "campaign":
+        assert ns["population"].groups and list((ns["work"] / "cases").glob("cases_*"))
+    else:
+        raise AssertionError(f"{script.name}: a tutorial this test does not check")
