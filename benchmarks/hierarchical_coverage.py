@@ -24,12 +24,13 @@ intervals:
 
 Scored against the truth: coverage, the mean interval width, tau^.
 
-    python benchmarks/hierarchical_coverage.py [--seeds 20] [--first 1] [--workers 2]
+    python benchmarks/hierarchical_coverage.py [--seeds 20] [--first 1] [--workers 2] [--tests 8]
 """
 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import sys
 import tempfile
@@ -41,10 +42,12 @@ from scipy import stats
 
 from cpas_ocp.campaign.nested_population import NestedData, fit_nested
 from cpas_ocp.campaign.population_model import PopulationData, fit_population
+from cpas_ocp.errors import SolverFailure
 from cpas_ocp.estimation.simulate import simulate_problem
 from cpas_ocp.inference.hierarchical_fit import hierarchical_fit
 from cpas_ocp.io.flight_test import load_test
 from cpas_ocp.io.problems import Problem, load_problem
+from cpas_ocp.physics.flight_test import FlightTest
 
 MEDIAN, TAU = 2.0, 0.05
 TESTS = 8
@@ -94,22 +97,32 @@ def two_stage(fits: list, covs: list) -> dict[str, tuple[float, float, float, fl
     return out
 
 
-def run_seed(seed: int) -> dict:
-    """Simulate and fit one seed's tests; the three estimates."""
+def simulated_tests(seed: int, n: int, folder: Path) -> list[FlightTest]:
+    """`n` tests of the seed's campaign, simulated into `folder` (their truth removed)."""
     rng = np.random.default_rng(seed)
     base = load_problem("fbcp")
+    tests = []
+    for i in range(n):
+        out = folder / f"t{i}"
+        simulate_problem(variant(base, rng), out, 1000 * seed + i)
+        (out / "truth.json").unlink()
+        tests.append(load_test(out))
+    return tests
+
+
+def run_seed(seed: int, n: int = TESTS) -> dict:
+    """Simulate and fit one seed's `n` tests; the three estimates."""
     with tempfile.TemporaryDirectory() as tmp:
-        tests = []
-        for i in range(TESTS):
-            folder = Path(tmp) / f"t{i}"
-            simulate_problem(variant(base, rng), folder, 1000 * seed + i)
-            (folder / "truth.json").unlink()
-            tests.append(load_test(folder))
+        tests = simulated_tests(seed, n, Path(tmp))
         timer = harness.Timer()
-        with timer("hierarchical"):
-            hf = hierarchical_fit(tests, {"CdS": "type"})
+        try:
+            with timer("hierarchical"):
+                hf = hierarchical_fit(tests, {"CdS": "type"})
+        except SolverFailure as exc:  # counted, never scored as an estimate
+            return {"seed": seed, "wall_s": timer["hierarchical"], "failure": str(exc)}
     pop = hf.estimate(NAME)
     out = {"seed": seed, "wall_s": timer["hierarchical"], "evaluations": hf.evaluations,
+           "is_result": hf.is_result,
            "hierarchical": (float(np.log(pop.median)), float(np.log(pop.lower)),
                             float(np.log(pop.upper)), pop.tau)}
     out.update(two_stage(hf.individual, hf.individual_covariances))
@@ -117,6 +130,10 @@ def run_seed(seed: int) -> dict:
 
 
 def summarise(rows: list[dict]) -> dict:
+    failed = [r for r in rows if "failure" in r]
+    for r in failed:
+        print(f"seed {r['seed']}: the hierarchical fit failed ({r['failure']})")
+    rows = [r for r in rows if "failure" not in r]
     n = len(rows)
     truth = np.log(MEDIAN)
     lo, hi = stats.binom.ppf([0.025, 0.975], n, 0.95) / n
@@ -124,7 +141,7 @@ def summarise(rows: list[dict]) -> dict:
           f"in {100 * lo:.0f}-{100 * hi:.0f} % of them\n")
     print("| estimate | coverage | mean width (log) | mean tau^ | SD of estimates |")
     print("|---|---|---|---|---|")
-    out: dict = {"seeds": n}
+    out: dict = {"seeds": n, "failed": len(failed)}
     for key, label in (("hierarchical", "hierarchical (one NLP)"),
                        ("two_stage", "two-stage, openings apart"),
                        ("nested", "two-stage, a test as one observation")):
@@ -146,9 +163,13 @@ def summarise(rows: list[dict]) -> dict:
 
 
 def main() -> None:
-    args = harness.seeds_parser(__doc__, seeds=20).parse_args()
-    rows = harness.run_seeds(run_seed, args)
-    harness.report("hierarchical_coverage", first=args.first, **summarise(rows))
+    ap = harness.seeds_parser(__doc__, seeds=20)
+    ap.add_argument("--tests", type=int, default=TESTS,
+                    help=f"tests per campaign (default {TESTS})")
+    args = ap.parse_args()
+    rows = harness.run_seeds(functools.partial(run_seed, n=args.tests), args)
+    harness.report("hierarchical_coverage", first=args.first, tests=args.tests,
+                   **summarise(rows))
 
 
 if __name__ == "__main__":

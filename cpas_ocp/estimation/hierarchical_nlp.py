@@ -81,11 +81,12 @@ class HierarchicalNlp(JointNlp):
                 raise ValueError(f"{pop.name}: a between-test standard deviation above 0")
 
     def solve(self, z0: np.ndarray, max_iter: int = 500, verbose: bool = False,
-              statistical_stop: bool = True) -> tuple[np.ndarray, SolverStats]:
+              statistical_stop: bool = True, monitor: bool = True, warm: bool = False
+              ) -> tuple[np.ndarray, SolverStats]:
         """`JointNlp.solve`, ended by the statistical test by default: a population whose
         copies the data hardly fix leaves Gauss-Newton's Hessian far from the exact one
         along them."""
-        return super().solve(z0, max_iter, verbose, statistical_stop)
+        return super().solve(z0, max_iter, verbose, statistical_stop, monitor, warm)
 
     def set_tau(self, taus: Sequence[float]) -> None:
         """Each population's tau (the outer loop of a hierarchical fit moves them)."""

@@ -157,12 +157,16 @@ def hierarchical_fit(tests: Sequence[FlightTest], populations: Mapping[str, str]
                      share: Mapping[str, str] | None = None, settings: Settings | None = None,
                      labels: Sequence[str] | None = None,
                      tau: Mapping[str, float] | None = None,
-                     progress: Callable[[str], None] | None = None) -> HierarchicalFit:
+                     progress: Callable[[str], None] | None = None,
+                     monitor: bool = True, warm: bool = True) -> HierarchicalFit:
     """Reconstruct `tests` in one NLP with each parameter named in `populations` (base name
     -> "type" or "vehicle", as `joint_fit`'s share) drawn per test from a log-normal
     population (module docstring), and each named in `share` held equal across the tests
     as `joint_fit` holds it.  `tau` holds a population's tau (log space) fixed instead of
-    estimating it.  Raises SolverFailure where a solve fails (its status and
+    estimating it.  `monitor` and `warm` False end each solve by Ipopt's own
+    acceptable-point tests before the statistical one and start each from Ipopt's default
+    barrier (`JointNlp.solve`: the slower path, kept to compare).
+    Raises SolverFailure where a solve fails (its status and
     iterations), SharingError where nothing named has copies in two places."""
     say = progress or (lambda _: None)
     labels = list(labels) if labels is not None else [t.name for t in tests]
@@ -191,10 +195,11 @@ def hierarchical_fit(tests: Sequence[FlightTest], populations: Mapping[str, str]
     z = nlp.start(fits, means)
     free = [g for g, p in enumerate(pops) if p.name not in (tau or {})]
     state = {"z": z, "evaluations": 0}
+    # each solve after the first starts at its neighbour's solution (a warm start)
 
     def deviance(log_taus: np.ndarray) -> float:
         nlp.set_tau(np.exp(log_taus))
-        z, _ = nlp.solve(state["z"])
+        z, _ = nlp.solve(state["z"], monitor=monitor, warm=warm and state["evaluations"] > 0)
         state["z"] = z
         state["evaluations"] += 1
         value = nlp.laplace_deviance(z)
@@ -210,7 +215,7 @@ def hierarchical_fit(tests: Sequence[FlightTest], populations: Mapping[str, str]
                 return deviance(trial)
             log_taus[g] = _downhill(along, float(log_taus[g]), np.log(TAU_RANGE))
     nlp.set_tau(np.exp(log_taus))
-    z, solver_stats = nlp.solve(state["z"])
+    z, solver_stats = nlp.solve(state["z"], monitor=monitor, warm=warm)
     final = nlp.laplace_deviance(z)
     cov = nlp.covariance(z)
     out = []
