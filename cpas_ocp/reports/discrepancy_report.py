@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Any
 
 import pandas as pd
+import plotly.graph_objects as go
 
 from cpas_ocp.discrepancy.diagnosis import Diagnosis
 from cpas_ocp.discrepancy.discovery import Discovery
@@ -342,16 +343,88 @@ def write_discovery(discovery: Discovery, out: str | Path,
         if not figures:
             return out
         page = begin_page(final, f"Discovery on {final.test.name}", units)
-        page.heading("Ending")
-        page.preformatted(discovery.ending())
-        page.heading("The chain, step by step")
-        page.preformatted(discovery_text(discovery))
+        chain_section(page, discovery)
         parameter_section(page, final, cov, units)
         if last is not None:
             page.heading("Sensors: the last model against measurement, by phase window")
             sensor_figures(page, last.fit, units, last.windows)
         page.write(tmp / "discovery.html")
     return out
+
+
+# Two-sided level of the noise band drawn around chi-square/dof = 1 on the discovery page.
+BAND_Z = 1.959963984540054
+CHAIN_HEADER = ("step", "change", "chi-square", "dof", "chi²/dof", "share of the excess removed",
+                "time (s)", "worst window (normalised RMS)", "admitted by")
+
+
+def chain_rows(discovery: Discovery) -> list[list[object]]:
+    """One row per step (`CHAIN_HEADER`): what it changed, chi-square and its dof, and the
+    share of the first fit's excess over the noise (chi-square - dof) the step removed
+    (a share, not a test: the step's own test is in "admitted by"); None where the first
+    fit had no excess."""
+    first = discovery.steps[0]
+    excess = first.criteria.chi_square - first.fit.dof
+    rows, before = [], None
+    for k, s in enumerate(discovery.steps):
+        chi2 = s.criteria.chi_square
+        share = (None if before is None or excess <= 0.0
+                 else f"{100.0 * (before - chi2) / excess:+.1f} %")
+        worst = s.worst_window
+        rows.append([k, s.label, round(chi2, 1), s.fit.dof, round(chi2 / s.fit.dof, 3),
+                     share or "", round(s.found_s + s.diagnosed_s),
+                     f"{worst[0]} ({worst[1]:.2f})" if worst else "not diagnosed",
+                     s.admitted_by])
+        before = chi2
+    return rows
+
+
+def chain_figure(discovery: Discovery) -> go.Figure:
+    """chi-square/dof after each step against the band the noise allows about 1 (1 +- 1.96
+    sqrt(2/dof), the chi-square's 95 % range over dof): the loop's aim drawn."""
+    steps = discovery.steps
+    x = [f"{k}: {s.label}" for k, s in enumerate(steps)]
+    ratio = [s.criteria.chi_square / s.fit.dof for s in steps]
+    half = [BAND_Z * (2.0 / s.fit.dof) ** 0.5 for s in steps]
+    fig = go.Figure([
+        go.Scatter(x=x, y=[1.0 + h for h in half], mode="lines", line={"width": 0},
+                   showlegend=False, hoverinfo="skip"),
+        go.Scatter(x=x, y=[1.0 - h for h in half], mode="lines", line={"width": 0},
+                   fill="tonexty", fillcolor="rgba(120, 170, 120, 0.35)",
+                   name="the noise's 95 % range"),
+        go.Scatter(x=x, y=ratio, mode="lines+markers", name="χ²/dof after the step",
+                   marker={"size": 9}),
+    ])
+    fig.update_layout(title="χ²/dof step by step, against the noise",
+                      yaxis={"title": "χ²/dof", "type": "log" if max(ratio) > 20 else "linear"},
+                      height=380)
+    return fig
+
+
+def chain_section(page: Page, discovery: Discovery) -> None:
+    """The page's opening: how the chain ended, the error falling step by step towards the
+    noise (`chain_figure`), the steps as a table, then what each step explained and what
+    else was tried."""
+    page.heading("The error, step by step")
+    page.paragraph(discovery.ending())
+    page.figure(chain_figure(discovery), rows=1, time_axis=False)
+    page.table(list(CHAIN_HEADER), chain_rows(discovery))
+    for line in [line for s in discovery.steps[1:] for line in s.explained_lines()]:
+        page.paragraph(line)
+    for title, items in (("Plug-ins proposed from the residual's signature, tested as "
+                          "written", discovery.proposals),
+                         ("Refinements of the effects added, tested against the effect as "
+                          "it was", discovery.refinements),
+                         ("Drag laws by sparse regression", discovery.regressions)):
+        if items:
+            page.heading(title)
+            for item in items:
+                page.paragraph(str(item))
+    for note in discovery.notes:
+        page.paragraph(note, "note")
+    last = discovery.steps[-1].diagnosis
+    if last is not None:
+        page.paragraph("Last diagnosis: " + last.verdict())
 
 
 def final_covariance(discovery: Discovery) -> Covariance | None:

@@ -22,7 +22,7 @@ from plotly.subplots import make_subplots
 
 from cpas_ocp.precision import Measured
 from cpas_ocp.reports.display_units import pretty
-from cpas_ocp.reports.plots import WINDOW_COLOURS, DragAreaCurves
+from cpas_ocp.reports.plots import WINDOW_COLOURS, DragAreaCurves, WindCurve
 from cpas_ocp.reports.report_data import ChannelSeries, ParameterRow, Span
 
 # Points from which a trace is drawn with WebGL rather than SVG (SVG slows beyond this).
@@ -288,6 +288,28 @@ def residual_comparison_figure(page: Page, sensor: str, labels: tuple[str, str],
     fig.update_layout(title=f"{sensor}: normalised residuals, {labels[0]} and {labels[1]}",
                       height=220 * len(pairs) + 140)
     page.figure(fig, len(pairs))
+
+
+def wind_figure(curves: Sequence[WindCurve], speed: str) -> go.Figure | None:
+    """The air's motion against time: each component's estimate at the knots and its 95 %
+    band (`plots.wind_curves`); None where there is none."""
+    if not curves:
+        return None
+    fig = make_subplots(rows=len(curves), cols=1, shared_xaxes=True, vertical_spacing=0.06)
+    for row, c in enumerate(curves, 1):
+        fig.add_trace(go.Scatter(x=c.t, y=c.velocity + c.band, mode="lines", line={"width": 0},
+                                 showlegend=False, hoverinfo="skip"), row=row, col=1)
+        fig.add_trace(go.Scatter(x=c.t, y=c.velocity - c.band, mode="lines", line={"width": 0},
+                                 fill="tonexty", fillcolor="rgba(31, 119, 180, 0.25)",
+                                 name="95 % band", showlegend=row == 1), row=row, col=1)
+        fig.add_trace(go.Scatter(x=c.t, y=c.velocity, mode="lines+markers",
+                                 marker={"size": 4}, line={"color": "rgb(31, 119, 180)"},
+                                 name="estimate at the knots", showlegend=row == 1),
+                      row=row, col=1)
+        fig.update_yaxes(title_text=f"{c.component} [{speed}]", row=row, col=1)
+    fig.update_xaxes(title_text="time [s]", row=len(curves), col=1)
+    fig.update_layout(title="The air's motion (wind process)", height=160 + 220 * len(curves))
+    return fig
 
 
 def window_legend(page: Page) -> None:

@@ -184,46 +184,72 @@ def plot_wind(fit: Fit, cov: Covariance | None, folder: Path,
                         folder / "wind.png")
 
 
-def wind_axes(fit: Fit, cov: Covariance | None, units: DisplayUnits | None = None,
-              axes: np.ndarray | None = None) -> np.ndarray | None:
-    """The wind process's estimate (`wind_process`): each component's air velocity at its
-    knots with the 95 % band (+-1.96 sigma), against time (left) and against altitude
-    (right); into `axes` (a row of two per component, else a new figure's); the axes, or
-    None where the model has no process knots."""
-    components = {}
+@dataclass(frozen=True)
+class WindCurve:
+    """One component of the wind process's estimate in display units: the knot times (s),
+    the air velocity there and its 95 % half-band (+-1.96 sigma, NaN without a sigma), and
+    the vehicle's altitude at each knot."""
+
+    component: str
+    t: np.ndarray
+    velocity: np.ndarray
+    band: np.ndarray
+    altitude: np.ndarray
+
+
+def wind_curves(fit: Fit, cov: Covariance | None, units: DisplayUnits
+                ) -> list[WindCurve]:
+    """Each component of the wind process's estimate (`wind_process`) at its knots, in
+    `units`; empty where the model has no process knots."""
+    components: dict[str, list[tuple[int, str]]] = {}
     for name in fit.free:
         base, index = split_name(name)
         if fit.model.parameter(name).process_knot and base.startswith("wind_"):
             components.setdefault(base.removeprefix("wind_"), []).append((int(index[0]), name))
     if not components:
-        return None
-    units = units or display_units(fit.test)
-    kv, speed = units.factor("velocity"), pretty(units.unit("velocity"))
-    kh, length = units.factor("length"), pretty(units.unit("length"))
+        return []
+    kv, kh = units.factor("velocity"), units.factor("length")
     std = cov.std if cov is not None else {}
     q = fit.quantities()
-    if axes is None:
-        axes = plt.subplots(len(components), 2, figsize=(12, 2.8 * len(components) + 1.0),
-                            squeeze=False, gridspec_kw={"width_ratios": [3, 1]})[1]
     wind = next(e for e in fit.model.effects if isinstance(e, WindProcess))
     knot_times = wind.knot_times(fit.test)
-    for row, (component, knots) in enumerate(components.items()):
+    out = []
+    for component, knots in components.items():
         names = [n for _, n in sorted(knots)]
-        t = knot_times[:len(names)]
-        u = kv * np.array([fit.parameters[n] for n in names])
-        band = kv * 1.96 * np.array([std.get(n, np.nan) for n in names])
+        t = np.asarray(knot_times[:len(names)], dtype=float)
+        out.append(WindCurve(component, t, kv * np.array([fit.parameters[n] for n in names]),
+                             kv * 1.96 * np.array([std.get(n, np.nan) for n in names]),
+                             kh * np.interp(t, fit.t, q["altitude"])))
+    return out
+
+
+def wind_axes(fit: Fit, cov: Covariance | None, units: DisplayUnits | None = None,
+              axes: np.ndarray | None = None) -> np.ndarray | None:
+    """The wind process's estimate (`wind_curves`): each component's air velocity at its
+    knots with the 95 % band (+-1.96 sigma), against time (left) and against altitude
+    (right); into `axes` (a row of two per component, else a new figure's); the axes, or
+    None where the model has no process knots."""
+    units = units or display_units(fit.test)
+    curves = wind_curves(fit, cov, units)
+    if not curves:
+        return None
+    speed, length = pretty(units.unit("velocity")), pretty(units.unit("length"))
+    if axes is None:
+        axes = plt.subplots(len(curves), 2, figsize=(12, 2.8 * len(curves) + 1.0),
+                            squeeze=False, gridspec_kw={"width_ratios": [3, 1]})[1]
+    for row, c in enumerate(curves):
+        t, u, band = c.t, c.velocity, c.band
         ax = axes[row, 0]
         ax.fill_between(t, u - band, u + band, color="C0", alpha=0.25, label="95 % band")
         ax.plot(t, u, "-o", ms=2.5, color="C0", label="estimate at the knots")
         ax.axhline(0.0, color="k", lw=0.5)
-        ax.set_ylabel(f"{component} air velocity [{speed}]")
+        ax.set_ylabel(f"{c.component} air velocity [{speed}]")
         ax.legend(loc="best", fontsize=8)
-        altitude = kh * np.interp(t, fit.t, q["altitude"])
         ax = axes[row, 1]
-        ax.fill_betweenx(altitude, u - band, u + band, color="C0", alpha=0.25)
-        ax.plot(u, altitude, "-o", ms=2.5, color="C0")
+        ax.fill_betweenx(c.altitude, u - band, u + band, color="C0", alpha=0.25)
+        ax.plot(u, c.altitude, "-o", ms=2.5, color="C0")
         ax.axvline(0.0, color="k", lw=0.5)
-        ax.set_xlabel(f"{component} [{speed}]")
+        ax.set_xlabel(f"{c.component} [{speed}]")
         ax.set_ylabel(f"altitude [{length}]")
     axes[-1, 0].set_xlabel("time [s]")
     return axes

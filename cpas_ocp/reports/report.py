@@ -18,8 +18,14 @@ from cpas_ocp.inference.profile_likelihood import Profile
 from cpas_ocp.io.import_reports import import_nominal
 from cpas_ocp.io.output_folder import atomic_folder
 from cpas_ocp.io.strict_json import json_text
-from cpas_ocp.physics.units import SI_UNIT
-from cpas_ocp.reports.display_units import CHANNEL_DIMENSION, DisplayUnits, display_units
+from cpas_ocp.physics.parameters import split_name
+from cpas_ocp.physics.units import FACTORS, SI_UNIT
+from cpas_ocp.reports.display_units import (
+    CHANNEL_DIMENSION,
+    DisplayUnits,
+    display_units,
+    pretty,
+)
 from cpas_ocp.reports.failure_report import RESULT_MARKERS
 from cpas_ocp.reports.fit_text import claim_text
 from cpas_ocp.reports.flight_report import (
@@ -35,7 +41,13 @@ from cpas_ocp.reports.flight_report import (
     steady_drag_area_section,
     steady_drag_area_text,
 )
-from cpas_ocp.reports.html_page import Page, drag_area_figure, sensor_figure, window_legend
+from cpas_ocp.reports.html_page import (
+    Page,
+    drag_area_figure,
+    sensor_figure,
+    wind_figure,
+    window_legend,
+)
 from cpas_ocp.reports.html_page import parameter_table as parameter_html
 from cpas_ocp.reports.plots import (
     DragAreaCurves,
@@ -46,6 +58,7 @@ from cpas_ocp.reports.plots import (
     plot_profile,
     plot_sensors,
     plot_wind,
+    wind_curves,
 )
 from cpas_ocp.reports.report_data import (
     Z95,
@@ -264,11 +277,15 @@ def begin_page(fit: Fit, title: str, units: DisplayUnits) -> Page:
 
 
 def parameter_section(page: Page, fit: Fit, cov: Covariance | None,
-                      units: DisplayUnits) -> None:
-    """The parameter table (flagged rows highlighted), then the strong correlations and
-    the combinations the data do not determine."""
+                      units: DisplayUnits, knots: bool = True) -> None:
+    """The parameter table (flagged rows highlighted; a process's knots left out without
+    `knots`, drawn as a curve instead), then the strong correlations and the combinations
+    the data do not determine."""
     page.heading("Parameters")
-    parameter_html(page, parameter_rows(fit, cov, units))
+    rows = parameter_rows(fit, cov, units)
+    if not knots:
+        rows = [r for r in rows if not fit.model.parameter(r.name).process_knot]
+    parameter_html(page, rows)
     if cov is not None:
         page.preformatted(f"{correlation_line(cov)}\n{identifiability_text(cov)}")
 
@@ -285,6 +302,37 @@ def sensor_figures(page: Page, fit: Fit, units: DisplayUnits,
         sensor_figure(page, sensor, [c for c in series if c.sensor == sensor], shown)
 
 
+def answer_section(page: Page, fit: Fit, cov: Covariance | None, claim: Claim | None,
+                   units: DisplayUnits, nominal: dict[str, dict[str, Any]]) -> None:
+    """What a reader came for, first: whether the fit is a result (and why not), and each
+    canopy stage's drag area with its sigma and 95 % interval, beside the card's nominal
+    value where an import kept one."""
+    if claim is not None and claim.headline():
+        page.warning(claim.headline())
+    page.heading("The answer")
+    if claim is not None:
+        page.paragraph(f"Claim: {claim.verdict()}.")
+    areas = [r for r in parameter_rows(fit, cov, units) if split_name(r.name)[0] == "CdS"]
+    if areas:
+        k = units.factor("area")
+        shown = [_nominal_area(nominal.get(r.name), k) for r in areas]
+        page.table(["drag area", "value", "± 1σ", "95 % interval", "unit", "nominal"],
+                   [[r.name, r.value_text, r.std_text, r.interval, pretty(r.unit), n]
+                    for r, n in zip(areas, shown, strict=True)],
+                   flagged=[bool(r.flag) for r in areas])
+    if claim is not None:
+        for line in [*claim.problems(), *(f"moved {m}" for m in claim.moves), *claim.notes]:
+            page.paragraph(line)
+
+
+def _nominal_area(spec: dict[str, Any] | None, k: float) -> str:
+    """A card's nominal drag area (`import_nominal`'s entry) in the display unit ('' where
+    none): design figures carry no sigma, so three significant digits."""
+    if spec is None:
+        return ""
+    return f"{spec['value'] * FACTORS['area'][spec['unit']] * k:.3g}"
+
+
 def reconstruction_page(fit: Fit, cov: Covariance | None, claim: Claim | None,
                         units: DisplayUnits,
                         curves: Sequence[DragAreaCurves] | None = None,
@@ -294,12 +342,14 @@ def reconstruction_page(fit: Fit, cov: Covariance | None, claim: Claim | None,
     `drag_area_curves` of the fit where not given); with a flight card's `nominal` drag
     areas (an imported log), the steady descent rates and the nominal comparison."""
     page = begin_page(fit, f"Reconstruction of {fit.test.name}", units)
-    if claim is not None:
-        if claim.headline():
-            page.warning(claim.headline())
-        page.heading("Claim")
-        page.preformatted(claim_text(claim))
-    parameter_section(page, fit, cov, units)
+    answer_section(page, fit, cov, claim, units, nominal or {})
+    parameter_section(page, fit, cov, units, knots=False)
+    wind = wind_figure(wind_curves(fit, cov, units), pretty(units.unit("velocity")))
+    if wind is not None:
+        page.heading("The air's motion")
+        page.paragraph("The wind process's estimate at its knots, with its 95 % band; the "
+                       "knots' values are in result.json and parameters.csv.", "note")
+        page.figure(wind, rows=1)
     page.heading("Fit")
     page.preformatted(fit_summary(fit, units))
     events = event_rows(fit)

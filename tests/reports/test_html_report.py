@@ -244,3 +244,100 @@ def test_a_large_series_is_drawn_in_full_with_webgl_and_said_so(browser, tmp_pat
     assert drawn[0] == ["scattergl"] * 3 and drawn[1] == [n] * 3 and drawn[2] > 0
     severe = [e for e in browser.get_log("browser") if e["level"] == "SEVERE"]
     assert not severe, severe
+
+
+# --- pages that lead with the answer --------------------------------------------------
+
+def test_the_reconstruction_page_leads_with_the_drag_areas(report, browser, drogue_fit) -> None:
+    fit, _, _ = drogue_fit(1)
+    browser.get((report / "report.html").as_uri())
+    headings = browser.execute_script(
+        "return Array.from(document.querySelectorAll('h2')).map(h => h.textContent);")
+    assert headings[0] == "The answer", headings
+    assert headings.index("The answer") < headings.index("Parameters")
+    first = browser.execute_script(
+        "const t = document.querySelector('table'); return [t.previousElementSibling && "
+        "t.previousElementSibling.textContent, Array.from(t.querySelectorAll('tbody tr'))"
+        ".map(r => Array.from(r.cells).map(c => c.textContent))];")
+    rows = first[1]
+    areas = [n for n in fit.free if n.startswith("CdS[")]
+    assert [r[0] for r in rows] == areas  # the first table on the page: the drag areas
+    for row in rows:  # each to its sigma: as many decimals as two digits of the sigma take
+        value, sigma = row[1], row[2]
+        assert len(value.split(".")[-1]) == len(sigma.split(".")[-1]), row
+
+
+@pytest.fixture(scope="module")
+def wind_report(problem_folder, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A `rocket_gusts` test reconstructed with the wind process: a report whose model has
+    process knots."""
+    import json
+
+    import cpas_ocp as co
+
+    folder = problem_folder("rocket_gusts", 1)
+    manifest = json.loads((folder / "manifest.json").read_text())
+    model = tmp_path_factory.mktemp("wind") / "model.json"
+    model.write_text(json.dumps({**manifest["model"],
+                                 "effects": ["wind_process", *manifest["model"]["effects"]]}))
+    out = model.parent / "report"
+    co.reconstruct(folder, model=model, out=out)
+    return out
+
+
+def test_the_air_motion_is_a_curve_with_its_band_not_a_list(wind_report, browser) -> None:
+    page = (wind_report / "report.html").read_text()
+    assert "<h2>The air&#x27;s motion</h2>" in page or "<h2>The air's motion</h2>" in page
+    assert "<td>wind_" not in page  # the knots are drawn, not tabled
+    browser.get((wind_report / "report.html").as_uri())
+    traces = browser.execute_script(
+        "const h = Array.from(document.querySelectorAll('h2')).find(h => "
+        "h.textContent.startsWith('The air')); let e = h.nextElementSibling; "
+        "while (e && !e.querySelector('div.js-plotly-plot')) e = e.nextElementSibling; "
+        "const d = e.querySelector('div.js-plotly-plot'); "
+        "return d._fullData.map(t => [t.name || '', t.fill || '', t._length]);")
+    assert any(fill == "tonexty" for _, fill, _ in traces)  # the band
+    assert any(name == "estimate at the knots" and n > 3 for name, _, n in traces)
+    headings = browser.execute_script(
+        "return Array.from(document.querySelectorAll('h2')).map(h => h.textContent);")
+    assert headings[0] == "The answer"
+
+
+@pytest.fixture(scope="module")
+def discovery_folder(drogue_folder, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A two-step chain of real drogue fits (`cheap_discovery`), written as `discover`
+    writes it."""
+    from cpas_ocp.cli import main
+    from tests.cheap_discovery import cheap
+
+    out = tmp_path_factory.mktemp("discovery") / "chain"
+    patch = pytest.MonkeyPatch()
+    cheap(patch)
+    try:
+        assert main(["discover", str(drogue_folder(1)), "--out", str(out),
+                     "--max-steps", "2"]) == 0
+    finally:
+        patch.undo()
+    return out
+
+
+def test_the_discovery_page_opens_with_chi_square_step_by_step(discovery_folder,
+                                                               browser) -> None:
+    import json
+
+    steps = json.loads((discovery_folder / "discovery.json").read_text())["steps"]
+    browser.get((discovery_folder / "discovery.html").as_uri())
+    opening = browser.execute_script(
+        "const h = document.querySelector('h2'); const d = document.querySelector("
+        "'div.js-plotly-plot'); const t = document.querySelector('table'); return [h.textContent,"
+        " d._fullData.map(s => [s.name || '', s._length]), t.querySelectorAll('tbody tr').length,"
+        " Array.from(t.querySelectorAll('th')).map(c => c.textContent),"
+        " document.documentElement.scrollWidth <= window.innerWidth];")
+    heading, traces, rows, header, fits = opening
+    assert heading == "The error, step by step"
+    chain = [n for name, n in traces if name == "χ²/dof after the step"]
+    assert chain == [len(steps)] and any(name == "the noise's 95 % range" for name, _ in traces)
+    assert rows == len(steps) and "share of the excess removed" in header
+    assert fits  # no horizontal scrollbar: the chain is a table, not a wide <pre>
+    page = (discovery_folder / "discovery.html").read_text()
+    assert not re.search(r"<pre>\s*step\s+added", page)  # the text table is not pasted in
