@@ -13,15 +13,20 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import datetime
 import json
 import math
 import os
+import platform
+import subprocess
+import sys
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-_RUN: dict[str, Any] = {"seed": None, "json": None}  # what the last parse_args read
+# what the last parse_args read; a script that never parses records its result
+_RUN: dict[str, Any] = {"seed": None, "json": None, "record": True}
 
 
 class _Parser(argparse.ArgumentParser):
@@ -31,7 +36,8 @@ class _Parser(argparse.ArgumentParser):
                          namespace: argparse.Namespace | None = None
                          ) -> tuple[argparse.Namespace, list[str]]:
         ns, rest = super().parse_known_args(args, namespace)
-        _RUN.update(seed=getattr(ns, "seed", None), json=getattr(ns, "json", None))
+        _RUN.update(seed=getattr(ns, "seed", None), json=getattr(ns, "json", None),
+                    record=not getattr(ns, "no_record", False))
         return ns, rest
 
 
@@ -39,12 +45,15 @@ def parser(doc: str | None, seed: int | None, seed_help: str = "seed of the rand
            ) -> argparse.ArgumentParser:
     """The script's parser: `doc`'s first paragraph as description, ``--seed`` (default
     `seed`; None where the script draws nothing of its own, or its draws are seeded by its
-    other options, and the seed is only recorded) and ``--json PATH``."""
+    other options, and the seed is only recorded), ``--json PATH`` and ``--no-record``."""
     ap = _Parser(description=(doc or "").strip().split("\n\n")[0])
     ap.add_argument("--seed", type=int, default=seed,
                     help=seed_help if seed is None else f"{seed_help} (default {seed})")
     ap.add_argument("--json", type=Path, default=None, metavar="PATH",
                     help="also append the result line (JSON) to this file")
+    ap.add_argument("--no-record", action="store_true",
+                    help="do not write the result as the benchmark's latest "
+                    "(benchmarks/results/NAME.json, rendered into the documentation site)")
     return ap
 
 
@@ -125,14 +134,49 @@ def _plain(value: Any) -> Any:
     return str(value)
 
 
+RESULTS = Path(__file__).resolve().parent / "results"  # each benchmark's latest result
+
+
+def revision() -> str:
+    """The source revision the benchmark ran (git's abbreviated commit, "+changes" where the
+    tree differed from it; "unknown" outside a git checkout)."""
+    root = Path(__file__).resolve().parents[1]
+    try:
+        commit = subprocess.run(["git", "rev-parse", "--short=10", "HEAD"], cwd=root,
+                                capture_output=True, text=True, check=True).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"],
+                               cwd=root, capture_output=True, text=True, check=True).stdout
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+    return commit + ("+changes" if dirty.strip() else "")
+
+
+def machine() -> dict[str, Any]:
+    """What the figures were measured on: CPUs, platform, Python and CasADi versions."""
+    import casadi
+
+    return {"cpus": os.cpu_count(), "platform": platform.platform(),
+            "python": platform.python_version(), "casadi": casadi.__version__}
+
+
 def report(name: str, **results: Any) -> dict[str, Any]:
-    """Print the benchmark's result line, ``JSON: {...}``, and append it to --json where
-    given: the benchmark's `name`, its seed, the load average and CPU count, and `results`.
-    Call it last; it returns what it wrote."""
-    line = {"benchmark": name, "seed": _RUN["seed"], "load_average": list(os.getloadavg()),
-            "cpus": os.cpu_count(), "results": _plain(results)}
+    """Print the benchmark's result line, ``JSON: {...}``, write it as the benchmark's latest
+    result (``benchmarks/results/<name>.json``, which the documentation site's validation
+    tables are rendered from; not with ``--no-record``), and append it to --json where
+    given: the benchmark's `name`, its seed, the revision, the date (UTC), the machine, the
+    load average, the command line and `results`.  Call it last; it returns what it
+    wrote."""
+    line = {"benchmark": name, "seed": _RUN["seed"], "revision": revision(),
+            "date": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC"),
+            "machine": machine(), "load_average": list(os.getloadavg()),
+            "cpus": os.cpu_count(), "command": " ".join(sys.argv),
+            "results": _plain(results)}
     text = json.dumps(line, allow_nan=False)
     print(f"JSON: {text}", flush=True)
+    if _RUN["record"]:
+        RESULTS.mkdir(exist_ok=True)
+        (RESULTS / f"{name}.json").write_text(json.dumps(line, indent=1, allow_nan=False)
+                                              + "\n")
     if _RUN["json"] is not None:
         path = Path(_RUN["json"])
         path.parent.mkdir(parents=True, exist_ok=True)

@@ -25,3 +25,6 @@ for path in sorted(pages.TUTORIALS.glob("*.py")):
         fh.write(pages.tutorial_page(path))
 with mkdocs_gen_files.open("tutorials/discovery.md", "w") as fh:
     fh.write(pages.tutorial_page(pages.ROOT / "docs" / "notebook.py"))
+
+with mkdocs_gen_files.open("results.md", "w") as fh:
+    fh.write(pages.results_page(sorted(pages.RESULTS.glob("*.json"))))

@@ -6,7 +6,9 @@ site at build time (mkdocs-gen-files); nothing generated is kept in the reposito
 from __future__ import annotations
 
 import argparse
+import ast
 import json
+import math
 from pathlib import Path
 from typing import Any
 
@@ -15,6 +17,7 @@ from cpas_ocp.cli import arguments
 ROOT = Path(__file__).resolve().parents[2]
 SCHEMAS = ROOT / "data_schemas"
 TUTORIALS = ROOT / "docs" / "tutorials"
+RESULTS = ROOT / "benchmarks" / "results"  # each benchmark's latest result (harness.report)
 
 
 def _cell(text: object) -> str:
@@ -156,3 +159,60 @@ def tutorial_page(path: Path) -> str:
     name = path.relative_to(ROOT).as_posix()
     out.append(f"*This page is the script `{name}`; the suite runs it as printed.*")
     return "\n\n".join(out) + "\n"
+
+
+def _flatten(value: Any, key: str = "") -> list[tuple[str, Any]]:
+    """(dotted key, value) for every leaf of a result; short lists of numbers kept whole."""
+    if isinstance(value, dict):
+        return [row for k, v in value.items() for row in _flatten(v, f"{key}.{k}" if key else k)]
+    if isinstance(value, list) and len(value) > 6 and all(isinstance(v, dict) for v in value):
+        return [(key, f"{len(value)} rows (in the JSON)")]
+    return [(key, value)]
+
+
+def _shown(value: Any) -> str:
+    """A figure as the table prints it: numbers to 4 significant digits."""
+    if isinstance(value, float):
+        return "—" if not math.isfinite(value) else f"{value:.4g}"
+    if isinstance(value, list):
+        return "[" + ", ".join(_shown(v) for v in value) + "]"
+    return "—" if value is None else str(value)
+
+
+def _purpose(name: str) -> str:
+    """The first paragraph of the benchmark script's docstring (what it measures)."""
+    script = ROOT / "benchmarks" / f"{name}.py"
+    if not script.is_file():
+        return ""
+    doc = ast.get_docstring(ast.parse(script.read_text())) or ""
+    return " ".join(doc.split("\n\n")[0].split())
+
+
+def results_page(paths: list[Path]) -> str:
+    """The measured results: for each benchmark's latest result (benchmarks/results/*.json,
+    written by `harness.report`), what it measures, the revision, date and machine it ran
+    on and the command that ran it, and its figures as a table.  Rerunning a benchmark
+    rewrites its result; the site's next build shows it."""
+    out = ["# Measured results", "",
+           "Each table is the latest run of a benchmark script, rendered from its JSON result "
+           "(`benchmarks/results/NAME.json`) when the site is built: rerun the command shown "
+           "and the table follows. Timings are wall-clock on the machine named, under the "
+           "load average given; ratios against a baseline run in the same script are what "
+           "carry from one machine to another.", ""]
+    if not paths:
+        out.append("No benchmark has recorded a result yet.")
+    for path in paths:
+        result = json.loads(path.read_text())
+        name = result["benchmark"]
+        m = result.get("machine", {})
+        load = result.get("load_average") or []
+        out += [f"## {name}", "", _purpose(name), "",
+                f"Revision `{result.get('revision', 'unknown')}`, {result.get('date', '')}, "
+                f"{m.get('cpus', result.get('cpus', '?'))} CPUs, {m.get('platform', '')}, "
+                f"Python {m.get('python', '?')}, CasADi {m.get('casadi', '?')}; load average "
+                f"{', '.join(f'{v:.1f}' for v in load)}.", "",
+                f"```\n{result.get('command', f'python benchmarks/{name}.py')}\n```", "",
+                "| figure | value |", "|---|---|"]
+        out += [f"| `{k}` | {_cell(_shown(v))} |" for k, v in _flatten(result["results"])]
+        out.append("")
+    return "\n".join(out) + "\n"

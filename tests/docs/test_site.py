@@ -85,3 +85,28 @@ def test_each_tutorial_runs_as_printed(script: Path, monkeypatch, tmp_path, caps
         assert ns["population"].groups and list((ns["work"] / "cases").glob("cases_*"))
     else:
         raise AssertionError(f"{script.name}: a tutorial this test does not check")
+
+
+def test_a_benchmark_result_is_recorded_and_rendered(monkeypatch, tmp_path) -> None:
+    """`harness.report` writes the benchmark's latest result with its revision, date and
+    machine; the site's results page renders it as a table."""
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    import harness
+
+    monkeypatch.setattr(harness, "RESULTS", tmp_path)
+    monkeypatch.setattr(sys, "argv", ["benchmarks/hierarchical_speed.py", "--tests", "4"])
+    harness.parser(None, seed=1).parse_args(["--seed", "3"])
+    harness.report("hierarchical_speed", speed_up=4.25, new_s=109.0,
+                   failures={"old": "Maximum_Iterations_Exceeded"})
+    [path] = tmp_path.glob("*.json")
+    result = json.loads(path.read_text())
+    assert result["seed"] == 3 and result["revision"] and result["machine"]["cpus"]
+    page = pages.results_page([path])
+    assert "## hierarchical_speed" in page and "| `speed_up` | 4.25 |" in page
+    assert "| `failures.old` | Maximum_Iterations_Exceeded |" in page
+    assert result["revision"] in page and result["date"] in page
+    assert "benchmarks/hierarchical_speed.py --tests 4" in page
+    assert "statistical test" in page  # what the benchmark measures, from its docstring
+    harness.parser(None, seed=1).parse_args(["--no-record"])
+    harness.report("hierarchical_speed", speed_up=1.0)
+    assert json.loads(path.read_text())["results"]["speed_up"] == 4.25  # not rewritten
