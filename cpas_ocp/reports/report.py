@@ -229,25 +229,44 @@ def identifiability_text(cov: Covariance) -> str:
     return "\n".join(lines)
 
 
+def fit_parts(fit: Fit, units: DisplayUnits) -> tuple[str, list[tuple[str, float, str]], str]:
+    """The fit's outcome in three parts: the solver's line (status, iterations, time,
+    chi-square/dof, AIC, BIC), per sensor (name, normalised RMS, RMS per channel in
+    `units`), and where the model fits worst ('' where nowhere is named)."""
+    ic = information_criteria(fit)
+    solver = (f"solver: {fit.solver.status}, {fit.solver.iterations} iterations, "
+              f"{fit.solver.wall_s:.1f} s, from {fit.solver.start};  "
+              f"chi²/dof = {fit.chi_square:.1f}/{fit.dof} = {fit.chi_square / fit.dof:.3f};  "
+              f"AIC {ic['aic']:.1f}, BIC {ic['bic']:.1f}")
+    sensors = [(s, e["normalised_rms"],
+                ", ".join(f"{c} {v * k:.4g} {unit}" for c, v in e["rms"].items()
+                          for unit, k in [display_channel(fit, units, s, c)]))
+               for s, e in sensor_summary(fit).items()]
+    worst = worst_windows(fit, top=1)
+    where = "" if not worst else (
+        f"worst fit: {worst[0].sensor}.{worst[0].channel} in {worst[0].t0:.2f}-"
+        f"{worst[0].t1:.2f} s, normalised RMS {worst[0].normalised_rms:.2f}")
+    return solver, sensors, where
+
+
 def fit_summary(fit: Fit, units: DisplayUnits | None = None) -> str:
     """Solver outcome, residuals per sensor (RMS in `units`, default the test's own) and
     where the model fits worst."""
-    units = units or display_units(fit.test)
-    ic = information_criteria(fit)
-    out = [f"solver: {fit.solver.status}, {fit.solver.iterations} iterations, "
-           f"{fit.solver.wall_s:.1f} s, from {fit.solver.start};  "
-           f"chi²/dof = {fit.chi_square:.1f}/{fit.dof} = {fit.chi_square / fit.dof:.3f};  "
-           f"AIC {ic['aic']:.1f}, BIC {ic['bic']:.1f}"]
-    for s, e in sensor_summary(fit).items():
-        rms = ", ".join(f"{c} {v * k:.4g} {unit}" for c, v in e["rms"].items()
-                        for unit, k in [display_channel(fit, units, s, c)])
-        out.append(f"  {s:16s} normalised RMS {e['normalised_rms']:.3f}   (RMS {rms})")
-    worst = worst_windows(fit, top=1)
-    if worst:
-        w = worst[0]
-        out.append(f"worst fit: {w.sensor}.{w.channel} in {w.t0:.2f}-{w.t1:.2f} s, "
-                   f"normalised RMS {w.normalised_rms:.2f}")
-    return "\n".join(out)
+    solver, sensors, where = fit_parts(fit, units or display_units(fit.test))
+    out = [solver] + [f"  {s:16s} normalised RMS {n:.3f}   (RMS {rms})" for s, n, rms in sensors]
+    return "\n".join(out + ([where] if where else []))
+
+
+def fit_section(page: Page, fit: Fit, units: DisplayUnits) -> None:
+    """The fit's outcome on a page (`fit_parts`): the solver's line, a table of the sensors'
+    residuals, and where the model fits worst."""
+    solver, sensors, where = fit_parts(fit, units)
+    page.heading("Fit")
+    page.paragraph(solver)
+    page.table(["sensor", "normalised RMS", "RMS per channel"],
+               [[s, round(n, 3), rms] for s, n, rms in sensors])
+    if where:
+        page.paragraph(where)
 
 
 def correlation_markdown(cov: Covariance, threshold: float = REPORTED_CORRELATION) -> str:
@@ -350,8 +369,7 @@ def reconstruction_page(fit: Fit, cov: Covariance | None, claim: Claim | None,
         page.paragraph("The wind process's estimate at its knots, with its 95 % band; the "
                        "knots' values are in result.json and parameters.csv.", "note")
         page.figure(wind, rows=1)
-    page.heading("Fit")
-    page.preformatted(fit_summary(fit, units))
+    fit_section(page, fit, units)
     events = event_rows(fit)
     if events:
         page.heading("Events: observed against the model")
