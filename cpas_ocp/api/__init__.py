@@ -38,10 +38,12 @@ if TYPE_CHECKING:
     from cpas_ocp.api.campaigns import (
         Campaign,
         Dispersions,
+        Hierarchical,
         Joint,
         MonteCarlo,
         Population,
         dispersions,
+        hierarchical,
         joint,
         monte_carlo,
         population,
@@ -79,9 +81,9 @@ if TYPE_CHECKING:
 # used: a command imports only what its workflow needs (`cpas-ocp import` reads a log with
 # pandas and scipy, and never loads matplotlib or the estimator).
 _HOMES = {
-    **dict.fromkeys(("Campaign", "Dispersions", "Joint", "MonteCarlo", "Population",
-                     "dispersions", "joint", "monte_carlo", "population",
-                     "reconstruct_campaign"), "cpas_ocp.api.campaigns"),
+    **dict.fromkeys(("Campaign", "Dispersions", "Hierarchical", "Joint", "MonteCarlo",
+                     "Population", "dispersions", "hierarchical", "joint", "monte_carlo",
+                     "population", "reconstruct_campaign"), "cpas_ocp.api.campaigns"),
     **dict.fromkeys(("compare", "diagnose", "discover"), "cpas_ocp.api.discrepancy"),
     **dict.fromkeys(("Flight", "flight"), "cpas_ocp.api.flights"),
     "import_log": "cpas_ocp.api.log_import",
@@ -113,12 +115,13 @@ def __dir__() -> list[str]:
     return sorted({*globals(), *_HOMES})
 
 
-__all__ = ["Campaign", "Dispersions", "FitOptions", "Flight", "InitialGuess", "Joint",
+__all__ = ["Campaign", "Dispersions", "FitOptions", "Flight", "Hierarchical", "InitialGuess",
+           "Joint",
            "MonteCarlo", "Narration", "Population", "Reconstruction", "RocketPyExport",
            "baseline_effects", "build",
            "compare", "demo", "design", "diagnose", "discover", "dispersions", "effect",
-           "fit_estimator", "flight", "hierarchical_fit", "import_log", "joint", "load_model",
-           "load_test",
+           "fit_estimator", "flight", "hierarchical", "hierarchical_fit", "import_log", "joint",
+           "load_model", "load_test",
            "monte_carlo", "population", "reconstruct", "reconstruct_campaign", "reduce",
            "resume_discovery", "rocketpy_export", "simulate", "summary", "terminal",
            "what_if"]

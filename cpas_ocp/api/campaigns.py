@@ -39,6 +39,7 @@ from cpas_ocp.campaign.population_study import (
 )
 from cpas_ocp.errors import InputError, NotAResult
 from cpas_ocp.estimation.estimator import Estimator, Fit, Settings
+from cpas_ocp.inference.hierarchical_fit import HierarchicalFit, hierarchical_fit
 from cpas_ocp.inference.joint_fit import JointFit, SharingError, joint_fit
 from cpas_ocp.io.flight_test import load_test
 from cpas_ocp.io.model_spec import spec_of_test
@@ -46,6 +47,11 @@ from cpas_ocp.io.output_folder import atomic_folder
 from cpas_ocp.physics.flight_test import FlightTest
 from cpas_ocp.progress import SILENT, Narration, terminal
 from cpas_ocp.reports.campaign_text import campaign_text, monte_carlo_text
+from cpas_ocp.reports.hierarchical_report import (
+    hierarchical_text,
+    population_frame,
+    write_hierarchical,
+)
 from cpas_ocp.reports.joint_report import joint_frame, joint_text, write_joint
 from cpas_ocp.reports.population_report import (
     parameter_frame,
@@ -125,6 +131,52 @@ def joint(tests: Sequence[FlightTest | str | Path], share: Mapping[str, str],
         return Joint(joint_fit(loaded, share, settings, labels, say))
     except SharingError as exc:
         raise InputError("(tests)", "share", str(exc)) from None
+
+
+def hierarchical(tests: Sequence[FlightTest | str | Path], populations: Mapping[str, str],
+                 share: Mapping[str, str] | None = None, settings: Settings | None = None,
+                 progress: bool = False) -> Hierarchical:
+    """Reconstruct several tests and the populations of the parameters named in
+    `populations` ({base name: "type" | "vehicle"}) in one NLP: each test's copy drawn from
+    a log-normal population whose median and spread tau are estimated with it, tau by the
+    Laplace approximation to the marginal likelihood (`inference.hierarchical_fit`); those
+    named in `share` held equal across the tests as `joint` holds them."""
+    loaded = [t if isinstance(t, FlightTest) else load_test(t) for t in tests]
+    if len(loaded) < 2:
+        raise InputError("(tests)", "tests", "at least two test folders for a population")
+    labels = [str(t) if not isinstance(t, FlightTest) else t.name for t in tests]
+    say = (lambda line: print(line, file=sys.stderr, flush=True)) if progress else None
+    try:
+        return Hierarchical(hierarchical_fit(loaded, populations, share, settings, labels,
+                                             progress=say))
+    except SharingError as exc:
+        raise InputError("(tests)", "population", str(exc)) from None
+
+
+@dataclass
+class Hierarchical:
+    """A hierarchical fit of several tests (`inference.hierarchical_fit.HierarchicalFit` as
+    `fit`): each population's median, interval and tau, every copy beside its test's own
+    estimate, a summary and its report folder."""
+
+    fit: HierarchicalFit
+
+    @property
+    def table(self) -> pd.DataFrame:
+        """Per population: the median with its interval, tau, the copies (SI)."""
+        return population_frame(self.fit)
+
+    def summary(self) -> str:
+        """What `cpas-ocp hierarchical` prints."""
+        return hierarchical_text(self.fit)
+
+    def report(self, out: str | Path) -> Path:
+        """hierarchical.md, hierarchical.csv, copies.csv and hierarchical.json in `out`."""
+        return write_hierarchical(self.fit, Path(out))
+
+    def __repr__(self) -> str:
+        return (f"<Hierarchical fit of {len(self.fit.fits)} tests: "
+                f"{', '.join(p.name for p in self.fit.populations)}>")
 
 
 @dataclass

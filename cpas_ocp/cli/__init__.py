@@ -12,6 +12,8 @@
                                               fit two effect sets, test which the data prefer
     cpas-ocp campaign TESTS_DIR --out DIR     reconstruct many test folders, tabulate parameters
     cpas-ocp population CAMPAIGN --out DIR    each canopy type's population: mu, Omega, groupings
+    cpas-ocp hierarchical TEST_DIR TEST_DIR ... --population CdS --out DIR
+                                              tests and their populations in one NLP
     cpas-ocp dispersions CAMPAIGN --out DIR   Monte Carlo cases within the grown hulls
     cpas-ocp montecarlo TEST_DIR --cases DIR --out DIR
                                               fly the cases through a test's fit: peak loads

@@ -165,6 +165,23 @@ def parser() -> argparse.ArgumentParser:
                         "parameters.csv, joint.json)")
     s.set_defaults(run=commands.joint)
 
+    s = sub.add_parser("hierarchical", help="several tests and their parameters' populations "
+                                            "in one NLP: each test's copy drawn from a "
+                                            "population whose median and spread are fitted "
+                                            "with it")
+    s.add_argument("tests", nargs="+", type=Path, help="two or more test folders")
+    s.add_argument("--population", action="append", required=True, type=shared,
+                   help="a parameter drawn per test from a log-normal population: its base "
+                        "name, one population per canopy type and stage (CdS), or "
+                        "BASE:vehicle, one per test vehicle (repeatable)")
+    s.add_argument("--share", action="append", default=[], type=shared,
+                   help="a parameter held equal across the tests instead, as joint holds it "
+                        "(repeatable)")
+    s.add_argument("--out", required=True, type=Path,
+                   help="the folder to write the fit to (hierarchical.md, hierarchical.csv, "
+                        "copies.csv, hierarchical.json)")
+    s.set_defaults(run=commands.hierarchical)
+
     s = sub.add_parser("dispersions", help="Monte Carlo cases per canopy type and stage from "
                                            "a campaign's parameter table")
     s.add_argument("campaign", type=Path, help="a campaign folder or its parameters table")

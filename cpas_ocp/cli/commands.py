@@ -209,6 +209,19 @@ def joint(args: argparse.Namespace) -> int:
     return 0
 
 
+def hierarchical(args: argparse.Namespace) -> int:
+    from cpas_ocp import api
+    done = api.hierarchical(args.tests, dict(args.population), dict(args.share),
+                            progress=sys.stderr.isatty())
+    out = done.report(args.out)
+    print(done.summary())
+    print(f"\nhierarchical fit written to {out} (hierarchical.md, hierarchical.csv, "
+          "copies.csv, hierarchical.json)")
+    if not done.fit.is_result:
+        raise NotAResult(f"the hierarchical fit is not a result: {done.fit.problems[0]}")
+    return 0
+
+
 def population(args: argparse.Namespace) -> int:
     from cpas_ocp import api
     if not 0.0 < args.alpha < 1.0:
