@@ -4,7 +4,7 @@ tests that share hardware, Monte Carlo dispersions and peak loads."""
 from __future__ import annotations
 
 import sys
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -122,15 +122,23 @@ def joint(tests: Sequence[FlightTest | str | Path], share: Mapping[str, str],
     across them: {base name: "type" | "vehicle"}, e.g. {"CdS": "type", "prf": "vehicle"}
     for one drag area per canopy type and stage and one PRF per forebody
     (`inference.joint_fit`).  Each test is fitted alone first, as its start."""
-    loaded = [t if isinstance(t, FlightTest) else load_test(t) for t in tests]
-    if len(loaded) < 2:
-        raise InputError("(tests)", "tests", "at least two test folders to fit jointly")
-    labels = [str(t) if not isinstance(t, FlightTest) else t.name for t in tests]
-    say = (lambda line: print(line, file=sys.stderr, flush=True)) if progress else None
+    loaded, labels, say = _several(tests, "to fit jointly", progress)
     try:
         return Joint(joint_fit(loaded, share, settings, labels, say))
     except SharingError as exc:
         raise InputError("(tests)", "share", str(exc)) from None
+
+
+def _several(tests: Sequence[FlightTest | str | Path], why: str, progress: bool
+             ) -> tuple[list[FlightTest], list[str], Callable[[str], None] | None]:
+    """Two or more tests loaded (InputError saying `why` they are needed otherwise), their
+    labels (folder or name), and where their fits' progress goes (stderr, or nowhere)."""
+    loaded = [t if isinstance(t, FlightTest) else load_test(t) for t in tests]
+    if len(loaded) < 2:
+        raise InputError("(tests)", "tests", f"at least two test folders {why}")
+    labels = [str(t) if not isinstance(t, FlightTest) else t.name for t in tests]
+    return loaded, labels, (lambda line: print(line, file=sys.stderr, flush=True)) \
+        if progress else None
 
 
 def hierarchical(tests: Sequence[FlightTest | str | Path], populations: Mapping[str, str],
@@ -141,11 +149,7 @@ def hierarchical(tests: Sequence[FlightTest | str | Path], populations: Mapping[
     a log-normal population whose median and spread tau are estimated with it, tau by the
     Laplace approximation to the marginal likelihood (`inference.hierarchical_fit`); those
     named in `share` held equal across the tests as `joint` holds them."""
-    loaded = [t if isinstance(t, FlightTest) else load_test(t) for t in tests]
-    if len(loaded) < 2:
-        raise InputError("(tests)", "tests", "at least two test folders for a population")
-    labels = [str(t) if not isinstance(t, FlightTest) else t.name for t in tests]
-    say = (lambda line: print(line, file=sys.stderr, flush=True)) if progress else None
+    loaded, labels, say = _several(tests, "for a population", progress)
     try:
         return Hierarchical(hierarchical_fit(loaded, populations, share, settings, labels,
                                              progress=say))
