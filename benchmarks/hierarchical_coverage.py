@@ -157,8 +157,10 @@ def summarise(rows: list[dict]) -> dict:
     print(f"width two-stage / hierarchical: median {np.median(ratio):.2f} "
           f"(range {min(ratio):.2f}-{max(ratio):.2f}); hierarchical fit "
           f"{np.mean([r['wall_s'] for r in rows]):.0f} s, "
-          f"{np.mean([r['evaluations'] for r in rows]):.0f} solves on average")
+          f"{np.mean([r['evaluations'] for r in rows]):.0f} solves on average; "
+          f"{sum(not r['is_result'] for r in rows)} not a result")
     out["width_ratio"] = float(np.median(ratio))
+    out["not_a_result"] = sum(not r["is_result"] for r in rows)
     return out
 
 

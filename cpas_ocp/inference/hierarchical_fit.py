@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import optimize, stats
 
+from cpas_ocp.errors import SolverFailure
 from cpas_ocp.estimation.estimator import Settings, SolverStats
 from cpas_ocp.estimation.fit import Fit
 from cpas_ocp.estimation.hierarchical_nlp import HierarchicalNlp, Population
@@ -197,9 +198,20 @@ def hierarchical_fit(tests: Sequence[FlightTest], populations: Mapping[str, str]
     state = {"z": z, "evaluations": 0}
     # each solve after the first starts at its neighbour's solution (a warm start)
 
+    def solve() -> tuple[np.ndarray, SolverStats]:
+        """The NLP at its current tau from the last solution; a warm start that fails
+        (a restoration phase at the small barrier) is solved again from the default one."""
+        if not (warm and state["evaluations"] > 0):
+            return nlp.solve(state["z"], monitor=monitor)
+        try:
+            return nlp.solve(state["z"], monitor=monitor, warm=True)
+        except SolverFailure as exc:
+            say(f"warm start failed ({exc.status}); solving from the default barrier")
+            return nlp.solve(state["z"], monitor=monitor)
+
     def deviance(log_taus: np.ndarray) -> float:
         nlp.set_tau(np.exp(log_taus))
-        z, _ = nlp.solve(state["z"], monitor=monitor, warm=warm and state["evaluations"] > 0)
+        z, _ = solve()
         state["z"] = z
         state["evaluations"] += 1
         value = nlp.laplace_deviance(z)
@@ -215,7 +227,7 @@ def hierarchical_fit(tests: Sequence[FlightTest], populations: Mapping[str, str]
                 return deviance(trial)
             log_taus[g] = _downhill(along, float(log_taus[g]), np.log(TAU_RANGE))
     nlp.set_tau(np.exp(log_taus))
-    z, solver_stats = nlp.solve(state["z"], monitor=monitor, warm=warm)
+    z, solver_stats = solve()
     final = nlp.laplace_deviance(z)
     cov = nlp.covariance(z)
     out = []
