@@ -165,7 +165,7 @@ def test_a_drag_area_its_descent_contradicts_is_no_result(tmp_path: Path) -> Non
     fit.parameters["CdS[main,open]"] = 31.9 - 1.1 * limit * np.hypot(2.7, 1.0)
     [sentence] = descent_disagreements(fit, lambda: std)  # type: ignore[arg-type]
     assert sentence.startswith("the main's fitted drag area CdS[main,open]")
-    assert "31.9 ± 1 m^2 its settled descent needs" in sentence
+    assert "31.9 ± 1.0 m^2 its settled descent needs" in sentence
     # A canopy that did not open, or one needing more than its diameter gives, is judged
     # by its own sentence, not this one.
     deployments["main"] = {**deployments["main"], "above_diameter": True}

@@ -27,6 +27,7 @@ import pytest
 from cpas_ocp.cli import main
 from cpas_ocp.io.flight_card import load_card
 from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.precision import with_sigma
 
 DATA = Path(__file__).resolve().parents[3] / "shared" / "data"
 LOGS = {"ndrt_2020": "rocketpy-logs/ndrt-2020/ndrt_2020_flight_data.csv",
@@ -182,7 +183,8 @@ def test_each_log_reconstructs_to_its_noise_or_says_why(tmp_path: Path, card: st
     assert "## Drag areas from the steady descent" in report
     for name in nominal:
         assert f"| {name} | " in report.split("## Drag areas from the steady descent")[1]
-    for name in nominal:
-        assert f"| {name} | {result['parameters'][name]['value']:.4f} ± " in report
+    for name in nominal:  # the fitted value to its sigma's precision
+        fitted = result["parameters"][name]
+        assert f"| {name} | {with_sigma(fitted['value'], fitted['std'])} | " in report
     page = (tmp_path / "report" / "report.html").read_text()
     assert "Drag areas against the card&#x27;s nominal values" in page
