@@ -74,6 +74,11 @@ def import_nominal(folder: Path | None) -> dict[str, dict[str, Any]]:
             and isinstance(spec.get("value"), int | float) and spec.get("unit") in FACTORS["area"]}
 
 
+def nominal_area(spec: dict[str, Any]) -> float:
+    """A nominal drag area of `import_nominal` in SI (m^2)."""
+    return float(spec["value"]) * FACTORS["area"][spec["unit"]]
+
+
 def import_deployments(folder: Path | None) -> dict[str, dict[str, Any]]:
     """Per canopy, what the import's deployment forensics found in the log of the test
     folder `folder` (its ``import.json``): ``{canopy: {verdict, sentence, ...}}``; empty

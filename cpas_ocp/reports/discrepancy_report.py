@@ -39,6 +39,7 @@ from cpas_ocp.io.model_spec import model_block
 from cpas_ocp.io.output_folder import atomic_folder
 from cpas_ocp.io.strict_json import json_text
 from cpas_ocp.physics.effects.registry import EffectType
+from cpas_ocp.precision import Z95
 from cpas_ocp.reports.discrepancy_text import comparison_text, diagnosis_text, discovery_text
 from cpas_ocp.reports.display_units import DisplayUnits, display_units, pretty
 from cpas_ocp.reports.html_page import Page, residual_comparison_figure, window_legend
@@ -352,8 +353,6 @@ def write_discovery(discovery: Discovery, out: str | Path,
     return out
 
 
-# Two-sided level of the noise band drawn around chi-square/dof = 1 on the discovery page.
-BAND_Z = 1.959963984540054
 CHAIN_HEADER = ("step", "change", "chi-square", "dof", "chi²/dof", "share of the excess removed",
                 "time (s)", "worst window (normalised RMS)", "admitted by")
 
@@ -385,7 +384,7 @@ def chain_figure(discovery: Discovery) -> go.Figure:
     steps = discovery.steps
     x = [f"{k}: {s.label}" for k, s in enumerate(steps)]
     ratio = [s.criteria.chi_square / s.fit.dof for s in steps]
-    half = [BAND_Z * (2.0 / s.fit.dof) ** 0.5 for s in steps]
+    half = [Z95 * (2.0 / s.fit.dof) ** 0.5 for s in steps]
     fig = go.Figure([
         go.Scatter(x=x, y=[1.0 + h for h in half], mode="lines", line={"width": 0},
                    showlegend=False, hoverinfo="skip"),

@@ -40,7 +40,7 @@ from cpas_ocp.inference.model_comparison import channel_rms
 from cpas_ocp.inference.phase_windows import DEPLOYMENT_EVENTS
 from cpas_ocp.inference.profile_likelihood import THRESHOLD, Profile, held_profile
 from cpas_ocp.io.import_events import EJECTION_EXCLUDE_S
-from cpas_ocp.io.import_reports import import_snatches
+from cpas_ocp.io.import_reports import import_snatches, nominal_area
 from cpas_ocp.io.model_spec import ModelSpec
 from cpas_ocp.io.opening_loads import OPENING_WINDOW_S, descent_load_factor_peak
 from cpas_ocp.physics.atmosphere import density_at
@@ -48,7 +48,7 @@ from cpas_ocp.physics.effects.canopy_inflation import BAND_BLEND_M
 from cpas_ocp.physics.effects.wind_process import WindProcess
 from cpas_ocp.physics.flight_test import Event, Parachute
 from cpas_ocp.physics.parameters import param_name, split_name
-from cpas_ocp.physics.units import FACTORS, G0
+from cpas_ocp.physics.units import G0
 from cpas_ocp.precision import with_sigma
 from cpas_ocp.reports.display_units import DisplayUnits, pretty
 
@@ -439,7 +439,7 @@ def nominal_comparisons(fit: Fit, cov: Covariance, nominal: dict[str, dict[str, 
     for name, spec in nominal.items():
         if name not in fit.parameters:
             continue
-        value = float(spec["value"]) * FACTORS["area"][spec["unit"]]
+        value = nominal_area(spec)
         canopy = split_name(name)[1][0]
         band = split_name(name)[1][-1] if fit.test.parachute(canopy).band_names else ""
         rate = next((r for r in rates if r.canopies[-1] == canopy and band in ("", r.band)),

@@ -15,11 +15,11 @@ from cpas_ocp.inference.diagnostics import sensor_summary, worst_windows
 from cpas_ocp.inference.model_comparison import Criteria
 from cpas_ocp.inference.phase_windows import PhaseWindow, phase_windows
 from cpas_ocp.inference.profile_likelihood import Profile
-from cpas_ocp.io.import_reports import import_nominal
+from cpas_ocp.io.import_reports import import_nominal, nominal_area
 from cpas_ocp.io.output_folder import atomic_folder
 from cpas_ocp.io.strict_json import json_text
 from cpas_ocp.physics.parameters import split_name
-from cpas_ocp.physics.units import FACTORS, SI_UNIT
+from cpas_ocp.physics.units import SI_UNIT
 from cpas_ocp.reports.display_units import (
     CHANNEL_DIMENSION,
     DisplayUnits,
@@ -349,7 +349,7 @@ def _nominal_area(spec: dict[str, Any] | None, k: float) -> str:
     none): design figures carry no sigma, so three significant digits."""
     if spec is None:
         return ""
-    return f"{spec['value'] * FACTORS['area'][spec['unit']] * k:.3g}"
+    return f"{nominal_area(spec) * k:.3g}"
 
 
 def reconstruction_page(fit: Fit, cov: Covariance | None, claim: Claim | None,
