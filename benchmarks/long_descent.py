@@ -1,7 +1,7 @@
 """Benchmark: a 100 Hz, 10-minute rocket descent imported and reconstructed, this tree
 against an earlier revision.
 
-A seeded point-mass flight (the generator of `tests/io/test_rocket_log_import.py`:
+A seeded point-mass flight (the generator of `cpas_ocp/io/example_flight.py`:
 a 16.9 kg rocket boosted to about 6.2 km above the pad, a 4 m^2 drogue at
 apogee, a 12 m^2 main at 300 m above the pad about eight minutes later, then
 touchdown) is written as a column-mapped log: time in ms, pressure in hPa and
@@ -43,12 +43,8 @@ sys.path.insert(0, str(ROOT))
 
 from benchmarks import harness  # noqa: E402
 from benchmarks.revisions import PRELUDE, code_at  # noqa: E402
-from tests.io.test_rocket_log_import import (  # noqa: E402
-    CARD,
-    COLUMN_MAP,
-    fly,
-    write_mapped,
-)
+from cpas_ocp.io.example_flight import fly  # noqa: E402
+from tests.io.test_rocket_log_import import CARD, COLUMN_MAP, write_mapped  # noqa: E402
 
 BASELINE = "bac75cc"  # the grid capped at 0.25 s steps
 THRUST_N = 6500.0  # boost thrust (N, 2.5 s): apogee about 6.1 km above the pad

@@ -2,7 +2,7 @@
 vertical motion as a wind process), any mix of its channels, imported and
 reconstructed from the command line, this tree against an earlier revision.
 
-A seeded point-mass flight (the generator of `tests/io/test_rocket_log_import.py`,
+A seeded point-mass flight (the generator of `cpas_ocp/io/example_flight.py`,
 as `long_descent.py` uses it): a 16.9 kg rocket boosted to about 4.4 km above
 the pad, an 8 m^2 drogue at apogee (26 s) and a 20 m^2 main at 300 m (599 s),
 touchdown at 683 s.  The log holds the barometer (hPa) and optionally the
@@ -46,14 +46,8 @@ import pandas as pd  # noqa: E402
 from benchmarks import harness  # noqa: E402
 from benchmarks.revisions import PRELUDE, code_at  # noqa: E402
 from cpas_ocp.estimation.estimator import Estimator  # noqa: E402
-from tests.io.test_rocket_log_import import (  # noqa: E402
-    A_NOISE,
-    CARD,
-    COLUMN_MAP,
-    SITE,
-    fly,
-    sensor_readings,
-)
+from cpas_ocp.io.example_flight import A_NOISE, SITE, fly, sensor_readings  # noqa: E402
+from tests.io.test_rocket_log_import import CARD, COLUMN_MAP  # noqa: E402
 
 BASELINE = "f7978ab"  # before the import merged a series' straight stretches into means
 THRUST_N = 4200.0  # boost thrust (N, 2.5 s): apogee about 4.4 km above the pad

@@ -7,7 +7,8 @@ import json
 from pathlib import Path
 
 from cpas_ocp.cli import main
-from tests.io.test_rocket_log_import import CARD, COLUMN_MAP, Flight, fly, write_mapped
+from cpas_ocp.io.example_flight import Flight, fly
+from tests.io.test_rocket_log_import import CARD, COLUMN_MAP, write_mapped
 
 
 def altimeter_log(folder: Path, rate_hz: float, seed: int = 5, still_air: bool = False

@@ -25,8 +25,8 @@ import pytest
 from cpas_ocp import api
 from cpas_ocp.api.rocketpy_export import deployment_trigger, rocketpy_export
 from cpas_ocp.cli import main
+from cpas_ocp.io.example_flight import MAIN_AGL_M, fly
 from cpas_ocp.io.flight_test import load_test
-from tests.io.test_rocket_log_import import MAIN_AGL_M, fly
 from tests.rocket_logs import altimeter_log
 
 

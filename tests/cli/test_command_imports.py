@@ -15,7 +15,8 @@ from pathlib import Path
 
 import pytest
 
-from tests.io.test_rocket_log_import import fly, layout_arguments
+from cpas_ocp.io.example_flight import fly
+from tests.io.test_rocket_log_import import layout_arguments
 
 ROOT = Path(__file__).resolve().parents[2]
 # Modules only fits, reports and studies need.

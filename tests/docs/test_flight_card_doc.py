@@ -34,12 +34,7 @@ import pytest
 
 import tests.io.test_rocket_log_import as generator
 from cpas_ocp.cli import main
-from cpas_ocp.io.flight_test import load_test
-from cpas_ocp.io.json_files import validate_block
-from cpas_ocp.physics.atmosphere import pressure_altitude
-from cpas_ocp.physics.units import FACTORS, G0
-from tests.io.test_rocket_log_import import (
-    DT,
+from cpas_ocp.io.example_flight import (
     H_TABLE,
     P_TABLE,
     SITE,
@@ -48,6 +43,11 @@ from tests.io.test_rocket_log_import import (
     sample_time,
     sensor_readings,
 )
+from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.io.json_files import validate_block
+from cpas_ocp.physics.atmosphere import pressure_altitude
+from cpas_ocp.physics.units import FACTORS, G0
+from tests.io.test_rocket_log_import import DT
 
 ROOT = Path(__file__).resolve().parents[2]
 PAGE = ROOT / "docs" / "flight-card.md"

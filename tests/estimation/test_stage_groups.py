@@ -16,19 +16,11 @@ import pytest
 from cpas_ocp.cli import main
 from cpas_ocp.estimation.reduction import reduce_and_guess
 from cpas_ocp.estimation.stage_groups import SETTLE_S, starts_coincide
+from cpas_ocp.io.example_flight import CDS, FILL_S, LINE_STRETCH_S, Flight, fly
 from cpas_ocp.io.flight_test import load_test
 from cpas_ocp.io.model_spec import spec_of_test
 from cpas_ocp.physics.flight_test import FlightTest
-from tests.io.test_rocket_log_import import (
-    CARD,
-    CDS,
-    COLUMN_MAP,
-    FILL_S,
-    LINE_STRETCH_S,
-    Flight,
-    fly,
-    write_mapped,
-)
+from tests.io.test_rocket_log_import import CARD, COLUMN_MAP, write_mapped
 
 # Relative error of a canopy's initial drag area.  The reduction reads it from the descent
 # (CdS = W G / q, q from the speed of a 5 s Savitzky-Golay track of the altimeter): the

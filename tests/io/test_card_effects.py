@@ -11,9 +11,10 @@ import pytest
 
 from cpas_ocp.cli import main
 from cpas_ocp.errors import InputError
+from cpas_ocp.io.example_flight import fly
 from cpas_ocp.io.flight_card import load_card
 from cpas_ocp.physics.effects.registry import BUILTIN
-from tests.io.test_rocket_log_import import CARD, COLUMN_MAP, fly, write_mapped
+from tests.io.test_rocket_log_import import CARD, COLUMN_MAP, write_mapped
 
 PLUGINS = Path(__file__).resolve().parents[1] / "plugins"
 

@@ -11,7 +11,8 @@ from pathlib import Path
 import pytest
 
 from cpas_ocp.cli import main
-from tests.io.test_rocket_log_import import CARD, fly, write_cats
+from cpas_ocp.io.example_flight import fly
+from tests.io.test_rocket_log_import import CARD, write_cats
 
 
 @pytest.fixture(scope="module")

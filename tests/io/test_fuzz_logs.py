@@ -44,13 +44,14 @@ from cpas_ocp.campaign.campaign import COLUMNS
 from cpas_ocp.campaign.dispersion_study import DISPERSED
 from cpas_ocp.cli import main
 from cpas_ocp.errors import NotAResult
+from cpas_ocp.io.example_flight import Flight, fly
 from cpas_ocp.io.flight_test import load_test
 from cpas_ocp.io.plausibility import PAD_PRESSURE_PA, PAD_TEMPERATURE_K
 from tests.campaign.test_dispersion_study import _table
 from tests.campaign.test_drag_area_envelope import stage_table
 from tests.corruption import assert_contract, corrupted_document, corrupted_lines
 from tests.io.test_fuzz_files import SETTINGS, _case
-from tests.io.test_rocket_log_import import CARD, COLUMN_MAP, Flight, fly, write_cats, write_mapped
+from tests.io.test_rocket_log_import import CARD, COLUMN_MAP, write_cats, write_mapped
 
 RATE_HZ = 50.0  # the logs' sample rate: events resolved, a few thousand rows to rewrite
 NOMINAL = {"CdS[drogue,stage1]": {"value": 0.467, "unit": "m^2", "source": "card"},

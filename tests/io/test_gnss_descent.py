@@ -1,6 +1,6 @@
 """A descent logged only by the GNSS, and a log whose files end at different times.
 
-The seeded generator of `tests/io/test_rocket_log_import.py` flies the rocket; the
+The seeded generator of `cpas_ocp/io/example_flight.py` flies the rocket; the
 altimeter's file ends at apogee (or just after the drogue's charge) while a GNSS file,
 fixes at 5 Hz with `GNSS_SIGMA_M` of seeded white noise on the true altitude, goes on to
 the ground.  The import must read the descent in the GNSS altitude: touchdown, the
@@ -26,22 +26,19 @@ import pandas as pd
 import pytest
 
 from cpas_ocp.cli import main
-from cpas_ocp.io.flight_test import load_test
-from tests.io.test_rocket_log_import import (
-    CARD,
+from cpas_ocp.io.example_flight import (
     CDS,
     CDS_BODY,
-    COLUMN_MAP,
     DRY_MASS,
-    DT,
     MASS,
     SITE,
     Flight,
     fly,
     sample_time,
     sensor_readings,
-    write_mapped,
 )
+from cpas_ocp.io.flight_test import load_test
+from tests.io.test_rocket_log_import import CARD, COLUMN_MAP, DT, write_mapped
 
 GNSS_SIGMA_M = 3.0  # the receiver's altitude noise (m)
 GNSS_HZ = 5.0

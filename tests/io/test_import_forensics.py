@@ -15,7 +15,8 @@ import pytest
 
 from cpas_ocp.cli import main
 from cpas_ocp.inference.result_claim import Claim, deployment_findings
-from tests.io.test_rocket_log_import import CARD, COLUMN_MAP, fly, write_mapped
+from cpas_ocp.io.example_flight import fly
+from tests.io.test_rocket_log_import import CARD, COLUMN_MAP, write_mapped
 
 
 def _import(tmp_path: Path, chutes: tuple[str, ...], cds: dict[str, float], seed: int,

@@ -12,8 +12,9 @@ import pandas as pd
 import pytest
 
 from cpas_ocp.cli import main
+from cpas_ocp.io.example_flight import fly
 from cpas_ocp.io.log_hygiene import charge_swing, damaged_end, turned_over
-from tests.io.test_rocket_log_import import CARD, COLUMN_MAP, fly, write_mapped
+from tests.io.test_rocket_log_import import CARD, COLUMN_MAP, write_mapped
 
 NOISE_M = 0.5
 

@@ -19,15 +19,9 @@ import pandas as pd
 import pytest
 
 from cpas_ocp.cli import main
-from cpas_ocp.io.flight_test import load_test
-from cpas_ocp.io.model_spec import spec_of_test
-from cpas_ocp.physics.atmosphere import pressure_altitude
-from cpas_ocp.physics.units import G0
-from tests.io.test_rocket_log_import import (
-    CARD,
+from cpas_ocp.io.example_flight import (
     CDS,
     CDS_BODY,
-    DT,
     GROUND_M,
     H_TABLE,
     MAIN_AGL_M,
@@ -37,8 +31,12 @@ from tests.io.test_rocket_log_import import (
     fly,
     sample_time,
     sensor_readings,
-    write_mapped,
 )
+from cpas_ocp.io.flight_test import load_test
+from cpas_ocp.io.model_spec import spec_of_test
+from cpas_ocp.physics.atmosphere import pressure_altitude
+from cpas_ocp.physics.units import G0
+from tests.io.test_rocket_log_import import CARD, DT, write_mapped
 
 FT = 0.3048
 

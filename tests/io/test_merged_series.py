@@ -13,10 +13,11 @@ import pytest
 
 from cpas_ocp.cli import main
 from cpas_ocp.io import flight_log
+from cpas_ocp.io.example_flight import fly
 from cpas_ocp.io.flight_test import load_test
 from cpas_ocp.io.import_steps import STEPS, merged_series
 from cpas_ocp.io.log_noise import CURVATURE_BIAS, MERGE_SPAN_S, merged_blocks
-from tests.io.test_rocket_log_import import CARD, COLUMN_MAP, fly, write_mapped
+from tests.io.test_rocket_log_import import CARD, COLUMN_MAP, write_mapped
 
 RATE_HZ = 100.0
 SIGMA = 0.3  # white noise of the synthetic channel (m)

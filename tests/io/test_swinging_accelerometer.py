@@ -21,10 +21,11 @@ import pytest
 
 from cpas_ocp.cli import main
 from cpas_ocp.estimation.estimator import Estimator
+from cpas_ocp.io.example_flight import CDS, RATE_HZ, fly
 from cpas_ocp.io.flight_test import load_test
 from cpas_ocp.physics.effects.wind_process import WindProcess
 from cpas_ocp.physics.units import G0
-from tests.io.test_rocket_log_import import CARD, CDS, COLUMN_MAP, RATE_HZ, fly, write_mapped
+from tests.io.test_rocket_log_import import CARD, COLUMN_MAP, write_mapped
 
 SWING_TAU_S = 0.4  # correlation time of the swing's AR(1) part (s)
 SWING_SIGMA = 1.2  # its stationary sigma (m/s^2)

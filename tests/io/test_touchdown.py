@@ -1,6 +1,6 @@
 """Touchdown where the altitude stops descending and stays at the ground's level.
 
-The seeded generator of `tests/io/test_rocket_log_import.py` flies the rocket to a ground
+The seeded generator of `cpas_ocp/io/example_flight.py` flies the rocket to a ground
 7 m above the pad; the log is sampled from 1 Hz to 1 kHz and cut seconds after the
 touchdown, or in the air.  A log whose last seconds lie still on the ground is landed
 (within three of the sigmas it states of the true touchdown, the phase ending before it);
@@ -20,20 +20,12 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from cpas_ocp.io.example_flight import GROUND_M, Flight, fly, sensor_readings
 from cpas_ocp.io.flight_events import detect_events, level_noise, second_difference_sigma
 from cpas_ocp.io.flight_test import load_test
 from cpas_ocp.physics.atmosphere import pressure_altitude
 from tests.io.recovery_flights import filtered_altitude
-from tests.io.test_rocket_log_import import (
-    COLUMN_MAP,
-    GROUND_M,
-    Flight,
-    _card,
-    _import,
-    fly,
-    sensor_readings,
-    write_mapped,
-)
+from tests.io.test_rocket_log_import import COLUMN_MAP, _card, _import, write_mapped
 
 REST_S = 2.7  # a real log kept 2.7 s of the vehicle at rest after its touchdown
 
