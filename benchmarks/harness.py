@@ -134,6 +134,15 @@ def _plain(value: Any) -> Any:
     return str(value)
 
 
+def table(columns: Sequence[str], rows: Sequence[Sequence[Any]]) -> dict[str, Any]:
+    """A result that is a table: its `columns` and `rows` (a row per case, a value per
+    column).  `report` records it as ``{"columns": ..., "rows": ...}``, and the documentation
+    site renders it as a table where docs/validation.md names the benchmark."""
+    if any(len(row) != len(columns) for row in rows):
+        raise ValueError(f"a table of {len(columns)} columns given a row of another length")
+    return {"columns": list(columns), "rows": [list(row) for row in rows]}
+
+
 RESULTS = Path(__file__).resolve().parent / "results"  # each benchmark's latest result
 
 

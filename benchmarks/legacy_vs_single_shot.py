@@ -411,7 +411,14 @@ def report(truth: dict[str, float], single: dict[str, float], free: list[str],
     print(f"  max |start-time error|, single   {1000 * dt_single:8.1f} ms")
     print(f"  max |start-time error|, legacy   {1000 * dt_legacy:8.1f} ms   "
           "(observed event times)")
-    return {"common_parameters": len(common), "single_shot_s": single_wall,
+    comparison = harness.table(
+        ["", "single-shot", "legacy"],
+        [[f"wall time (s), legacy step {1000 * step:g} ms", single_wall, legacy.wall_s],
+         [f"RMS relative error over {len(common)} common parameters (%)", 100 * rms_s,
+          100 * rms_l],
+         ["largest start-time error (ms)", 1000 * dt_single, 1000 * dt_legacy]])
+    return {"comparison": comparison, "common_parameters": len(common),
+            "single_shot_s": single_wall,
             "legacy_s": legacy.wall_s, "legacy_steps_s": legacy.timings,
             "legacy_simulations": legacy.simulations,
             "legacy_over_single_shot": harness.ratio(legacy.wall_s, single_wall),

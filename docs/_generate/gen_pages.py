@@ -28,3 +28,7 @@ with mkdocs_gen_files.open("tutorials/discovery.md", "w") as fh:
 
 with mkdocs_gen_files.open("results.md", "w") as fh:
     fh.write(pages.results_page(sorted(pages.RESULTS.glob("*.json"))))
+
+# Validation: each `<!-- result: NAME -->` line becomes that benchmark's recorded result.
+with mkdocs_gen_files.open("validation.md", "w") as fh:
+    fh.write(pages.validation_page((pages.ROOT / "docs" / "validation.md").read_text()))

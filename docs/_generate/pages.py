@@ -9,6 +9,7 @@ import argparse
 import ast
 import json
 import math
+import re
 from pathlib import Path
 from typing import Any
 
@@ -161,10 +162,43 @@ def tutorial_page(path: Path) -> str:
     return "\n\n".join(out) + "\n"
 
 
+def _is_table(value: Any) -> bool:
+    """A result that reads as a table: one written by `harness.table` (``{"columns": [...],
+    "rows": [[...], ...]}``), or records: two or more named cases, each an object of plain
+    figures (``{"drogue": {"samples": 7209, ...}, "fbcp": {...}}``)."""
+    if not isinstance(value, dict):
+        return False
+    if set(value) == {"columns", "rows"}:
+        return True
+    return len(value) >= 2 and all(
+        isinstance(v, dict) and v and not any(isinstance(x, dict | list) for x in v.values())
+        for v in value.values())
+
+
+def _as_table(value: dict[str, Any]) -> dict[str, Any]:
+    """`value` (`_is_table`) as columns and rows; records take a column per figure any case
+    has, a case's name first."""
+    if set(value) == {"columns", "rows"}:
+        return value
+    columns = list(dict.fromkeys(k for v in value.values() for k in v))
+    return {"columns": ["", *columns],
+            "rows": [[name, *(case.get(c) for c in columns)] for name, case in value.items()]}
+
+
 def _flatten(value: Any, key: str = "") -> list[tuple[str, Any]]:
-    """(dotted key, value) for every leaf of a result; short lists of numbers kept whole."""
+    """(dotted key, value) for every leaf of a result; short lists of numbers kept whole,
+    a table (`_is_table`) as one leaf."""
+    if _is_table(value):
+        return [(key, value)]
     if isinstance(value, dict):
-        return [row for k, v in value.items() for row in _flatten(v, f"{key}.{k}" if key else k)]
+        # Cases beside other figures (``{"seeds": 7, "hierarchical": {...}, "nested": {...}}``)
+        # are read as one table where two or more of them hold the same figures.
+        shapes = [tuple(v) for v in value.values() if _is_table({"a": v, "b": v})]
+        common = {shape for shape in shapes if shapes.count(shape) >= 2}
+        cases = {k: v for k, v in value.items() if isinstance(v, dict) and tuple(v) in common}
+        rows = [(key, cases)] if cases else []
+        return rows + [row for k, v in value.items() if k not in cases
+                       for row in _flatten(v, f"{key}.{k}" if key else k)]
     if isinstance(value, list) and len(value) > 6 and all(isinstance(v, dict) for v in value):
         return [(key, f"{len(value)} rows (in the JSON)")]
     return [(key, value)]
@@ -188,6 +222,79 @@ def _purpose(name: str) -> str:
     return " ".join(doc.split("\n\n")[0].split())
 
 
+def _markdown_table(value: dict[str, Any]) -> list[str]:
+    """A table result (`_is_table`) as a markdown table, each number to 4 significant
+    digits."""
+    table = _as_table(value)
+    return [f"| {' | '.join(_cell(c) for c in table['columns'])} |",
+            "|" + "---|" * len(table["columns"]),
+            *(f"| {' | '.join(_cell(_shown(v)) for v in row)} |" for row in table["rows"]), ""]
+
+
+def _provenance(result: dict[str, Any]) -> str:
+    """Where a result comes from: the revision, date, machine and load of its run."""
+    m = result.get("machine", {})
+    load = result.get("load_average") or []
+    return (f"Revision `{result.get('revision', 'unknown')}`, {result.get('date', '')}, "
+            f"{m.get('cpus', result.get('cpus', '?'))} CPUs, {m.get('platform', '')}, "
+            f"Python {m.get('python', '?')}, CasADi {m.get('casadi', '?')}; load average "
+            f"{', '.join(f'{v:.1f}' for v in load)}.")
+
+
+def _command(result: dict[str, Any]) -> str:
+    return result.get("command") or f"python benchmarks/{result['benchmark']}.py"
+
+
+def _figures(result: dict[str, Any]) -> list[str]:
+    """A result's figures: its tables (`_is_table`) each under its name, then the other
+    figures as one table of name and value."""
+    if _is_table(result["results"]):
+        return _markdown_table(result["results"])
+    leaves = _flatten(result["results"])
+    out: list[str] = []
+    for key, value in leaves:
+        if _is_table(value):
+            out += [*([f"*{key}*", ""] if key else []), *_markdown_table(value)]
+    rest = [(k, v) for k, v in leaves if not _is_table(v)]
+    if rest:
+        out += ["| figure | value |", "|---|---|",
+                *(f"| `{k}` | {_cell(_shown(v))} |" for k, v in rest), ""]
+    return out
+
+
+RESULT_MARK = re.compile(r"^<!-- result: ([a-z0-9_]+)((?:\.[A-Za-z0-9_]+)*) -->$",
+                         re.MULTILINE)
+
+
+def result_block(name: str, part: str = "") -> str:
+    """A benchmark's latest recorded result as the validation page shows it in place: its
+    tables and figures (only those under the dotted key `part`, where given), then the
+    command and run that produced them."""
+    path = RESULTS / f"{name}.json"
+    where = f"docs/validation.md: <!-- result: {name}{part} -->"
+    if not path.is_file():
+        raise FileNotFoundError(f"{where} names no recorded result (run python "
+                                f"benchmarks/{name}.py)")
+    result = json.loads(path.read_text())
+    figures = result["results"]
+    for key in filter(None, part.split(".")):
+        if not isinstance(figures, dict) or key not in figures:
+            raise KeyError(f"{where}: the result has no {key!r}")
+        figures = figures[key]
+    if not isinstance(figures, dict):
+        figures = {part.rsplit(".", 1)[-1]: figures}
+    return "\n".join([*_figures({"results": figures}),
+                      f"*Generated from `benchmarks/results/{name}.json`: `{_command(result)}`. "
+                      f"{_provenance(result)}*", ""])
+
+
+def validation_page(text: str) -> str:
+    """docs/validation.md with each ``<!-- result: NAME -->`` line replaced by that
+    benchmark's latest recorded result (`result_block`): the tables are rendered from the
+    JSON at every build, so rerunning the benchmark is what changes them."""
+    return RESULT_MARK.sub(lambda m: result_block(m.group(1), m.group(2)), text)
+
+
 def results_page(paths: list[Path]) -> str:
     """The measured results: for each benchmark's latest result (benchmarks/results/*.json,
     written by `harness.report`), what it measures, the revision, date and machine it ran
@@ -204,15 +311,6 @@ def results_page(paths: list[Path]) -> str:
     for path in paths:
         result = json.loads(path.read_text())
         name = result["benchmark"]
-        m = result.get("machine", {})
-        load = result.get("load_average") or []
-        out += [f"## {name}", "", _purpose(name), "",
-                f"Revision `{result.get('revision', 'unknown')}`, {result.get('date', '')}, "
-                f"{m.get('cpus', result.get('cpus', '?'))} CPUs, {m.get('platform', '')}, "
-                f"Python {m.get('python', '?')}, CasADi {m.get('casadi', '?')}; load average "
-                f"{', '.join(f'{v:.1f}' for v in load)}.", "",
-                f"```\n{result.get('command', f'python benchmarks/{name}.py')}\n```", "",
-                "| figure | value |", "|---|---|"]
-        out += [f"| `{k}` | {_cell(_shown(v))} |" for k, v in _flatten(result["results"])]
-        out.append("")
+        out += [f"## {name}", "", _purpose(name), "", _provenance(result), "",
+                f"```\n{_command(result)}\n```", "", *_figures(result)]
     return "\n".join(out) + "\n"

@@ -81,6 +81,8 @@ def test_each_tutorial_runs_as_printed(script: Path, monkeypatch, tmp_path, caps
         assert (ns["work"] / "report" / "report.html").is_file()
     elif script.stem == "planning":
         assert ns["design"].ranking and "%" in printed
+    elif script.stem == "rocket_log":
+        assert ns["rec"].is_result and "the main did not inflate" in printed
     elif script.stem == "campaign":
         assert ns["population"].groups and list((ns["work"] / "cases").glob("cases_*"))
     else:
@@ -110,3 +112,38 @@ def test_a_benchmark_result_is_recorded_and_rendered(monkeypatch, tmp_path) -> N
     harness.parser(None, seed=1).parse_args(["--no-record"])
     harness.report("hierarchical_speed", speed_up=1.0)
     assert json.loads(path.read_text())["results"]["speed_up"] == 4.25  # not rewritten
+
+
+def test_each_validation_table_is_rendered_from_its_recorded_result() -> None:
+    """Every `<!-- result: NAME[.part] -->` line of docs/validation.md names a recorded
+    result, and the page the site shows holds that result's table, revision and date in its
+    place."""
+    text = (ROOT / "docs" / "validation.md").read_text()
+    marks = pages.RESULT_MARK.findall(text)
+    assert marks, "docs/validation.md renders no recorded result"
+    page = pages.validation_page(text)
+    assert "<!-- result:" not in page
+    for name, _ in marks:
+        result = json.loads((pages.RESULTS / f"{name}.json").read_text())
+        assert f"Revision `{result['revision']}`, {result['date']}" in page, name
+        assert f"benchmarks/results/{name}.json" in page, name
+
+
+def test_cases_beside_other_figures_render_as_one_table(monkeypatch, tmp_path) -> None:
+    """Cases holding the same figures become a table's rows (a case per row, a figure per
+    column), a dotted part selects one branch, and a marker naming no result is an error
+    that names the benchmark to run."""
+    monkeypatch.setattr(pages, "RESULTS", tmp_path)
+    (tmp_path / "coverage.json").write_text(json.dumps({
+        "benchmark": "coverage", "revision": "abc1234567", "date": "d", "command": "c",
+        "results": {"seeds": 7, "fit": {"a": {"covered": 0.95, "width": 0.06123456},
+                                         "b": {"covered": 1.0, "width": 0.121}}}}))
+    block = pages.validation_page("<!-- result: coverage -->")
+    assert "|  | covered | width |" in block and "| a | 0.95 | 0.06123 |" in block
+    assert "| `seeds` | 7 |" in block
+    part = pages.validation_page("<!-- result: coverage.fit.a -->")
+    assert "| `covered` | 0.95 |" in part and "seeds" not in part
+    with pytest.raises(FileNotFoundError, match=r"benchmarks/missing\.py"):
+        pages.validation_page("<!-- result: missing -->")
+    with pytest.raises(KeyError, match="no 'c'"):
+        pages.validation_page("<!-- result: coverage.fit.c -->")
