@@ -16,10 +16,13 @@ About three minutes."""
 from __future__ import annotations
 
 import dataclasses
+import json
 
 import numpy as np
+import pandas as pd
 import pytest
 
+from cpas_ocp.cli import main
 from cpas_ocp.estimation.simulate import simulate_problem
 from cpas_ocp.inference.hierarchical_fit import TAU_RANGE, hierarchical_fit
 from cpas_ocp.inference.joint_fit import joint_fit
@@ -71,3 +74,27 @@ def test_tau_estimated_and_the_median_covered(tests) -> None:
     assert TAU_RANGE[0] < pop.tau < TAU_RANGE[1]
     assert fit.is_result, fit.problems
     assert pop.lower < 2.0 < pop.upper
+
+
+def test_the_command_writes_two_tests_and_their_population(problem_folder, tmp_path,
+                                                          capsys) -> None:
+    """`cpas-ocp hierarchical` on two fbcp tests: the population's median with its interval,
+    and every copy beside its own test's estimate, whole or said why not a result."""
+    folders = [str(problem_folder("fbcp", seed)) for seed in (1, 2)]
+    out = tmp_path / "out"
+    code = main(["hierarchical", *folders, "--population", "CdS", "--out", str(out)])
+    assert code in (0, 4)  # 4: written, and said why it is not a result
+    printed = capsys.readouterr().out
+    assert "| population | median |" in printed
+    record = json.loads((out / "hierarchical.json").read_text())
+    assert record["result"] == (code == 0)
+    pops = pd.read_csv(out / "hierarchical.csv")
+    assert set(pops["population"]) == {"CdS[fbcp,stage1]"}
+    row = pops.iloc[0]
+    assert row["lower"] < row["median"] < row["upper"] and row["copies"] == 4
+    copies = pd.read_csv(out / "copies.csv")
+    assert len(copies) == 4 and set(copies["test"]) == set(folders)
+    # each copy between its own estimate and the median, or within a sigma of its own
+    for c in copies.itertuples():
+        lo, hi = sorted((c.alone, row["median"]))
+        assert lo - c.alone_std <= c.value <= hi + c.alone_std, c

@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
+from cpas_ocp.cli import main
 from cpas_ocp.discrepancy.diagnosis import ALPHA as DIAGNOSIS_ALPHA
 from cpas_ocp.discrepancy.diagnosis import Diagnosis
 from cpas_ocp.discrepancy.wind_evidence import DECISIVE_2LNB, wind_evidence
@@ -26,6 +27,7 @@ from cpas_ocp.estimation.estimator import Estimator
 from cpas_ocp.estimation.simulate import simulate_problem
 from cpas_ocp.inference.continuation import solve_checked
 from cpas_ocp.inference.process_intensity import choose_intensity
+from cpas_ocp.inference.result_claim import PROCESS_SIGMAS
 from cpas_ocp.io.flight_test import load_test
 from cpas_ocp.io.model_spec import spec_from_block, spec_of_test
 from cpas_ocp.io.problems import load_problem
@@ -268,3 +270,33 @@ def test_the_diagnosis_names_the_air_motion_through_gusts_and_not_in_still_air(
     assert wind_evidence(still, still_spec, DIAGNOSIS_ALPHA) is None
     forced = wind_evidence(still, still_spec, 1.0)
     assert forced is not None and not forced.decisive
+
+
+def wind_model(folder: Path, dest: Path, sigma: float) -> Path:
+    """The test's model with the air's vertical motion as a process of prior `sigma` (m/s)."""
+    model = json.loads((folder / "manifest.json").read_text())["model"]
+    model["effects"] = [{"effect": "wind_process", "components": ["up"], "knot_s": 4.0,
+                         "tau_s": 10.0, "sigma_vertical": sigma}] + model["effects"]
+    dest.write_text(json.dumps(model))
+    return dest
+
+
+@pytest.mark.parametrize(("sigma", "code"), [(0.05, 4), (1.0, 0)])
+def test_a_wind_process_beyond_its_prior_exits_4(problem_folder, tmp_path, capsys,
+                                                 sigma: float, code: int) -> None:
+    """rocket_gusts (seed 2) flown through air of 1 m/s: fitted with a prior of 0.05 m/s the
+    knots go beyond 5 sigma of it (exit 4, the knot and its sigma named); with the prior
+    it was drawn from, a result."""
+    folder = problem_folder("rocket_gusts", 2)
+    model = wind_model(folder, tmp_path / "model.json", sigma)
+    out = tmp_path / "out"
+    assert main(["reconstruct", str(folder), "--model", str(model), "--out", str(out)]) == code
+    claim = json.loads((out / "result.json").read_text())["claim"]
+    if code:
+        err = capsys.readouterr().err
+        assert "a process departs from its prior beyond 5 sigma: wind_process: wind_up[" in err
+        assert "sigma of its prior" in err
+        knots = [d for d in claim["process_departures"] if d["kind"] == "knot"]
+        assert knots and all(abs(d["sigmas"]) > PROCESS_SIGMAS for d in knots)
+    else:
+        assert claim["result"] is True and claim["process_departures"] == []

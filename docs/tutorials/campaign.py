@@ -1,10 +1,11 @@
 # %% [markdown]
 # # A campaign, its populations and Monte Carlo cases
 #
-# Four Drogue tests reconstructed in parallel, each canopy type and stage's
-# population fitted from their estimates with each test's own covariance, and
-# Monte Carlo cases drawn from the fitted populations. The canopies' positions
-# in the cluster (drogue1, drogue2) enter as a covariate by default.
+# Four tests of a pair of Forward Bay Cover Parachutes (the built-in `fbcp`
+# test) reconstructed in parallel, the canopy type's population fitted from
+# their estimates with each test's own covariance, and Monte Carlo cases drawn
+# from the fitted population. The canopies' positions in the pair (fbcp1,
+# fbcp2) enter as a covariate by default.
 
 # %%
 import tempfile
@@ -14,7 +15,7 @@ import cpas_ocp as co
 
 work = Path(tempfile.mkdtemp(prefix="cpas-campaign-"))
 for i in range(4):  # four tests, each with its own sensor noise
-    co.simulate("drogue", work / "tests" / f"test{i}", seed=100 + i)
+    co.simulate("fbcp", work / "tests" / f"test{i}", seed=100 + i)
 campaign = co.reconstruct_campaign(work / "tests", work / "campaign", workers=2)
 print(campaign.summary())
 
@@ -42,6 +43,6 @@ print(population.summary())
 
 # %%
 cases = co.dispersions(work / "campaign", work / "cases", cases=200, seed=1,
-                       from_population=True, at={"position": "drogue2"})
+                       from_population=True, at={"position": "fbcp2"})
 print("\n".join(cases.notes))
 print(sorted(p.name for p in (work / "cases").glob("cases_*.parquet")))

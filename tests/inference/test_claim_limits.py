@@ -266,37 +266,6 @@ def test_sigmas_ten_times_too_large_warn_that_uncertainties_are_overstated(
     assert "Uncertainties overstated." in (tmp_path / "out" / "report.html").read_text()
 
 
-def wind_model(folder: Path, dest: Path, sigma: float) -> Path:
-    """The test's model with the air's vertical motion as a process of prior `sigma` (m/s)."""
-    model = json.loads((folder / "manifest.json").read_text())["model"]
-    model["effects"] = [{"effect": "wind_process", "components": ["up"], "knot_s": 4.0,
-                         "tau_s": 10.0, "sigma_vertical": sigma}] + model["effects"]
-    dest.write_text(json.dumps(model))
-    return dest
-
-
-@pytest.mark.slow
-@pytest.mark.parametrize(("sigma", "code"), [(0.05, 4), (1.0, 0)])
-def test_a_wind_process_beyond_its_prior_exits_4(problem_folder, tmp_path, capsys,
-                                                 sigma: float, code: int) -> None:
-    """rocket_gusts (seed 2) flown through air of 1 m/s: fitted with a prior of 0.05 m/s the
-    knots go beyond 5 sigma of it (exit 4, the knot and its sigma named); with the prior
-    it was drawn from, a result."""
-    folder = problem_folder("rocket_gusts", 2)
-    model = wind_model(folder, tmp_path / "model.json", sigma)
-    out = tmp_path / "out"
-    assert main(["reconstruct", str(folder), "--model", str(model), "--out", str(out)]) == code
-    claim = json.loads((out / "result.json").read_text())["claim"]
-    if code:
-        err = capsys.readouterr().err
-        assert "a process departs from its prior beyond 5 sigma: wind_process: wind_up[" in err
-        assert "sigma of its prior" in err
-        knots = [d for d in claim["process_departures"] if d["kind"] == "knot"]
-        assert knots and all(abs(d["sigmas"]) > PROCESS_SIGMAS for d in knots)
-    else:
-        assert claim["result"] is True and claim["process_departures"] == []
-
-
 @pytest.mark.slow
 def test_a_parameter_on_a_guessed_bound_is_flagged_in_every_output(problem_folder, tmp_path,
                                                                    capsys) -> None:
