@@ -165,19 +165,27 @@ def tutorial_page(path: Path) -> str:
 def _is_table(value: Any) -> bool:
     """A result that reads as a table: one written by `harness.table` (``{"columns": [...],
     "rows": [[...], ...]}``), or records: two or more named cases, each an object of plain
-    figures (``{"drogue": {"samples": 7209, ...}, "fbcp": {...}}``)."""
+    figures (``{"drogue": {"samples": 7209, ...}, "fbcp": {...}}``), or a list of two or more
+    such objects (runs in order)."""
+    def plain(case: Any) -> bool:
+        return isinstance(case, dict) and bool(case) and not any(
+            isinstance(x, dict | list) for x in case.values())
+
+    if isinstance(value, list):  # runs in order, each an object of plain figures
+        return len(value) >= 2 and all(plain(v) for v in value)
     if not isinstance(value, dict):
         return False
     if set(value) == {"columns", "rows"}:
         return True
-    return len(value) >= 2 and all(
-        isinstance(v, dict) and v and not any(isinstance(x, dict | list) for x in v.values())
-        for v in value.values())
+    return len(value) >= 2 and all(plain(v) for v in value.values())
 
 
-def _as_table(value: dict[str, Any]) -> dict[str, Any]:
+def _as_table(value: dict[str, Any] | list[dict[str, Any]]) -> dict[str, Any]:
     """`value` (`_is_table`) as columns and rows; records take a column per figure any case
-    has, a case's name first."""
+    has, a case's name first (a list's runs have none)."""
+    if isinstance(value, list):
+        columns = list(dict.fromkeys(k for v in value for k in v))
+        return {"columns": columns, "rows": [[run.get(c) for c in columns] for run in value]}
     if set(value) == {"columns", "rows"}:
         return value
     columns = list(dict.fromkeys(k for v in value.values() for k in v))
@@ -222,7 +230,7 @@ def _purpose(name: str) -> str:
     return " ".join(doc.split("\n\n")[0].split())
 
 
-def _markdown_table(value: dict[str, Any]) -> list[str]:
+def _markdown_table(value: dict[str, Any] | list[dict[str, Any]]) -> list[str]:
     """A table result (`_is_table`) as a markdown table, each number to 4 significant
     digits."""
     table = _as_table(value)

@@ -137,10 +137,12 @@ def test_cases_beside_other_figures_render_as_one_table(monkeypatch, tmp_path) -
     (tmp_path / "coverage.json").write_text(json.dumps({
         "benchmark": "coverage", "revision": "abc1234567", "date": "d", "command": "c",
         "results": {"seeds": 7, "fit": {"a": {"covered": 0.95, "width": 0.06123456},
-                                         "b": {"covered": 1.0, "width": 0.121}}}}))
+                                         "b": {"covered": 1.0, "width": 0.121}},
+                    "runs": [{"rate": 100, "s": 0.7}, {"rate": 4000, "s": 2.4}]}}))
     block = pages.validation_page("<!-- result: coverage -->")
     assert "|  | covered | width |" in block and "| a | 0.95 | 0.06123 |" in block
     assert "| `seeds` | 7 |" in block
+    assert "| rate | s |" in block and "| 4000 | 2.4 |" in block  # a list of runs
     part = pages.validation_page("<!-- result: coverage.fit.a -->")
     assert "| `covered` | 0.95 |" in part and "seeds" not in part
     with pytest.raises(FileNotFoundError, match=r"benchmarks/missing\.py"):
