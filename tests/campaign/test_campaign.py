@@ -9,7 +9,7 @@ import shutil
 import pandas as pd
 import pytest
 
-from cpas_ocp.campaign.campaign import COLUMNS, find_tests, parameter_table, run_campaign
+from cpas_ocp.campaign.campaign import COLUMNS
 from cpas_ocp.cli import main
 
 pytestmark = pytest.mark.slow
@@ -79,18 +79,6 @@ def test_campaign_tabulates_every_test_and_reports_the_broken_one(tests_root, tm
     one = cov[cov.test == "fbcp-seed1"]
     assert len(one) == len(diagonal[diagonal.test == "fbcp-seed1"]) * (
         len(diagonal[diagonal.test == "fbcp-seed1"]) + 1) // 2
-
-
-def test_dask_cluster_gives_the_same_table(tests_root) -> None:
-    distributed = pytest.importorskip("distributed")
-    folders = find_tests(tests_root)
-    local = parameter_table(run_campaign(folders, workers=1))
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                  dashboard_address=None) as cluster:
-        outcomes = run_campaign(folders, scheduler=cluster.scheduler_address)
-    assert [o.kind for o in outcomes] == ["input", "ok", "ok", "ok"]
-    remote = parameter_table(outcomes)
-    pd.testing.assert_frame_equal(local, remote, check_exact=False, rtol=1e-9)
 
 
 def test_no_test_folders_is_one_line_exit_2(tmp_path, capsys) -> None:

@@ -77,20 +77,6 @@ def test_peak_loads_follow_peak_drag_area_times_dynamic_pressure(study) -> None:
     assert "fitted values peak at" in (root / "local" / "montecarlo.md").read_text()
 
 
-def test_dask_cluster_gives_the_same_peaks(study) -> None:
-    distributed = pytest.importorskip("distributed")
-    folder, root = study
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                  dashboard_address=None) as cluster:
-        assert main(["montecarlo", str(folder), "--cases", str(root / "dispersions"), "--out",
-                     str(root / "dask"), "--limit", str(LIMIT),
-                     "--scheduler", cluster.scheduler_address]) == 0
-    for chute in ("fbcp1", "fbcp2"):
-        local = pd.read_parquet(root / "local" / f"peak_loads_{chute}_stage1.parquet")
-        remote = pd.read_parquet(root / "dask" / f"peak_loads_{chute}_stage1.parquet")
-        pd.testing.assert_frame_equal(local, remote, check_exact=False, rtol=1e-12)
-
-
 def _bad(argv: list[str], capsys) -> str:
     assert main(argv) == 2
     err = capsys.readouterr().err.strip()
