@@ -201,9 +201,9 @@ def _flatten(value: Any, key: str = "") -> list[tuple[str, Any]]:
     if isinstance(value, dict):
         # Cases beside other figures (``{"seeds": 7, "hierarchical": {...}, "nested": {...}}``)
         # are read as one table where two or more of them hold the same figures.
-        shapes = [tuple(v) for v in value.values() if _is_table({"a": v, "b": v})]
-        common = {shape for shape in shapes if shapes.count(shape) >= 2}
-        cases = {k: v for k, v in value.items() if isinstance(v, dict) and tuple(v) in common}
+        flat = {k: v for k, v in value.items() if _is_table({"a": v, "b": v})}
+        shapes = [tuple(v) for v in flat.values()]
+        cases = {k: v for k, v in flat.items() if shapes.count(tuple(v)) >= 2}
         rows = [(key, cases)] if cases else []
         return rows + [row for k, v in value.items() if k not in cases
                        for row in _flatten(v, f"{key}.{k}" if key else k)]
