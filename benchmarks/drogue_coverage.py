@@ -152,14 +152,16 @@ def report(results: list[SeedResult], elapsed_s: float) -> dict:
         print("no seed was reconstructed")
     else:
         print(f"{'parameter':34s} {'coverage %':>10s} {'n':>4s} {'mean z':>7s} {'mean z^2':>8s}")
-        cover = {}
+        cover, per_parameter = {}, {}
         for name, zs in z_by_name.items():
             z = np.array(zs)
             cover[name] = float(np.mean(np.abs(z) < Z95))
+            per_parameter[name] = {"coverage_percent": 100 * cover[name], "n": z.size,
+                                   "mean_z": z.mean(), "mean_z2": np.mean(z**2)}
             print(f"{name:34s} {100 * cover[name]:10.1f} {z.size:4d} {z.mean():7.2f} "
                   f"{np.mean(z**2):8.2f}")
         out = summarise(z_by_name, cover, ok, unscored)
-        out["coverage"] = cover
+        out["per_parameter"] = per_parameter
     failures = [r for r in results if r.error]
     print(f"\nfailures: {len(failures)} of {len(results)} seeds")
     for r in failures:
