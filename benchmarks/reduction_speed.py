@@ -85,8 +85,17 @@ def main() -> int:
     rows = {}
     with tempfile.TemporaryDirectory() as tmp, code_at(args.against) as before:
         for name, folder in cases(Path(tmp), args.seed).items():
-            old, new = (run_child(REDUCE, code, str(folder), str(args.repeat))
-                        for code in (before, ROOT))
+            new = run_child(REDUCE, ROOT, str(folder), str(args.repeat))
+            try:
+                old = run_child(REDUCE, before, str(folder), str(args.repeat))
+            except RuntimeError as error:  # a folder the older package cannot read
+                reason = str(error).strip().splitlines()[-1]
+                rows[name] = {"before_s": None, "now_s": new["wall_s"], "wall_ratio": None,
+                              "largest_change": f"not comparable: {args.against} {reason}",
+                              "change_of_range": None}
+                print(f"{name:20s} now: {new['wall_s']:6.3f} s | not comparable: "
+                      f"{args.against} {reason}", flush=True)
+                continue
             worst, change = largest_change(old, new)
             rows[name] = {"before_s": old["wall_s"], "now_s": new["wall_s"],
                           "wall_ratio": harness.ratio(new["wall_s"], old["wall_s"]),
