@@ -13,9 +13,9 @@ physics, integrated at 2 ms:
 each canopy's drag area growing linearly over its fill (0.6 s drogue, 1.2 s main) from
 0.3 s after its charge, through a site atmosphere from the surface density (1.001 kg/m^3)
 and a lapse rate of 8 K/km.  The axis stays vertical, so the axial specific force is
-(T - drag) / m.  The logger sees the pressure with 2 Pa noise and the axial acceleration
-with 0.3 m/s^2 noise, each ejection charge's pressure pulse and jolt, the main's snatch and
-the landing's impact.
+(T - drag) / m.  The logger sees the pressure with 2 Pa noise (5 Pa in `example_log`) and
+the axial acceleration with 0.3 m/s^2 noise, each ejection charge's pressure pulse and jolt,
+the main's snatch and the landing's impact.
 """
 
 from __future__ import annotations
