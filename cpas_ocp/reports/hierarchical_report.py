@@ -16,7 +16,7 @@ import pandas as pd
 from cpas_ocp.inference.hierarchical_fit import LEVEL, HierarchicalFit
 from cpas_ocp.io.output_folder import atomic_folder
 from cpas_ocp.io.strict_json import json_text
-from cpas_ocp.precision import with_interval
+from cpas_ocp.precision import rounded, sigma_text, with_interval
 
 MARKER = "hierarchical.json"
 
@@ -46,7 +46,8 @@ def copies_frame(hf: HierarchicalFit) -> pd.DataFrame:
 
 def hierarchical_text(hf: HierarchicalFit) -> str:
     """The fit in a few lines, a table of the populations (each median to the precision its
-    interval allows), and why it is not a result where it is not."""
+    interval allows; a shared parameter to its sigma's), and why it is not a result where it
+    is not."""
     s = hf.stats
     lines = [f"Hierarchical fit of {len(hf.fits)} tests: {s.status}; {hf.evaluations} solves "
              f"for tau; chi-square {hf.chi2:.1f} on {hf.dof} degrees of freedom (the copies' "
@@ -58,8 +59,8 @@ def hierarchical_text(hf: HierarchicalFit) -> str:
         tau = f"{p.tau:.3g}" + ("" if p.tau_estimated else " (held)")
         lines.append(f"| {p.name} | {median} | {interval} | {tau} | {len(p.copies)} |")
     for s_est in hf.shared:
-        lines.append(f"| {s_est.name} (shared) | {s_est.value:.4g} | sigma {s_est.std:.2g} | "
-                     f"| {len(s_est.members)} |")
+        lines.append(f"| {s_est.name} (shared) | {rounded(s_est.value, s_est.std)} | "
+                     f"sigma {sigma_text(s_est.std)} | | {len(s_est.members)} |")
     if not hf.is_result:
         lines += ["", "**Not a result.** " + " ".join(f"{p[0].upper()}{p[1:]}."
                                                       for p in hf.problems)]

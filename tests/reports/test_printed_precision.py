@@ -39,3 +39,23 @@ def test_the_reports_print_each_estimate_to_its_sigma(drogue_fit, tmp_path) -> N
         assert table.loc[name, "value"] == fit.parameters[name]
     assert json.loads((out / "result.json").read_text())["parameters"]
     assert not re.search(r"\d\.\d{6,} ±", md)
+
+
+def test_the_hierarchical_table_prints_each_median_and_shared_value_to_its_precision() -> None:
+    """A population's median to the precision its interval allows; a parameter shared
+    across the tests to its sigma's (1.01771 ± 0.00859 prints 1.0177, sigma 0.0086, not
+    four significant digits whatever the sigma)."""
+    from types import SimpleNamespace
+
+    from cpas_ocp.reports.hierarchical_report import hierarchical_text
+
+    population = SimpleNamespace(name="CdS[fbcp,stage1]", median=2.012345, lower=1.951234,
+                                 upper=2.075432, tau=0.0512, tau_estimated=True,
+                                 copies={"0:a": 2.0, "1:b": 2.02})
+    shared = SimpleNamespace(name="prf[capsule]", value=1.01771, std=0.00859, members=[0, 1])
+    fit = SimpleNamespace(stats=SimpleNamespace(status="Solve_Succeeded"), evaluations=3,
+                          chi2=10.0, dof=9, fits=[1, 2], populations=[population],
+                          shared=[shared], is_result=True, problems=[])
+    text = hierarchical_text(fit)
+    assert "| CdS[fbcp,stage1] | 2.012 | [1.951, 2.075] | 0.0512 | 2 |" in text, text
+    assert "| prf[capsule] (shared) | 1.0177 | sigma 0.0086 | | 2 |" in text, text
