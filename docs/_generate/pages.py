@@ -162,22 +162,24 @@ def tutorial_page(path: Path) -> str:
     return "\n\n".join(out) + "\n"
 
 
+def _case(value: Any) -> bool:
+    """One case of a table: an object of plain figures (no objects or lists in it)."""
+    return isinstance(value, dict) and bool(value) and not any(
+        isinstance(x, dict | list) for x in value.values())
+
+
 def _is_table(value: Any) -> bool:
     """A result that reads as a table: one written by `harness.table` (``{"columns": [...],
-    "rows": [[...], ...]}``), or records: two or more named cases, each an object of plain
-    figures (``{"drogue": {"samples": 7209, ...}, "fbcp": {...}}``), or a list of two or more
-    such objects (runs in order)."""
-    def plain(case: Any) -> bool:
-        return isinstance(case, dict) and bool(case) and not any(
-            isinstance(x, dict | list) for x in case.values())
-
-    if isinstance(value, list):  # runs in order, each an object of plain figures
-        return len(value) >= 2 and all(plain(v) for v in value)
+    "rows": [[...], ...]}``), or records: two or more named cases (`_case`,
+    ``{"drogue": {"samples": 7209, ...}, "fbcp": {...}}``), or a list of two or more cases
+    (runs in order)."""
+    if isinstance(value, list):
+        return len(value) >= 2 and all(_case(v) for v in value)
     if not isinstance(value, dict):
         return False
     if set(value) == {"columns", "rows"}:
         return True
-    return len(value) >= 2 and all(plain(v) for v in value.values())
+    return len(value) >= 2 and all(_case(v) for v in value.values())
 
 
 def _as_table(value: dict[str, Any] | list[dict[str, Any]]) -> dict[str, Any]:
@@ -201,7 +203,7 @@ def _flatten(value: Any, key: str = "") -> list[tuple[str, Any]]:
     if isinstance(value, dict):
         # Cases beside other figures (``{"seeds": 7, "hierarchical": {...}, "nested": {...}}``)
         # are read as one table where two or more of them hold the same figures.
-        flat = {k: v for k, v in value.items() if _is_table({"a": v, "b": v})}
+        flat = {k: v for k, v in value.items() if _case(v)}
         shapes = [tuple(v) for v in flat.values()]
         cases = {k: v for k, v in flat.items() if shapes.count(tuple(v)) >= 2}
         rows = [(key, cases)] if cases else []
