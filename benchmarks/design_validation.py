@@ -101,7 +101,7 @@ def table(case: Prediction, runs: list[dict], rows: list[dict]) -> tuple[np.ndar
           f"band for empirical/predicted at N = {n}: {lo:.2f}-{hi:.2f}")
     print(f"{'parameter':28s} {'predicted':>11s} {'empirical':>11s} {'ratio':>6s} "
           f"{'bias/sd':>8s}  ")
-    outside = within15 = 0
+    outside, ratios, within15 = [], [], 0
     truth = np.array([[r["truth"][nm] for nm in names] for r in ok])
     for j, name in enumerate(names):
         pred = case.sigma(name)
@@ -109,16 +109,20 @@ def table(case: Prediction, runs: list[dict], rows: list[dict]) -> tuple[np.ndar
         bias = float(np.mean(est[:, j] - truth[:, j]) / (emp / np.sqrt(n))) if emp else 0.0
         ratio = emp / pred if pred else float("nan")
         flag = "" if lo <= ratio <= hi else " outside band"
-        outside += bool(flag)
+        outside += [f"{name} {ratio:.2f}"] if flag else []
+        ratios.append(ratio)
         within15 += abs(ratio - 1.0) <= 0.15
         print(f"{name:28s} {pred or float('nan'):11.4g} {emp:11.4g} {ratio:6.2f} {bias:8.2f}"
               f"{flag}")
         rows.append({"instrumentation": case.instrumentation.name, "parameter": name,
                      "predicted": pred, "empirical": emp, "ratio": ratio, "seeds": n})
     print(f"within 15 %: {within15} of {len(names)}; outside the {lo:.2f}-{hi:.2f} band: "
-          f"{outside} of {len(names)} (about {0.05 * len(names):.1f} expected by chance)")
+          f"{len(outside)} of {len(names)} (about {0.05 * len(names):.1f} expected by chance)")
     return est, {"converged": n, "seeds": len(runs), "parameters": len(names),
-                 "within_15_percent": within15, "outside_band": outside}
+                 "within_15_percent": within15, "band": f"{lo:.2f}-{hi:.2f}",
+                 "outside_band": len(outside),
+                 "ratio_range": f"{min(ratios):.2f}-{max(ratios):.2f}",
+                 "outside": "; ".join(outside) or "none"}
 
 
 def confirm(found: TestDesign, cases: list[Prediction], estimates: dict[str, np.ndarray],
@@ -152,7 +156,8 @@ def confirm(found: TestDesign, cases: list[Prediction], estimates: dict[str, np.
         print(f"{name:60s} {pred:9.3f} {emp:9.3f}  {np.percentile(boot, 2.5):.3f}-"
               f"{np.percentile(boot, 97.5):.3f}")
         changes[name] = {"predicted": pred, "empirical": emp,
-                         "bootstrap_95": [np.percentile(boot, 2.5), np.percentile(boot, 97.5)]}
+                         "bootstrap_95": f"{np.percentile(boot, 2.5):.3f}-"
+                                         f"{np.percentile(boot, 97.5):.3f}"}
         best = best if best is not None and best[1] >= emp else (name, emp)
     top = cases[1].instrumentation.name
     print(f"top-ranked change: {top}; largest empirical reduction: {best[0] if best else '-'}"
@@ -196,7 +201,10 @@ def main() -> int:
             writer = csv.DictWriter(f, fieldnames=list(rows[0]))
             writer.writeheader()
             writer.writerows(rows)
-    harness.report("design_validation", plan=str(args.plan), design_s=timer["design"],
+    # one record per plan and first seed: benchmarks/results/design_validation-PLAN[-FIRST]
+    name = "-".join(["design_validation", args.plan.stem.lower(),
+                     *([str(args.first)] if args.first != 1 else [])])
+    harness.report(name, plan=str(args.plan), design_s=timer["design"],
                    wall_s=timer.elapsed(), instrumentations=tables, ranking=confirmed)
     return 0
 

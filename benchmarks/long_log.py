@@ -47,6 +47,7 @@ from benchmarks import harness  # noqa: E402
 from benchmarks.revisions import PRELUDE, code_at  # noqa: E402
 from cpas_ocp.estimation.estimator import Estimator  # noqa: E402
 from cpas_ocp.io.example_flight import A_NOISE, SITE, fly, sensor_readings  # noqa: E402
+from cpas_ocp.precision import with_sigma  # noqa: E402
 from tests.io.test_rocket_log_import import CARD, COLUMN_MAP  # noqa: E402
 
 BASELINE = "f7978ab"  # before the import merged a series' straight stretches into means
@@ -261,8 +262,25 @@ def main() -> None:
     plain = {case: {run: {stage: {k: v for k, v in st.items() if k not in ("stdout",)}
                           for stage, st in stages.items()}
                     for run, stages in runs.items()} for case, runs in results.items()}
+    fits = [{"case": case, "run": run, "import_s": stages["import"]["wall_s"],
+             "reconstruct_s": stages.get("reconstruct", {}).get("wall_s"),
+             "peak_mb": total(stages)[1], "exit": stages.get("reconstruct", {}).get("exit"),
+             **fit_row(stages.get("reconstruct", {}).get("fit"))}
+            for case, runs in plain.items() for run, stages in runs.items()]
     harness.report("long_log", baseline=None if args.no_baseline else args.baseline,
-                   diameter=not args.no_diameter, runs=plain, baseline_over_tree=ratios)
+                   diameter=not args.no_diameter, fits=fits, runs=plain,
+                   baseline_over_tree=ratios)
+
+
+def fit_row(fit: dict | None) -> dict:
+    """A reconstruction's solver status, iterations, chi-square/dof and drag areas as one
+    table row's figures (empty where it wrote no result)."""
+    if fit is None:
+        return {}
+    return {"status": fit["status"], "iterations": fit["iterations"],
+            "chi2_dof": fit["chi2_dof"],
+            "drag_areas_m2": ", ".join(f"{k} {with_sigma(v, s)}"
+                                       for k, (v, s) in fit["cds"].items())}
 
 
 if __name__ == "__main__":

@@ -224,8 +224,9 @@ def _shown(value: Any) -> str:
 
 
 def _purpose(name: str) -> str:
-    """The first paragraph of the benchmark script's docstring (what it measures)."""
-    script = ROOT / "benchmarks" / f"{name}.py"
+    """The first paragraph of the benchmark script's docstring (what it measures); a
+    record named ``SCRIPT-CASE`` is one of that script's runs."""
+    script = ROOT / "benchmarks" / f"{name.split('-')[0]}.py"
     if not script.is_file():
         return ""
     doc = ast.get_docstring(ast.parse(script.read_text())) or ""
@@ -272,7 +273,7 @@ def _figures(result: dict[str, Any]) -> list[str]:
     return out
 
 
-RESULT_MARK = re.compile(r"^<!-- result: ([a-z0-9_]+)((?:\.[A-Za-z0-9_]+)*) -->$",
+RESULT_MARK = re.compile(r"^<!-- result: ([a-z0-9_]+(?:-[a-z0-9_]+)*)((?:\.[A-Za-z0-9_]+)*) -->$",
                          re.MULTILINE)
 
 
