@@ -129,6 +129,22 @@ def test_each_validation_table_is_rendered_from_its_recorded_result() -> None:
         assert f"benchmarks/results/{name}.json" in page, name
 
 
+def test_a_scripts_runs_are_recorded_and_rendered_one_record_each(monkeypatch, tmp_path
+                                                                   ) -> None:
+    """A script run on several inputs (design_validation.py on each plan) records each run
+    as SCRIPT-CASE: the marker names that record, and the page says what the script
+    measures, from its docstring."""
+    monkeypatch.setattr(pages, "RESULTS", tmp_path)
+    (tmp_path / "design_validation-fbcp.json").write_text(json.dumps({
+        "benchmark": "design_validation-fbcp", "revision": "abc1234567", "date": "d",
+        "command": "python benchmarks/design_validation.py docs/plans/fbcp.json",
+        "results": {"ranking": {"seeds": 50, "confirmed": True}}}))
+    block = pages.validation_page("<!-- result: design_validation-fbcp.ranking -->")
+    assert "| `confirmed` | True |" in block
+    assert "benchmarks/results/design_validation-fbcp.json" in block
+    assert pages._purpose("design_validation-fbcp").startswith("Benchmark:")
+
+
 def test_cases_beside_other_figures_render_as_one_table(monkeypatch, tmp_path) -> None:
     """Cases holding the same figures become a table's rows (a case per row, a figure per
     column), a dotted part selects one branch, and a marker naming no result is an error
