@@ -199,13 +199,14 @@ def profile_edges(prof: dict, estimate: float) -> tuple[float | None, float | No
             root_edge(v[above], d[above], estimate))
 
 
-def spread_table(pred: Prediction, runs: list[dict], names: tuple[str, ...]) -> dict[str, float]:
+def spread_table(pred: Prediction, runs: list[dict], names: tuple[str, ...]
+                 ) -> dict[str, dict[str, float]]:
     """Print, per name, over the seeds flown with event noise, the empirical/predicted ratio
     (95 % interval), the mean Wald sigma, the robust ratio, the largest error, the bias, the
     error's correlation with the seed's Wald sigma and its sd in units of that sigma;
     the ratio on the seeds that named the five and on the rest; over the seeds also flown
     without it, that ratio and the paired difference's sd.
-    Return the ratios with event noise."""
+    Return each name's figures (the ratio with event noise first)."""
     spread = [r for r in runs if "estimates" in r and not r["profiles"]]
     noisy = {r["seed"]: r for r in spread if r["event_noise"]}
     exact = {r["seed"]: r for r in spread if not r["event_noise"]}
@@ -216,30 +217,38 @@ def spread_table(pred: Prediction, runs: list[dict], names: tuple[str, ...]) -> 
     print(f"{'parameter':26s} {'predicted':>10s} {'ratio':>5s} {'95 %':>10s} {'Wald':>5s} "
           f"{'robust':>6s} {'max|z|':>6s} {'bias/se':>7s} {'r(W)':>5s} {'own':>5s} "
           f"{'1-50':>5s} {'51-':>5s} {'no ev.':>6s} {'paired':>6s}")
-    ratios = {}
+    rows: dict[str, dict[str, float]] = {}
     for name in names:
         sigma = pred.sigma(name)
         a = np.array([noisy[s]["estimates"][name] for s in seeds])
         err = a - np.array([noisy[s]["truth"][name] for s in seeds])
         ratio = float(np.std(a, ddof=1) / sigma)
-        ratios[name] = ratio
         lo, hi = ratio_interval(ratio, n)
         own = np.array([noisy[s]["wald"][name] for s in seeds])
         wald = np.mean(own) / sigma
         robust = MAD_TO_SD * np.median(np.abs(a - np.median(a))) / sigma
+        rows[name] = {"predicted": sigma, "ratio": ratio, "ratio_95": f"{lo:.2f}-{hi:.2f}",
+                      "wald": float(wald), "robust": float(robust),
+                      "r_error_own_sigma": float(np.corrcoef(err, own)[0, 1]),
+                      "sd_in_own_sigma": float(np.std(err / own, ddof=1))}
         line = (f"{name:26s} {sigma:10.4g} {ratio:5.2f} {lo:4.2f}-{hi:4.2f} {wald:5.2f} "
                 f"{robust:6.2f} {np.max(np.abs(err)) / sigma:6.2f} "
                 f"{np.mean(err) / (np.std(a, ddof=1) / np.sqrt(n)):7.2f} "
                 f"{np.corrcoef(err, own)[0, 1]:5.2f} {np.std(err / own, ddof=1):5.2f}")
-        for part in (a[np.array(seeds) <= SELECTION_SEEDS], a[np.array(seeds) > SELECTION_SEEDS]):
-            line += f" {np.std(part, ddof=1) / sigma:5.2f}" if len(part) > 2 else f" {'-':>5s}"
+        named = np.array(seeds) <= SELECTION_SEEDS  # the seeds that named the five
+        for key, part in ((f"ratio_seeds_1_{SELECTION_SEEDS}", a[named]),
+                          (f"ratio_seeds_{SELECTION_SEEDS + 1}_on", a[~named])):
+            rows[name][key] = float(np.std(part, ddof=1) / sigma) if len(part) > 2 else None
+            line += f" {rows[name][key]:5.2f}" if len(part) > 2 else f" {'-':>5s}"
         if m > 2:
             a2 = np.array([noisy[s]["estimates"][name] for s in pairs])
             b2 = np.array([exact[s]["estimates"][name] for s in pairs])
-            line += (f" {np.std(b2, ddof=1) / sigma:6.2f} "
-                     f"{np.std(a2 - b2, ddof=1) / sigma:6.3f}")
+            rows[name] |= {"ratio_without_event_noise": float(np.std(b2, ddof=1) / sigma),
+                           "paired_difference_sd": float(np.std(a2 - b2, ddof=1) / sigma)}
+            line += (f" {rows[name]['ratio_without_event_noise']:6.2f} "
+                     f"{rows[name]['paired_difference_sd']:6.3f}")
         print(line)
-    return ratios
+    return rows
 
 
 def joint_table(pred: Prediction, runs: list[dict], seed: int = NULL_SEED) -> list[dict]:
@@ -274,8 +283,8 @@ def joint_table(pred: Prediction, runs: list[dict], seed: int = NULL_SEED) -> li
                 print(f"  the {len(FOCUS)} widest of all {len(cov.names)} on these seeds: "
                       f"{top:+.3f} -> {np.exp(top / 2):.3f}; p with the choice after the "
                       f"fact = {q:.4f}")
-                out[-1]["widest"] = {"mean_log_excess": top, "ratio": float(np.exp(top / 2)),
-                                     "p": q}
+                out[-1] |= {"widest_mean_log_excess": top,
+                            "widest_ratio": float(np.exp(top / 2)), "widest_p": q}
     return out
 
 
@@ -340,16 +349,19 @@ def main() -> int:
     for r in runs:
         if "error" in r:
             print(f"seed {r['seed']} (event noise {r['event_noise']}): {r['error']}")
-    ratios, joint, profiles = {}, [], {}
+    spread, joint, profiles = {}, [], {}
     if any(not r.get("profiles") for r in runs):
-        ratios = spread_table(pred, runs, FOCUS + CONTROLS)
+        spread = spread_table(pred, runs, FOCUS + CONTROLS)
         joint = joint_table(pred, runs, args.seed)
     if any(r.get("profiles") for r in runs):
-        profiles = profile_table(pred, runs, ratios)
+        profiles = profile_table(pred, runs, {n: row["ratio"] for n, row in spread.items()})
+    parameters = {name: spread.get(name, {}) | (
+        dict(zip(("profile_below_over_wald", "profile_above_over_wald", "profile_over_wald"),
+                 profiles[name], strict=True)) if name in profiles else {})
+        for name in FOCUS + CONTROLS}
     harness.report("design_nonlinearity", plan=str(args.plan),
                    failed=[[r["seed"], r["event_noise"]] for r in runs if "error" in r],
-                   empirical_over_predicted=ratios, joint_excess=joint,
-                   profile_over_wald=profiles)
+                   parameters=parameters, joint_excess=joint)
     return 0
 
 
