@@ -10,7 +10,7 @@ estimate from the truth with its degrees of freedom, and each effect parameter w
 sigma against the truth) and once with the baseline model (rigid risers, no added mass),
 whose excess chi-square is the likelihood-ratio statistic for the effect's parameters.
 
-    python benchmarks/effect_recovery.py [--cases fbcp_added_mass:1 ...]
+    python benchmarks/effect_recovery.py [--cases fbcp:added_mass:1 drogue:added_mass:4 ...]
 """
 
 from __future__ import annotations
@@ -38,7 +38,7 @@ from cpas_ocp.precision import with_sigma  # noqa: E402
 from tests.conftest import START_GUESS_OFFSET_S, offset_events  # noqa: E402
 
 K_A = 1.4  # added-mass factor of the truth
-# name: (problem, added mass?, riser (frequency Hz, damping ratio) or None)
+# the truth's kind: (added mass?, the riser's (frequency Hz, damping ratio) or None for rigid)
 KINDS = {"added_mass": (True, None), "elastic_riser_15hz": (False, (15.0, 0.25)),
          "elastic_riser_8hz+added_mass": (True, (8.0, 0.25))}
 CASES = ["fbcp:added_mass:1", "fbcp:added_mass:2", "fbcp:added_mass:3",
