@@ -269,13 +269,14 @@ def test_the_reconstruction_page_leads_with_the_drag_areas(report, browser, drog
 
 @pytest.fixture(scope="module")
 def wind_report(problem_folder, tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A `rocket_gusts` test reconstructed with the wind process: a report whose model has
-    process knots."""
+    """A `rocket_steady` test reconstructed with the wind process: a report whose model has
+    process knots (still air, so the curve is flat within its band; what is tested is how
+    the knots are drawn)."""
     import json
 
     import cpas_ocp as co
 
-    folder = problem_folder("rocket_gusts", 1)
+    folder = problem_folder("rocket_steady", 1)
     manifest = json.loads((folder / "manifest.json").read_text())
     model = tmp_path_factory.mktemp("wind") / "model.json"
     model.write_text(json.dumps({**manifest["model"],
