@@ -305,8 +305,8 @@ def test_the_air_motion_is_a_curve_with_its_band_not_a_list(wind_report, browser
 
 
 @pytest.fixture(scope="module")
-def discovery_folder(drogue_folder, tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A two-step chain of real drogue fits (`cheap_discovery`), written as `discover`
+def discovery_folder(problem_folder, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A two-step chain of real `fbcp` fits (`cheap_discovery`), written as `discover`
     writes it."""
     from cpas_ocp.cli import main
     from tests.cheap_discovery import cheap
@@ -315,7 +315,7 @@ def discovery_folder(drogue_folder, tmp_path_factory: pytest.TempPathFactory) ->
     patch = pytest.MonkeyPatch()
     cheap(patch)
     try:
-        assert main(["discover", str(drogue_folder(1)), "--out", str(out),
+        assert main(["discover", str(problem_folder("fbcp", 1)), "--out", str(out),
                      "--max-steps", "2"]) == 0
     finally:
         patch.undo()
