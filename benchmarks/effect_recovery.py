@@ -80,8 +80,9 @@ def run_case(case: str, work: Path) -> dict:
     except SolverFailure as exc:
         return row | {"status": f"{exc.status} after {exc.iterations} iterations"}
     m2, dof = cov.mahalanobis({n: fit.parameters[n] - truth[n] for n in fit.free})
-    added = [n for n in fit.free if n.split("[")[0] in
-             ("added_mass_factor", "riser_period", "riser_damping_ratio")]
+    baseline = baseline_effects()
+    added = [n for e in effects if e not in baseline for n in
+             (q.name for q in e.parameters(test)) if n in fit.free]  # the effects' own
     row |= {"status": fit.solver.status, "iterations": fit.solver.iterations,
             "fit_s": timer["fit"], "chi2_dof": fit.chi_square / fit.dof,
             "mahalanobis2": m2, "dof": dof, "p": float(chi2.sf(m2, dof)),

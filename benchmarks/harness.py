@@ -21,7 +21,7 @@ import platform
 import subprocess
 import sys
 import time
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -141,6 +141,14 @@ def table(columns: Sequence[str], rows: Sequence[Sequence[Any]]) -> dict[str, An
     if any(len(row) != len(columns) for row in rows):
         raise ValueError(f"a table of {len(columns)} columns given a row of another length")
     return {"columns": list(columns), "rows": [list(row) for row in rows]}
+
+
+def estimates_text(estimates: Iterable[tuple[str, float, float | None]]) -> str:
+    """``name value ± sigma, ...``: each estimate to its sigma's precision, as the reports
+    print it (`cpas_ocp.precision.with_sigma`), for a record's table cell."""
+    from cpas_ocp.precision import with_sigma
+
+    return ", ".join(f"{name} {with_sigma(value, sigma)}" for name, value, sigma in estimates)
 
 
 RESULTS = Path(__file__).resolve().parent / "results"  # each benchmark's latest result

@@ -44,7 +44,6 @@ sys.path.insert(0, str(ROOT))
 from benchmarks import harness  # noqa: E402
 from benchmarks.revisions import PRELUDE, code_at  # noqa: E402
 from cpas_ocp.io.example_flight import fly  # noqa: E402
-from cpas_ocp.precision import with_sigma  # noqa: E402
 from tests.io.test_rocket_log_import import CARD, COLUMN_MAP, write_mapped  # noqa: E402
 
 BASELINE = "bac75cc"  # the grid capped at 0.25 s steps
@@ -196,8 +195,8 @@ def summary_figures(run: dict) -> dict:
             "grid": run["grid"], "status": res["solver"]["status"],
             "iterations": res["solver"]["iterations"],
             "chi2_dof": res["fit"]["chi_square_per_dof"],
-            "drag_areas_m2": ", ".join(
-                f"{key} {with_sigma(params[key]['value'], params[key].get('std'))}"
+            "drag_areas_m2": harness.estimates_text(
+                (key, params[key]["value"], params[key].get("std"))
                 for key in ("CdS[drogue,stage1]", "CdS[main,stage2]"))}
 
 

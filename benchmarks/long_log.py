@@ -30,11 +30,8 @@ ratio printed as a lower bound.
 from __future__ import annotations
 
 import json
-import os
-import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -44,10 +41,9 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
 from benchmarks import harness  # noqa: E402
-from benchmarks.revisions import PRELUDE, code_at  # noqa: E402
+from benchmarks.revisions import code_at, run_stage  # noqa: E402
 from cpas_ocp.estimation.estimator import Estimator  # noqa: E402
 from cpas_ocp.io.example_flight import A_NOISE, SITE, fly, sensor_readings  # noqa: E402
-from cpas_ocp.precision import with_sigma  # noqa: E402
 from tests.io.test_rocket_log_import import CARD, COLUMN_MAP  # noqa: E402
 
 BASELINE = "f7978ab"  # before the import merged a series' straight stretches into means
@@ -116,41 +112,6 @@ def imported_estimator(seed: int, channels: frozenset[str] = frozenset({"baro", 
             raise SystemExit(f"the import failed (exit {code})")
         test = as_test(folder / "test")
         return build(test, model_of(test))
-
-
-# A command of the code tree given first (`revisions.PRELUDE`), then its arguments.
-COMMAND = "from cpas_ocp.cli import main; raise SystemExit(main(sys.argv[1:]))"
-
-
-def run_stage(code: Path, args: list[str], cache: Path, timeout: float, cwd: Path) -> dict:
-    """`cpas-ocp ARGS` with the package of `code` in a fresh process, stdout and stderr
-    pipes: wall time (s), peak resident memory (MB, the process's ru_maxrss), exit code
-    (None past `timeout`), the lines of stdout and the progress lines of stderr."""
-    env = {**os.environ, "CPAS_OCP_CACHE": str(cache)}
-    with tempfile.TemporaryFile(mode="w+") as out, tempfile.TemporaryFile(mode="w+") as err:
-        t0 = time.perf_counter()
-        proc = subprocess.Popen([sys.executable, "-c", PRELUDE + COMMAND, str(code), *args],
-                                env=env, cwd=cwd, stdout=out, stderr=err, text=True)
-        code_, usage = None, None
-        while True:
-            pid, status, usage = os.wait4(proc.pid, os.WNOHANG)
-            if pid:
-                code_ = os.waitstatus_to_exitcode(status)
-                break
-            if time.perf_counter() - t0 > timeout:
-                proc.kill()
-                _, _, usage = os.wait4(proc.pid, 0)
-                break
-            time.sleep(0.2)
-        wall = time.perf_counter() - t0
-        proc.returncode = code_ if code_ is not None else -9
-        out.seek(0)
-        err.seek(0)
-        stdout, stderr = out.read(), err.read()
-    return {"wall_s": wall, "peak_mb": usage.ru_maxrss / 1024.0, "exit": code_,
-            "stdout": stdout.splitlines(), "progress": [line for line in stderr.splitlines()
-                                                        if line.startswith("  iteration")],
-            "stderr_tail": stderr.splitlines()[-3:]}
 
 
 def run_case(code: Path, folder: Path, cache: Path, timeout: float, label: str) -> dict:
@@ -279,8 +240,7 @@ def fit_row(fit: dict | None) -> dict:
         return {}
     return {"status": fit["status"], "iterations": fit["iterations"],
             "chi2_dof": fit["chi2_dof"],
-            "drag_areas_m2": ", ".join(f"{k} {with_sigma(v, s)}"
-                                       for k, (v, s) in fit["cds"].items())}
+            "drag_areas_m2": harness.estimates_text((k, v, s) for k, (v, s) in fit["cds"].items())}
 
 
 if __name__ == "__main__":

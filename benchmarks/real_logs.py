@@ -24,8 +24,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from benchmarks import harness  # noqa: E402
-from benchmarks.long_log import run_stage  # noqa: E402
-from cpas_ocp.precision import with_sigma  # noqa: E402
+from benchmarks.revisions import run_stage  # noqa: E402
 from tests.io.test_rocketpy_logs import DATA, LOGS  # noqa: E402
 
 
@@ -52,9 +51,9 @@ def run_log(card: str, work: Path, cache: Path, timeout: float) -> dict:
     claim = res["claim"]
     row |= {"verdict": claim["verdict"], "chi2_dof": res["fit"]["chi_square_per_dof"],
             "iterations": res["solver"]["iterations"],
-            "drag_areas_m2": ", ".join(f"{k} {with_sigma(v['value'], v.get('std'))}"
-                                       for k, v in res["parameters"].items()
-                                       if k.startswith("CdS")),
+            "drag_areas_m2": harness.estimates_text(
+                (k, v["value"], v.get("std")) for k, v in res["parameters"].items()
+                if k.startswith("CdS")),
             "claim_leads_with": (claim.get("problems") or [""])[0]}
     return row
 

@@ -7,7 +7,8 @@ temporary worktree; `run_child` runs a script in a fresh Python process whose
 worktree's), and returns the JSON object the script prints last; `call_at`
 calls a function of a benchmark module so, with this tree's benchmark code
 and the given tree's package; `compare_cases` does that for each case folder
-with a revision's package and this tree's, alternately.
+with a revision's package and this tree's, alternately; `run_stage` runs a `cpas-ocp`
+command with a given tree's package and times it, with its peak memory.
 
 Paths the package no longer offers as switches are measured at the last
 revision that had them: `SWITCHES` (Settings' `polish`, `damping` and
@@ -23,6 +24,7 @@ import statistics
 import subprocess
 import sys
 import tempfile
+import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
@@ -130,3 +132,38 @@ def compare_cases(benchmark: str, function: str, cases: Callable[[Path], dict[st
             print(f"{name:20s} {against}: {describe(old)} | now: {describe(new)} | ratio "
                   f"{harness.ratio_text(new['wall_s'], old['wall_s'])}", flush=True)
     harness.report(benchmark, against=against, cases=rows)
+
+
+# A command of the code tree given first (`revisions.PRELUDE`), then its arguments.
+COMMAND = "from cpas_ocp.cli import main; raise SystemExit(main(sys.argv[1:]))"
+
+
+def run_stage(code: Path, args: list[str], cache: Path, timeout: float, cwd: Path) -> dict:
+    """`cpas-ocp ARGS` with the package of `code` in a fresh process, stdout and stderr
+    pipes: wall time (s), peak resident memory (MB, the process's ru_maxrss), exit code
+    (None past `timeout`), the lines of stdout and the progress lines of stderr."""
+    env = {**os.environ, "CPAS_OCP_CACHE": str(cache)}
+    with tempfile.TemporaryFile(mode="w+") as out, tempfile.TemporaryFile(mode="w+") as err:
+        t0 = time.perf_counter()
+        proc = subprocess.Popen([sys.executable, "-c", PRELUDE + COMMAND, str(code), *args],
+                                env=env, cwd=cwd, stdout=out, stderr=err, text=True)
+        code_, usage = None, None
+        while True:
+            pid, status, usage = os.wait4(proc.pid, os.WNOHANG)
+            if pid:
+                code_ = os.waitstatus_to_exitcode(status)
+                break
+            if time.perf_counter() - t0 > timeout:
+                proc.kill()
+                _, _, usage = os.wait4(proc.pid, 0)
+                break
+            time.sleep(0.2)
+        wall = time.perf_counter() - t0
+        proc.returncode = code_ if code_ is not None else -9
+        out.seek(0)
+        err.seek(0)
+        stdout, stderr = out.read(), err.read()
+    return {"wall_s": wall, "peak_mb": usage.ru_maxrss / 1024.0, "exit": code_,
+            "stdout": stdout.splitlines(), "progress": [line for line in stderr.splitlines()
+                                                        if line.startswith("  iteration")],
+            "stderr_tail": stderr.splitlines()[-3:]}
