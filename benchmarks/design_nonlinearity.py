@@ -355,13 +355,14 @@ def main() -> int:
         joint = joint_table(pred, runs, args.seed)
     if any(r.get("profiles") for r in runs):
         profiles = profile_table(pred, runs, {n: row["ratio"] for n, row in spread.items()})
-    parameters = {name: spread.get(name, {}) | (
-        dict(zip(("profile_below_over_wald", "profile_above_over_wald", "profile_over_wald"),
-                 profiles[name], strict=True)) if name in profiles else {})
-        for name in FOCUS + CONTROLS}
+    role = {name: "named" if name in FOCUS else "control" for name in FOCUS + CONTROLS}
     harness.report("design_nonlinearity", plan=str(args.plan),
                    failed=[[r["seed"], r["event_noise"]] for r in runs if "error" in r],
-                   parameters=parameters, joint_excess=joint)
+                   spread={name: {"role": role[name]} | row for name, row in spread.items()},
+                   profiles={name: {"role": role[name]} | dict(zip(
+                       ("below_over_wald", "above_over_wald", "both_over_wald"), means,
+                       strict=True)) for name, means in profiles.items()},
+                   joint_excess=joint)
     return 0
 
 
