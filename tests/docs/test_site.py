@@ -167,8 +167,6 @@ def test_cases_beside_other_figures_render_as_one_table(monkeypatch, tmp_path) -
         pages.validation_page("<!-- result: coverage.fit.c -->")
 
 
-@pytest.mark.xfail(strict=True, reason="the design-nonlinearity study's table is still "
-                   "written from its printed output, until the study is rerun")
 def test_the_validation_page_holds_no_table_written_by_hand() -> None:
     """Every table of docs/validation.md is rendered from a benchmark's record: the page's
     source holds markers and prose, and no table rows of its own."""
