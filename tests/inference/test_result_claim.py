@@ -112,8 +112,8 @@ def test_a_fit_of_the_right_model_is_a_result(drogue_fit) -> None:
 
 def test_events_later_than_the_window_are_recovered_by_moving_the_windows(
         drogue_folder, pressed, monkeypatch) -> None:
-    """`solve_checked` on the late events.  Its first fit, from the reduction, is the one
-    `pressed` made with the same estimator (the same call, made once in this module);
+    """`solve_checked` on the late events.  Its first fit is the one `pressed` made with
+    the same estimator (made once in this module), pressed on the windows' edges;
     everything after it is fitted here."""
     from cpas_ocp.inference import continuation
 
@@ -171,16 +171,16 @@ def pressed(drogue_folder, tmp_path_factory):
     """The late events fitted without window moves, which leaves the start times on their
     windows: the folder and its `Reconstruction`, fitted once.  The commands tested with it
     are given this fit where theirs would be made (`given`): the same estimator on the same
-    folder, so what they are tested for, what they say of it, is unchanged.  The restarts
-    are left out too: from the same windows they end at the same edges, at a chi-square no
-    lower (measured in `continuation.solve_checked`'s docstring).  Its fit is also the first
-    fit of the window moves tested above."""
+    folder, so what they are tested for, what they say of it, is unchanged.  Its fit is
+    also the first fit of the window moves tested above.  The restarts stay in: the fit
+    from the reduction alone converges pressed or stalls on the same edges depending on
+    the last digits of the simulated data (it stalls at chi-square 363,605 after 95
+    iterations with numpy 2.4 and scipy 1.17), and the restarts end pressed at 363,204
+    either way."""
     folder = late_events(drogue_folder(1), tmp_path_factory.mktemp("pressed") / "late",
                          LATE_S)
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr("cpas_ocp.inference.continuation.MAX_WINDOW_MOVES", 0)
-        patch.setattr("cpas_ocp.inference.continuation._restarted",
-                      lambda _est, first, _progress: first())
         return folder, co.reconstruct(folder)
 
 
