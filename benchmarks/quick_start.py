@@ -6,7 +6,7 @@ each as its own process from the shell.
 The README states both figures as one line each; `tests/docs/test_readme.py` checks that
 what it states agrees with this script's latest recorded result
 (`benchmarks/results/quick_start.json`), so a README that drifts from the measurement
-fails the suite.  The suite's run is long (most of 20 minutes on 2 cores): `--no-suite`
+fails the suite.  The suite's run is long (minutes on 2 cores): `--no-suite`
 times the demo alone and keeps the suite's figures of the previous record.
 
     python benchmarks/quick_start.py [--repeat 3] [--no-suite]
