@@ -166,6 +166,65 @@ def test_a_first_move_that_does_not_lower_chi_square_leaves_the_fit_to_its_resta
     assert kept is fit and claim.moves == []
 
 
+def _failed_first_steps(fit, monkeypatch: pytest.MonkeyPatch, moved_is_result: bool
+                        ) -> list[str]:
+    """`solve_checked`'s steps where the first fit fails with `fit` as its last iterate and
+    start times on their windows' edges, each move ending in a claim that is a result at
+    the noise or not (stand-ins throughout: what is tested is the order of the steps)."""
+    from types import SimpleNamespace
+
+    from cpas_ocp.errors import SolverFailure
+    from cpas_ocp.inference import continuation
+
+    steps: list[str] = []
+    failure = SolverFailure("Stalled_Without_Progress", 95, "", 363605.0, fit)
+    claim = SimpleNamespace(is_result=moved_is_result, fits_noise=moved_is_result, moves=[])
+
+    def first(e, p):
+        steps.append("first fit fails")
+        raise failure
+
+    def moved(e, f, c, fail, p):
+        steps.append("move from the last iterate" if fail is failure else "move")
+        return e, f, claim, ["a move"], None if moved_is_result else fail
+
+    def restarted(e, given, p):
+        steps.append("restarts")
+        return given()
+
+    monkeypatch.setattr(continuation, "_solve_from_reduction", first)
+    monkeypatch.setattr(continuation, "_judged", lambda e, exc: claim)
+    monkeypatch.setattr(continuation, "moved_windows", lambda c, e, f: "moved spec")
+    monkeypatch.setattr(continuation, "_moved", moved)
+    monkeypatch.setattr(continuation, "_restarted", restarted)
+    monkeypatch.setattr(continuation, "_with_moves", lambda e, f, c, m, fail: (e, f, c))
+    return steps
+
+
+def test_a_failed_first_fit_on_its_edges_is_moved_before_any_restart(
+        drogue_fit, monkeypatch) -> None:
+    from cpas_ocp.inference import continuation
+
+    fit, _, _ = drogue_fit(1)
+    steps = _failed_first_steps(fit, monkeypatch, moved_is_result=True)
+    _, kept, claim = continuation.solve_checked(Estimator(fit.test))
+    assert steps == ["first fit fails", "move from the last iterate"]
+    assert claim.is_result and kept is fit
+
+
+def test_a_failed_first_fit_whose_move_is_no_result_is_restarted_first(
+        drogue_fit, monkeypatch) -> None:
+    from cpas_ocp.inference import continuation
+
+    fit, _, _ = drogue_fit(1)
+    steps = _failed_first_steps(fit, monkeypatch, moved_is_result=False)
+    continuation.solve_checked(Estimator(fit.test))
+    # The move tried from the stalled iterate is not kept: the restarts go first, as they
+    # did before, and the windows are moved from where they end.
+    assert steps == ["first fit fails", "move from the last iterate", "restarts",
+                     "move from the last iterate"]
+
+
 @pytest.fixture(scope="module")
 def pressed(drogue_folder, tmp_path_factory):
     """The late events fitted without window moves, which leaves the start times on their
