@@ -216,7 +216,7 @@ def card(fmt: str | None = None) -> dict[str, Any]:
 
 
 EXAMPLE_P_NOISE_PA = 5.0  # Pa (about 0.5 m): a flying altimeter's scatter, its port's
-# airflow included
+# airflow included, above the import's 0.3 m resolution floor
 
 
 def example_log(folder: str | Path, seed: int = 1, main_opens: bool = True,

@@ -87,7 +87,6 @@ from cpas_ocp.io.log_noise import (
     independent_blocks,
     longest_stretch,
     merged_blocks,
-    resolution_sigma,
     scatter_rms,
     settled_time,
 )
@@ -124,10 +123,7 @@ MIN_EVENT_SIGMA_S = 1e-6  # least event sigma a manifest states (its times' reso
 OPENING_READ_SAMPLES = 10  # accelerometer rows that read an opening (its OPENING_WINDOW_S)
 
 
-# The altimeter's sigma is at least its resolution's (`resolution_sigma`) and this: a
-# centimetre, below any barometric altimeter's noise, which only keeps a series without
-# scatter from being weighed without limit (m).
-MIN_BARO_SIGMA_M = 0.01
+MIN_BARO_SIGMA_M = 0.3  # floor of the altimeter noise sigma (the pressure resolution, m)
 
 
 SERIES_MARGIN_S = 1.5  # series extend this far beyond the phase: a 1 Hz GPS covers it (s)
@@ -549,8 +545,7 @@ def altimeter_series(d: LogImport) -> None:
         if len(blocks) < MIN_DESCENT_SAMPLES:  # too short a segment: the whole phase's
             blocks, steady_end = independent_blocks(d.baro_phase[["time", "altitude"]])[0], \
                 d.t_end
-        d.baro_sigmas.append(max(MIN_BARO_SIGMA_M, resolution_sigma(part["altitude"]),
-                                 block_sigma(blocks, steady_end)))
+        d.baro_sigmas.append(max(MIN_BARO_SIGMA_M, block_sigma(blocks, steady_end)))
         if len(d.baro_sigmas) > 1:
             sigma_after.append({"time": {"value": round(a, 3), "unit": "s"},
                                 "sigma": {"altitude": {"value": round(d.baro_sigmas[-1], 3),

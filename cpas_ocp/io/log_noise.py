@@ -25,7 +25,6 @@ ACF_FLOOR = 0.05  # a noise's autocorrelation counts until it first falls below 
 
 
 SCATTER_WINDOW_S = 8.0  # window of the local trend a sensor's scatter is taken about (s)
-TREND_GRID_S = 0.1  # the local trend's resampling interval, at most (s)
 
 
 RATE_WINDOW_S = 2.0  # window of the local descent rate that tells when a canopy has settled (s)
@@ -61,16 +60,9 @@ CURVATURE_BIAS = 0.1  # a merged mean's curvature bias, at most this share of it
 
 def _scatter(t: np.ndarray, values: np.ndarray) -> np.ndarray | None:
     """`values` less their local quadratic trend over SCATTER_WINDOW_S (a Savitzky-Golay
-    filter on a uniform resampling at most TREND_GRID_S apart, from the first sample to
-    the last: a trend held flat beyond its last grid point would leave the last samples
-    of a 27 m/s descent up to 2.7 m off it, which reads as correlated noise); None where
-    the samples span too short a time."""
-    points = int(np.ceil((t[-1] - t[0]) / TREND_GRID_S)) + 1
-    if points < 5:
-        return None
-    grid = np.linspace(t[0], t[-1], points)
-    step = grid[1] - grid[0]
-    window = min(int(SCATTER_WINDOW_S / step) // 2 * 2 + 1, points // 2 * 2 - 1)
+    filter on a uniform resampling); None where the samples span too short a time."""
+    grid = np.arange(t[0], t[-1], 0.1)
+    window = min(int(SCATTER_WINDOW_S / 0.1) // 2 * 2 + 1, len(grid) // 2 * 2 - 1)
     if window < 5:
         return None
     return values - np.interp(t, grid, savgol_filter(np.interp(grid, t, values), window, 2))
@@ -88,17 +80,6 @@ def scatter_sigma(t: np.ndarray, values: np.ndarray) -> float:
     if r is None:
         return second_difference_sigma(values)
     return float(1.4826 * np.median(np.abs(r - np.median(r))))
-
-
-def resolution_sigma(values: np.ndarray) -> float:
-    """The noise a recorder's rounding alone puts on a channel: q / sqrt(12), the sigma of
-    a reading rounded to its resolution q, taken as the smallest change between
-    consecutive readings (in the channel's unit); 0 where no two consecutive readings
-    differ.  Pressure in whole pascals reads as steps of about 0.09 m of height near the
-    ground (sigma 0.025 m), an altitude in whole feet as 0.30 m (sigma 0.088 m)."""
-    steps = np.abs(np.diff(np.asarray(values, dtype=float)))
-    steps = steps[steps > 0.0]
-    return float(steps.min() / np.sqrt(12.0)) if steps.size else 0.0
 
 
 def integrated_time(r: np.ndarray) -> float:

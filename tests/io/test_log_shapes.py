@@ -413,33 +413,6 @@ def test_correlation_length_of_white_and_correlated_noise() -> None:
         assert np.std(ar) / np.sqrt(t.size) < truth / 2.5
 
 
-def test_the_local_trend_follows_a_fast_descent_to_its_last_sample() -> None:
-    """A straight 27 m/s descent sampled at 20 Hz, over a span that is and one that is not
-    a whole number of the trend's grid intervals: the scatter about the local trend is
-    0 to the last sample.  A trend held flat beyond its last grid point left the last
-    two samples 1.35 and 2.7 m off, which the tail factor of `block_sigma` read as
-    correlated noise (1.35 on one seed of a 2 Pa altimeter, 16 % on its sigma)."""
-    from cpas_ocp.io.log_noise import scatter_rms
-    for n in (463, 461):
-        t = 41.75 + 0.05 * np.arange(n)
-        assert scatter_rms(t, 2000.0 - 27.0 * t) < 1e-9, n
-
-
-def test_the_altimeter_sigma_floor_is_its_resolution() -> None:
-    """The noise a recorder's rounding alone gives, q / sqrt(12): an altitude in whole feet
-    and a pressure in whole pascals (as heights near the ground, 1.2 kg/m^3), each on a
-    noisy descent; a channel whose readings never change has none."""
-    from cpas_ocp.io.log_noise import resolution_sigma
-    t = np.arange(0.0, 60.0, 0.05)
-    h = 600.0 - 6.0 * t + np.random.default_rng(3).normal(0.0, 0.5, t.size)
-    feet = np.round(h / 0.3048) * 0.3048
-    assert resolution_sigma(feet) == pytest.approx(0.3048 / np.sqrt(12.0), rel=1e-9)
-    pa_step = 1.0 / (1.2 * 9.80665)  # m of height per pascal
-    pascals = np.round(h / pa_step) * pa_step
-    assert resolution_sigma(pascals) == pytest.approx(pa_step / np.sqrt(12.0), rel=1e-9)
-    assert resolution_sigma(np.full(10, 300.0)) == 0.0
-
-
 def test_still_air_leaves_the_air_motion_out_of_the_default(flight: Flight,
                                                             tmp_path: Path) -> None:
     """`import --still-air` writes the rocket default without the wind process; a card's own
