@@ -128,14 +128,15 @@ def solve_checked(est: Estimator, progress: bool = False
     one, after its restarts (a failed run is never a plain result); the first failure
     is raised where no window moves or no moved model converges.
     """
+    claim: Claim | None = None
+    tried = False
     try:
         first: Fit | SolverFailure = _solve_from_reduction(est, progress)
     except SolverFailure as exc:
-        first = exc
-        from_stall = _moved_from_failure(est, exc, progress)
+        first, claim = exc, _judged(est, exc)  # its last iterate's, judged once
+        from_stall = _moved_from_failure(est, exc, claim, progress)
         if from_stall is not None:
             return _with_moves(*from_stall)
-    claim, tried = None, False
     if isinstance(first, Fit):
         claim = check_claim(est, first)
         tried = moved_windows(claim, est, first) is not None
@@ -160,12 +161,13 @@ def _judged(est: Estimator, failure: SolverFailure) -> Claim | None:
         return None
 
 
-def _moved_from_failure(est: Estimator, failure: SolverFailure, progress: bool
+def _moved_from_failure(est: Estimator, failure: SolverFailure, claim: Claim | None,
+                        progress: bool
                         ) -> tuple[Estimator, Fit, Claim, list[WindowMove], None] | None:
-    """The windows moved from a failed first fit's last iterate (`_moved`) where its
-    start times sit at their windows' edges, kept where the moves end in a converged
-    result at the noise; None otherwise (the restarts then go first)."""
-    claim = _judged(est, failure)
+    """The windows moved from a failed first fit's last iterate (`_moved`), whose claim
+    is `claim` (`_judged`), where its start times sit at their windows' edges, kept where
+    the moves end in a converged result at the noise; None otherwise (the restarts then
+    go first)."""
     if claim is None or moved_windows(claim, est, failure.last_iterate) is None:
         return None
     est, fit, claim, moves, still = _moved(est, failure.last_iterate, claim, failure,
@@ -178,8 +180,9 @@ def _moved_from_failure(est: Estimator, failure: SolverFailure, progress: bool
 def _restarted_claim(est: Estimator, first: Fit | SolverFailure, claim: Claim | None,
                      progress: bool) -> tuple[Fit, Claim, SolverFailure | None]:
     """The first fit restarted (`_restarted`) and its claim (`claim`, the first's, where
-    no restart replaced it); where every start fails, the failure's last iterate and its
-    claim with the failure, which is raised where its last iterate cannot be judged."""
+    no restart replaced it; a failed first's is its last iterate's, `_judged`); where
+    every start fails, the failure's last iterate and its claim with the failure, which
+    is raised where its last iterate cannot be judged."""
     def given() -> Fit:
         if isinstance(first, SolverFailure):
             raise first
@@ -190,7 +193,7 @@ def _restarted_claim(est: Estimator, first: Fit | SolverFailure, claim: Claim | 
         return (fit, claim if fit is first and claim is not None else check_claim(est, fit),
                 None)
     except SolverFailure as exc:
-        judged = _judged(est, exc)
+        judged = claim if exc is first else _judged(est, exc)
         if judged is None:  # no last iterate, or one unfit to linearise: the failure stands
             raise exc from None
         return exc.last_iterate, judged, exc

@@ -185,7 +185,8 @@ def _failed_first_steps(fit, monkeypatch: pytest.MonkeyPatch, moved_is_result: b
         raise failure
 
     def moved(e, f, c, fail, p):
-        steps.append("move from the last iterate" if fail is failure else "move")
+        assert fail is failure and f is fit  # every move here starts at the last iterate
+        steps.append("move from the last iterate")
         return e, f, claim, ["a move"], None if moved_is_result else fail
 
     def restarted(e, given, p):
@@ -193,7 +194,11 @@ def _failed_first_steps(fit, monkeypatch: pytest.MonkeyPatch, moved_is_result: b
         return given()
 
     monkeypatch.setattr(continuation, "_solve_from_reduction", first)
-    monkeypatch.setattr(continuation, "_judged", lambda e, exc: claim)
+    def judged(e, exc):
+        steps.append("last iterate judged")
+        return claim
+
+    monkeypatch.setattr(continuation, "_judged", judged)
     monkeypatch.setattr(continuation, "moved_windows", lambda c, e, f: "moved spec")
     monkeypatch.setattr(continuation, "_moved", moved)
     monkeypatch.setattr(continuation, "_restarted", restarted)
@@ -208,7 +213,7 @@ def test_a_failed_first_fit_on_its_edges_is_moved_before_any_restart(
     fit, _, _ = drogue_fit(1)
     steps = _failed_first_steps(fit, monkeypatch, moved_is_result=True)
     _, kept, claim = continuation.solve_checked(Estimator(fit.test))
-    assert steps == ["first fit fails", "move from the last iterate"]
+    assert steps == ["first fit fails", "last iterate judged", "move from the last iterate"]
     assert claim.is_result and kept is fit
 
 
@@ -220,9 +225,10 @@ def test_a_failed_first_fit_whose_move_is_no_result_is_restarted_first(
     steps = _failed_first_steps(fit, monkeypatch, moved_is_result=False)
     continuation.solve_checked(Estimator(fit.test))
     # The move tried from the stalled iterate is not kept: the restarts go first, as they
-    # did before, and the windows are moved from where they end.
-    assert steps == ["first fit fails", "move from the last iterate", "restarts",
-                     "move from the last iterate"]
+    # did before, and the windows are moved from where they end (here the same failure,
+    # whose last iterate is judged once).
+    assert steps == ["first fit fails", "last iterate judged", "move from the last iterate",
+                     "restarts", "move from the last iterate"]
 
 
 @pytest.fixture(scope="module")
